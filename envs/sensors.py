@@ -1,0 +1,80 @@
+"""Sensors: quantizing wheel encoders and an external (motion-capture-like) pose sensor.
+
+Poses are (x, y, theta) of the axle midpoint in the world frame (m, m, rad; x right, y up,
+theta counter-clockwise and continuous, i.e. never wrapped). Sensors hold no random state:
+every noisy reading takes the np.random.Generator to draw from.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def relative_pose(pose_start: np.ndarray, pose_end: np.ndarray) -> np.ndarray:
+    """Body-frame increment (dx, dy, dtheta) from `pose_start` to `pose_end`.
+
+    dx, dy (m) are the displacement expressed in the body frame at `pose_start` (x forward,
+    y left); dtheta (rad) is the continuous heading change theta_end - theta_start.
+    """
+    ex = pose_end[0] - pose_start[0]
+    ey = pose_end[1] - pose_start[1]
+    c = math.cos(pose_start[2])
+    s = math.sin(pose_start[2])
+    return np.array([c * ex + s * ey, -s * ex + c * ey, pose_end[2] - pose_start[2]])
+
+
+class WheelEncoders:
+    """Incremental encoders reading the absolute wheel angles floored to whole ticks.
+
+    Increments are differences of quantized absolute readings, so quantization errors stay
+    within one tick per segment and never accumulate along a run.
+    """
+
+    def __init__(self, ticks_per_rev: int = 4096) -> None:
+        if int(ticks_per_rev) != ticks_per_rev or ticks_per_rev < 1:
+            raise ValueError(f"ticks_per_rev must be a positive integer, got {ticks_per_rev!r}")
+        self.ticks_per_rev = int(ticks_per_rev)
+        self.resolution = 2.0 * math.pi / self.ticks_per_rev  # rad per tick
+
+    def count(self, angles: np.ndarray) -> np.ndarray:
+        """Tick counts (floats holding integers) for absolute wheel angles (rad)."""
+        return np.floor(np.asarray(angles, dtype=float) / self.resolution)
+
+    def increments(self, angles_start: np.ndarray, angles_end: np.ndarray) -> np.ndarray:
+        """Measured wheel angle increments (rad) between two absolute angle readings."""
+        return (self.count(angles_end) - self.count(angles_start)) * self.resolution
+
+
+@dataclass(frozen=True)
+class RelativePoseSensor:
+    """External pose sensor with independent Gaussian noise per reading.
+
+    Attributes:
+        sigma_xy: standard deviation of the x and y errors (m).
+        sigma_theta: standard deviation of the heading error (rad).
+    """
+
+    sigma_xy: float = 2e-3
+    sigma_theta: float = 1e-3
+
+    def __post_init__(self) -> None:
+        for name in ("sigma_xy", "sigma_theta"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"RelativePoseSensor.{name} must be finite and >= 0, got {value}")
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """Per-channel standard deviations (sigma_x, sigma_y, sigma_theta) in (m, m, rad)."""
+        return np.array([self.sigma_xy, self.sigma_xy, self.sigma_theta])
+
+    def measure(self, true_increment: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Noisy body-frame increment (dx, dy, dtheta); one fresh noise draw per segment."""
+        return np.asarray(true_increment, dtype=float) + self.sigma * rng.standard_normal(3)
+
+    def absolute(self, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Noisy world pose (x, y, theta); theta stays continuous (not wrapped)."""
+        return np.asarray(pose, dtype=float) + self.sigma * rng.standard_normal(3)

@@ -1,0 +1,181 @@
+"""One robot in the arena, driven segment by segment and measured like a calibration log.
+
+Knows nothing of reinforcement learning: it composes a drive (`IdealDrive` or
+`PymunkDrive`), wheel encoders and the external pose sensor. Units: meters, radians,
+seconds. Poses are world (x, y, theta) of the axle midpoint with theta continuous; segment
+increments are in the body frame at the segment's start (x forward, y left).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from envs.physics import CHASSIS_SIZE, Arena, Drive, IdealDrive, PymunkDrive
+from envs.robot import RobotSpec
+from envs.sensors import RelativePoseSensor, WheelEncoders, relative_pose
+
+SPAWN_MARGIN = 0.6  # m, minimum distance from a random start position to the walls
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """Settings of the world and its sensors.
+
+    Attributes:
+        arena_width, arena_height: arena extent along world x and y (m), centred at the origin.
+        physics_hz: physics tick rate (Hz). 50 Hz resolves the 0.05 s motor lag (exactly
+            discretized) and keeps throughput high; the traction solver is stable at any rate.
+        ideal: roll without slip or lag (the kinematic model is exact) instead of pymunk.
+        ticks_per_rev: encoder resolution (ticks per wheel revolution).
+        sigma_xy, sigma_theta: pose sensor noise standard deviations (m, rad).
+    """
+
+    arena_width: float = 4.0
+    arena_height: float = 4.0
+    physics_hz: float = 50.0
+    ideal: bool = False
+    ticks_per_rev: int = 4096
+    sigma_xy: float = 2e-3
+    sigma_theta: float = 1e-3
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.physics_hz) and self.physics_hz > 0):
+            raise ValueError(f"physics_hz must be finite and > 0, got {self.physics_hz}")
+        for name in ("arena_width", "arena_height"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 2 * SPAWN_MARGIN):
+                raise ValueError(f"{name} must be > {2 * SPAWN_MARGIN} m, got {value}")
+
+
+@dataclass(frozen=True, eq=False)
+class SegmentOutcome:
+    """What one segment produced (all arrays read-only).
+
+    Attributes:
+        measurement: (5,) the CSV row dphi_L, dphi_R (quantized encoder increments, rad),
+            dx, dy (m), dtheta (rad) (noisy relative pose in the start body frame).
+        true_increment: (3,) true dx, dy (m), dtheta (rad, continuous).
+        true_dphi: (2,) unquantized wheel angle increments (rad).
+        collision: whether the chassis touched a wall during the segment.
+        pose_start, pose_end: (3,) world poses (x, y, theta), theta continuous.
+        path: (M, 3) world poses at every physics tick, pose_start first and pose_end last.
+    """
+
+    measurement: np.ndarray
+    true_increment: np.ndarray
+    true_dphi: np.ndarray
+    collision: bool
+    pose_start: np.ndarray
+    pose_end: np.ndarray
+    path: np.ndarray
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.flags.writeable = False
+    return array
+
+
+class Simulation:
+    """A robot in a walled arena, run in motion segments with fixed wheel-speed commands.
+
+    `reset` must be called before `run_segment`. Noise is drawn from the generator given to
+    `reset`, so the same robot, seed and commands give bit-identical outcomes.
+    """
+
+    def __init__(self, config: SimulationConfig | None = None) -> None:
+        self.config = config or SimulationConfig()
+        self.arena = Arena(self.config.arena_width, self.config.arena_height)
+        self.encoders = WheelEncoders(self.config.ticks_per_rev)
+        self.pose_sensor = RelativePoseSensor(self.config.sigma_xy, self.config.sigma_theta)
+        drive_type = IdealDrive if self.config.ideal else PymunkDrive
+        self.drive: Drive = drive_type(self.arena, self.config.physics_hz)
+        self.dt = self.drive.dt  # s, one physics tick
+        self._robot: RobotSpec | None = None
+        self._rng: np.random.Generator | None = None
+
+    def reset(
+        self,
+        robot: RobotSpec,
+        rng: np.random.Generator,
+        pose: np.ndarray | None = None,
+    ) -> None:
+        """Place `robot` at rest and keep `rng` for all later noise.
+
+        pose: world (x, y, theta); None draws one from `rng`, at least SPAWN_MARGIN from the
+        walls, heading uniform in [-pi, pi). Wheel angles start at random (uniform in
+        [0, 2 pi)) so encoder quantization is not aligned with the start.
+        """
+        if not robot.b < CHASSIS_SIZE or not abs(robot.com_offset) < 0.5 * CHASSIS_SIZE:
+            raise ValueError(
+                f"robot does not fit the {CHASSIS_SIZE} m chassis: b={robot.b}, "
+                f"com_offset={robot.com_offset}"
+            )
+        if pose is None:
+            half = np.array([self.arena.width, self.arena.height]) / 2 - SPAWN_MARGIN
+            pose = np.append(rng.uniform(-half, half), rng.uniform(-math.pi, math.pi))
+        else:
+            pose = np.asarray(pose, dtype=float)
+            if pose.shape != (3,) or not np.isfinite(pose).all():
+                raise ValueError(f"pose must be 3 finite numbers (x, y, theta), got {pose}")
+            if not self.arena.contains_footprint(pose[0], pose[1], pose[2]):
+                raise ValueError(f"pose {pose} puts the chassis outside the arena")
+        wheel_angles = rng.uniform(0.0, 2.0 * math.pi, 2)
+        self.drive.reset(robot, pose, wheel_angles)
+        self._robot = robot
+        self._rng = rng
+
+    def run_segment(self, cmd_L: float, cmd_R: float, duration: float) -> SegmentOutcome:
+        """Hold wheel-speed commands (rad/s, clipped to the motor limit) for `duration` s.
+
+        duration must be a whole number of physics ticks (1 / physics_hz).
+        """
+        if self._robot is None:
+            raise RuntimeError("Simulation.reset must be called before run_segment")
+        if not (math.isfinite(cmd_L) and math.isfinite(cmd_R)):
+            raise ValueError(f"wheel commands must be finite, got {(cmd_L, cmd_R)}")
+        ticks = duration * self.config.physics_hz if math.isfinite(duration) else 0.0
+        n_ticks = round(ticks)
+        if n_ticks < 1 or abs(ticks - n_ticks) > 1e-9 * n_ticks:
+            raise ValueError(
+                f"duration must be a positive multiple of the physics tick {self.dt} s, "
+                f"got {duration}"
+            )
+        phi_start = self.drive.wheel_angles
+        path, collision = self.drive.run(float(cmd_L), float(cmd_R), n_ticks)
+        phi_end = self.drive.wheel_angles
+        true_increment = relative_pose(path[0], path[-1])
+        measurement = np.concatenate(
+            [
+                self.encoders.increments(phi_start, phi_end),
+                self.pose_sensor.measure(true_increment, self._rng),
+            ]
+        )
+        return SegmentOutcome(
+            measurement=_read_only(measurement),
+            true_increment=_read_only(true_increment),
+            true_dphi=_read_only(phi_end - phi_start),
+            collision=collision,
+            pose_start=_read_only(path[0].copy()),
+            pose_end=_read_only(path[-1].copy()),
+            path=_read_only(path),
+        )
+
+    @property
+    def pose(self) -> np.ndarray:
+        """Current world pose (x, y, theta) of the axle midpoint, theta continuous."""
+        return self.drive.pose
+
+    @property
+    def wheel_angles(self) -> np.ndarray:
+        """Current absolute (unquantized) wheel angles (phi_L, phi_R) in rad."""
+        return self.drive.wheel_angles
+
+    @property
+    def robot(self) -> RobotSpec:
+        """The hidden robot set by the last `reset`."""
+        if self._robot is None:
+            raise RuntimeError("Simulation.reset has not been called")
+        return self._robot

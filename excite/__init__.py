@@ -1,0 +1,29 @@
+"""excite: calibrate a differential-drive robot's wheel radii and separation, and plan the
+maneuvers that identify them fastest.
+
+Core API (numpy/scipy only; importing excite never imports gymnasium, pymunk or torch)::
+
+    from excite import Params, Segments, predict_increment, increment_jacobian
+    from excite import load_segments, save_segments, calibrate, OnlineEstimator
+"""
+
+from excite.calibration import CalibrationResult, calibrate
+from excite.data import DataError, Segments, load_segments, save_segments
+from excite.kinematics import Params, increment_jacobian, predict_increment
+from excite.online import OnlineEstimator
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "CalibrationResult",
+    "DataError",
+    "OnlineEstimator",
+    "Params",
+    "Segments",
+    "calibrate",
+    "increment_jacobian",
+    "load_segments",
+    "predict_increment",
+    "save_segments",
+    "__version__",
+]

@@ -1,0 +1,207 @@
+"""Differential-drive kinematics of one motion segment, and its analytic Jacobian.
+
+Frames and units (DESIGN.md): parameters p = (r_L, r_R, b) in meters, wheel increments
+dphi in radians. The increment (dx, dy, dtheta) is expressed in the body frame at the start
+of the segment (x forward, y left, theta counter-clockwise); the left wheel sits at +b/2 on y.
+
+For a constant-curvature segment (lesson, section 2)::
+
+    ds     = (r_L dphi_L + r_R dphi_R) / 2
+    dtheta = (r_R dphi_R - r_L dphi_L) / b
+    dx     = ds * sinc(dtheta),  sinc(u) = sin(u) / u
+    dy     = ds * cosc(dtheta),  cosc(u) = (1 - cos(u)) / u
+
+sinc, cosc and their derivatives are evaluated by their Taylor series for |u| < 1 and by
+cancellation-free closed forms beyond, so both branches agree to a few ulps and nothing is
+NaN or inf for u = 0, tiny u, or several turns.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from math import factorial
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "Params",
+    "predict_increment",
+    "increment_jacobian",
+    "sinc",
+    "cosc",
+    "dsinc",
+    "dcosc",
+    "sinc_family",
+    "sinc_cosc_scalar",
+    "wrap_angle",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Below this |u| the series are used; 12 terms make the truncation error < 1e-20 there.
+SERIES_THRESHOLD = 1.0
+_N_TERMS = 12
+
+
+def _coefficients(term) -> tuple[float, ...]:
+    """Coefficients c_k of a series sum_k c_k * (u^2)^k, highest power first (for Horner)."""
+    return tuple(term(k) for k in reversed(range(_N_TERMS)))
+
+
+# sinc(u)  = sum_k (-1)^k u^2k / (2k+1)!
+_SINC = _coefficients(lambda k: (-1) ** k / factorial(2 * k + 1))
+# cosc(u)  = u * sum_k (-1)^k u^2k / (2k+2)!
+_COSC = _coefficients(lambda k: (-1) ** k / factorial(2 * k + 2))
+# sinc'(u) = u * sum_k (-1)^(k+1) (2k+2) u^2k / (2k+3)!
+_DSINC = _coefficients(lambda k: (-1) ** (k + 1) * (2 * k + 2) / factorial(2 * k + 3))
+# cosc'(u) = sum_k (-1)^k (2k+1) u^2k / (2k+2)!
+_DCOSC = _coefficients(lambda k: (-1) ** k * (2 * k + 1) / factorial(2 * k + 2))
+
+
+def _series(coeffs: tuple[float, ...], u2):
+    """Horner evaluation in u^2; works on Python floats and numpy arrays alike."""
+    acc = coeffs[0]
+    for c in coeffs[1:]:
+        acc = acc * u2 + c
+    return acc
+
+
+@dataclass(frozen=True)
+class Params:
+    """Kinematic parameters of a differential-drive robot (meters).
+
+    r_L, r_R: effective left / right wheel radius; b: effective wheel separation.
+    """
+
+    r_L: float
+    r_R: float
+    b: float
+
+    def __post_init__(self) -> None:
+        for name in ("r_L", "r_R", "b"):
+            value = float(getattr(self, name))
+            if not math.isfinite(value) or value <= 0.0:
+                raise ValueError(f"{name} must be a positive finite length in meters, got {value}")
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def from_array(cls, values: ArrayLike) -> Params:
+        r_L, r_R, b = np.asarray(values, dtype=float).reshape(3)
+        return cls(float(r_L), float(r_R), float(b))
+
+    def as_array(self) -> FloatArray:
+        """(r_L, r_R, b) as a float64 array of shape (3,)."""
+        return np.array([self.r_L, self.r_R, self.b])
+
+
+def sinc_family(u: ArrayLike, derivatives: bool = True) -> tuple[FloatArray, ...]:
+    """(sinc, cosc[, sinc', cosc']) of an array, sharing one sin/cos evaluation."""
+    u = np.asarray(u, dtype=float)
+    small = np.abs(u) < SERIES_THRESHOLD
+    big = np.where(small, 1.0, u)  # 1 on the series branch: the closed forms never divide by 0
+    u2 = u * u
+    s, c, h = np.sin(big), np.cos(big), np.sin(0.5 * big)
+    one_minus_cos = 2.0 * h * h
+    f = np.where(small, _series(_SINC, u2), s / big)
+    g = np.where(small, u * _series(_COSC, u2), one_minus_cos / big)
+    if not derivatives:
+        return f, g
+    big2 = big * big
+    fp = np.where(small, u * _series(_DSINC, u2), (big * c - s) / big2)
+    gp = np.where(small, _series(_DCOSC, u2), (big * s - one_minus_cos) / big2)
+    return f, g, fp, gp
+
+
+def sinc(u: ArrayLike) -> FloatArray:
+    """sin(u)/u, with sinc(0) = 1."""
+    return sinc_family(u, derivatives=False)[0]
+
+
+def cosc(u: ArrayLike) -> FloatArray:
+    """(1 - cos(u))/u, with cosc(0) = 0; evaluated as 2 sin^2(u/2)/u (no cancellation)."""
+    return sinc_family(u, derivatives=False)[1]
+
+
+def dsinc(u: ArrayLike) -> FloatArray:
+    """d/du sinc(u) = (u cos u - sin u)/u^2."""
+    return sinc_family(u)[2]
+
+
+def dcosc(u: ArrayLike) -> FloatArray:
+    """d/du cosc(u) = (u sin u - (1 - cos u))/u^2."""
+    return sinc_family(u)[3]
+
+
+def sinc_cosc_scalar(u: float) -> tuple[float, float, float, float]:
+    """(sinc, cosc, sinc', cosc') of one Python float: the hot path of the online estimator."""
+    if abs(u) < SERIES_THRESHOLD:
+        u2 = u * u
+        return (
+            _series(_SINC, u2),
+            u * _series(_COSC, u2),
+            u * _series(_DSINC, u2),
+            _series(_DCOSC, u2),
+        )
+    s, c, h = math.sin(u), math.cos(u), math.sin(0.5 * u)
+    one_minus_cos = 2.0 * h * h
+    return s / u, one_minus_cos / u, (u * c - s) / (u * u), (u * s - one_minus_cos) / (u * u)
+
+
+def wrap_angle(a: ArrayLike) -> FloatArray:
+    """Wrap angles (rad) to (-pi, pi]."""
+    a = np.asarray(a, dtype=float)
+    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
+
+
+def _as_params(params: Params | ArrayLike) -> tuple[float, float, float]:
+    if isinstance(params, Params):
+        return params.r_L, params.r_R, params.b
+    r_L, r_R, b = np.asarray(params, dtype=float).reshape(3)
+    return float(r_L), float(r_R), float(b)
+
+
+def predict_increment(
+    dphi_L: ArrayLike, dphi_R: ArrayLike, params: Params | ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Predicted body-frame increment (dx [m], dy [m], dtheta [rad]) of each segment.
+
+    dphi_L, dphi_R: wheel increments (rad), any broadcastable shapes.
+    params: Params or array-like (r_L, r_R, b) in meters.
+    """
+    r_L, r_R, b = _as_params(params)
+    s_L = r_L * np.asarray(dphi_L, dtype=float)
+    s_R = r_R * np.asarray(dphi_R, dtype=float)
+    ds = 0.5 * (s_R + s_L)
+    dtheta = (s_R - s_L) / b
+    f, g = sinc_family(dtheta, derivatives=False)
+    return ds * f, ds * g, dtheta
+
+
+def increment_jacobian(
+    dphi_L: ArrayLike, dphi_R: ArrayLike, params: Params | ArrayLike
+) -> FloatArray:
+    """Jacobian d(dx, dy, dtheta)/d(r_L, r_R, b) of each segment, shape (N, 3, 3).
+
+    Rows: dx, dy, dtheta. Columns: r_L, r_R, b. Units: m/m for the position rows,
+    rad/m for the heading row.
+    """
+    r_L, r_R, b = _as_params(params)
+    phi_L = np.atleast_1d(np.asarray(dphi_L, dtype=float))
+    phi_R = np.atleast_1d(np.asarray(dphi_R, dtype=float))
+    phi_L, phi_R = np.broadcast_arrays(phi_L, phi_R)
+    s_L, s_R = r_L * phi_L, r_R * phi_R
+    ds = 0.5 * (s_R + s_L)
+    dtheta = (s_R - s_L) / b
+    f, g, fp, gp = sinc_family(dtheta)
+
+    # d(ds)/dp and d(dtheta)/dp, each shaped (N, 3) over (r_L, r_R, b).
+    dds = np.stack([0.5 * phi_L, 0.5 * phi_R, np.zeros_like(ds)], axis=-1)
+    ddth = np.stack([-phi_L / b, phi_R / b, -dtheta / b], axis=-1)
+
+    jac = np.empty(phi_L.shape + (3, 3))
+    jac[..., 0, :] = dds * f[..., None] + (ds * fp)[..., None] * ddth
+    jac[..., 1, :] = dds * g[..., None] + (ds * gp)[..., None] * ddth
+    jac[..., 2, :] = ddth
+    return jac

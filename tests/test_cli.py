@@ -1,0 +1,163 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from excite import save_segments
+from excite.cli import main
+from excite.synthetic import lesson_dataset
+
+from .conftest import TRUTH, spin_segments, straight_segments
+
+
+@pytest.fixture
+def good_csv(tmp_path, rng):
+    path = tmp_path / "log.csv"
+    save_segments(path, lesson_dataset(rng, 200, TRUTH))
+    return path
+
+
+def run_cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_one_line_error(code, err, *fragments):
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("excite: error: "), err
+    for fragment in fragments:
+        assert fragment in lines[0]
+
+
+def test_report_and_exit_zero(capsys, good_csv):
+    code, out, err = run_cli(capsys, "calibrate", good_csv)
+    assert code == 0 and err == ""
+    for word in ("r_L", "r_R", "b ", "sigma_min", "condition number", "identifiable    = yes",
+                 "residual RMS", "outliers"):
+        assert word in out
+
+
+def test_json_object(capsys, good_csv):
+    code, out, _ = run_cli(capsys, "calibrate", good_csv, "--json", "--sigma", "2e-3,2e-3,1e-3",
+                           "--loss", "huber", "--init", "0.1,0.1,0.6")
+    assert code == 0
+    d = json.loads(out)
+    assert set(d["params"]) == {"r_L", "r_R", "b"}
+    assert d["sigma"] == {"x": 2e-3, "y": 2e-3, "theta": 1e-3}
+    assert d["converged"] and d["identifiable"] and d["loss"] == "huber"
+    np.testing.assert_allclose([d["params"][k] for k in ("r_L", "r_R", "b")],
+                               TRUTH.as_array(), rtol=0.03)
+
+
+def test_ros2_yaml(capsys, good_csv, tmp_path):
+    out_yaml = tmp_path / "ddc.yaml"
+    code, out, _ = run_cli(capsys, "calibrate", good_csv, "--init", "0.05,0.05,0.3",
+                           "--ros2-yaml", out_yaml)
+    assert code == 0 and str(out_yaml) in out
+    text = out_yaml.read_text().splitlines()
+    assert text[:2] == ["diff_drive_controller:", "  ros__parameters:"]
+    values = dict(line.strip().split(": ") for line in text[2:])
+    assert float(values["wheel_radius"]) == 0.05 and float(values["wheel_separation"]) == 0.3
+    d = json.loads(subprocess.run([sys.executable, "-m", "excite.cli", "calibrate",
+                                   str(good_csv), "--json", "--init", "0.05,0.05,0.3"],
+                                  capture_output=True, text=True, check=True).stdout)
+    assert float(values["left_wheel_radius_multiplier"]) == pytest.approx(
+        d["params"]["r_L"] / 0.05, rel=1e-8)
+    assert float(values["wheel_separation_multiplier"]) == pytest.approx(
+        d["params"]["b"] / 0.3, rel=1e-8)
+
+
+@pytest.mark.parametrize(
+    "segments, words",
+    [(straight_segments, "b: no segment turns"),
+     (spin_segments, "the common scale of r_L, r_R and b: no segment translates")],
+)
+def test_degenerate_data_exit_3_and_name_the_direction(capsys, tmp_path, rng, segments, words):
+    path = tmp_path / "d.csv"
+    save_segments(path, segments(rng))
+    code, out, _ = run_cli(capsys, "calibrate", path)
+    assert code == 3 and words in out
+    code, out, _ = run_cli(capsys, "calibrate", path, "--json")
+    d = json.loads(out)
+    assert code == 3 and d["identifiable"] is False and d["unidentifiable_direction"] == words
+
+
+BAD_FILES = {
+    "empty": ("", "no segments"),
+    "header only": ("dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt\n", "no segments"),
+    "text": ("1,1,0,0,0\n1,2,x,0,0\n1,1,0,0,0\n", ":2: dx_gt is not a number"),
+    "nan": ("1,1,0,0,0\n1,2,0,0,0\n1,1,nan,0,0\n", ":3: dx_gt is not finite"),
+    "inf": ("1,1,0,0,0\ninf,2,0,0,0\n1,1,0,0,0\n", ":2: dphi_L is not finite"),
+    "columns": ("1,1,0,0,0\n1,1,0,0\n1,1,0,0,0\n", ":2: expected 5 columns, found 4"),
+    "too few": ("1,1,0,0,0\n1,1,0,0,0\n", "at least 3"),
+    "binary": (b"\x7fELF\x02\x01\x01\x00\x00\x00", "binary data"),
+}
+
+
+@pytest.mark.parametrize("name", BAD_FILES)
+def test_bad_files_are_one_line_errors(capsys, tmp_path, name):
+    content, fragment = BAD_FILES[name]
+    path = tmp_path / "bad.csv"
+    path.write_bytes(content if isinstance(content, bytes) else content.encode())
+    code, out, err = run_cli(capsys, "calibrate", path)
+    assert_one_line_error(code, err, str(path), fragment)
+    assert out == ""
+
+
+@pytest.mark.parametrize(
+    "extra, fragment",
+    [
+        (["--sigma", "1e-3,1e-3"], "--sigma needs 3"),
+        (["--sigma", "1e-3,-1e-3,1e-3"], "SY must be positive"),
+        (["--sigma", "a,b,c"], "SX is not a number"),
+        (["--sigma", "1e-3,1e-3,nan"], "STH must be positive"),
+        (["--init=-0.05,0.05,0.3"], "RL must be positive"),
+        (["--init", "-0.05,0.05,0.3"], "argument --init: expected one argument"),
+        (["--init", "0.05,0.05,0"], "B must be positive"),
+        (["--init", "0.05,0.05,inf"], "B must be positive"),
+        (["--loss", "cauchy"], "invalid choice: 'cauchy'"),
+        (["--bogus"], "unrecognized arguments: --bogus"),
+        (["--ros2-yaml", "/nonexistent/dir/x.yaml"], "cannot write /nonexistent/dir/x.yaml"),
+    ],
+)
+def test_bad_options_are_one_line_errors(capsys, good_csv, extra, fragment):
+    code, _, err = run_cli(capsys, "calibrate", good_csv, *extra)
+    assert_one_line_error(code, err, fragment)
+
+
+def test_usage_errors(capsys, tmp_path):
+    assert_one_line_error(*run_cli(capsys)[::2], "a command is required")
+    assert_one_line_error(*run_cli(capsys, "frobnicate")[::2], "invalid choice")
+    assert_one_line_error(*run_cli(capsys, "calibrate")[::2], "required")
+    assert_one_line_error(*run_cli(capsys, "calibrate", tmp_path / "none.csv")[::2],
+                          "no such file")
+    assert_one_line_error(*run_cli(capsys, "calibrate", tmp_path)[::2], "is a directory")
+
+
+def test_console_script_has_no_traceback_and_version(tmp_path):
+    exe = [sys.executable, "-m", "excite.cli"]
+    bad = tmp_path / "bad.csv"
+    bad.write_text("1,2,3\n")
+    proc = subprocess.run([*exe, "calibrate", str(bad)], capture_output=True, text=True)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.count("\n") == 1
+    proc = subprocess.run([*exe, "--version"], capture_output=True, text=True)
+    assert proc.returncode == 0 and proc.stdout.startswith("excite ")
+
+
+def test_import_excite_stays_light():
+    code = ("import sys, excite, gymnasium; "
+            "heavy = {'pymunk', 'torch', 'stable_baselines3', 'matplotlib'} & set(sys.modules); "
+            "print(sorted(heavy))")
+    # gymnasium itself may be imported by the user; excite must not pull the others.
+    proc = subprocess.run([sys.executable, "-c", code.replace(", gymnasium", "")],
+                          capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == "[]"
+    proc = subprocess.run([sys.executable, "-c", "import sys, excite; "
+                           "print('gymnasium' in sys.modules)"],
+                          capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == "False"

@@ -1,0 +1,93 @@
+import math
+import pickle
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from excite import OnlineEstimator, Params, calibrate
+from excite.information import fisher_information, scaled_jacobian, sigma_min
+from excite.synthetic import lesson_dataset
+
+from .conftest import TRUTH
+
+NOMINAL = Params(0.05, 0.05, 0.30)
+SIGMA = (2e-3, 2e-3, 1e-3)
+
+
+def run(est: OnlineEstimator, seg) -> OnlineEstimator:
+    for row in seg.as_array():
+        est.update(*row)
+    return est
+
+
+@pytest.mark.parametrize("sigma", [(2e-3, 2e-3, 1e-3), (5e-4, 5e-4, 1e-2), (5e-3, 5e-3, 2e-4)])
+def test_agrees_with_batch_well_within_one_std(rng, sigma):
+    seg = lesson_dataset(rng, 200, TRUTH, sigma=sigma)
+    batch = calibrate(seg, sigma=sigma)
+    online = run(OnlineEstimator(NOMINAL, sigma=sigma), seg)
+    z = (online.params.as_array() - batch.params.as_array()) / batch.std
+    assert np.all(np.abs(z) < 0.3), z  # the rest is the 10% prior
+    # Posterior = batch information plus the prior's (10% of nominal by default).
+    prior_information = np.diag(1 / (0.1 * NOMINAL.as_array()) ** 2)
+    expected = np.linalg.inv(np.linalg.inv(batch.covariance) + prior_information)
+    np.testing.assert_allclose(online.covariance, expected, rtol=0.05, atol=1e-3 * expected.max())
+
+
+def test_information_and_sigma_min_follow_the_definition(rng):
+    seg = lesson_dataset(rng, 300, TRUTH)
+    online = run(OnlineEstimator(NOMINAL, sigma=SIGMA), seg)
+    # The online information sums each segment's Jacobian at the estimate of its time;
+    # at convergence it matches the batch information at the final estimate.
+    batch_info = fisher_information(
+        scaled_jacobian(seg.dphi_L, seg.dphi_R, online.params, SIGMA, scale=NOMINAL))
+    np.testing.assert_allclose(online.information, batch_info, rtol=0.02)
+    assert online.sigma_min == pytest.approx(sigma_min(batch_info), rel=0.02)
+
+
+def test_no_motion_segments_change_nothing_and_never_nan():
+    est = OnlineEstimator(NOMINAL, sigma=SIGMA)
+    before = est.covariance.copy()
+    for _ in range(100):
+        est.update(0.0, 0.0, 1e-3, -2e-3, 5e-4)
+    np.testing.assert_allclose(est.params.as_array(), NOMINAL.as_array(), rtol=1e-15)
+    np.testing.assert_array_equal(est.covariance, before)
+    assert est.sigma_min == 0.0
+    assert est.n_segments == 100
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(st.lists(st.tuples(*[st.floats(-1e3, 1e3)] * 5), min_size=1, max_size=20))
+def test_never_produces_nan_or_non_physical_values(rows):
+    est = OnlineEstimator(NOMINAL, sigma=SIGMA)
+    for row in rows:
+        est.update(*row)
+        p = est.params.as_array()
+        assert np.all(np.isfinite(p)) and np.all(p > 0)
+        assert np.all(np.isfinite(est.covariance))
+
+
+def test_wraps_heading_residuals():
+    p = Params(0.05, 0.05, 0.3)
+    a = OnlineEstimator(p, sigma=SIGMA)
+    b = OnlineEstimator(p, sigma=SIGMA)
+    a.update(-10.0, 10.0, 0.0, 0.0, 10.0 / 3.0)
+    b.update(-10.0, 10.0, 0.0, 0.0, 10.0 / 3.0 - 2 * math.pi)
+    np.testing.assert_allclose(a.params.as_array(), b.params.as_array(), rtol=1e-12)
+
+
+def test_rejects_bad_input():
+    with pytest.raises(ValueError, match="prior_std"):
+        OnlineEstimator(NOMINAL, prior_std=-1.0)
+    with pytest.raises(ValueError, match="sigma"):
+        OnlineEstimator(NOMINAL, sigma=(0, 1, 1))
+    with pytest.raises(ValueError, match="finite"):
+        OnlineEstimator(NOMINAL).update(1.0, float("nan"), 0, 0, 0)
+
+
+def test_pickles(rng):
+    est = run(OnlineEstimator(NOMINAL, sigma=SIGMA), lesson_dataset(rng, 20, TRUTH))
+    clone = pickle.loads(pickle.dumps(est))
+    assert clone.params == est.params
+    np.testing.assert_array_equal(clone.information, est.information)
