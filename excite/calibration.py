@@ -18,7 +18,7 @@ from scipy.stats import chi2
 
 from excite.data import DataError, Segments
 from excite.information import as_sigma, inverse_information
-from excite.kinematics import Params, increment_jacobian, predict_increment, sinc_family, wrap_angle
+from excite.kinematics import Params, sinc_family, wrap_angle
 
 __all__ = ["CalibrationResult", "calibrate", "initial_estimate", "DEFAULT_NOMINAL"]
 
@@ -133,18 +133,14 @@ def _as_segments(segments: Segments | ArrayLike) -> Segments:
     return Segments.from_array(segments)
 
 
-def _residuals(p: FloatArray, seg: Segments) -> FloatArray:
-    """Raw residuals predicted - measured, shape (N, 3), theta wrapped to (-pi, pi]."""
-    dx, dy, dth = predict_increment(seg.dphi_L, seg.dphi_R, p)
-    return np.column_stack([dx - seg.dx, dy - seg.dy, wrap_angle(dth - seg.dtheta)])
-
-
-def _lstsq_from(a: FloatArray, y: FloatArray, ref: FloatArray) -> tuple[FloatArray, int]:
-    """Least-squares solution closest to ``ref`` (min-norm correction) and the rank of a."""
-    if a.size == 0 or not np.any(a):
+def _lstsq_from(gram: FloatArray, rhs: FloatArray, ref: FloatArray) -> tuple[FloatArray, int]:
+    """Solution of the normal equations gram x = rhs closest to ``ref`` (min-norm correction),
+    and the numerical rank of gram."""
+    if not np.any(gram):
         return ref.copy(), 0
-    delta, _, rank, _ = np.linalg.lstsq(a, y - a @ ref, rcond=1e-6)
-    return ref + delta, int(rank)
+    lam = np.linalg.eigvalsh(gram)
+    rank = int(np.sum(lam > lam[-1] * 1e-12))
+    return ref + _solve_psd(gram, rhs - gram @ ref), rank
 
 
 def initial_estimate(segments: Segments, fallback: Params = DEFAULT_NOMINAL) -> Params:
@@ -155,62 +151,116 @@ def initial_estimate(segments: Segments, fallback: Params = DEFAULT_NOMINAL) -> 
     change is linear in r/b: th_k = (r_R/b) dphi_R - (r_L/b) dphi_L. Directions the data do
     not determine are taken from ``fallback`` (keeping its b/r ratio).
     """
-    f, g = sinc_family(segments.dtheta, derivatives=False)
-    half = 0.5 * np.column_stack([segments.dphi_L, segments.dphi_R])
-    a_trans = np.vstack([half * f[:, None], half * g[:, None]])
-    y_trans = np.concatenate([segments.dx, segments.dy])
+    phi_L, phi_R, th = segments.dphi_L, segments.dphi_R, segments.dtheta
+    f, g = sinc_family(th, derivatives=False)
+    # Translation rows (f, g) * (phi_L, phi_R)/2 . (r_L, r_R): 2x2 normal equations.
+    phi = np.stack([phi_L, phi_R])
+    w = 0.25 * (f * f + g * g)
+    v = 0.5 * (f * segments.dx + g * segments.dy)
+    gram = np.einsum("ik,k,jk->ij", phi, w, phi)
     r_ref = np.array([fallback.r_L, fallback.r_R])
-    radii, rank_trans = _lstsq_from(a_trans, y_trans, r_ref)
+    radii, rank_trans = _lstsq_from(gram, np.einsum("ik,k->i", phi, v), r_ref)
     if np.any(radii <= 0):
         radii, rank_trans = r_ref, 0
 
     b_ref = fallback.b * radii.mean() / r_ref.mean()
-    a_rot = np.column_stack([-segments.dphi_L, segments.dphi_R])
-    ratios, rank_rot = _lstsq_from(a_rot, segments.dtheta, radii / b_ref)
+    # Heading rows (-phi_L, phi_R) . (r_L/b, r_R/b).
+    signed = phi * np.array([[-1.0], [1.0]])
+    gram = np.einsum("ik,jk->ij", signed, signed)
+    ratios, rank_rot = _lstsq_from(gram, np.einsum("ik,k->i", signed, th), radii / b_ref)
     if rank_trans == 0 and rank_rot > 0 and np.all(ratios > 0):
         # Nothing translates: only r/b is known; the common scale comes from the fallback.
         return Params(*(ratios * fallback.b), fallback.b)
     b = b_ref
     if rank_rot > 0:
-        chord = radii[1] * segments.dphi_R - radii[0] * segments.dphi_L  # = b * dtheta
-        denominator = float(segments.dtheta @ segments.dtheta)
-        candidate = float(chord @ segments.dtheta) / denominator if denominator > 0 else 0.0
+        chord = radii[1] * phi_R - radii[0] * phi_L  # = b * dtheta
+        denominator = float(np.einsum("k,k->", th, th))
+        candidate = float(np.einsum("k,k->", chord, th)) / denominator if denominator else 0.0
         if np.isfinite(candidate) and 0.5 * b_ref < candidate < 2.0 * b_ref:
             b = candidate
     return Params(radii[0], radii[1], b)
 
 
-class _Objective:
-    """Whitened (optionally Huber-weighted) residuals of one dataset for fixed sigma."""
+class _Evaluation:
+    """The model at p: raw residuals and relative Jacobian rows, channel-major.
 
-    def __init__(self, seg: Segments, sigma: FloatArray, loss: Loss):
-        self.seg, self.inv_sigma, self.loss = seg, 1.0 / sigma, loss
+    raw[c, k]: residual (predicted - measured) of channel c (x, y, theta) of segment k.
+    jac[c, i, k]: d raw[c, k] / d p_i * p_i, the derivative with respect to the relative
+    parameters (Jacobian columns scaled by p).
+    """
 
-    def whitened(self, p: FloatArray) -> FloatArray:
-        return _residuals(p, self.seg) * self.inv_sigma
+    def __init__(self, p: FloatArray, raw: FloatArray, jac: FloatArray):
+        self.p, self.raw, self.jac = p, raw, jac
+        self._unit: tuple[FloatArray, FloatArray, FloatArray] | None = None
 
-    def weights(self, z: FloatArray) -> FloatArray:
-        if self.loss == "linear":
-            return np.ones_like(z)
-        a = np.abs(z)
-        return np.where(a <= HUBER_K, 1.0, HUBER_K / np.maximum(a, HUBER_K))
-
-    def cost(self, z: FloatArray) -> float:
-        if self.loss == "linear":
-            return 0.5 * float(np.sum(z * z))
-        a = np.abs(z)
-        return float(np.sum(np.where(a <= HUBER_K, 0.5 * z * z, HUBER_K * (a - 0.5 * HUBER_K))))
-
-    def jacobian(self, p: FloatArray) -> FloatArray:
-        """Whitened Jacobian, (N, 3, 3)."""
-        return increment_jacobian(self.seg.dphi_L, self.seg.dphi_R, p) * self.inv_sigma[:, None]
+    def unit_system(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Per channel: J_c J_c^T (3,3,3), J_c r_c (3,3) and r_c . r_c (3,), for sigma = 1."""
+        if self._unit is None:
+            # einsum's own loops, not BLAS: threads only contend on these long, thin products.
+            info = np.einsum("cik,cjk->cij", self.jac, self.jac)
+            gradient = np.einsum("cik,ck->ci", self.jac, self.raw)
+            self._unit = (info, gradient, np.einsum("ck,ck->c", self.raw, self.raw))
+        return self._unit
 
 
-def _normal_equations(jac: FloatArray, z: FloatArray, w: FloatArray, scale: FloatArray):
-    """(J_s^T W J_s, J_s^T W z) with J_s = J diag(scale): the relative-parameter system."""
-    js = jac * scale
-    wj = js * w[:, :, None]
-    return np.einsum("nki,nkj->ij", wj, js), np.einsum("nki,nk->i", wj, z)
+class _Model:
+    """Residuals and analytic Jacobian of one dataset, in the structure the solver needs."""
+
+    def __init__(self, seg: Segments):
+        self.phi_L, self.phi_R = seg.dphi_L, seg.dphi_R
+        self.dx, self.dy, self.dtheta = seg.dx, seg.dy, seg.dtheta
+        self.n = len(seg)
+
+    def evaluate(self, p: FloatArray) -> _Evaluation:
+        r_L, r_R, b = p
+        s_L, s_R = r_L * self.phi_L, r_R * self.phi_R
+        ds, th = 0.5 * (s_L + s_R), (s_R - s_L) / b
+        f, g, fp, gp = sinc_family(th)
+        raw = np.empty((3, self.n))
+        np.subtract(ds * f, self.dx, out=raw[0])
+        np.subtract(ds * g, self.dy, out=raw[1])
+        raw[2] = wrap_angle(th - self.dtheta)
+        # Relative derivatives of ds: (s_L, s_R, 0)/2; of th: (-s_L/b, s_R/b, -th).
+        a0, a1 = 0.5 * s_L, 0.5 * s_R
+        c0, c1, c2 = -s_L / b, s_R / b, -th
+        ex, ey = ds * fp, ds * gp
+        jac = np.empty((3, 3, self.n))
+        jac[0, 0], jac[0, 1], jac[0, 2] = f * a0 + ex * c0, f * a1 + ex * c1, ex * c2
+        jac[1, 0], jac[1, 1], jac[1, 2] = g * a0 + ey * c0, g * a1 + ey * c1, ey * c2
+        jac[2, 0], jac[2, 1], jac[2, 2] = c0, c1, c2
+        return _Evaluation(p, raw, jac)
+
+
+def _huber_cost(z: FloatArray) -> float:
+    a = np.abs(z)
+    return float(np.sum(np.where(a <= HUBER_K, 0.5 * z * z, HUBER_K * (a - 0.5 * HUBER_K))))
+
+
+@dataclass(frozen=True)
+class _System:
+    """Whitened, (Huber-)weighted normal equations of an evaluation for given sigma."""
+
+    channel_information: FloatArray  # (3 channels, 3, 3), relative parameters
+    gradient: FloatArray  # (3,)
+    cost: float
+
+    @property
+    def information(self) -> FloatArray:
+        return self.channel_information.sum(axis=0)
+
+
+def _system(ev: _Evaluation, sigma: FloatArray, loss: Loss) -> _System:
+    inv_var = 1.0 / (sigma * sigma)
+    if loss == "linear":
+        info, gradient, rss = ev.unit_system()
+        return _System(info * inv_var[:, None, None], inv_var @ gradient,
+                       0.5 * float(inv_var @ rss))
+    z = ev.raw / sigma[:, None]
+    w = (HUBER_K / np.maximum(np.abs(z), HUBER_K)) * inv_var[:, None]
+    weighted = ev.jac * w[:, None, :]
+    info = np.einsum("cik,cjk->cij", weighted, ev.jac)
+    gradient = np.einsum("cik,ck->i", weighted, ev.raw)
+    return _System(info, gradient, _huber_cost(z))
 
 
 def _solve_psd(a: FloatArray, rhs: FloatArray) -> FloatArray:
@@ -221,62 +271,86 @@ def _solve_psd(a: FloatArray, rhs: FloatArray) -> FloatArray:
     return vec[:, keep] @ coef
 
 
+def _estimate_sigma(ev: _Evaluation, system: _System | None, loss: Loss) -> FloatArray:
+    """Per-channel noise std from the residuals at an evaluation.
+
+    linear: sqrt(RSS_c / (N - h_c)), with h_c = tr(F^-1 F_c) the degrees of freedom the fit
+    takes from channel c (REML-style); huber: 1.4826 * median |residual| (MAD).
+    """
+    raw = ev.raw
+    if loss == "huber":
+        sigma = _MAD_TO_STD * np.median(np.abs(raw), axis=1)
+    else:
+        dof = np.full(3, float(raw.shape[1]))
+        if system is not None:
+            inverse = np.linalg.pinv(system.information, hermitian=True)
+            dof -= np.einsum("ij,cji->c", inverse, system.channel_information)
+        sigma = np.sqrt(ev.unit_system()[2] / np.maximum(dof, 1.0))
+    # Floor for noise-free data: 1e-12 of the measured magnitudes (never divide by zero).
+    return np.maximum(sigma, 1e-12 * (np.sqrt(ev.unit_system()[2] / raw.shape[1]) + 1e-300))
+
+
+@dataclass
+class _Fit:
+    ev: _Evaluation
+    system: _System
+    sigma: FloatArray
+    iterations: int
+    converged: bool
+    message: str
+
+
 def _levenberg_marquardt(
-    obj: _Objective,
+    model: _Model,
     p0: FloatArray,
+    sigma: FloatArray | None,
+    loss: Loss,
     max_iterations: int,
     tol: float,
     frozen: FloatArray | None = None,
-) -> tuple[FloatArray, int, bool, str]:
-    """Minimise the (Huber-)weighted whitened cost; steps are relative: p <- p * (1 + step).
+) -> _Fit:
+    """Minimise the whitened (Huber-)cost; steps are relative: p <- p * (1 + step).
 
-    frozen: (3, k) orthonormal relative directions the steps must not move along.
+    sigma None: re-estimate the noise levels at every iterate (joint iteration), until both
+    the step and the noise levels settle. frozen: (3, k) orthonormal relative directions the
+    steps must not move along.
     """
-    p = p0.copy()
-    z = obj.whitened(p)
-    cost = obj.cost(z)
+    estimate = sigma is None
+    ev = model.evaluate(p0)
+    if estimate:
+        sigma = _estimate_sigma(ev, None, loss)
+    system = _system(ev, sigma, loss)
     lam = 1e-3
     for iteration in range(1, max_iterations + 1):
-        a, g = _normal_equations(obj.jacobian(p), z, obj.weights(z), p)
+        settled = True
+        if estimate:
+            new_sigma = _estimate_sigma(ev, system, loss)
+            settled = bool(np.all(np.abs(new_sigma / sigma - 1.0) < 1e-6))
+            if not settled:
+                sigma = new_sigma
+                system = _system(ev, sigma, loss)
+        a = system.information
+        step = _solve_psd(a + lam * np.diag(np.diag(a)), -system.gradient)
+        if frozen is not None:
+            step = step - frozen @ (frozen.T @ step)
+        if np.max(np.abs(step)) < tol and settled:
+            return _Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
         while True:
-            step = _solve_psd(a + lam * np.diag(np.diag(a)), -g)
-            if frozen is not None:
-                step = step - frozen @ (frozen.T @ step)
-            trial = p * (1.0 + step)
+            trial = ev.p * (1.0 + step)
             if np.all(trial > 0):
-                z_trial = obj.whitened(trial)
-                cost_trial = obj.cost(z_trial)
-                if cost_trial <= cost:
+                ev_trial = model.evaluate(trial)
+                system_trial = _system(ev_trial, sigma, loss)
+                if system_trial.cost <= system.cost:
                     break
             lam *= 10.0
             if lam > 1e12:
-                return p, iteration, True, "no further decrease of the cost"
-        p, z, improvement = trial, z_trial, cost - cost_trial
-        cost = cost_trial
-        lam = max(lam / 10.0, 1e-9)
-        if np.max(np.abs(step)) < tol or improvement <= tol * max(cost, 1e-300):
-            return p, iteration, True, "relative step below tolerance"
-    return p, max_iterations, False, "maximum number of iterations reached"
-
-
-def _leverage(jac: FloatArray, w: FloatArray) -> FloatArray:
-    """Per-channel sum of hat-matrix diagonals (degrees of freedom the fit takes), (3,)."""
-    wj = jac * np.sqrt(w)[:, :, None]
-    info = np.einsum("nki,nkj->ij", wj, wj)
-    inv = np.linalg.pinv(info, hermitian=True)
-    return np.einsum("nki,ij,nkj->k", wj, inv, wj)
-
-
-def _estimate_sigma(raw: FloatArray, jac_raw: FloatArray, loss: Loss) -> FloatArray:
-    """Per-channel noise std from raw residuals (REML-style dof correction; MAD for Huber)."""
-    n = raw.shape[0]
-    if loss == "huber":
-        sigma = _MAD_TO_STD * np.median(np.abs(raw), axis=0)
-    else:
-        dof = n - _leverage(jac_raw, np.ones_like(raw))
-        sigma = np.sqrt(np.sum(raw * raw, axis=0) / np.maximum(dof, 1.0))
-    scale = np.maximum(np.max(np.abs(raw), axis=0), 1.0)
-    return np.maximum(sigma, 1e-12 * scale)
+                return _Fit(ev, system, sigma, iteration, True, "no further decrease of the cost")
+            step = _solve_psd(a + lam * np.diag(np.diag(a)), -system.gradient)
+            if frozen is not None:
+                step = step - frozen @ (frozen.T @ step)
+        ev, system = ev_trial, system_trial
+        lam = max(lam / 10.0, 1e-12)
+    return _Fit(ev, system, sigma, max_iterations, False, "maximum number of iterations reached")
 
 
 def _describe_direction(v: FloatArray, seg: Segments, sigma: FloatArray) -> str:
@@ -301,17 +375,16 @@ def calibrate(
     loss: Loss = "linear",
     *,
     max_iterations: int = 100,
-    tol: float = 1e-12,
+    tol: float = 1e-10,
     max_relative_std: float = DEFAULT_MAX_RELATIVE_STD,
-    max_sigma_rounds: int = 20,
 ) -> CalibrationResult:
     """Estimate p = (r_L, r_R, b) from segments by weighted maximum likelihood.
 
     segments: Segments or an (N, 5) array in CSV column order (N >= 3).
     initial: starting Params; None finds its own start (:func:`initial_estimate`).
     sigma: measurement noise std (sigma_x [m], sigma_y [m], sigma_theta [rad]) or
-        (sigma_xy, sigma_theta); None estimates them from the residuals (re-weighting until
-        they settle to 0.01%).
+        (sigma_xy, sigma_theta); None estimates them from the residuals, re-weighting at
+        every iteration until they settle.
     loss: "linear" (Gaussian maximum likelihood) or "huber" (robust to slip outliers; the
         threshold is 1.345 whitened standard deviations).
     max_relative_std: identifiability threshold on 1/sigma_min.
@@ -327,72 +400,41 @@ def calibrate(
         p = (initial if isinstance(initial, Params) else Params.from_array(initial)).as_array()
     start = p
 
-    estimate_sigma = sigma is None
-    if estimate_sigma:
-        s = _estimate_sigma(_residuals(p, seg), increment_jacobian(seg.dphi_L, seg.dphi_R, p),
-                            loss)
-    else:
-        s = as_sigma(sigma)
-
-    total_iterations, converged, message = 0, False, ""
-    for _ in range(max_sigma_rounds if estimate_sigma else 1):
-        obj = _Objective(seg, s, loss)
-        p, iterations, converged, message = _levenberg_marquardt(obj, p, max_iterations, tol)
-        total_iterations += iterations
-        if not estimate_sigma:
-            break
-        new_s = _estimate_sigma(_residuals(p, seg), obj.jacobian(p) / obj.inv_sigma[:, None],
-                                loss)
-        settled = np.all(np.abs(new_s / s - 1.0) < 1e-4)
-        s = new_s
-        if settled:
-            break
-    weak = _weak_directions(_Objective(seg, s, loss), p, max_relative_std)
-    if weak is not None:
+    model = _Model(seg)
+    given = None if sigma is None else as_sigma(sigma)
+    fit = _levenberg_marquardt(model, p, given, loss, max_iterations, tol)
+    lam, vec = np.linalg.eigh(fit.system.information)
+    weak = lam * max_relative_std**2 < 1.0
+    if np.any(weak):
         # The data cannot determine these directions: hold them at the start instead of
         # letting the fit wander along them to chase noise.
-        p, iterations, converged, message = _levenberg_marquardt(
-            _Objective(seg, s, loss), start, max_iterations, tol, frozen=weak)
-        total_iterations += iterations
-    return _result(seg, p, s, estimate_sigma, loss, converged, total_iterations, message,
-                   max_relative_std)
+        refit = _levenberg_marquardt(model, start, fit.sigma, loss, max_iterations, tol,
+                                     frozen=vec[:, weak])
+        refit.iterations += fit.iterations
+        fit = refit
+    return _result(seg, fit, sigma is None, loss, max_relative_std)
 
 
-def _relative_information(obj: _Objective, p: FloatArray) -> FloatArray:
-    """Whitened (Huber-weighted), relatively scaled Fisher information at p."""
-    z = obj.whitened(p)
-    return _normal_equations(obj.jacobian(p), z, obj.weights(z), p)[0]
-
-
-def _weak_directions(obj: _Objective, p: FloatArray, max_relative_std: float):
-    """Relative directions whose CRLB std exceeds max_relative_std, as (3, k), or None."""
-    lam, vec = np.linalg.eigh(_relative_information(obj, p))
-    weak = lam * max_relative_std**2 < 1.0
-    return vec[:, weak] if np.any(weak) else None
-
-
-def _result(seg, p, s, estimate_sigma, loss, converged, iterations, message,
-            max_relative_std) -> CalibrationResult:
-    obj = _Objective(seg, s, loss)
-    z = obj.whitened(p)
-    info_rel = _relative_information(obj, p)
+def _result(seg: Segments, fit: _Fit, sigma_estimated: bool, loss: Loss,
+            max_relative_std: float) -> CalibrationResult:
+    p, info_rel = fit.ev.p, fit.system.information
     lam, vec = np.linalg.eigh(info_rel)
     singular = np.sqrt(np.maximum(lam[::-1], 0.0))
     s_min = singular[-1]
     condition = singular[0] / s_min if s_min > 0 else float("inf")
     covariance = inverse_information(info_rel) * np.outer(p, p)
-    std = np.sqrt(np.diag(covariance))
     identifiable = bool(s_min > 0 and 1.0 / s_min <= max_relative_std)
     direction = vector = None
     if not identifiable:
         vector = vec[:, 0]
-        direction = _describe_direction(vector, seg, s)
-    raw = z / obj.inv_sigma
+        direction = _describe_direction(vector, seg, fit.sigma)
+    raw = fit.ev.raw.T
+    z = raw / fit.sigma
     outliers = int(np.sum(np.sum(z * z, axis=1) > chi2.ppf(OUTLIER_QUANTILE, 3)))
     return CalibrationResult(
         params=Params.from_array(p),
         covariance=covariance,
-        std=std,
+        std=np.sqrt(np.diag(covariance)),
         singular_values=singular,
         condition_number=float(condition),
         identifiable=identifiable,
@@ -401,11 +443,11 @@ def _result(seg, p, s, estimate_sigma, loss, converged, iterations, message,
         n_segments=len(seg),
         n_outliers=outliers,
         rms_residual=np.sqrt(np.mean(raw * raw, axis=0)),
-        sigma=s,
-        sigma_estimated=estimate_sigma,
+        sigma=fit.sigma,
+        sigma_estimated=sigma_estimated,
         loss=loss,
-        converged=converged,
-        iterations=iterations,
-        message=message,
+        converged=fit.converged,
+        iterations=fit.iterations,
+        message=fit.message,
         residuals=raw,
     )

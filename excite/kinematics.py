@@ -11,9 +11,9 @@ For a constant-curvature segment (lesson, section 2)::
     dx     = ds * sinc(dtheta),  sinc(u) = sin(u) / u
     dy     = ds * cosc(dtheta),  cosc(u) = (1 - cos(u)) / u
 
-sinc, cosc and their derivatives are evaluated by their Taylor series for |u| < 1 and by
-cancellation-free closed forms beyond, so both branches agree to a few ulps and nothing is
-NaN or inf for u = 0, tiny u, or several turns.
+sinc, cosc and their derivatives are evaluated by cancellation-free closed forms where those
+are accurate and by their Taylor series where not (see :func:`sinc_family`); both branches
+agree to a few ulps at each seam, and nothing is NaN or inf for u = 0, tiny u, or many turns.
 """
 
 from __future__ import annotations
@@ -39,9 +39,12 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+_TWO_PI = 2.0 * math.pi
 
-#: Below this |u| the series are used; 12 terms make the truncation error < 1e-20 there.
+#: Below this |u| sinc' uses its series (12 terms: truncation error < 1e-20 there).
 SERIES_THRESHOLD = 1.0
+#: Below this |u| sinc, cosc, cosc' use their first 3 series terms (truncation < 1e-25).
+TINY_THRESHOLD = 1e-4
 _N_TERMS = 12
 
 
@@ -65,6 +68,15 @@ def _series(coeffs: tuple[float, ...], u2):
     acc = coeffs[0]
     for c in coeffs[1:]:
         acc = acc * u2 + c
+    return acc
+
+
+def _series_inplace(coeffs: tuple[float, ...], u2: FloatArray) -> FloatArray:
+    """Horner evaluation in u^2 on an array, without temporaries."""
+    acc = np.full_like(u2, coeffs[0])
+    for c in coeffs[1:]:
+        acc *= u2
+        acc += c
     return acc
 
 
@@ -97,21 +109,39 @@ class Params:
 
 
 def sinc_family(u: ArrayLike, derivatives: bool = True) -> tuple[FloatArray, ...]:
-    """(sinc, cosc[, sinc', cosc']) of an array, sharing one sin/cos evaluation."""
+    """(sinc, cosc[, sinc', cosc']) of an array, sharing one sin/cos evaluation.
+
+    sinc, cosc and cosc' use cancellation-free closed forms in sin(u/2), cos(u/2) (accurate
+    to a few ulps for every u != 0) and exact short series for |u| < 1e-4. sinc' has a
+    cancellation of order 1/u^2 in closed form, so it uses the series for |u| < 1.
+    """
     u = np.asarray(u, dtype=float)
-    small = np.abs(u) < SERIES_THRESHOLD
-    big = np.where(small, 1.0, u)  # 1 on the series branch: the closed forms never divide by 0
-    u2 = u * u
-    s, c, h = np.sin(big), np.cos(big), np.sin(0.5 * big)
-    one_minus_cos = 2.0 * h * h
-    f = np.where(small, _series(_SINC, u2), s / big)
-    g = np.where(small, u * _series(_COSC, u2), one_minus_cos / big)
-    if not derivatives:
-        return f, g
-    big2 = big * big
-    fp = np.where(small, u * _series(_DSINC, u2), (big * c - s) / big2)
-    gp = np.where(small, _series(_DCOSC, u2), (big * s - one_minus_cos) / big2)
-    return f, g, fp, gp
+    if u.ndim == 0:
+        return tuple(x.reshape(()) for x in sinc_family(u.reshape(1), derivatives))
+    tiny = np.abs(u) < TINY_THRESHOLD
+    any_tiny = bool(np.any(tiny))
+    safe = np.where(tiny, 1.0, u) if any_tiny else u
+    half_sin, half_cos = np.sin(0.5 * safe), np.cos(0.5 * safe)
+    one_minus_cos = 2.0 * half_sin * half_sin
+    sin_u = 2.0 * half_sin * half_cos
+    f = sin_u / safe
+    g = one_minus_cos / safe
+    if derivatives:
+        safe2 = safe * safe
+        gp = (safe * sin_u - one_minus_cos) / safe2
+        small = np.abs(u) < SERIES_THRESHOLD
+        fp = (safe * (1.0 - one_minus_cos) - sin_u) / safe2
+        if np.any(small):
+            us = u[small]
+            fp[small] = us * _series_inplace(_DSINC, us * us)
+    if any_tiny:
+        ut = u[tiny]
+        u2 = ut * ut
+        f[tiny] = _series(_SINC[-3:], u2)
+        g[tiny] = ut * _series(_COSC[-3:], u2)
+        if derivatives:
+            gp[tiny] = _series(_DCOSC[-3:], u2)
+    return (f, g, fp, gp) if derivatives else (f, g)
 
 
 def sinc(u: ArrayLike) -> FloatArray:
@@ -152,7 +182,8 @@ def sinc_cosc_scalar(u: float) -> tuple[float, float, float, float]:
 def wrap_angle(a: ArrayLike) -> FloatArray:
     """Wrap angles (rad) to (-pi, pi]."""
     a = np.asarray(a, dtype=float)
-    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
+    wrapped = a - _TWO_PI * np.round(a / _TWO_PI)  # in [-pi, pi]
+    return np.where(wrapped <= -np.pi, wrapped + _TWO_PI, wrapped)
 
 
 def _as_params(params: Params | ArrayLike) -> tuple[float, float, float]:

@@ -44,8 +44,9 @@ def test_jacobian_matches_central_differences(ds, dtheta, p):
                 - np.array(predict_increment(phi_L, phi_R, down))) / (2 * h)
 
     value = np.abs(np.array(predict_increment(phi_L, phi_R, x)))
-    # Absolute floor for entries that vanish analytically (e.g. sin(4 pi) = 1e-16 in floats):
-    # 1e-13 of the wheel travel of the segment (m for dx, dy; rad for dtheta).
+    # Absolute floor for entries that vanish analytically (e.g. at dtheta = 2 pi k): the
+    # finite differences' own rounding, ~10 eps |travel| / h (travel: the wheel travel of the
+    # segment, m for dx, dy; rad for dtheta), i.e. 4e-11 of the travel for h = 5e-5.
     wheel_travel = max(abs(p.r_L * phi_L), abs(p.r_R * phi_R))
     travel = np.array([wheel_travel, wheel_travel, wheel_travel / p.b])
     for j in range(3):
@@ -53,7 +54,7 @@ def test_jacobian_matches_central_differences(ds, dtheta, p):
         # O(eps |f| / h), both far below the tolerance for relative steps h = 1e-4.
         fd = (4 * central(j, 5e-5) - central(j, 1e-4)) / 3
         analytic = jac[:, j] * x[j]  # derivative with respect to the relative parameter
-        tol = 1e-6 * np.maximum(np.abs(jac * x).max(axis=1), value) + 1e-13 * travel
+        tol = 1e-6 * np.maximum(np.abs(jac * x).max(axis=1), value) + 10 * np.finfo(float).eps / 5e-5 * travel
         assert np.all(np.abs(fd - analytic) <= tol), (j, fd, analytic)
 
 
