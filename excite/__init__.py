@@ -1,7 +1,9 @@
 """excite: calibrate a differential-drive robot's wheel radii and separation, and plan the
 maneuvers that identify them fastest.
 
-Core API (numpy/scipy only; importing excite never imports gymnasium, pymunk or torch)::
+Core API (numpy/scipy only; importing excite never imports gymnasium, pymunk or torch, yet
+registers the environment ids ``excite/DiffDriveCalib-v0`` and ``excite/DiffDriveCalibIdeal-v0``
+with gymnasium, see :mod:`excite.registration`)::
 
     from excite import Params, Segments, predict_increment, increment_jacobian
     from excite import load_segments, save_segments, calibrate, OnlineEstimator
@@ -11,6 +13,9 @@ from excite.calibration import CalibrationResult, calibrate
 from excite.data import DataError, Segments, load_segments, save_segments
 from excite.kinematics import Params, increment_jacobian, predict_increment
 from excite.online import OnlineEstimator
+from excite.registration import install as _install_gymnasium_ids
+
+_install_gymnasium_ids()
 
 __version__ = "0.1.0"
 

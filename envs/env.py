@@ -1,0 +1,315 @@
+"""The Gymnasium environment: plan calibration maneuvers for a robot with hidden wheels."""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from envs.robot import RobotDistribution, RobotSpec
+from envs.simulation import Simulation, SimulationConfig
+from excite.data import Segments
+from excite.information import fisher_information, scaled_jacobian, sigma_min
+from excite.kinematics import Params
+from excite.online import OnlineEstimator
+
+
+class Estimator(Protocol):
+    """What the environment needs of an online estimator (OnlineEstimator implements it)."""
+
+    def update(self, dphi_L: float, dphi_R: float, dx: float, dy: float,
+               dtheta: float) -> None: ...
+
+    @property
+    def params(self) -> Params: ...
+
+    @property
+    def covariance(self) -> np.ndarray: ...
+
+
+#: estimator_factory(nominal robot, sensor sigma (sx, sy, sth)) -> a fresh estimator.
+EstimatorFactory = Callable[[Params, np.ndarray], Estimator]
+
+
+def default_estimator(nominal: Params, sigma: np.ndarray) -> OnlineEstimator:
+    """OnlineEstimator started at the nominal robot, with the sensor's noise levels."""
+    return OnlineEstimator(nominal, sigma=sigma)
+
+
+OBS_SIZE = 16
+
+
+class DiffDriveCalibEnv(gym.Env):
+    """Excite a differential-drive robot so its wheel parameters become identifiable fast.
+
+    A robot with hidden effective wheel radii r_L, r_R and wheel separation b (drawn per
+    episode around the nominal robot) drives in a walled arena. Each step is one motion
+    segment: the action holds two wheel-speed commands for ``segment_duration`` seconds; the
+    encoders and an external pose sensor then give one calibration row
+    (dphi_L, dphi_R, dx, dy, dtheta), which updates an online estimator. The reward is the
+    information the segment added.
+
+    ## Action space
+    ``Box(-1, 1, (2,), float32)``: (left, right) wheel-speed commands as fractions of the
+    motor limit (``robot["max_wheel_speed"]``, rad/s). Out-of-range actions are clipped;
+    non-finite actions raise ``ValueError``.
+
+    ## Observation space
+    ``Box(float32, (16,))``, only what a real robot could know (never the hidden truth):
+
+    | index | meaning |
+    |-------|---------|
+    | 0-2   | estimate / nominal - 1 for (r_L, r_R, b), clipped to [-1, 1] |
+    | 3-5   | log1p of the eigenvalues (ascending) of the information matrix F, / 10 |
+    | 6-8   | eigenvector of F's smallest eigenvalue (the worst-known direction) |
+    | 9-10  | measured position x, y divided by the arena half-size |
+    | 11-12 | cos, sin of the measured heading |
+    | 13-14 | the previous action |
+    | 15    | fraction of the segment budget used |
+
+    F is the whitened, relatively scaled Fisher information of all segments so far at the
+    current estimate (DESIGN.md); sigma_min = sqrt(lambda_min(F)).
+
+    ## Reward
+    A sum of named terms, each reported in ``info["reward_terms"]``:
+
+    - ``information``: (sigma_min_t - sigma_min_{t-1}) / ``information_scale``; the episode's
+      sum telescopes to the final sigma_min / information_scale;
+    - ``collision``: -``collision_penalty`` when the chassis touched a wall;
+    - ``effort``: -``effort_cost`` * mean(action^2); ``time``: -``time_cost`` per segment;
+    - ``accuracy`` (privileged, for training in simulation only; 0 by default): at the
+      episode's last step, -``accuracy_weight`` * 100 * max relative error of the estimate
+      against the hidden truth. The observation never contains the truth.
+
+    ## Episode end
+    Truncated after ``budget`` segments (the registered ids also set ``max_episode_steps``;
+    pass ``max_episode_steps`` to ``gymnasium.make`` when you change the budget). Terminated
+    when ``target_sigma_min`` (if set) is reached.
+
+    ## Configuration
+    ``DiffDriveCalibEnv.default_config()`` documents every key; override with
+    ``config={...}`` or keyword arguments, e.g.
+    ``gymnasium.make("excite/DiffDriveCalib-v0", budget=50, max_episode_steps=50)``.
+    ``estimator_factory(nominal, sigma)`` plugs in another estimator (default:
+    :class:`excite.OnlineEstimator` at the nominal robot).
+
+    ## Evaluation
+    ``env.unwrapped.true_params`` (hidden truth), ``env.unwrapped.segments`` (the episode's
+    calibration log), ``env.unwrapped.estimator``.
+
+    ``reset(options={"robot": RobotSpec, "pose": (x, y, theta)})`` fixes the hidden robot
+    and/or start pose.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
+
+    @staticmethod
+    def default_config() -> dict[str, Any]:
+        return {
+            "ideal": False,  # True: roll without slip or lag (the kinematic model is exact)
+            "budget": 30,  # segments per episode
+            "segment_duration": 1.0,  # s per segment (a multiple of 1 / physics_hz)
+            "arena_size": 4.0,  # m, square arena side
+            "physics_hz": 50.0,  # physics tick rate
+            "ticks_per_rev": 4096,  # encoder resolution
+            "sigma_xy": 2e-3,  # m, pose sensor noise (per segment increment)
+            "sigma_theta": 1e-3,  # rad
+            "robot": {},  # RobotDistribution overrides, e.g. {"radius_rel": 0.05}
+            "information_scale": 100.0,  # reward unit of sigma_min
+            "collision_penalty": 1.0,
+            "effort_cost": 0.0,
+            "time_cost": 0.0,
+            "accuracy_weight": 0.0,  # privileged terminal term (uses the hidden truth)
+            "target_sigma_min": None,  # terminate once sigma_min reaches it
+        }
+
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        config: dict[str, Any] | None = None,
+        estimator_factory: EstimatorFactory | None = None,
+        **overrides: Any,
+    ):
+        cfg = self.default_config()
+        for key, value in {**(config or {}), **overrides}.items():
+            if key not in cfg:
+                raise ValueError(f"unknown config key {key!r}; known: {', '.join(cfg)}")
+            cfg[key] = value
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+        if int(cfg["budget"]) < 1:
+            raise ValueError(f"budget must be at least 1 segment, got {cfg['budget']}")
+        self.config = cfg
+        self.render_mode = render_mode
+        self.distribution = RobotDistribution(**cfg["robot"])
+        nominal = self.distribution.nominal()
+        self.nominal = Params(*nominal.kinematic_params())
+        self.max_wheel_speed = nominal.max_wheel_speed
+        self.sim = Simulation(SimulationConfig(
+            arena_width=cfg["arena_size"], arena_height=cfg["arena_size"],
+            physics_hz=cfg["physics_hz"], ideal=bool(cfg["ideal"]),
+            ticks_per_rev=cfg["ticks_per_rev"], sigma_xy=cfg["sigma_xy"],
+            sigma_theta=cfg["sigma_theta"]))
+        self.sigma = self.sim.pose_sensor.sigma
+        self.segment_duration = float(cfg["segment_duration"])
+        self.budget = int(cfg["budget"])
+        self.estimator_factory = estimator_factory or default_estimator
+
+        self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        low = np.array([-1] * 3 + [0] * 3 + [-1] * 3 + [-1.5] * 2 + [-1] * 4 + [0], np.float32)
+        high = np.array([1] * 3 + [5] * 3 + [1] * 3 + [1.5] * 2 + [1] * 4 + [1], np.float32)
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self._renderer = None
+        self._robot: RobotSpec | None = None
+
+    # -- episode ---------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = options or {}
+        robot = options.get("robot") or self.distribution.sample(self.np_random)
+        sim_rng = np.random.default_rng(self.np_random.integers(2**63))
+        self.sim.reset(robot, sim_rng, pose=options.get("pose"))
+        self._robot = robot
+        self._sensor_rng = np.random.default_rng(self.np_random.integers(2**63))
+        self.estimator = self.estimator_factory(self.nominal, self.sigma.copy())
+        self._rows: list[np.ndarray] = []
+        self._paths: list[np.ndarray] = [self.sim.pose[None, :]]
+        self._last_action = np.zeros(2)
+        self._sigma_min = 0.0
+        self._information = np.zeros((3, 3))
+        self._measured_pose = self.sim.pose_sensor.absolute(self.sim.pose, self._sensor_rng)
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), {"sigma_min": 0.0, "n_segments": 0}
+
+    def step(self, action):
+        if self._robot is None:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(action, dtype=float).reshape(-1)
+        if a.shape != (2,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be 2 finite numbers (left, right), got {action!r}")
+        a = np.clip(a, -1.0, 1.0)
+        outcome = self.sim.run_segment(a[0] * self.max_wheel_speed, a[1] * self.max_wheel_speed,
+                                       self.segment_duration)
+        row = outcome.measurement
+        self.estimator.update(*map(float, row))
+        self._rows.append(row)
+        self._paths.append(outcome.path[1:])
+        self._last_action = a
+        self._measured_pose = self.sim.pose_sensor.absolute(outcome.pose_end, self._sensor_rng)
+
+        previous = self._sigma_min
+        self._information = self.information_at(self.estimate)
+        self._sigma_min = float(sigma_min(self._information))
+        n = len(self._rows)
+        target = self.config["target_sigma_min"]
+        terminated = target is not None and self._sigma_min >= target
+        truncated = n >= self.budget and not terminated
+        terms = {
+            "information": (self._sigma_min - previous) / self.config["information_scale"],
+            "collision": -float(self.config["collision_penalty"]) * outcome.collision,
+            "effort": -float(self.config["effort_cost"]) * float(np.mean(a * a)),
+            "time": -float(self.config["time_cost"]),
+            "accuracy": 0.0,
+        }
+        if (terminated or truncated) and self.config["accuracy_weight"]:
+            terms["accuracy"] = -self.config["accuracy_weight"] * 100.0 * self.max_relative_error
+        info = {
+            "reward_terms": terms,
+            "sigma_min": self._sigma_min,
+            "collision": bool(outcome.collision),
+            "measurement": row,
+            "estimate": self.estimate.as_array(),
+            "n_segments": n,
+        }
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), float(sum(terms.values())), terminated, truncated, info
+
+    # -- what the robot knows ------------------------------------------------------------------
+    @property
+    def estimate(self) -> Params:
+        p = self.estimator.params
+        return p if isinstance(p, Params) else Params.from_array(p)
+
+    @property
+    def segments(self) -> Segments:
+        """The calibration log of this episode so far."""
+        return Segments.from_array(np.array(self._rows).reshape(-1, 5))
+
+    def information_at(self, params: Params) -> np.ndarray:
+        """Relative Fisher information of this episode's segments evaluated at ``params``."""
+        if not self._rows:
+            return np.zeros((3, 3))
+        rows = np.array(self._rows)
+        jac = scaled_jacobian(rows[:, 0], rows[:, 1], params, self.sigma, scale=self.nominal)
+        return fisher_information(jac)
+
+    @property
+    def sigma_min(self) -> float:
+        return self._sigma_min
+
+    def _observation(self) -> np.ndarray:
+        lam, vec = np.linalg.eigh(self._information)
+        weakest = vec[:, 0] * (1.0 if vec[np.argmax(np.abs(vec[:, 0])), 0] >= 0 else -1.0)
+        x, y, theta = self._measured_pose
+        half = 0.5 * self.config["arena_size"]
+        obs = np.concatenate([
+            self.estimate.as_array() / self.nominal.as_array() - 1.0,
+            np.log1p(np.maximum(lam, 0.0)) / 10.0,
+            weakest,
+            [x / half, y / half, math.cos(theta), math.sin(theta)],
+            self._last_action,
+            [len(self._rows) / self.budget],
+        ])
+        return np.clip(obs, self.observation_space.low, self.observation_space.high).astype(
+            np.float32)
+
+    # -- evaluation only -------------------------------------------------------------------------
+    @property
+    def true_params(self) -> Params:
+        """The hidden truth (for evaluation; never part of the observation)."""
+        if self._robot is None:
+            raise RuntimeError("call reset() first")
+        return Params(*self._robot.kinematic_params())
+
+    @property
+    def robot(self) -> RobotSpec:
+        if self._robot is None:
+            raise RuntimeError("call reset() first")
+        return self._robot
+
+    @property
+    def max_relative_error(self) -> float:
+        return float(np.max(np.abs(self.estimate.as_array() / self.true_params.as_array() - 1)))
+
+    # -- rendering ---------------------------------------------------------------------------
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode=...")
+            return None
+        if self._renderer is None:
+            from envs.rendering import ArenaRenderer
+
+            self._renderer = ArenaRenderer(self.config["arena_size"],
+                                           human=self.render_mode == "human")
+        frame = self._renderer.draw(
+            path=np.concatenate(self._paths), pose=self.sim.pose, robot=self.robot,
+            estimate=self.estimate, sigma_min=self._sigma_min, n_segments=len(self._rows),
+            budget=self.budget)
+        return None if self.render_mode == "human" else frame
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self):
+        state = copy.copy(self.__dict__)
+        state["_renderer"] = None  # figures do not pickle; a new one is made on demand
+        return state
