@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import gymnasium as gym
@@ -42,6 +43,34 @@ def default_estimator(nominal: Params, sigma: np.ndarray) -> OnlineEstimator:
 
 
 OBS_SIZE = 16
+
+
+@dataclass(frozen=True)
+class RobotKnowledge:
+    """What the robot knows after n segments: everything a planner may use, never the truth.
+
+    observation: the env's observation vector. estimate: current estimate (m). information:
+    relative Fisher information of the log at the estimate (3x3). log: (n, 5) calibration rows.
+    pose: measured world pose (x, y, theta). nominal: the nominal robot. sigma: sensor noise
+    (m, m, rad). max_wheel_speed: motor limit (rad/s); segment_duration (s); arena_size (m);
+    budget (segments).
+    """
+
+    observation: np.ndarray
+    estimate: Params
+    information: np.ndarray
+    log: np.ndarray
+    pose: np.ndarray
+    nominal: Params
+    sigma: np.ndarray
+    max_wheel_speed: float
+    segment_duration: float
+    arena_size: float
+    budget: int
+
+    @property
+    def n_segments(self) -> int:
+        return int(self.log.shape[0])
 
 
 class DiffDriveCalibEnv(gym.Env):
@@ -253,6 +282,15 @@ class DiffDriveCalibEnv(gym.Env):
     @property
     def sigma_min(self) -> float:
         return self._sigma_min
+
+    def knowledge(self) -> RobotKnowledge:
+        """What the robot knows now (for planners and scripted protocols)."""
+        return RobotKnowledge(
+            observation=self._observation(), estimate=self.estimate,
+            information=self._information.copy(), log=np.array(self._rows).reshape(-1, 5),
+            pose=self._measured_pose.copy(), nominal=self.nominal, sigma=self.sigma.copy(),
+            max_wheel_speed=self.max_wheel_speed, segment_duration=self.segment_duration,
+            arena_size=float(self.config["arena_size"]), budget=self.budget)
 
     def _observation(self) -> np.ndarray:
         lam, vec = np.linalg.eigh(self._information)

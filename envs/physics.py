@@ -21,31 +21,13 @@ import numpy as np
 import pymunk
 
 from envs.robot import RobotSpec
+from excite.kinematics import sinc_cosc_scalar, sinc_family
 
 GRAVITY = 9.81  # m/s^2
 CHASSIS_SIZE = 0.36  # m, side of the square footprint centred on the axle midpoint
 WALL_RADIUS = 0.05  # m, half-thickness of the arena's wall segments
 SLIP_ITERATIONS = 6  # Gauss-Seidel sweeps over the two wheels when a friction cap binds
 _CHASSIS_TYPE, _WALL_TYPE = 1, 2  # pymunk collision types
-_SMALL_ANGLE = 1e-4  # rad, below which sinc/cosc use their Taylor series
-
-
-def sinc_cosc(u: float) -> tuple[float, float]:
-    """(sin(u)/u, (1 - cos(u))/u), continuous at u = 0."""
-    if abs(u) < _SMALL_ANGLE:
-        u2 = u * u
-        return 1.0 - u2 / 6.0, u * (0.5 - u2 / 24.0)
-    return math.sin(u) / u, (1.0 - math.cos(u)) / u
-
-
-def sinc_cosc_array(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorized `sinc_cosc`."""
-    small = np.abs(u) < _SMALL_ANGLE
-    safe = np.where(small, 1.0, u)
-    u2 = u * u
-    sinc = np.where(small, 1.0 - u2 / 6.0, np.sin(safe) / safe)
-    cosc = np.where(small, u * (0.5 - u2 / 24.0), (1.0 - np.cos(safe)) / safe)
-    return sinc, cosc
 
 
 @dataclass(frozen=True)
@@ -141,7 +123,7 @@ class IdealDrive:
         v_L, v_R = robot.r_L * omega[0], robot.r_R * omega[1]
         ds = 0.5 * (v_L + v_R) * t
         dth = (v_R - v_L) / robot.b * t
-        sinc, cosc = sinc_cosc_array(dth)
+        sinc, cosc = sinc_family(dth, derivatives=False)
         bx, by = ds * sinc, ds * cosc
         x0, y0, th0 = self._pose
         c, s = math.cos(th0), math.sin(th0)
@@ -320,7 +302,7 @@ class PymunkDrive:
             else:
                 vx, vy, w = self._slip(vx, vy, w, t_L, t_R)
             vel_x, vel_y = c * vx - s * vy, s * vx + c * vy
-            sinc, cosc = sinc_cosc(w * dt)
+            sinc, cosc = sinc_cosc_scalar(w * dt, derivatives=False)
             chord_x = sinc * vel_x - cosc * vel_y
             chord_y = cosc * vel_x + sinc * vel_y
             body.velocity = (chord_x, chord_y)

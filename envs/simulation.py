@@ -48,6 +48,8 @@ class SimulationConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 2 * SPAWN_MARGIN):
                 raise ValueError(f"{name} must be > {2 * SPAWN_MARGIN} m, got {value}")
+        WheelEncoders(self.ticks_per_rev)  # validate the sensor settings early
+        RelativePoseSensor(self.sigma_xy, self.sigma_theta)
 
 
 @dataclass(frozen=True, eq=False)

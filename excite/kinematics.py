@@ -164,19 +164,27 @@ def dcosc(u: ArrayLike) -> FloatArray:
     return sinc_family(u)[3]
 
 
-def sinc_cosc_scalar(u: float) -> tuple[float, float, float, float]:
-    """(sinc, cosc, sinc', cosc') of one Python float: the hot path of the online estimator."""
-    if abs(u) < SERIES_THRESHOLD:
+def sinc_cosc_scalar(u: float, derivatives: bool = True) -> tuple[float, ...]:
+    """(sinc, cosc[, sinc', cosc']) of one Python float, with the branches of
+    :func:`sinc_family`: the hot path of the online estimator and the physics."""
+    if abs(u) < TINY_THRESHOLD:
         u2 = u * u
-        return (
-            _series(_SINC, u2),
-            u * _series(_COSC, u2),
-            u * _series(_DSINC, u2),
-            _series(_DCOSC, u2),
-        )
-    s, c, h = math.sin(u), math.cos(u), math.sin(0.5 * u)
-    one_minus_cos = 2.0 * h * h
-    return s / u, one_minus_cos / u, (u * c - s) / (u * u), (u * s - one_minus_cos) / (u * u)
+        f, g = _series(_SINC[-3:], u2), u * _series(_COSC[-3:], u2)
+        if not derivatives:
+            return f, g
+        return f, g, u * _series(_DSINC[-3:], u2), _series(_DCOSC[-3:], u2)
+    half_sin, half_cos = math.sin(0.5 * u), math.cos(0.5 * u)
+    one_minus_cos = 2.0 * half_sin * half_sin
+    sin_u = 2.0 * half_sin * half_cos
+    f, g = sin_u / u, one_minus_cos / u
+    if not derivatives:
+        return f, g
+    u2 = u * u
+    if abs(u) < SERIES_THRESHOLD:
+        fp = u * _series(_DSINC, u2)
+    else:
+        fp = (u * (1.0 - one_minus_cos) - sin_u) / u2
+    return f, g, fp, (u * sin_u - one_minus_cos) / u2
 
 
 def wrap_angle(a: ArrayLike) -> FloatArray:

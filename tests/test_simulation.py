@@ -181,7 +181,9 @@ def test_encoder_quantization():
     enc = WheelEncoders(ticks_per_rev=4096)
     res = 2 * math.pi / 4096
     assert enc.resolution == pytest.approx(res)
-    np.testing.assert_array_equal(enc.count(np.array([0.0, res * 0.999, res, -1e-9])), [0, 0, 1, -1])
+    np.testing.assert_array_equal(
+        enc.count(np.array([0.0, res * 0.999, res, -1e-9])), [0, 0, 1, -1]
+    )
     rng = np.random.default_rng(0)
     start = rng.uniform(-100, 100, (1000, 2))
     end = start + rng.uniform(-50, 50, (1000, 2))
