@@ -78,10 +78,18 @@ class DiffDriveCalibEnv(gym.Env):
 
     A robot with hidden effective wheel radii r_L, r_R and wheel separation b (drawn per
     episode around the nominal robot) drives in a walled arena. Each step is one motion
-    segment: the action holds two wheel-speed commands for ``segment_duration`` seconds; the
+    segment: the action holds two wheel-speed commands for ``segment_duration`` seconds
+    (optionally followed by ``settle_time`` seconds of stop command: stop-and-go segments start
+    and end at rest, which keeps the wheel-speed ratio, hence the curvature, constant); the
     encoders and an external pose sensor then give one calibration row
     (dphi_L, dphi_R, dx, dy, dtheta), which updates an online estimator. The reward is the
     information the segment added.
+
+    On the slip id the robot drives continuously: the motors lag (first order) and the wheels
+    push through friction-capped traction, so abrupt or fast maneuvers slip and curve
+    differently from the constant-curvature model, while smooth, gentle ones follow it: the
+    information a maneuver buys is traded against the bias it brings. The Ideal id rolls
+    exactly along the model.
 
     ## Action space
     ``Box(-1, 1, (2,), float32)``: (left, right) wheel-speed commands as fractions of the
@@ -142,7 +150,8 @@ class DiffDriveCalibEnv(gym.Env):
         return {
             "ideal": False,  # True: roll without slip or lag (the kinematic model is exact)
             "budget": 30,  # segments per episode
-            "segment_duration": 1.0,  # s per segment (a multiple of 1 / physics_hz)
+            "segment_duration": 1.0,  # s the command is held (a multiple of 1 / physics_hz)
+            "settle_time": 0.0,  # s of zero command after it (> 0: stop-and-go segments)
             "arena_size": 4.0,  # m, square arena side
             "physics_hz": 50.0,  # physics tick rate
             "ticks_per_rev": 4096,  # encoder resolution
@@ -224,7 +233,7 @@ class DiffDriveCalibEnv(gym.Env):
             raise ValueError(f"action must be 2 finite numbers (left, right), got {action!r}")
         a = np.clip(a, -1.0, 1.0)
         outcome = self.sim.run_segment(a[0] * self.max_wheel_speed, a[1] * self.max_wheel_speed,
-                                       self.segment_duration)
+                                       self.segment_duration, self.config["settle_time"])
         row = outcome.measurement
         self.estimator.update(*map(float, row))
         self._rows.append(row)
@@ -323,6 +332,19 @@ class DiffDriveCalibEnv(gym.Env):
         return self._robot
 
     @property
+    def path(self) -> np.ndarray:
+        """The true world poses (x, y, theta) of this episode at the physics rate (M, 3)."""
+        return np.concatenate(self._paths)
+
+    @property
+    def last_segment_distance(self) -> float:
+        """Path length (m) the robot travelled in the last segment (evaluation only)."""
+        steps = self._paths[-1][:, :2] if len(self._paths) > 1 else np.zeros((1, 2))
+        start = self._paths[-2][-1, :2] if len(self._paths) > 1 else steps[0]
+        points = np.vstack([start, steps])
+        return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+
+    @property
     def max_relative_error(self) -> float:
         return float(np.max(np.abs(self.estimate.as_array() / self.true_params.as_array() - 1)))
 
@@ -337,7 +359,7 @@ class DiffDriveCalibEnv(gym.Env):
             self._renderer = ArenaRenderer(self.config["arena_size"],
                                            human=self.render_mode == "human")
         frame = self._renderer.draw(
-            path=np.concatenate(self._paths), pose=self.sim.pose, robot=self.robot,
+            path=self.path, pose=self.sim.pose, robot=self.robot,
             estimate=self.estimate, sigma_min=self._sigma_min, n_segments=len(self._rows),
             budget=self.budget)
         return None if self.render_mode == "human" else frame

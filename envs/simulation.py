@@ -129,24 +129,28 @@ class Simulation:
         self._robot = robot
         self._rng = rng
 
-    def run_segment(self, cmd_L: float, cmd_R: float, duration: float) -> SegmentOutcome:
-        """Hold wheel-speed commands (rad/s, clipped to the motor limit) for `duration` s.
+    def run_segment(
+        self, cmd_L: float, cmd_R: float, duration: float, settle: float = 0.0
+    ) -> SegmentOutcome:
+        """Hold wheel-speed commands (rad/s, clipped to the motor limit) for `duration` s,
+        then command zero for `settle` s (stop-and-go), all measured as one segment.
 
-        duration must be a whole number of physics ticks (1 / physics_hz).
+        Starting and ending at rest, both wheels follow the same lag shape, so their speed
+        ratio, and the path's curvature, stay constant: without slip the segment is exactly
+        the kinematic model's arc. duration and settle must be whole numbers of physics ticks.
         """
         if self._robot is None:
             raise RuntimeError("Simulation.reset must be called before run_segment")
         if not (math.isfinite(cmd_L) and math.isfinite(cmd_R)):
             raise ValueError(f"wheel commands must be finite, got {(cmd_L, cmd_R)}")
-        ticks = duration * self.config.physics_hz if math.isfinite(duration) else 0.0
-        n_ticks = round(ticks)
-        if n_ticks < 1 or abs(ticks - n_ticks) > 1e-9 * n_ticks:
-            raise ValueError(
-                f"duration must be a positive multiple of the physics tick {self.dt} s, "
-                f"got {duration}"
-            )
+        n_ticks = self._ticks(duration, "duration", minimum=1)
+        n_settle = self._ticks(settle, "settle", minimum=0)
         phi_start = self.drive.wheel_angles
         path, collision = self.drive.run(float(cmd_L), float(cmd_R), n_ticks)
+        if n_settle:
+            stop_path, stop_collision = self.drive.run(0.0, 0.0, n_settle)
+            path = np.concatenate([path, stop_path[1:]])
+            collision = collision or stop_collision
         phi_end = self.drive.wheel_angles
         true_increment = relative_pose(path[0], path[-1])
         measurement = np.concatenate(
@@ -164,6 +168,16 @@ class Simulation:
             pose_end=_read_only(path[-1].copy()),
             path=_read_only(path),
         )
+
+    def _ticks(self, seconds: float, name: str, minimum: int) -> int:
+        ticks = seconds * self.config.physics_hz if math.isfinite(seconds) else -1.0
+        n = round(ticks)
+        if n < minimum or abs(ticks - n) > 1e-9 * max(n, 1):
+            raise ValueError(
+                f"{name} must be a {'positive' if minimum else 'non-negative'} multiple of the "
+                f"physics tick {self.dt} s, got {seconds}"
+            )
+        return n
 
     @property
     def pose(self) -> np.ndarray:

@@ -13,6 +13,7 @@ import json
 import os
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 from excite import __version__
 from excite.data import DataError
@@ -79,6 +80,103 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return EXIT_OK if result.identifiable else EXIT_UNIDENTIFIABLE
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _env_id(text: str) -> str:
+    import gymnasium
+
+    if text not in gymnasium.registry:
+        known = ", ".join(k for k in gymnasium.registry if k.startswith("excite/"))
+        raise UsageError(f"unknown environment {text!r}; excite's are {known}")
+    return text
+
+
+def _protocol_names(text: str | None, policy: str | None) -> list[str]:
+    from agents.catalog import PROTOCOL_NAMES, default_protocols
+
+    if text is None:
+        return default_protocols(policy)
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    for name in names:
+        if name not in PROTOCOL_NAMES:
+            raise UsageError(f"unknown protocol {name!r}; choose from {', '.join(PROTOCOL_NAMES)}")
+    if not names or len(set(names)) != len(names):
+        raise UsageError(f"--protocols needs distinct comma-separated names, got {text!r}")
+    return names
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from agents.catalog import ProtocolError, make_protocol
+    from agents.compare import make_env, run_protocol_episode
+    from excite.data import save_segments
+
+    env_id = _env_id(args.env)
+    try:
+        protocol = make_protocol(args.protocol, args.policy)
+    except ProtocolError as exc:
+        raise UsageError(str(exc)) from None
+    out = Path(args.out)
+    if not out.parent.is_dir():
+        raise UsageError(f"cannot write {out}: no such directory {out.parent}")
+    env = make_env(env_id, args.segments)
+    records = run_protocol_episode(env, protocol, args.seed)
+    base = env.unwrapped
+    save_segments(out, base.segments)
+    truth = {**dict(zip(("r_L", "r_R", "b"), base.true_params.as_array().tolist(), strict=True)),
+             "robot": {k: float(v) for k, v in vars(base.robot).items()},
+             "sigma": dict(zip(("x", "y", "theta"), base.sigma.tolist(), strict=True)),
+             "env": env_id, "protocol": args.protocol, "seed": args.seed,
+             "segments": len(records),
+             "collisions": int(np.sum([r["collision"] for r in records]))}
+    truth_path = out.with_name(out.stem + ".truth.json") if out.suffix == ".csv" else Path(
+        f"{out}.truth.json")
+    truth_path.write_text(json.dumps(truth, indent=2) + "\n")
+    print(f"wrote {len(records)} segments to {out} and the hidden truth to {truth_path}")
+    return EXIT_OK
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from agents.catalog import ProtocolError
+    from agents.compare import COLUMNS, CompareError, CompareSettings, run_comparison
+    from agents.report import format_table, plot_comparison, summarize
+
+    env_id = _env_id(args.env)
+    if args.policy and not Path(args.policy).is_file():
+        raise UsageError(f"--policy: no such file {args.policy}")
+    protocols = _protocol_names(args.protocols, args.policy)
+    settings = CompareSettings(env_id=env_id, segments=args.segments, seed=args.seed)
+    try:
+        rows = run_comparison(args.out, protocols, args.episodes, settings, args.workers,
+                              args.policy)
+    except (ProtocolError, CompareError) as exc:
+        raise UsageError(str(exc)) from None
+    except OSError as exc:
+        raise UsageError(f"cannot write to {args.out}: {exc.strerror}") from None
+    columns = {k: np.array([r[k] for r in rows]) for k in COLUMNS}
+    summary = summarize(columns, seed=args.seed)
+    summary["settings"] = {"env": env_id, "segments": args.segments, "seed": args.seed,
+                           "episodes": args.episodes, "protocols": protocols}
+    out = Path(args.out)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+    plots = plot_comparison(columns, out, arena_size=4.0)
+    print(format_table(summary))
+    print(f"\nresults: {out / 'segments.csv'}, {out / 'summary.json'}")
+    print("plots:   " + ", ".join(str(p) for p in plots))
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="excite", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"excite {__version__}")
@@ -95,6 +193,29 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--ros2-yaml", metavar="OUT.yaml",
                      help="write diff_drive_controller parameters (nominal from --init)")
     cal.set_defaults(handler=cmd_calibrate)
+
+    sim = sub.add_parser("simulate", help="drive a simulated robot with a protocol, write its log")
+    sim.add_argument("--protocol", required=True, metavar="NAME")
+    sim.add_argument("--segments", type=_positive_int, required=True, metavar="N")
+    sim.add_argument("--seed", type=int, default=0, metavar="S")
+    sim.add_argument("--env", default="excite/DiffDriveCalib-v0", metavar="ID")
+    sim.add_argument("--policy", metavar="PATH", help="policy file for --protocol learned")
+    sim.add_argument("--out", required=True, metavar="FILE.csv",
+                     help="segment CSV; the hidden truth goes to FILE.truth.json")
+    sim.set_defaults(handler=cmd_simulate)
+
+    cmp_ = sub.add_parser("compare", help="compare calibration protocols on the same robots")
+    cmp_.add_argument("--protocols", metavar="A,B,...",
+                      help="default: every protocol available (learned if a policy exists)")
+    cmp_.add_argument("--episodes", type=_positive_int, default=20, metavar="N")
+    cmp_.add_argument("--segments", type=_positive_int, default=30, metavar="K")
+    cmp_.add_argument("--seed", type=int, default=0, metavar="S")
+    cmp_.add_argument("--env", default="excite/DiffDriveCalib-v0", metavar="ID")
+    cmp_.add_argument("--workers", type=_positive_int, default=None, metavar="W",
+                      help="worker processes (default: all cores)")
+    cmp_.add_argument("--out", default="excite_compare", metavar="DIR")
+    cmp_.add_argument("--policy", metavar="PATH", help="policy file for the learned protocol")
+    cmp_.set_defaults(handler=cmd_compare)
     return parser
 
 
@@ -104,13 +225,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
         handler: Callable[[argparse.Namespace], int] | None = getattr(args, "handler", None)
         if handler is None:
-            raise UsageError("a command is required (calibrate); see excite --help")
+            raise UsageError("a command is required (calibrate, simulate, compare); "
+                             "see excite --help")
         return handler(args)
     except (UsageError, DataError) as exc:
         print(f"excite: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
-        print("excite: interrupted", file=sys.stderr)
+        print("excite: interrupted (compare keeps finished episodes: re-run the same command "
+              "to continue)", file=sys.stderr)
         return 130
     except Exception as exc:  # never a traceback for users; EXCITE_DEBUG=1 shows it
         if os.environ.get("EXCITE_DEBUG"):

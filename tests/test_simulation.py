@@ -306,3 +306,38 @@ def test_layer_imports_no_rl_or_agents():
         modules += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
         for module in modules:
             assert module.split(".")[0] not in {"gymnasium", "gym", "torch", "agents"}, name
+
+
+def test_stop_and_go_segments_follow_the_kinematic_arc_despite_motor_lag():
+    """Starting and ending at rest (settle = 20 motor time constants), both wheels follow the
+    same lag shape: a segment gentle enough not to slip (15% of the motor limit: at most
+    3 m/s^2 from rest, below this low-grip robot's mu g) is exactly the constant-curvature
+    arc of its wheel increments; driven continuously, the same commands curve differently."""
+    from excite import Params, predict_increment
+
+    robot = RobotDistribution().sample(np.random.default_rng(5))
+    truth = Params(*robot.kinematic_params())
+
+    def model_errors(settle: float) -> list[float]:
+        sim = Simulation(SimulationConfig(arena_width=100.0, arena_height=100.0))
+        rng = np.random.default_rng(6)
+        sim.reset(robot, rng, pose=np.zeros(3))
+        errors = []
+        for _ in range(20):
+            cmd = rng.uniform(-0.15, 0.15, 2) * robot.max_wheel_speed
+            out = sim.run_segment(*cmd, 1.0, settle=settle)
+            predicted = np.ravel(predict_increment(*out.true_dphi, truth))
+            errors.append(np.abs(out.true_increment - predicted).max())
+        return errors
+
+    errors_stop, errors_continuous = model_errors(1.0), model_errors(0.0)
+    assert max(errors_stop) < 1e-9
+    assert max(errors_continuous) > 1e-5
+
+
+def test_settle_must_be_whole_ticks():
+    sim = Simulation()
+    rng = np.random.default_rng(0)
+    sim.reset(RobotDistribution().nominal(), rng)
+    with pytest.raises(ValueError, match="settle must be a non-negative multiple"):
+        sim.run_segment(1.0, 1.0, 1.0, settle=0.013)

@@ -1,0 +1,204 @@
+"""Paired comparison of calibration protocols on the same hidden robots (``excite compare``).
+
+Episode i gives every protocol the same hidden robot, start pose and sensor-noise streams
+(the env is reset with the same seed), so differences are protocol effects, not luck.
+Episodes run in parallel worker processes; each finished episode's rows are appended to
+``DIR/segments.csv`` at once, so an interrupted run re-run with the same ``DIR`` continues
+where it stopped, losing and duplicating nothing.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from collections.abc import Iterable
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+from tqdm import tqdm
+
+import excite  # noqa: F401  (registers the environment ids in worker processes)
+from agents.catalog import make_protocol
+from agents.oracle import oracle_design
+from agents.protocols import Protocol
+from excite.information import crlb_relative_std
+
+COLUMNS = ("protocol", "episode", "segment", "r_L_err", "r_R_err", "b_err", "sigma_min",
+           "oracle_sigma_min", "rel_std_r_L", "rel_std_r_R", "rel_std_b", "collision",
+           "x", "y", "theta", "distance")
+DEFAULT_ENV = "excite/DiffDriveCalib-v0"
+
+
+class CompareError(ValueError):
+    """Bad settings for a comparison (e.g. an output folder made with other settings)."""
+
+
+@dataclass(frozen=True)
+class CompareSettings:
+    """What makes two runs comparable (stored in DIR/config.json)."""
+
+    env_id: str = DEFAULT_ENV
+    segments: int = 30
+    seed: int = 0
+
+
+def episode_seed(seed: int, episode: int) -> int:
+    """The env seed of one episode: distinct for every (seed, episode) pair."""
+    return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
+
+
+def make_env(env_id: str, segments: int) -> gym.Env:
+    return gym.make(env_id, budget=segments, max_episode_steps=segments)
+
+
+def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[dict]:
+    """Run one episode of ``protocol``; one record per segment (see COLUMNS)."""
+    env.reset(seed=seed)
+    base = env.unwrapped
+    protocol.reset(np.random.default_rng([seed, 1]))
+    truth = base.true_params.as_array()
+    records, distance, done = [], 0.0, False
+    while not done:
+        _, _, terminated, truncated, info = env.step(protocol.act(base.knowledge()))
+        done = terminated or truncated
+        distance += base.last_segment_distance
+        err = base.estimate.as_array() / truth - 1.0
+        rel_std = crlb_relative_std(base.knowledge().information)
+        x, y, theta = base.sim.pose
+        records.append({
+            "segment": info["n_segments"], "r_L_err": err[0], "r_R_err": err[1],
+            "b_err": err[2], "sigma_min": info["sigma_min"],
+            "rel_std_r_L": rel_std[0], "rel_std_r_R": rel_std[1], "rel_std_b": rel_std[2],
+            "collision": int(info["collision"]), "x": x, "y": y, "theta": theta,
+            "distance": distance,
+        })
+    return records
+
+
+def run_episode(settings: CompareSettings, protocols: list[str], episode: int,
+                policy_path: str | None) -> list[dict]:
+    """All requested protocols on episode ``episode`` (runs in a worker process)."""
+    env = make_env(settings.env_id, settings.segments)
+    seed = episode_seed(settings.seed, episode)
+    env.reset(seed=seed)
+    base = env.unwrapped
+    oracle = oracle_design(base.true_params, base.sigma, base.nominal, settings.segments,
+                           base.max_wheel_speed, base.segment_duration).sigma_min
+    rows = []
+    for name in protocols:
+        for record in run_protocol_episode(env, make_protocol(name, policy_path), seed):
+            rows.append({"protocol": name, "episode": episode, "oracle_sigma_min": oracle,
+                         **record})
+    env.close()
+    return rows
+
+
+# -- the results file -----------------------------------------------------------------------
+def _parse(row: dict[str, str]) -> dict | None:
+    try:
+        out = {"protocol": row["protocol"], "episode": int(row["episode"]),
+               "segment": int(row["segment"]), "collision": int(row["collision"])}
+        for key in COLUMNS[3:]:
+            if key != "collision":
+                out[key] = float(row[key])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return out
+
+
+def read_complete_rows(path: Path, segments: int) -> list[dict]:
+    """Rows of every (protocol, episode) present with all segments exactly once; partial
+    episodes (an interrupted write) and malformed lines are dropped."""
+    if not path.exists():
+        return []
+    groups: dict[tuple[str, int], dict[int, dict]] = {}
+    with open(path, newline="") as handle:
+        for raw in csv.DictReader(handle):
+            row = _parse(raw)
+            if row is not None:
+                groups.setdefault((row["protocol"], row["episode"]), {})[row["segment"]] = row
+    complete = [g for g in groups.values() if sorted(g) == list(range(1, segments + 1))]
+    return [row for g in complete for _, row in sorted(g.items())]
+
+
+def _write_rows(path: Path, rows: Iterable[dict], mode: str) -> None:
+    with open(path, mode, newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
+        if mode == "w":
+            writer.writeheader()
+        writer.writerows({k: _format(row[k]) for k in COLUMNS} for row in rows)
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
+def _format(value):
+    if isinstance(value, float):
+        return repr(value) if math.isfinite(value) else ("inf" if value > 0 else "-inf")
+    return value
+
+
+def _check_settings(out_dir: Path, settings: CompareSettings) -> None:
+    config = out_dir / "config.json"
+    if config.exists():
+        try:
+            stored = json.loads(config.read_text())
+        except json.JSONDecodeError:
+            raise CompareError(
+                f"{config}: not valid JSON; remove it or choose another --out") from None
+        if stored != asdict(settings):
+            raise CompareError(
+                f"{out_dir} holds a comparison with other settings ({stored}); "
+                "use another --out or the same --env, --segments and --seed")
+    else:
+        config.write_text(json.dumps(asdict(settings), indent=2) + "\n")
+
+
+def run_comparison(
+    out_dir: str | Path,
+    protocols: list[str],
+    episodes: int,
+    settings: CompareSettings | None = None,
+    workers: int | None = None,
+    policy_path: str | None = None,
+    progress: bool = True,
+) -> list[dict]:
+    """Run (or finish) a comparison in ``out_dir``; returns the rows of the requested
+    protocols and episodes. Every protocol name is checked before any work starts."""
+    settings = settings or CompareSettings()
+    for name in protocols:
+        make_protocol(name, policy_path)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    _check_settings(out, settings)
+    csv_path = out / "segments.csv"
+    rows = read_complete_rows(csv_path, settings.segments)
+    _write_rows(csv_path, rows, "w")  # rewrite without partial episodes or duplicates
+    done = {(r["protocol"], r["episode"]) for r in rows}
+    todo = {e: [p for p in protocols if (p, e) not in done] for e in range(episodes)}
+    todo = {e: p for e, p in todo.items() if p}
+
+    bar = tqdm(total=len(todo), desc="episodes", unit="ep", disable=not progress)
+    with ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+        pending = {pool.submit(run_episode, settings, names, e, policy_path)
+                   for e, names in todo.items()}
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    new_rows = future.result()
+                    _write_rows(csv_path, new_rows, "a")
+                    rows.extend(new_rows)
+                    bar.update(1)
+        except BaseException:
+            for future in pending:
+                future.cancel()
+            raise
+        finally:
+            bar.close()
+    wanted = set(protocols)
+    return [r for r in rows if r["protocol"] in wanted and r["episode"] < episodes]

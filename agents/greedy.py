@@ -1,0 +1,85 @@
+"""The model-based information planner: greedy E-optimal excitation.
+
+At every segment it predicts, with the kinematic model at the current estimate, the
+information each candidate command would add, and picks the one that raises sigma_min of all
+segments most, among those predicted to stay clear of the walls. With ``lookahead`` it scores
+each of the best first moves by the best second move that can follow it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agents.motion import (
+    action_margin,
+    is_safe,
+    predicted_poses,
+    safe_actions,
+    turn_to_center,
+    wheel_increments,
+)
+from agents.protocols import Protocol
+from envs.env import RobotKnowledge
+from excite.information import scaled_jacobian
+
+
+def command_grid(n: int, limit: float = 1.0) -> np.ndarray:
+    """All (left, right) pairs of an n x n grid over [-limit, limit]^2, without (0, 0)."""
+    axis = np.linspace(-limit, limit, n)
+    grid = np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1).reshape(-1, 2)
+    return grid[np.any(grid != 0.0, axis=1)]
+
+
+def segment_information(actions: np.ndarray, knowledge: RobotKnowledge, params=None) -> np.ndarray:
+    """Relative Fisher information (n, 3, 3) each command would add (DESIGN.md definition)."""
+    dphi = wheel_increments(actions, knowledge)
+    jac = scaled_jacobian(dphi[:, 0], dphi[:, 1], params or knowledge.estimate, knowledge.sigma,
+                          scale=knowledge.nominal)
+    return np.einsum("nki,nkj->nij", jac, jac)
+
+
+def smallest_eigenvalue(information: np.ndarray) -> np.ndarray:
+    return np.linalg.eigvalsh(information)[..., 0]
+
+
+class GreedyPlanner(Protocol):
+    """E-optimal greedy planner over a grid of commands (``grid`` x ``grid`` in
+    [-max_speed, max_speed]^2); ``lookahead`` adds a second step for the ``beam`` best."""
+
+    name = "greedy"
+
+    def __init__(self, grid: int = 21, max_speed: float = 1.0, lookahead: bool = False,
+                 beam: int = 12):
+        self.candidates = command_grid(grid, max_speed)
+        self.lookahead = lookahead
+        self.beam = beam
+
+    def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
+        gains = segment_information(self.candidates, knowledge)
+        score = smallest_eigenvalue(knowledge.information + gains)
+        ok = safe_actions(self.candidates, knowledge)
+        if not ok.any():
+            return turn_to_center(knowledge)
+        score = np.where(ok, score, -np.inf)
+        if self.lookahead and knowledge.n_segments + 1 < knowledge.budget:
+            score = self._two_step_scores(knowledge, gains, score)
+        return self.candidates[int(np.argmax(score))]
+
+    def _two_step_scores(self, knowledge: RobotKnowledge, gains: np.ndarray,
+                         score: np.ndarray) -> np.ndarray:
+        """Replace the scores of the ``beam`` best first moves by their best two-step score
+        (the second move also wall-checked, from the first move's predicted end pose)."""
+        best = np.argsort(score)[::-1][: self.beam]
+        best = best[np.isfinite(score[best])]
+        dphi = wheel_increments(self.candidates[best], knowledge)
+        ends = predicted_poses(knowledge.pose, dphi, knowledge.estimate)[:, -1]
+        second_dphi = wheel_increments(self.candidates, knowledge)
+        two_step = np.full(score.shape, -np.inf)
+        for index, end in zip(best, ends, strict=True):
+            safe = is_safe(predicted_poses(end, second_dphi, knowledge.estimate),
+                           knowledge.arena_size, action_margin(self.candidates))
+            if not safe.any():
+                continue
+            info = knowledge.information + gains[index] + gains[safe]
+            two_step[index] = smallest_eigenvalue(info).max()
+        return two_step if np.isfinite(two_step).any() else score
