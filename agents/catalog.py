@@ -24,12 +24,12 @@ def make_protocol(name: str, policy_path: str | Path | None = None) -> Protocol:
 
         return GreedyPlanner()
     if name == "learned":
-        from agents.learned import LearnedPolicy
-
         path = Path(policy_path) if policy_path else SHIPPED_POLICY
         if not path.exists():
             where = "" if policy_path else " (no policy is shipped; train one with excite train)"
             raise ProtocolError(f"learned policy file not found: {path}{where}")
+        from agents.learned import LearnedPolicy
+
         return LearnedPolicy(path)
     raise ProtocolError(f"unknown protocol {name!r}; choose from {', '.join(PROTOCOL_NAMES)}")
 

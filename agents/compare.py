@@ -137,8 +137,12 @@ def _write_rows(path: Path, rows: Iterable[dict], mode: str) -> None:
 
 
 def _format(value):
-    if isinstance(value, float):
+    """CSV text of a value: floats (numpy's too) in shortest round-trip form."""
+    if isinstance(value, float | np.floating):
+        value = float(value)
         return repr(value) if math.isfinite(value) else ("inf" if value > 0 else "-inf")
+    if isinstance(value, np.integer):
+        return int(value)
     return value
 
 

@@ -91,11 +91,14 @@ def _positive_int(text: str) -> int:
 
 
 def _env_id(text: str) -> str:
+    """An environment id registered with excite's environment class (its own or a user's)."""
     import gymnasium
 
-    if text not in gymnasium.registry:
-        known = ", ".join(k for k in gymnasium.registry if k.startswith("excite/"))
-        raise UsageError(f"unknown environment {text!r}; excite's are {known}")
+    from excite.registration import ENTRY_POINT
+
+    ours = [k for k, spec in gymnasium.registry.items() if spec.entry_point == ENTRY_POINT]
+    if text not in ours:
+        raise UsageError(f"unknown environment {text!r}; use one of {', '.join(ours)}")
     return text
 
 

@@ -1,0 +1,215 @@
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from agents.catalog import PROTOCOL_NAMES, ProtocolError, make_protocol
+from agents.compare import (
+    COLUMNS,
+    CompareError,
+    CompareSettings,
+    make_env,
+    read_complete_rows,
+    run_comparison,
+)
+from agents.greedy import GreedyPlanner
+from agents.oracle import oracle_design
+from excite import Params, calibrate, load_segments
+from excite.cli import main
+
+IDEAL = "excite/DiffDriveCalibIdeal-v0"
+
+
+def test_every_scripted_protocol_stays_inside_the_arena_on_the_ideal_env():
+    env = make_env(IDEAL, 30)
+    for name in PROTOCOL_NAMES[:-2]:
+        for seed in range(3):
+            env.reset(seed=seed)
+            protocol = make_protocol(name)
+            protocol.reset(np.random.default_rng(seed))
+            for _ in range(30):
+                *_, info = env.step(protocol.act(env.unwrapped.knowledge()))
+                assert not info["collision"], (name, seed)
+
+
+def test_greedy_beats_scripted_information_on_the_ideal_env_and_nears_the_oracle():
+    env = make_env(IDEAL, 30)
+    env.reset(seed=11)
+    base = env.unwrapped
+    oracle = oracle_design(base.true_params, base.sigma, base.nominal, 30,
+                           base.max_wheel_speed, base.segment_duration)
+    results = {}
+    for name in ("greedy", "straight_spin", "umbmark"):
+        env.reset(seed=11)
+        protocol = make_protocol(name)
+        protocol.reset(np.random.default_rng(0))
+        for _ in range(30):
+            *_, info = env.step(protocol.act(base.knowledge()))
+        results[name] = info["sigma_min"]
+    assert results["greedy"] > 1.5 * max(results["straight_spin"], results["umbmark"])
+    assert 0.9 * oracle.sigma_min < results["greedy"] <= 1.02 * oracle.sigma_min
+
+
+def test_greedy_lookahead_runs_and_is_at_least_as_informative_here():
+    env = make_env(IDEAL, 6)
+    values = []
+    for planner in (GreedyPlanner(grid=11), GreedyPlanner(grid=11, lookahead=True)):
+        env.reset(seed=3)
+        planner.reset(np.random.default_rng(0))
+        for _ in range(6):
+            *_, info = env.step(planner.act(env.unwrapped.knowledge()))
+        values.append(info["sigma_min"])
+    assert values[1] >= 0.95 * values[0]
+
+
+def test_oracle_bounds_are_certified_and_beat_any_single_command():
+    p, sigma = Params(0.05, 0.051, 0.3), np.array([2e-3, 2e-3, 1e-3])
+    design = oracle_design(p, sigma, Params(0.05, 0.05, 0.3), 30, 20.0, 1.0)
+    assert design.lower <= design.sigma_min <= design.lower * (1 + 1e-3)
+    assert design.weights.sum() == pytest.approx(30)
+    from agents.greedy import command_grid
+    from excite.information import fisher_information, scaled_jacobian, sigma_min
+
+    grid = command_grid(9)
+    for action in grid[::7]:
+        dphi = np.tile(action * 20.0, (30, 1))
+        single = sigma_min(fisher_information(scaled_jacobian(dphi[:, 0], dphi[:, 1], p, sigma,
+                                                              scale=Params(0.05, 0.05, 0.3))))
+        assert single <= design.sigma_min * (1 + 1e-6)
+
+
+def test_unknown_protocol_and_missing_policy():
+    with pytest.raises(ProtocolError, match="unknown protocol 'zigzag'"):
+        make_protocol("zigzag")
+    with pytest.raises(ProtocolError, match="learned policy file not found"):
+        make_protocol("learned", "/nonexistent/policy.zip")
+
+
+def _rows(path):
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def test_comparison_outputs_and_paired_episodes(tmp_path):
+    settings = CompareSettings(IDEAL, 6, 1)
+    rows = run_comparison(tmp_path, ["umbmark", "greedy"], 3, settings, workers=1,
+                          progress=False)
+    assert len(rows) == 2 * 3 * 6
+    disk = _rows(tmp_path / "segments.csv")
+    assert set(COLUMNS) <= set(disk[0]) and len(disk) == 36
+    # Same episode: same hidden robot for both protocols (same oracle, same first estimate
+    # prior), and each protocol's episodes differ.
+    oracle = {(r["protocol"], r["episode"]): r["oracle_sigma_min"] for r in disk}
+    for e in range(3):
+        assert oracle[("umbmark", str(e))] == oracle[("greedy", str(e))]
+    assert len({oracle[("greedy", str(e))] for e in range(3)}) == 3
+
+
+def test_rerun_adds_only_what_is_missing_and_rejects_other_settings(tmp_path):
+    settings = CompareSettings(IDEAL, 4, 0)
+    run_comparison(tmp_path, ["spin"], 2, settings, workers=1, progress=False)
+    # Simulate an interrupted write: a partial episode and a truncated line at the end.
+    with open(tmp_path / "segments.csv", "a") as handle:
+        handle.write("arcs,1,1,0.1,0.1,0.1,5,9,1,1,1,0,0,0,0,0\narcs,1,2,0.1,0.")
+    rows = run_comparison(tmp_path, ["spin", "arcs"], 3, settings, workers=2, progress=False)
+    keys = [(r["protocol"], r["episode"], r["segment"]) for r in _rows_parsed(tmp_path, 4)]
+    assert len(keys) == len(set(keys)) == 2 * 3 * 4 == len(rows)
+    with pytest.raises(CompareError, match="other settings"):
+        run_comparison(tmp_path, ["spin"], 1, CompareSettings(IDEAL, 5, 0), progress=False)
+
+
+def _rows_parsed(path, segments):
+    return read_complete_rows(path / "segments.csv", segments)
+
+
+def test_killed_comparison_resumes_without_loss_or_duplicates(tmp_path):
+    """Kill a running `excite compare` (SIGKILL, no chance to clean up) and re-run it."""
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "excite.cli", "compare", "--protocols", "random,arcs",
+           "--episodes", "24", "--segments", "10", "--env", IDEAL, "--workers", "2",
+           "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    deadline = time.time() + 60
+    while time.time() < deadline:  # wait until some, not all, episodes are written
+        path = out / "segments.csv"
+        if path.exists() and 3 * 20 < sum(1 for _ in open(path)) < 20 * 20:
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    partial = len(read_complete_rows(out / "segments.csv", 10))
+    assert 0 < partial < 2 * 24 * 10
+    subprocess.run(cmd, check=True, capture_output=True)
+    rows = read_complete_rows(out / "segments.csv", 10)
+    keys = [(r["protocol"], r["episode"], r["segment"]) for r in rows]
+    assert len(keys) == len(set(keys)) == 2 * 24 * 10
+    assert sum(1 for _ in open(out / "segments.csv")) == 2 * 24 * 10 + 1
+
+
+def test_compare_cli_writes_summary_and_plots(tmp_path, capsys):
+    from matplotlib.image import imread
+
+    code = main(["compare", "--protocols", "umbmark,greedy,straight", "--episodes", "3",
+                 "--segments", "8", "--env", IDEAL, "--workers", "1", "--out",
+                 str(tmp_path)])
+    out = capsys.readouterr().out
+    assert code == 0 and "greedy" in out and "oracle" in out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert set(summary["protocols"]) == {"umbmark", "greedy", "straight"}
+    assert "b" in summary["protocols"]["straight"]["undetermined"]
+    for name in ("errors_vs_segment.png", "sigma_min_vs_segment.png", "trajectories.png"):
+        image = imread(tmp_path / name)
+        assert image.shape[0] > 100 and image.std() > 0.01
+
+
+@pytest.mark.parametrize(
+    "argv, fragment",
+    [
+        (["compare", "--protocols", "zigzag"], "unknown protocol 'zigzag'"),
+        (["compare", "--protocols", "spin,spin"], "distinct"),
+        (["compare", "--episodes", "0"], "must be at least 1"),
+        (["compare", "--segments", "x"], "not a whole number"),
+        (["compare", "--env", "CartPole-v1"], "unknown environment 'CartPole-v1'"),
+        (["compare", "--env", "nope"], "unknown environment"),
+        (["compare", "--workers", "-2"], "must be at least 1"),
+        (["compare", "--policy", "/nonexistent.zip"], "--policy: no such file"),
+        (["compare", "--protocols", "learned", "--episodes", "1"], "learned policy"),
+        (["simulate", "--protocol", "zigzag", "--segments", "3", "--out", "x.csv"],
+         "unknown protocol"),
+        (["simulate", "--protocol", "spin", "--segments", "3"], "required: --out"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--out", "/no/dir/x.csv"],
+         "no such directory"),
+    ],
+)
+def test_compare_and_simulate_bad_input(tmp_path, capsys, monkeypatch, argv, fragment):
+    monkeypatch.chdir(tmp_path)
+    if argv[:3] == ["compare", "--protocols", "learned"]:
+        import agents.catalog
+
+        monkeypatch.setattr(agents.catalog, "SHIPPED_POLICY", tmp_path / "none.zip")
+    code = main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("excite: error: ")
+    assert fragment in err[0]
+
+
+@pytest.mark.parametrize("protocol", [*PROTOCOL_NAMES[:-1]])
+def test_simulate_every_protocol_and_calibrate_against_the_truth(tmp_path, capsys, protocol):
+    out = tmp_path / "log.csv"
+    assert main(["simulate", "--protocol", protocol, "--segments", "12", "--seed", "4",
+                 "--env", IDEAL, "--out", str(out)]) == 0
+    truth = json.loads((tmp_path / "log.truth.json").read_text())
+    seg = load_segments(out)
+    assert len(seg) == 12 and truth["protocol"] == protocol and truth["segments"] == 12
+    if protocol in ("greedy", "random", "arcs", "umbmark", "straight_spin"):
+        result = calibrate(seg, sigma=(2e-3, 2e-3, 1e-3))
+        truth_p = np.array([truth["r_L"], truth["r_R"], truth["b"]])
+        z = (result.params.as_array() - truth_p) / result.std
+        assert np.all(np.abs(z) < 5)
