@@ -128,6 +128,11 @@ def _rows_parsed(path, segments):
     return read_complete_rows(path / "segments.csv", segments)
 
 
+def _line_count(path) -> int:
+    with open(path) as handle:
+        return sum(1 for _ in handle)
+
+
 def test_killed_comparison_resumes_without_loss_or_duplicates(tmp_path):
     """Kill a running `excite compare` (SIGKILL, no chance to clean up) and re-run it."""
     out = tmp_path / "run"
@@ -139,7 +144,7 @@ def test_killed_comparison_resumes_without_loss_or_duplicates(tmp_path):
     deadline = time.time() + 60
     while time.time() < deadline:  # wait until some, not all, episodes are written
         path = out / "segments.csv"
-        if path.exists() and 3 * 20 < sum(1 for _ in open(path)) < 20 * 20:
+        if path.exists() and 3 * 20 < _line_count(path) < 20 * 20:
             break
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGKILL)
@@ -150,7 +155,7 @@ def test_killed_comparison_resumes_without_loss_or_duplicates(tmp_path):
     rows = read_complete_rows(out / "segments.csv", 10)
     keys = [(r["protocol"], r["episode"], r["segment"]) for r in rows]
     assert len(keys) == len(set(keys)) == 2 * 24 * 10
-    assert sum(1 for _ in open(out / "segments.csv")) == 2 * 24 * 10 + 1
+    assert _line_count(out / "segments.csv") == 2 * 24 * 10 + 1
 
 
 def test_compare_cli_writes_summary_and_plots(tmp_path, capsys):
