@@ -15,7 +15,8 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/excite compare --out demo_out
+	$(VENV)/bin/excite compare --episodes 100 --out demo_out
+	@echo "plots and tables: demo_out/ (summary.json, segments.csv, *.png)"
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check excite envs agents tests benchmarks

@@ -54,17 +54,18 @@ def is_safe(poses: np.ndarray, arena_size: float, margin: float | np.ndarray = M
     return inside.all(axis=(-1, -2))
 
 
-def action_margin(actions: np.ndarray) -> np.ndarray:
+def action_margin(actions: np.ndarray, speed_margin: float = SPEED_MARGIN) -> np.ndarray:
     """Wall clearance (m) demanded of each candidate action (n, 2)."""
-    return MARGIN + SPEED_MARGIN * np.abs(np.atleast_2d(actions)).max(axis=1)
+    return MARGIN + speed_margin * np.abs(np.atleast_2d(actions)).max(axis=1)
 
 
-def safe_actions(actions: np.ndarray, knowledge: RobotKnowledge) -> np.ndarray:
+def safe_actions(actions: np.ndarray, knowledge: RobotKnowledge,
+                 speed_margin: float = SPEED_MARGIN) -> np.ndarray:
     """Boolean mask over candidate actions (n, 2): predicted to stay clear of the walls with
     both the current estimate and the nominal robot (a slip-biased estimate alone can be far
     off)."""
     dphi = wheel_increments(actions, knowledge)
-    margin = action_margin(actions)
+    margin = action_margin(actions, speed_margin)
     return np.logical_and.reduce([
         is_safe(predicted_poses(knowledge.pose, dphi, params), knowledge.arena_size, margin)
         for params in (knowledge.estimate, knowledge.nominal)])

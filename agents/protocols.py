@@ -15,7 +15,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from agents.motion import safe_actions, turn_to_center
+from agents.motion import SPEED_MARGIN, safe_actions, turn_to_center
 from envs.env import RobotKnowledge
 
 
@@ -23,6 +23,8 @@ class Protocol(ABC):
     """One calibration protocol. Subclasses set ``name`` and implement ``plan``."""
 
     name: ClassVar[str]
+    #: Wall clearance per unit of commanded speed (m) the guard demands (agents.motion).
+    speed_margin: ClassVar[float] = SPEED_MARGIN
 
     def reset(self, rng: np.random.Generator) -> None:
         """Start a new episode (``rng``: the episode's generator for any randomness)."""
@@ -43,7 +45,7 @@ class Protocol(ABC):
         """Keep the robot off the walls: the action if safe, else a safe variant of it (the
         same maneuver reversed, then shortened), else a turn towards the centre."""
         variants = np.array([action, -action, 0.5 * action, -0.5 * action, 0.25 * action])
-        ok = safe_actions(variants, knowledge)
+        ok = safe_actions(variants, knowledge, self.speed_margin)
         return variants[int(np.argmax(ok))] if ok.any() else turn_to_center(knowledge)
 
 

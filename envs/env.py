@@ -119,9 +119,10 @@ class DiffDriveCalibEnv(gym.Env):
       sum telescopes to the final sigma_min / information_scale;
     - ``collision``: -``collision_penalty`` when the chassis touched a wall;
     - ``effort``: -``effort_cost`` * mean(action^2); ``time``: -``time_cost`` per segment;
-    - ``accuracy`` (privileged, for training in simulation only; 0 by default): at the
-      episode's last step, -``accuracy_weight`` * 100 * max relative error of the estimate
-      against the hidden truth. The observation never contains the truth.
+    - ``accuracy`` (privileged, for training in simulation only; 0 by default):
+      -``accuracy_weight`` * 100 * (e_t - e_{t-1}), e the max relative error of the estimate
+      against the hidden truth; the episode's sum telescopes to -accuracy_weight * 100 *
+      (final error - nominal's error). The observation never contains the truth.
 
     ## Episode end
     Truncated after ``budget`` segments (the registered ids also set ``max_episode_steps``;
@@ -162,7 +163,7 @@ class DiffDriveCalibEnv(gym.Env):
             "collision_penalty": 1.0,
             "effort_cost": 0.0,
             "time_cost": 0.0,
-            "accuracy_weight": 0.0,  # privileged terminal term (uses the hidden truth)
+            "accuracy_weight": 0.0,  # privileged term (uses the hidden truth)
             "target_sigma_min": None,  # terminate once sigma_min reaches it
         }
 
@@ -221,6 +222,7 @@ class DiffDriveCalibEnv(gym.Env):
         self._sigma_min = 0.0
         self._information = np.zeros((3, 3))
         self._measured_pose = self.sim.pose_sensor.absolute(self.sim.pose, self._sensor_rng)
+        self._error = self.max_relative_error
         if self.render_mode == "human":
             self.render()
         return self._observation(), {"sigma_min": 0.0, "n_segments": 0}
@@ -241,7 +243,7 @@ class DiffDriveCalibEnv(gym.Env):
         self._last_action = a
         self._measured_pose = self.sim.pose_sensor.absolute(outcome.pose_end, self._sensor_rng)
 
-        previous = self._sigma_min
+        previous, previous_error = self._sigma_min, self._error
         self._information = self.information_at(self.estimate)
         self._sigma_min = float(sigma_min(self._information))
         n = len(self._rows)
@@ -255,8 +257,10 @@ class DiffDriveCalibEnv(gym.Env):
             "time": -float(self.config["time_cost"]),
             "accuracy": 0.0,
         }
-        if (terminated or truncated) and self.config["accuracy_weight"]:
-            terms["accuracy"] = -self.config["accuracy_weight"] * 100.0 * self.max_relative_error
+        if self.config["accuracy_weight"]:
+            self._error = self.max_relative_error
+            terms["accuracy"] = (-self.config["accuracy_weight"] * 100.0
+                                 * (self._error - previous_error))
         info = {
             "reward_terms": terms,
             "sigma_min": self._sigma_min,

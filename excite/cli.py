@@ -180,6 +180,20 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    from agents.train import TrainingError, train
+
+    try:
+        summary = train(args.out, algo=args.algo, timesteps=args.timesteps, n_envs=args.n_envs,
+                        seed=args.seed, resume=args.resume, config_path=args.config)
+    except TrainingError as exc:
+        raise UsageError(str(exc)) from None
+    print(f"trained {summary['algo']} to {summary['timesteps']} steps in "
+          f"{summary['wall_time_s']:.0f} s ({summary['fps'] or 0:.0f} steps/s); "
+          f"best policy: {Path(args.out) / 'best_model.zip'}")
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="excite", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"excite {__version__}")
@@ -219,6 +233,19 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--out", default="excite_compare", metavar="DIR")
     cmp_.add_argument("--policy", metavar="PATH", help="policy file for the learned protocol")
     cmp_.set_defaults(handler=cmd_compare)
+
+    trn = sub.add_parser("train", help="train an excitation policy (stable-baselines3)")
+    trn.add_argument("--algo", choices=("ppo", "sac"), default="ppo")
+    trn.add_argument("--timesteps", type=_positive_int, default=1_000_000, metavar="N")
+    trn.add_argument("--n-envs", type=_positive_int, default=None, metavar="E",
+                     help="parallel environments (default: from the config)")
+    trn.add_argument("--seed", type=int, default=0, metavar="S")
+    trn.add_argument("--config", metavar="FILE.yaml",
+                     help="hyperparameters (default: agents/configs/ALGO.yaml)")
+    trn.add_argument("--out", required=True, metavar="DIR")
+    trn.add_argument("--resume", action="store_true",
+                     help="continue from the last checkpoint in DIR (same settings)")
+    trn.set_defaults(handler=cmd_train)
     return parser
 
 
@@ -228,7 +255,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
         handler: Callable[[argparse.Namespace], int] | None = getattr(args, "handler", None)
         if handler is None:
-            raise UsageError("a command is required (calibrate, simulate, compare); "
+            raise UsageError("a command is required (calibrate, simulate, compare, train); "
                              "see excite --help")
         return handler(args)
     except (UsageError, DataError) as exc:

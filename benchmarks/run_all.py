@@ -1,0 +1,25 @@
+"""`make bench`: run every benchmark and print what it measured (record it in BENCHMARKS.md)."""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(__file__))
+
+import bench_calibration  # noqa: E402
+import bench_compare  # noqa: E402
+import bench_env  # noqa: E402
+import bench_estimator  # noqa: E402
+import bench_simulation  # noqa: E402
+import bench_slip  # noqa: E402
+
+if __name__ == "__main__":
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
+          f"{platform.python_version()}, {time.strftime('%Y-%m-%d %H:%M')}")
+    for module in (bench_calibration, bench_simulation, bench_env, bench_slip, bench_estimator,
+                   bench_compare):
+        print(f"\n=== {module.__name__} ===", flush=True)
+        module.main([]) if module is bench_calibration else module.main()
