@@ -15,7 +15,7 @@ from gymnasium import spaces
 from envs.robot import RobotDistribution, RobotSpec
 from envs.simulation import Simulation, SimulationConfig
 from excite.data import Segments
-from excite.information import fisher_information, scaled_jacobian, sigma_min
+from excite.information import fisher_information, scaled_jacobian
 from excite.kinematics import Params
 from excite.online import OnlineEstimator
 
@@ -216,11 +216,14 @@ class DiffDriveCalibEnv(gym.Env):
         self._robot = robot
         self._sensor_rng = np.random.default_rng(self.np_random.integers(2**63))
         self.estimator = self.estimator_factory(self.nominal, self.sigma.copy())
-        self._rows: list[np.ndarray] = []
+        self._log = np.empty((self.budget, 5))  # calibration rows; grows if stepped past budget
+        self._n = 0
         self._paths: list[np.ndarray] = [self.sim.pose[None, :]]
         self._last_action = np.zeros(2)
         self._sigma_min = 0.0
+        self._estimate = self.nominal
         self._information = np.zeros((3, 3))
+        self._eigen = (np.zeros(3), np.eye(3))
         self._measured_pose = self.sim.pose_sensor.absolute(self.sim.pose, self._sensor_rng)
         self._error = self.max_relative_error
         if self.render_mode == "human":
@@ -238,15 +241,20 @@ class DiffDriveCalibEnv(gym.Env):
                                        self.segment_duration, self.config["settle_time"])
         row = outcome.measurement
         self.estimator.update(*map(float, row))
-        self._rows.append(row)
+        if self._n == len(self._log):
+            self._log = np.concatenate([self._log, np.empty_like(self._log)])
+        self._log[self._n] = row
+        self._n += 1
         self._paths.append(outcome.path[1:])
         self._last_action = a
         self._measured_pose = self.sim.pose_sensor.absolute(outcome.pose_end, self._sensor_rng)
 
         previous, previous_error = self._sigma_min, self._error
-        self._information = self.information_at(self.estimate)
-        self._sigma_min = float(sigma_min(self._information))
-        n = len(self._rows)
+        self._estimate = self._read_estimate()
+        self._information = self.information_at(self._estimate)
+        self._eigen = np.linalg.eigh(self._information)
+        self._sigma_min = math.sqrt(max(float(self._eigen[0][0]), 0.0))
+        n = self._n
         target = self.config["target_sigma_min"]
         terminated = target is not None and self._sigma_min >= target
         truncated = n >= self.budget and not terminated
@@ -266,7 +274,7 @@ class DiffDriveCalibEnv(gym.Env):
             "sigma_min": self._sigma_min,
             "collision": bool(outcome.collision),
             "measurement": row,
-            "estimate": self.estimate.as_array(),
+            "estimate": self._estimate.as_array(),
             "n_segments": n,
         }
         if self.render_mode == "human":
@@ -274,22 +282,26 @@ class DiffDriveCalibEnv(gym.Env):
         return self._observation(), float(sum(terms.values())), terminated, truncated, info
 
     # -- what the robot knows ------------------------------------------------------------------
-    @property
-    def estimate(self) -> Params:
+    def _read_estimate(self) -> Params:
         p = self.estimator.params
         return p if isinstance(p, Params) else Params.from_array(p)
 
     @property
+    def estimate(self) -> Params:
+        """The estimator's estimate after the last segment."""
+        return self._estimate
+
+    @property
     def segments(self) -> Segments:
         """The calibration log of this episode so far."""
-        return Segments.from_array(np.array(self._rows).reshape(-1, 5))
+        return Segments.from_array(self._log[: self._n])
 
     def information_at(self, params: Params) -> np.ndarray:
         """Relative Fisher information of this episode's segments evaluated at ``params``."""
-        if not self._rows:
+        if not self._n:
             return np.zeros((3, 3))
-        rows = np.array(self._rows)
-        jac = scaled_jacobian(rows[:, 0], rows[:, 1], params, self.sigma, scale=self.nominal)
+        log = self._log[: self._n]
+        jac = scaled_jacobian(log[:, 0], log[:, 1], params, self.sigma, scale=self.nominal)
         return fisher_information(jac)
 
     @property
@@ -300,23 +312,23 @@ class DiffDriveCalibEnv(gym.Env):
         """What the robot knows now (for planners and scripted protocols)."""
         return RobotKnowledge(
             observation=self._observation(), estimate=self.estimate,
-            information=self._information.copy(), log=np.array(self._rows).reshape(-1, 5),
+            information=self._information.copy(), log=self._log[: self._n].copy(),
             pose=self._measured_pose.copy(), nominal=self.nominal, sigma=self.sigma.copy(),
             max_wheel_speed=self.max_wheel_speed, segment_duration=self.segment_duration,
             arena_size=float(self.config["arena_size"]), budget=self.budget)
 
     def _observation(self) -> np.ndarray:
-        lam, vec = np.linalg.eigh(self._information)
+        lam, vec = self._eigen
         weakest = vec[:, 0] * (1.0 if vec[np.argmax(np.abs(vec[:, 0])), 0] >= 0 else -1.0)
         x, y, theta = self._measured_pose
         half = 0.5 * self.config["arena_size"]
         obs = np.concatenate([
-            self.estimate.as_array() / self.nominal.as_array() - 1.0,
+            self._estimate.as_array() / self.nominal.as_array() - 1.0,
             np.log1p(np.maximum(lam, 0.0)) / 10.0,
             weakest,
             [x / half, y / half, math.cos(theta), math.sin(theta)],
             self._last_action,
-            [len(self._rows) / self.budget],
+            [self._n / self.budget],
         ])
         return np.clip(obs, self.observation_space.low, self.observation_space.high).astype(
             np.float32)
@@ -364,7 +376,7 @@ class DiffDriveCalibEnv(gym.Env):
                                            human=self.render_mode == "human")
         frame = self._renderer.draw(
             path=self.path, pose=self.sim.pose, robot=self.robot,
-            estimate=self.estimate, sigma_min=self._sigma_min, n_segments=len(self._rows),
+            estimate=self.estimate, sigma_min=self._sigma_min, n_segments=self._n,
             budget=self.budget)
         return None if self.render_mode == "human" else frame
 

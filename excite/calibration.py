@@ -375,7 +375,7 @@ def calibrate(
     loss: Loss = "linear",
     *,
     max_iterations: int = 100,
-    tol: float = 1e-10,
+    tol: float = 1e-8,
     max_relative_std: float = DEFAULT_MAX_RELATIVE_STD,
 ) -> CalibrationResult:
     """Estimate p = (r_L, r_R, b) from segments by weighted maximum likelihood.

@@ -72,9 +72,16 @@ def _series(coeffs: tuple[float, ...], u2):
 
 
 def _series_inplace(coeffs: tuple[float, ...], u2: FloatArray) -> FloatArray:
-    """Horner evaluation in u^2 on an array, without temporaries."""
-    acc = np.full_like(u2, coeffs[0])
-    for c in coeffs[1:]:
+    """Horner evaluation in u^2 on an array, without temporaries, using only the terms that
+    matter: those that can exceed 1e-18 of the leading one for the largest u^2 present."""
+    largest = float(u2.max()) if u2.size else 0.0
+    terms = len(coeffs)
+    while terms > 1 and abs(coeffs[len(coeffs) - terms]) * largest ** (terms - 1) < 1e-18 * abs(
+            coeffs[-1]):
+        terms -= 1
+    used = coeffs[len(coeffs) - terms:]
+    acc = np.full_like(u2, used[0])
+    for c in used[1:]:
         acc *= u2
         acc += c
     return acc
@@ -130,10 +137,13 @@ def sinc_family(u: ArrayLike, derivatives: bool = True) -> tuple[FloatArray, ...
         safe2 = safe * safe
         gp = (safe * sin_u - one_minus_cos) / safe2
         small = np.abs(u) < SERIES_THRESHOLD
-        fp = (safe * (1.0 - one_minus_cos) - sin_u) / safe2
-        if np.any(small):
-            us = u[small]
-            fp[small] = us * _series_inplace(_DSINC, us * us)
+        if small.all():
+            fp = u * _series_inplace(_DSINC, u * u)
+        else:
+            fp = (safe * (1.0 - one_minus_cos) - sin_u) / safe2
+            if small.any():
+                us = u[small]
+                fp[small] = us * _series_inplace(_DSINC, us * us)
     if any_tiny:
         ut = u[tiny]
         u2 = ut * ut
@@ -227,20 +237,20 @@ def increment_jacobian(
     rad/m for the heading row.
     """
     r_L, r_R, b = _as_params(params)
-    phi_L = np.atleast_1d(np.asarray(dphi_L, dtype=float))
-    phi_R = np.atleast_1d(np.asarray(dphi_R, dtype=float))
-    phi_L, phi_R = np.broadcast_arrays(phi_L, phi_R)
-    s_L, s_R = r_L * phi_L, r_R * phi_R
-    ds = 0.5 * (s_R + s_L)
-    dtheta = (s_R - s_L) / b
+    phi_L, phi_R = np.broadcast_arrays(np.atleast_1d(np.asarray(dphi_L, dtype=float)),
+                                       np.atleast_1d(np.asarray(dphi_R, dtype=float)))
+    ds = 0.5 * (r_L * phi_L + r_R * phi_R)
+    dtheta = (r_R * phi_R - r_L * phi_L) / b
     f, g, fp, gp = sinc_family(dtheta)
-
-    # d(ds)/dp and d(dtheta)/dp, each shaped (N, 3) over (r_L, r_R, b).
-    dds = np.stack([0.5 * phi_L, 0.5 * phi_R, np.zeros_like(ds)], axis=-1)
-    ddth = np.stack([-phi_L / b, phi_R / b, -dtheta / b], axis=-1)
-
     jac = np.empty(phi_L.shape + (3, 3))
-    jac[..., 0, :] = dds * f[..., None] + (ds * fp)[..., None] * ddth
-    jac[..., 1, :] = dds * g[..., None] + (ds * gp)[..., None] * ddth
-    jac[..., 2, :] = ddth
+    # Heading row: d(dtheta)/d(r_L, r_R, b); ds depends on the radii only: (phi_L, phi_R)/2.
+    th_L, th_R, th_b = jac[..., 2, 0], jac[..., 2, 1], jac[..., 2, 2]
+    np.multiply(phi_L, -1.0 / b, out=th_L)
+    np.multiply(phi_R, 1.0 / b, out=th_R)
+    np.multiply(dtheta, -1.0 / b, out=th_b)
+    for row, shape, shape_prime in ((0, f, fp), (1, g, gp)):
+        e = ds * shape_prime  # chain rule through dtheta
+        jac[..., row, 0] = 0.5 * phi_L * shape + e * th_L
+        jac[..., row, 1] = 0.5 * phi_R * shape + e * th_R
+        jac[..., row, 2] = e * th_b
     return jac
