@@ -63,12 +63,14 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[di
     protocol.reset(np.random.default_rng([seed, 1]))
     truth = base.true_params.as_array()
     records, distance, done = [], 0.0, False
+    knowledge = base.knowledge()
     while not done:
-        _, _, terminated, truncated, info = env.step(protocol.act(base.knowledge()))
+        _, _, terminated, truncated, info = env.step(protocol.act(knowledge))
         done = terminated or truncated
+        knowledge = base.knowledge()
         distance += base.last_segment_distance
-        err = base.estimate.as_array() / truth - 1.0
-        rel_std = crlb_relative_std(base.knowledge().information)
+        err = knowledge.estimate.as_array() / truth - 1.0
+        rel_std = crlb_relative_std(knowledge.information)
         x, y, theta = base.sim.pose
         records.append({
             "segment": info["n_segments"], "r_L_err": err[0], "r_R_err": err[1],

@@ -20,7 +20,7 @@ from agents.motion import (
 )
 from agents.protocols import Protocol
 from envs.env import RobotKnowledge
-from excite.information import scaled_jacobian
+from excite.information import segment_information
 
 
 def command_grid(n: int, limit: float = 1.0) -> np.ndarray:
@@ -30,12 +30,11 @@ def command_grid(n: int, limit: float = 1.0) -> np.ndarray:
     return grid[np.any(grid != 0.0, axis=1)]
 
 
-def segment_information(actions: np.ndarray, knowledge: RobotKnowledge, params=None) -> np.ndarray:
-    """Relative Fisher information (n, 3, 3) each command would add (DESIGN.md definition)."""
+def command_information(actions: np.ndarray, knowledge: RobotKnowledge) -> np.ndarray:
+    """Relative Fisher information (n, 3, 3) each command would add, predicted at the estimate."""
     dphi = wheel_increments(actions, knowledge)
-    jac = scaled_jacobian(dphi[:, 0], dphi[:, 1], params or knowledge.estimate, knowledge.sigma,
-                          scale=knowledge.nominal)
-    return np.einsum("nki,nkj->nij", jac, jac)
+    return segment_information(dphi[:, 0], dphi[:, 1], knowledge.estimate, knowledge.sigma,
+                               scale=knowledge.nominal)
 
 
 def smallest_eigenvalue(information: np.ndarray) -> np.ndarray:
@@ -55,7 +54,7 @@ class GreedyPlanner(Protocol):
         self.beam = beam
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
-        gains = segment_information(self.candidates, knowledge)
+        gains = command_information(self.candidates, knowledge)
         score = smallest_eigenvalue(knowledge.information + gains)
         ok = safe_actions(self.candidates, knowledge)
         if not ok.any():

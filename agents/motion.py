@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from envs.env import RobotKnowledge
-from envs.physics import CHASSIS_SIZE
+from envs.physics import Arena
 from excite.kinematics import Params, predict_increment
 
 #: Fractions of the segment at which the predicted footprint is checked.
@@ -20,7 +20,6 @@ CHECK_POINTS = np.array([0.25, 0.5, 0.75, 1.0])
 #: predict: the motors' lag carrying the previous speed on, and slip.
 MARGIN = 0.10
 SPEED_MARGIN = 0.35
-_CORNERS = 0.5 * CHASSIS_SIZE * np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], dtype=float)
 
 
 def wheel_increments(actions: np.ndarray, knowledge: RobotKnowledge) -> np.ndarray:
@@ -44,14 +43,12 @@ def predicted_poses(pose: np.ndarray, dphi: np.ndarray, params: Params,
 
 def is_safe(poses: np.ndarray, arena_size: float, margin: float | np.ndarray = MARGIN
             ) -> np.ndarray:
-    """Whether every footprint corner of every pose (n, m, 3) stays inside the arena, ``margin``
+    """Whether the footprint at every pose (n, m, 3) stays inside the square arena, ``margin``
     (m, a scalar or one per candidate) from the walls."""
-    c, s = np.cos(poses[..., 2:3]), np.sin(poses[..., 2:3])
-    cx = poses[..., 0:1] + c * _CORNERS[:, 0] - s * _CORNERS[:, 1]
-    cy = poses[..., 1:2] + s * _CORNERS[:, 0] + c * _CORNERS[:, 1]
-    limit = 0.5 * arena_size - np.reshape(margin, (-1,) + (1,) * (cx.ndim - 1))
-    inside = (np.abs(cx) <= limit) & (np.abs(cy) <= limit)
-    return inside.all(axis=(-1, -2))
+    margin = np.reshape(margin, (-1,) + (1,) * (poses.ndim - 2))
+    inside = Arena(arena_size, arena_size).contains_footprint(
+        poses[..., 0], poses[..., 1], poses[..., 2], margin)
+    return inside.all(axis=-1)
 
 
 def action_margin(actions: np.ndarray, speed_margin: float = SPEED_MARGIN) -> np.ndarray:

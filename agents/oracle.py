@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linprog
 
-from excite.information import scaled_jacobian
+from agents.greedy import command_grid
+from excite.information import segment_information
 from excite.kinematics import Params
 
 
@@ -43,12 +44,11 @@ def oracle_design(
     rtol: float = 1e-4,
     max_iterations: int = 200,
 ) -> OracleDesign:
-    """E-optimal design over a grid x grid set of commands in [-1, 1]^2 (see module doc)."""
-    axis = np.linspace(-1.0, 1.0, grid)
-    commands = np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1).reshape(-1, 2)
+    """E-optimal design over a grid x grid set of commands in [-1, 1]^2, the standstill
+    (no information) left out (see module doc)."""
+    commands = command_grid(grid)
     dphi = commands * max_wheel_speed * segment_duration
-    jac = scaled_jacobian(dphi[:, 0], dphi[:, 1], params, sigma, scale=nominal)
-    info = np.einsum("nki,nkj->nij", jac, jac)  # (n, 3, 3)
+    info = segment_information(dphi[:, 0], dphi[:, 1], params, sigma, scale=nominal)
     n = len(commands)
     cuts = list(np.eye(3))
     objective = np.zeros(n + 1)

@@ -51,11 +51,13 @@ class Arena:
                     f"({CHASSIS_SIZE * math.sqrt(2):.3f} m), got {value}"
                 )
 
-    def contains_footprint(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
-        """Whether the square chassis footprint at poses (x, y, theta) is inside the walls."""
+    def contains_footprint(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray,
+                           margin: float | np.ndarray = 0.0) -> np.ndarray:
+        """Whether the square chassis footprint at poses (x, y, theta) is inside the walls,
+        at least ``margin`` (m, broadcast with the poses) away from them."""
         half = 0.5 * CHASSIS_SIZE
         # Corner extent of a square rotated by theta, along each world axis.
-        reach = half * (np.abs(np.cos(theta)) + np.abs(np.sin(theta)))
+        reach = half * (np.abs(np.cos(theta)) + np.abs(np.sin(theta))) + margin
         return (np.abs(x) + reach <= 0.5 * self.width) & (np.abs(y) + reach <= 0.5 * self.height)
 
 

@@ -321,6 +321,12 @@ def _levenberg_marquardt(
         sigma = _estimate_sigma(ev, None, loss)
     system = _system(ev, sigma, loss)
     lam = 1e-3
+
+    def damped_step() -> FloatArray:
+        a = system.information
+        step = _solve_psd(a + lam * np.diag(np.diag(a)), -system.gradient)
+        return step if frozen is None else step - frozen @ (frozen.T @ step)
+
     for iteration in range(1, max_iterations + 1):
         settled = True
         if estimate:
@@ -329,10 +335,7 @@ def _levenberg_marquardt(
             if not settled:
                 sigma = new_sigma
                 system = _system(ev, sigma, loss)
-        a = system.information
-        step = _solve_psd(a + lam * np.diag(np.diag(a)), -system.gradient)
-        if frozen is not None:
-            step = step - frozen @ (frozen.T @ step)
+        step = damped_step()
         if np.max(np.abs(step)) < tol and settled:
             return _Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
         while True:
@@ -345,9 +348,7 @@ def _levenberg_marquardt(
             lam *= 10.0
             if lam > 1e12:
                 return _Fit(ev, system, sigma, iteration, True, "no further decrease of the cost")
-            step = _solve_psd(a + lam * np.diag(np.diag(a)), -system.gradient)
-            if frozen is not None:
-                step = step - frozen @ (frozen.T @ step)
+            step = damped_step()
         ev, system = ev_trial, system_trial
         lam = max(lam / 10.0, 1e-12)
     return _Fit(ev, system, sigma, max_iterations, False, "maximum number of iterations reached")

@@ -23,6 +23,7 @@ __all__ = [
     "Sigma",
     "as_sigma",
     "scaled_jacobian",
+    "segment_information",
     "fisher_information",
     "sigma_min",
     "log_det",
@@ -69,6 +70,18 @@ def scaled_jacobian(
     )
     jac = increment_jacobian(dphi_L, dphi_R, p)
     return jac / as_sigma(sigma)[:, None] * scale_arr[None, :]
+
+
+def segment_information(
+    dphi_L: ArrayLike,
+    dphi_R: ArrayLike,
+    params: Params | ArrayLike,
+    sigma: ArrayLike,
+    scale: Params | ArrayLike | None = None,
+) -> FloatArray:
+    """Relative Fisher information J_k^T J_k of each segment on its own, shape (N, 3, 3)."""
+    jac = scaled_jacobian(dphi_L, dphi_R, params, sigma, scale)
+    return np.einsum("nki,nkj->nij", jac, jac)
 
 
 def fisher_information(scaled_jac: ArrayLike) -> FloatArray:

@@ -29,10 +29,6 @@ __all__ = [
     "Params",
     "predict_increment",
     "increment_jacobian",
-    "sinc",
-    "cosc",
-    "dsinc",
-    "dcosc",
     "sinc_family",
     "sinc_cosc_scalar",
     "wrap_angle",
@@ -152,26 +148,6 @@ def sinc_family(u: ArrayLike, derivatives: bool = True) -> tuple[FloatArray, ...
         if derivatives:
             gp[tiny] = _series(_DCOSC[-3:], u2)
     return (f, g, fp, gp) if derivatives else (f, g)
-
-
-def sinc(u: ArrayLike) -> FloatArray:
-    """sin(u)/u, with sinc(0) = 1."""
-    return sinc_family(u, derivatives=False)[0]
-
-
-def cosc(u: ArrayLike) -> FloatArray:
-    """(1 - cos(u))/u, with cosc(0) = 0; evaluated as 2 sin^2(u/2)/u (no cancellation)."""
-    return sinc_family(u, derivatives=False)[1]
-
-
-def dsinc(u: ArrayLike) -> FloatArray:
-    """d/du sinc(u) = (u cos u - sin u)/u^2."""
-    return sinc_family(u)[2]
-
-
-def dcosc(u: ArrayLike) -> FloatArray:
-    """d/du cosc(u) = (u sin u - (1 - cos u))/u^2."""
-    return sinc_family(u)[3]
 
 
 def sinc_cosc_scalar(u: float, derivatives: bool = True) -> tuple[float, ...]:
