@@ -15,7 +15,7 @@ from gymnasium import spaces
 from envs.robot import RobotDistribution, RobotSpec
 from envs.simulation import Simulation, SimulationConfig
 from excite.data import Segments
-from excite.information import fisher_information, scaled_jacobian
+from excite.information import eigen_3x3, information_matrix
 from excite.kinematics import Params
 from excite.online import OnlineEstimator
 
@@ -219,11 +219,11 @@ class DiffDriveCalibEnv(gym.Env):
         self._log = np.empty((self.budget, 5))  # calibration rows; grows if stepped past budget
         self._n = 0
         self._paths: list[np.ndarray] = [self.sim.pose[None, :]]
-        self._last_action = np.zeros(2)
+        self._last_action = (0.0, 0.0)
         self._sigma_min = 0.0
         self._estimate = self.nominal
         self._information = np.zeros((3, 3))
-        self._eigen = (np.zeros(3), np.eye(3))
+        self._eigen = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))  # eigenvalues, weakest direction
         self._measured_pose = self.sim.pose_sensor.absolute(self.sim.pose, self._sensor_rng)
         self._error = self.max_relative_error
         if self.render_mode == "human":
@@ -233,41 +233,42 @@ class DiffDriveCalibEnv(gym.Env):
     def step(self, action):
         if self._robot is None:
             raise RuntimeError("call reset() before step()")
-        a = np.asarray(action, dtype=float).reshape(-1)
-        if a.shape != (2,) or not np.all(np.isfinite(a)):
+        values = np.asarray(action, dtype=float).reshape(-1).tolist()
+        if len(values) != 2 or not all(map(math.isfinite, values)):
             raise ValueError(f"action must be 2 finite numbers (left, right), got {action!r}")
-        a = np.clip(a, -1.0, 1.0)
-        outcome = self.sim.run_segment(a[0] * self.max_wheel_speed, a[1] * self.max_wheel_speed,
+        left, right = (min(max(v, -1.0), 1.0) for v in values)
+        outcome = self.sim.run_segment(left * self.max_wheel_speed, right * self.max_wheel_speed,
                                        self.segment_duration, self.config["settle_time"])
         row = outcome.measurement
-        self.estimator.update(*map(float, row))
+        self.estimator.update(*row.tolist())
         if self._n == len(self._log):
             self._log = np.concatenate([self._log, np.empty_like(self._log)])
         self._log[self._n] = row
         self._n += 1
         self._paths.append(outcome.path[1:])
-        self._last_action = a
+        self._last_action = (left, right)
         self._measured_pose = self.sim.pose_sensor.absolute(outcome.pose_end, self._sensor_rng)
 
         previous, previous_error = self._sigma_min, self._error
         self._estimate = self._read_estimate()
         self._information = self.information_at(self._estimate)
-        self._eigen = np.linalg.eigh(self._information)
-        self._sigma_min = math.sqrt(max(float(self._eigen[0][0]), 0.0))
+        self._eigen = eigen_3x3(self._information)
+        self._sigma_min = math.sqrt(max(self._eigen[0][0], 0.0))
         n = self._n
-        target = self.config["target_sigma_min"]
+        config = self.config
+        target = config["target_sigma_min"]
         terminated = target is not None and self._sigma_min >= target
         truncated = n >= self.budget and not terminated
         terms = {
-            "information": (self._sigma_min - previous) / self.config["information_scale"],
-            "collision": -float(self.config["collision_penalty"]) * outcome.collision,
-            "effort": -float(self.config["effort_cost"]) * float(np.mean(a * a)),
-            "time": -float(self.config["time_cost"]),
+            "information": (self._sigma_min - previous) / config["information_scale"],
+            "collision": -float(config["collision_penalty"]) if outcome.collision else 0.0,
+            "effort": -float(config["effort_cost"]) * 0.5 * (left * left + right * right),
+            "time": -float(config["time_cost"]),
             "accuracy": 0.0,
         }
-        if self.config["accuracy_weight"]:
+        if config["accuracy_weight"]:
             self._error = self.max_relative_error
-            terms["accuracy"] = (-self.config["accuracy_weight"] * 100.0
+            terms["accuracy"] = (-config["accuracy_weight"] * 100.0
                                  * (self._error - previous_error))
         info = {
             "reward_terms": terms,
@@ -301,8 +302,7 @@ class DiffDriveCalibEnv(gym.Env):
         if not self._n:
             return np.zeros((3, 3))
         log = self._log[: self._n]
-        jac = scaled_jacobian(log[:, 0], log[:, 1], params, self.sigma, scale=self.nominal)
-        return fisher_information(jac)
+        return information_matrix(log[:, 0], log[:, 1], params, self.sigma, scale=self.nominal)
 
     @property
     def sigma_min(self) -> float:
@@ -318,20 +318,23 @@ class DiffDriveCalibEnv(gym.Env):
             arena_size=float(self.config["arena_size"]), budget=self.budget)
 
     def _observation(self) -> np.ndarray:
-        lam, vec = self._eigen
-        weakest = vec[:, 0] * (1.0 if vec[np.argmax(np.abs(vec[:, 0])), 0] >= 0 else -1.0)
-        x, y, theta = self._measured_pose
-        half = 0.5 * self.config["arena_size"]
-        obs = np.concatenate([
-            self._estimate.as_array() / self.nominal.as_array() - 1.0,
-            np.log1p(np.maximum(lam, 0.0)) / 10.0,
-            weakest,
-            [x / half, y / half, math.cos(theta), math.sin(theta)],
-            self._last_action,
-            [self._n / self.budget],
-        ])
-        return np.clip(obs, self.observation_space.low, self.observation_space.high).astype(
-            np.float32)
+        (lam0, lam1, lam2), weakest = self._eigen
+        sign = 1.0 if max(weakest, key=abs) >= 0 else -1.0  # a unique sign for the direction
+        estimate, nominal = self._estimate, self.nominal
+        x, y, theta = self._measured_pose.tolist()
+        to_unit = 2.0 / self.config["arena_size"]
+        obs = np.array([
+            estimate.r_L / nominal.r_L - 1.0, estimate.r_R / nominal.r_R - 1.0,
+            estimate.b / nominal.b - 1.0,
+            0.1 * math.log1p(max(lam0, 0.0)), 0.1 * math.log1p(max(lam1, 0.0)),
+            0.1 * math.log1p(max(lam2, 0.0)),
+            sign * weakest[0], sign * weakest[1], sign * weakest[2],
+            x * to_unit, y * to_unit, math.cos(theta), math.sin(theta),
+            *self._last_action,
+            self._n / self.budget,
+        ], dtype=np.float32)
+        space = self.observation_space
+        return np.minimum(np.maximum(obs, space.low, out=obs), space.high, out=obs)
 
     # -- evaluation only -------------------------------------------------------------------------
     @property

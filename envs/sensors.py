@@ -65,16 +65,19 @@ class RelativePoseSensor:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"RelativePoseSensor.{name} must be finite and >= 0, got {value}")
+        sigma = np.array([self.sigma_xy, self.sigma_xy, self.sigma_theta])
+        sigma.flags.writeable = False
+        object.__setattr__(self, "_sigma", sigma)
 
     @property
     def sigma(self) -> np.ndarray:
         """Per-channel standard deviations (sigma_x, sigma_y, sigma_theta) in (m, m, rad)."""
-        return np.array([self.sigma_xy, self.sigma_xy, self.sigma_theta])
+        return self._sigma.copy()
 
     def measure(self, true_increment: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy body-frame increment (dx, dy, dtheta); one fresh noise draw per segment."""
-        return np.asarray(true_increment, dtype=float) + self.sigma * rng.standard_normal(3)
+        return rng.normal(np.asarray(true_increment, dtype=float), self._sigma)
 
     def absolute(self, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy world pose (x, y, theta); theta stays continuous (not wrapped)."""
-        return np.asarray(pose, dtype=float) + self.sigma * rng.standard_normal(3)
+        return rng.normal(np.asarray(pose, dtype=float), self._sigma)

@@ -14,16 +14,25 @@ Every estimator, the environment's reward and the planners use these functions.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from excite.kinematics import Params, increment_jacobian
+from excite.kinematics import (
+    Params,
+    increment_jacobian,
+    sinc_and_derivative,
+    sinc_cosc_scalar,
+)
 
 __all__ = [
     "Sigma",
     "as_sigma",
     "scaled_jacobian",
     "segment_information",
+    "information_matrix",
+    "eigen_3x3",
     "fisher_information",
     "sigma_min",
     "log_det",
@@ -47,9 +56,13 @@ def as_sigma(sigma: ArrayLike) -> FloatArray:
     s = np.asarray(sigma, dtype=float).reshape(-1)
     if s.size == 2:
         s = np.array([s[0], s[0], s[1]])
-    if s.size != 3 or not np.all(np.isfinite(s)) or np.any(s <= 0):
+    if s.size != 3 or not all(0.0 < x < math.inf for x in s.tolist()):
         raise ValueError(f"sigma must be three positive finite numbers (sx, sy, sth), got {sigma}")
     return s
+
+
+def _as_vector(values: Params | ArrayLike) -> FloatArray:
+    return values.as_array() if isinstance(values, Params) else np.asarray(values, dtype=float)
 
 
 def scaled_jacobian(
@@ -64,12 +77,53 @@ def scaled_jacobian(
     params: where the Jacobian is evaluated. scale: the nominal values that multiply the
     columns (default: params itself).
     """
-    p = params.as_array() if isinstance(params, Params) else np.asarray(params, dtype=float)
-    scale_arr = p if scale is None else (
-        scale.as_array() if isinstance(scale, Params) else np.asarray(scale, dtype=float)
-    )
+    p = _as_vector(params)
+    scale_arr = p if scale is None else _as_vector(scale)
     jac = increment_jacobian(dphi_L, dphi_R, p)
     return jac / as_sigma(sigma)[:, None] * scale_arr[None, :]
+
+
+def _information_rows(
+    dphi_L: ArrayLike,
+    dphi_R: ArrayLike,
+    params: Params | ArrayLike,
+    sigma: ArrayLike,
+    scale: Params | ArrayLike | None,
+) -> FloatArray:
+    """Rows R (3 parameters, 3 rows, N segments) with R[:, :, k] R[:, :, k]^T = J_k^T J_k,
+    J_k the whitened, relatively scaled Jacobian of segment k (:func:`scaled_jacobian`).
+
+    With sigma_x == sigma_y the two position rows may be turned by any angle without changing
+    J^T J; turned by -dtheta/2 (onto the chord of the arc) they need only sinc and sinc' of
+    v = dtheta/2: dx + i dy = ds sinc(v) e^{iv}, so the turned rows are
+    sinc(v) d(ds)/dp + ds sinc'(v)/2 d(dtheta)/dp  and  ds sinc(v)/2 d(dtheta)/dp.
+    That is half the work of the Jacobian itself (the environment's hot path).
+    """
+    s = as_sigma(sigma)
+    r_L, r_R, b = _as_vector(params).tolist()
+    c_L, c_R, c_b = _as_vector(params if scale is None else scale).tolist()
+    phi = np.array([np.ravel(dphi_L), np.ravel(dphi_R)], dtype=float)  # (2, N)
+    sigma_xy, sigma_y, sigma_theta = s.tolist()
+    if sigma_y != sigma_xy:
+        return scaled_jacobian(phi[0], phi[1], (r_L, r_R, b), s,
+                               (c_L, c_R, c_b)).transpose(2, 1, 0)
+    # v = dtheta / 2 and the whitened half travel ds / (2 sigma_xy): linear in the increments.
+    v, travel = np.array([-0.5 * r_L / b, 0.5 * r_R / b,
+                          0.25 * r_L / sigma_xy, 0.25 * r_R / sigma_xy]).reshape(2, 2) @ phi
+    sinc, dsinc = sinc_and_derivative(v)
+    rows = np.empty((3, 3, phi.shape[1]))
+    heading = rows[:, 2]  # d(dtheta)/dp times the column scale, whitened at the end
+    heading[:2] = phi
+    heading[2] = v
+    heading *= np.array([-c_L / b, c_R / b, -2.0 * c_b / b]).reshape(3, 1)
+    np.multiply(heading, travel * dsinc, out=rows[:, 0])
+    np.multiply(heading, travel * sinc, out=rows[:, 1])
+    # d(ds)/d(r_L, r_R) = (dphi_L, dphi_R) / 2
+    phi *= np.array([0.5 * c_L / sigma_xy, 0.5 * c_R / sigma_xy]).reshape(2, 1)
+    phi *= sinc
+    rows[:2, 0] += phi
+    heading *= 1.0 / sigma_theta
+    return rows
 
 
 def segment_information(
@@ -79,9 +133,153 @@ def segment_information(
     sigma: ArrayLike,
     scale: Params | ArrayLike | None = None,
 ) -> FloatArray:
-    """Relative Fisher information J_k^T J_k of each segment on its own, shape (N, 3, 3)."""
-    jac = scaled_jacobian(dphi_L, dphi_R, params, sigma, scale)
-    return np.einsum("nki,nkj->nij", jac, jac)
+    """Relative Fisher information J_k^T J_k of each segment on its own, shape (N, 3, 3).
+
+    dphi_L, dphi_R: wheel increments (rad), flattened to N segments. params: where J is
+    evaluated (m); scale: the column scale (default params).
+    """
+    rows = _information_rows(dphi_L, dphi_R, params, sigma, scale)
+    return np.einsum("irn,jrn->nij", rows, rows)
+
+
+def information_matrix(
+    dphi_L: ArrayLike,
+    dphi_R: ArrayLike,
+    params: Params | ArrayLike,
+    sigma: ArrayLike,
+    scale: Params | ArrayLike | None = None,
+) -> FloatArray:
+    """F = sum_k J_k^T J_k of all segments, (3, 3): ``fisher_information(scaled_jacobian(...))``
+    without forming the Jacobians (see :func:`segment_information` for the arguments).
+
+    Up to ``_LOOP_MAX`` segments with sigma_x == sigma_y (the environment's step) F comes from
+    nine weighted wheel-increment moments summed in one pure-Python pass (see
+    :func:`_information_from_moments`); beyond, from the vectorized rows.
+    """
+    s = as_sigma(sigma)
+    phi_L, phi_R = np.ravel(dphi_L), np.ravel(dphi_R)
+    if phi_L.size <= _LOOP_MAX and s[0] == s[1] and phi_L.size == phi_R.size:
+        return _information_from_moments(
+            phi_L.tolist(), phi_R.tolist(), _as_vector(params).tolist(),
+            _as_vector(params if scale is None else scale).tolist(), *s[1:].tolist())
+    rows = _information_rows(phi_L, phi_R, params, s, scale).reshape(3, -1)
+    return rows @ rows.T
+
+
+#: Segment count up to which the pure-Python moments beat numpy's per-call overhead.
+_LOOP_MAX = 32
+
+
+def _information_from_moments(
+    phi_L: list[float], phi_R: list[float], params: list[float], scale: list[float],
+    sigma_xy: float, sigma_theta: float,
+) -> FloatArray:
+    """F from the rows of :func:`_information_rows`, which are linear in phi = (dphi_L,
+    dphi_R) up to per-segment factors: heading row t = H phi, chord rows
+    r1 = (w dsinc) H phi + sinc E phi and r2 = (w sinc) H phi, w the whitened half travel.
+    Hence F = H A H^T + H M E^T + E M H^T + E S E^T with the 2x2 moments
+    A = sum (w^2 (sinc^2 + dsinc^2) + 1 / sigma_theta^2) phi phi^T,
+    M = sum w sinc dsinc phi phi^T and S = sum sinc^2 phi phi^T.
+    """
+    r_L, r_R, b = params
+    c_L, c_R, c_b = scale
+    v_L, v_R = -0.5 * r_L / b, 0.5 * r_R / b  # v = dtheta / 2 = v_L dphi_L + v_R dphi_R
+    w_L, w_R = 0.25 * r_L / sigma_xy, 0.25 * r_R / sigma_xy  # w = ds / (2 sigma_xy)
+    heading_weight = 1.0 / (sigma_theta * sigma_theta)
+    a11 = a12 = a22 = m11 = m12 = m22 = s11 = s12 = s22 = 0.0
+    for left, right in zip(phi_L, phi_R, strict=True):
+        v = v_L * left + v_R * right
+        w = w_L * left + w_R * right
+        sinc, _, dsinc, _ = sinc_cosc_scalar(v)
+        sinc2 = sinc * sinc
+        weight_a = w * w * (sinc2 + dsinc * dsinc) + heading_weight
+        weight_m = w * sinc * dsinc
+        ll, lr, rr = left * left, left * right, right * right
+        a11 += weight_a * ll
+        a12 += weight_a * lr
+        a22 += weight_a * rr
+        m11 += weight_m * ll
+        m12 += weight_m * lr
+        m22 += weight_m * rr
+        s11 += sinc2 * ll
+        s12 += sinc2 * lr
+        s22 += sinc2 * rr
+    # H = [[h0, 0], [0, h1], [g0, g1]] (column-scaled d(dtheta)/dp); E = [[e0, 0], [0, e1], 0].
+    h0, h1 = -c_L / b, c_R / b
+    g0, g1 = -2.0 * c_b / b * v_L, -2.0 * c_b / b * v_R
+    e0, e1 = 0.5 * c_L / sigma_xy, 0.5 * c_R / sigma_xy
+    f00 = h0 * h0 * a11 + 2.0 * h0 * e0 * m11 + e0 * e0 * s11
+    f01 = h0 * h1 * a12 + (h0 * e1 + h1 * e0) * m12 + e0 * e1 * s12
+    f11 = h1 * h1 * a22 + 2.0 * h1 * e1 * m22 + e1 * e1 * s22
+    f02 = h0 * (g0 * a11 + g1 * a12) + e0 * (g0 * m11 + g1 * m12)
+    f12 = h1 * (g0 * a12 + g1 * a22) + e1 * (g0 * m12 + g1 * m22)
+    f22 = g0 * g0 * a11 + 2.0 * g0 * g1 * a12 + g1 * g1 * a22
+    return np.array([[f00, f01, f02], [f01, f11, f12], [f02, f12, f22]])
+
+
+def eigen_3x3(information: ArrayLike) -> tuple[tuple[float, float, float],
+                                               tuple[float, float, float]]:
+    """Eigenvalues (ascending) of a symmetric 3x3 matrix and the unit eigenvector of the
+    smallest, in a few microseconds of pure Python (numpy.linalg.eigh spends more than that on
+    call overhead), with errors of order eps * ||F|| like LAPACK's.
+
+    The closed form (Smith 1961) gives the eigenvalue farther from the middle one accurately
+    (the other extreme is ill-conditioned when it nearly coincides with the middle); its
+    eigenvector is the longest cross product of two rows of F - lambda I, and the other two
+    come from the exact 2x2 problem on the plane orthogonal to it.
+    """
+    (a00, a01, a02), (_, a11, a12), (_, _, a22) = np.asarray(information, dtype=float).tolist()
+    trace = a00 + a11 + a22
+    q = trace / 3.0
+    d0, d1, d2 = a00 - q, a11 - q, a22 - q
+    p2 = (d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
+    if not p2 > 0.0:  # a multiple of the identity
+        return (q, q, q), (1.0, 0.0, 0.0)
+    p = math.sqrt(p2)
+    det = d0 * (d1 * d2 - a12 * a12) - a01 * (a01 * d2 - a12 * a02) + a02 * (a01 * a12 - d1 * a02)
+    r = min(max(det / (2.0 * p * p2), -1.0), 1.0)
+    top_is_isolated = r >= 0.0  # then top - middle >= sqrt(3) p, else middle - bottom is
+    angle = math.acos(r) / 3.0 + (0.0 if top_is_isolated else 2.0 * math.pi / 3.0)
+    isolated = q + 2.0 * p * math.cos(angle)
+    # Cross products of the rows of F - isolated I: each is parallel to the eigenvector.
+    c0, c1, c2 = a00 - isolated, a11 - isolated, a22 - isolated
+    x01 = (a01 * a12 - a02 * c1, a02 * a01 - c0 * a12, c0 * c1 - a01 * a01)
+    x02 = (a01 * c2 - a02 * a12, a02 * a02 - c0 * c2, c0 * a12 - a01 * a02)
+    x12 = (c1 * c2 - a12 * a12, a12 * a02 - a01 * c2, a01 * a12 - c1 * a02)
+    u = _unit(max(x01, x02, x12, key=_norm2))
+    # An orthonormal basis (e1, e2) of the plane orthogonal to u.
+    ux, uy, uz = abs(u[0]), abs(u[1]), abs(u[2])
+    if ux <= uy and ux <= uz:
+        e1 = _unit((0.0, u[2], -u[1]))  # u x (1, 0, 0)
+    elif uy <= uz:
+        e1 = _unit((-u[2], 0.0, u[0]))  # u x (0, 1, 0)
+    else:
+        e1 = _unit((u[1], -u[0], 0.0))  # u x (0, 0, 1)
+    e2 = (u[1] * e1[2] - u[2] * e1[1], u[2] * e1[0] - u[0] * e1[2], u[0] * e1[1] - u[1] * e1[0])
+    f1 = (a00 * e1[0] + a01 * e1[1] + a02 * e1[2], a01 * e1[0] + a11 * e1[1] + a12 * e1[2],
+          a02 * e1[0] + a12 * e1[1] + a22 * e1[2])  # F e1
+    b11 = f1[0] * e1[0] + f1[1] * e1[1] + f1[2] * e1[2]
+    b12 = f1[0] * e2[0] + f1[1] * e2[1] + f1[2] * e2[2]
+    b22 = (e2[0] * (a00 * e2[0] + a01 * e2[1] + a02 * e2[2])
+           + e2[1] * (a01 * e2[0] + a11 * e2[1] + a12 * e2[2])
+           + e2[2] * (a02 * e2[0] + a12 * e2[1] + a22 * e2[2]))
+    mean, half = 0.5 * (b11 + b22), math.hypot(0.5 * (b11 - b22), b12)
+    low, high = mean - half, mean + half
+    if not top_is_isolated:
+        return (trace - low - high, low, high), u
+    turn = 0.5 * math.atan2(2.0 * b12, b11 - b22)  # of the eigenvector of `high` in (e1, e2)
+    c, s = math.cos(turn), math.sin(turn)
+    return (low, high, trace - low - high), (c * e2[0] - s * e1[0], c * e2[1] - s * e1[1],
+                                             c * e2[2] - s * e1[2])
+
+
+def _norm2(a: tuple[float, float, float]) -> float:
+    return a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
+
+
+def _unit(a: tuple[float, float, float]) -> tuple[float, float, float]:
+    n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    return (a[0] / n, a[1] / n, a[2] / n)
 
 
 def fisher_information(scaled_jac: ArrayLike) -> FloatArray:

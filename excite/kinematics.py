@@ -19,6 +19,7 @@ agree to a few ulps at each seam, and nothing is NaN or inf for u = 0, tiny u, o
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from dataclasses import dataclass
 from math import factorial
 
@@ -30,6 +31,7 @@ __all__ = [
     "predict_increment",
     "increment_jacobian",
     "sinc_family",
+    "sinc_and_derivative",
     "sinc_cosc_scalar",
     "wrap_angle",
 ]
@@ -67,20 +69,38 @@ def _series(coeffs: tuple[float, ...], u2):
     return acc
 
 
-def _series_inplace(coeffs: tuple[float, ...], u2: FloatArray) -> FloatArray:
-    """Horner evaluation in u^2 on an array, without temporaries, using only the terms that
+def _dsinc_series(u: FloatArray) -> FloatArray:
+    """sinc'(u) of an array by its series (|u| <= 1); on long arrays only the terms that
     matter: those that can exceed 1e-18 of the leading one for the largest u^2 present."""
-    largest = float(u2.max()) if u2.size else 0.0
-    terms = len(coeffs)
-    while terms > 1 and abs(coeffs[len(coeffs) - terms]) * largest ** (terms - 1) < 1e-18 * abs(
-            coeffs[-1]):
-        terms -= 1
-    used = coeffs[len(coeffs) - terms:]
+    u2 = u * u
+    if u.size <= _POWER_TABLE_SIZE:
+        # One table of powers: 3 array operations instead of Horner's 2 per term (within
+        # 2 ulps of the exact value, Horner 1.2; measured against mpmath).
+        return u * ((u2[:, None] ** _POWERS) @ _DSINC_ASCENDING)
+    used = _dsinc_terms(float(u2.max()) if u2.size else 0.0)
     acc = np.full_like(u2, used[0])
     for c in used[1:]:
         acc *= u2
         acc += c
+    acc *= u
     return acc
+
+
+# The series term of power k (in u^2) matters once u^2 reaches this (increasing in k).
+_DSINC_THRESHOLDS = tuple(
+    (1e-18 * abs(_DSINC[-1]) / abs(_DSINC[-1 - k])) ** (1.0 / k) for k in range(1, _N_TERMS))
+_DSINC_ASCENDING = np.array(_DSINC[::-1])
+_DSINC_TRUNCATED = tuple(_DSINC[_N_TERMS - 1 - k:] for k in range(_N_TERMS))  # k + 1 terms
+# The first three terms: exact (truncation < 1e-25) below TINY_THRESHOLD.
+_SINC3, _COSC3, _DSINC3, _DCOSC3 = _SINC[-3:], _COSC[-3:], _DSINC[-3:], _DCOSC[-3:]
+
+
+def _dsinc_terms(largest_u2: float) -> tuple[float, ...]:
+    """The series coefficients of sinc' that matter up to u^2 = largest_u2 (Horner order)."""
+    return _DSINC_TRUNCATED[bisect_right(_DSINC_THRESHOLDS, largest_u2)]
+_POWERS = np.arange(float(_N_TERMS))
+#: Up to this many values a power table is faster than Horner's per-term loop (measured).
+_POWER_TABLE_SIZE = 64
 
 
 @dataclass(frozen=True)
@@ -95,11 +115,13 @@ class Params:
     b: float
 
     def __post_init__(self) -> None:
-        for name in ("r_L", "r_R", "b"):
-            value = float(getattr(self, name))
-            if not math.isfinite(value) or value <= 0.0:
+        values = float(self.r_L), float(self.r_R), float(self.b)
+        for name, value in zip(("r_L", "r_R", "b"), values, strict=True):
+            if not 0.0 < value < math.inf:
                 raise ValueError(f"{name} must be a positive finite length in meters, got {value}")
-            object.__setattr__(self, name, value)
+        object.__setattr__(self, "r_L", values[0])
+        object.__setattr__(self, "r_R", values[1])
+        object.__setattr__(self, "b", values[2])
 
     @classmethod
     def from_array(cls, values: ArrayLike) -> Params:
@@ -122,7 +144,7 @@ def sinc_family(u: ArrayLike, derivatives: bool = True) -> tuple[FloatArray, ...
     if u.ndim == 0:
         return tuple(x.reshape(()) for x in sinc_family(u.reshape(1), derivatives))
     tiny = np.abs(u) < TINY_THRESHOLD
-    any_tiny = bool(np.any(tiny))
+    any_tiny = bool(tiny.any())
     safe = np.where(tiny, 1.0, u) if any_tiny else u
     half_sin, half_cos = np.sin(0.5 * safe), np.cos(0.5 * safe)
     one_minus_cos = 2.0 * half_sin * half_sin
@@ -134,20 +156,36 @@ def sinc_family(u: ArrayLike, derivatives: bool = True) -> tuple[FloatArray, ...
         gp = (safe * sin_u - one_minus_cos) / safe2
         small = np.abs(u) < SERIES_THRESHOLD
         if small.all():
-            fp = u * _series_inplace(_DSINC, u * u)
+            fp = _dsinc_series(u)
         else:
             fp = (safe * (1.0 - one_minus_cos) - sin_u) / safe2
             if small.any():
-                us = u[small]
-                fp[small] = us * _series_inplace(_DSINC, us * us)
+                fp[small] = _dsinc_series(u[small])
     if any_tiny:
         ut = u[tiny]
         u2 = ut * ut
-        f[tiny] = _series(_SINC[-3:], u2)
-        g[tiny] = ut * _series(_COSC[-3:], u2)
+        f[tiny] = _series(_SINC3, u2)
+        g[tiny] = ut * _series(_COSC3, u2)
         if derivatives:
-            gp[tiny] = _series(_DCOSC[-3:], u2)
+            gp[tiny] = _series(_DCOSC3, u2)
     return (f, g, fp, gp) if derivatives else (f, g)
+
+
+def sinc_and_derivative(u: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """(sinc(u), sinc'(u)) of a 1-D array: the two functions the information needs.
+
+    sin(u) / u is accurate to an ulp or two for every u != 0 (u = 0 gives 1); sinc'(u) =
+    (cos u - sinc u) / u loses 3 eps / u^2 to cancellation, so it uses its series for
+    |u| < 1, as :func:`sinc_family` does.
+    """
+    u = np.asarray(u, dtype=float)
+    safe = np.where(u == 0.0, 1e-300, u)  # sin(1e-300) / 1e-300 == 1 exactly
+    f = np.sin(safe) / safe
+    fp = (np.cos(safe) - f) / safe
+    small = np.abs(u) < SERIES_THRESHOLD
+    if small.any():
+        fp[small] = _dsinc_series(u[small])
+    return f, fp
 
 
 def sinc_cosc_scalar(u: float, derivatives: bool = True) -> tuple[float, ...]:
@@ -155,10 +193,10 @@ def sinc_cosc_scalar(u: float, derivatives: bool = True) -> tuple[float, ...]:
     :func:`sinc_family`: the hot path of the online estimator and the physics."""
     if abs(u) < TINY_THRESHOLD:
         u2 = u * u
-        f, g = _series(_SINC[-3:], u2), u * _series(_COSC[-3:], u2)
+        f, g = _series(_SINC3, u2), u * _series(_COSC3, u2)
         if not derivatives:
             return f, g
-        return f, g, u * _series(_DSINC[-3:], u2), _series(_DCOSC[-3:], u2)
+        return f, g, u * _series(_DSINC3, u2), _series(_DCOSC3, u2)
     half_sin, half_cos = math.sin(0.5 * u), math.cos(0.5 * u)
     one_minus_cos = 2.0 * half_sin * half_sin
     sin_u = 2.0 * half_sin * half_cos
@@ -167,7 +205,7 @@ def sinc_cosc_scalar(u: float, derivatives: bool = True) -> tuple[float, ...]:
         return f, g
     u2 = u * u
     if abs(u) < SERIES_THRESHOLD:
-        fp = u * _series(_DSINC, u2)
+        fp = u * _series(_dsinc_terms(u2), u2)
     else:
         fp = (u * (1.0 - one_minus_cos) - sin_u) / u2
     return f, g, fp, (u * sin_u - one_minus_cos) / u2

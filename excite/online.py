@@ -31,33 +31,15 @@ def _wrap(a: float) -> float:
     return math.pi - (math.pi - a) % _TWO_PI
 
 
-def _model(p: list[float], phi_L: float, phi_R: float):
-    """Predicted increment h(p) and its Jacobian rows H (d/d(r_L, r_R, b)) for one segment."""
-    r_L, r_R, b = p
-    s_L, s_R = r_L * phi_L, r_R * phi_R
-    ds = 0.5 * (s_L + s_R)
-    th = (s_R - s_L) / b
-    f, g, fp, gp = sinc_cosc_scalar(th)
-    dth = (-phi_L / b, phi_R / b, -th / b)
-    dds = (0.5 * phi_L, 0.5 * phi_R, 0.0)
-    kf, kg = ds * fp, ds * gp
-    hx = [dds[i] * f + kf * dth[i] for i in range(3)]
-    hy = [dds[i] * g + kg * dth[i] for i in range(3)]
-    return (ds * f, ds * g, th), (hx, hy, dth)
-
-
-def _solve3(m: list[list[float]], v: list[float]) -> list[float]:
+def _solve3(m00: float, m01: float, m02: float, m11: float, m12: float, m22: float,
+            v0: float, v1: float, v2: float) -> tuple[float, float, float]:
     """Solve the symmetric positive-definite 3x3 system m x = v (Cramer's rule)."""
-    (a, b, c), (_, d, e), (_, _, f) = m
-    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
-    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
-    det = a * c00 + b * c01 + c * c02
-    x0, x1, x2 = v
-    return [
-        (c00 * x0 + c01 * x1 + c02 * x2) / det,
-        (c01 * x0 + c11 * x1 + c12 * x2) / det,
-        (c02 * x0 + c12 * x1 + c22 * x2) / det,
-    ]
+    c00, c01, c02 = m11 * m22 - m12 * m12, m02 * m12 - m01 * m22, m01 * m12 - m02 * m11
+    c11, c12, c22 = m00 * m22 - m02 * m02, m01 * m02 - m00 * m12, m00 * m11 - m01 * m01
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    return ((c00 * v0 + c01 * v1 + c02 * v2) / det,
+            (c01 * v0 + c11 * v1 + c12 * v2) / det,
+            (c02 * v0 + c12 * v1 + c22 * v2) / det)
 
 
 class OnlineEstimator:
@@ -107,36 +89,47 @@ class OnlineEstimator:
     def update(self, dphi_L: float, dphi_R: float, dx: float, dy: float, dtheta: float) -> None:
         """Fold in one segment: wheel increments (rad) and measured body-frame increment."""
         phi_L, phi_R = float(dphi_L), float(dphi_R)
-        z = (float(dx), float(dy), float(dtheta))
-        if not all(map(math.isfinite, (phi_L, phi_R, *z))):
+        zx, zy, zt = float(dx), float(dy), float(dtheta)
+        if not all(map(math.isfinite, (phi_L, phi_R, zx, zy, zt))):
             raise ValueError("segment values must be finite")
         wx, wy, wt = self._w
-        prior_q, prior_info = self._q, self._info
-        q = prior_q
+        q0, q1, q2 = self._q
+        (a00, a01, a02), (_, a11, a12), (_, _, a22) = self._info
+        x0, x1, x2 = q0, q1, q2  # the iterate, in log-parameters
         for _ in range(self._iterations):
-            p = [math.exp(qi) for qi in q]
-            (px, py, pt), (hx, hy, ht) = _model(p, phi_L, phi_R)
-            # Chain rule to log-parameters: d/dq_i = p_i d/dp_i.
-            hx = [hx[i] * p[i] for i in range(3)]
-            hy = [hy[i] * p[i] for i in range(3)]
-            ht = [ht[i] * p[i] for i in range(3)]
-            d = [q[i] - prior_q[i] for i in range(3)]
-            yx = z[0] - px + hx[0] * d[0] + hx[1] * d[1] + hx[2] * d[2]
-            yy = z[1] - py + hy[0] * d[0] + hy[1] * d[1] + hy[2] * d[2]
-            yt = _wrap(z[2] - pt) + ht[0] * d[0] + ht[1] * d[1] + ht[2] * d[2]
-            info = [
-                [prior_info[i][j] + wx * hx[i] * hx[j] + wy * hy[i] * hy[j] + wt * ht[i] * ht[j]
-                 for j in range(3)]
-                for i in range(3)
-            ]
-            rhs = [wx * hx[i] * yx + wy * hy[i] * yy + wt * ht[i] * yt for i in range(3)]
-            step = _solve3(info, rhs)
-            largest = max(abs(x) for x in step)
-            if largest > _MAX_LOG_STEP:
-                step = [x * (_MAX_LOG_STEP / largest) for x in step]
-            q = [prior_q[i] + step[i] for i in range(3)]
-        if all(math.isfinite(x) for row in info for x in (*row, *q)):
-            self._q, self._info = q, info
+            b = math.exp(x2)
+            s_L, s_R = math.exp(x0) * phi_L, math.exp(x1) * phi_R  # wheel travel (m)
+            ds, th = 0.5 * (s_L + s_R), (s_R - s_L) / b
+            f, g, fp, gp = sinc_cosc_scalar(th)
+            # Model rows (dx, dy, dtheta) differentiated by log-parameters: d/dq = p d/dp.
+            t0, t1, t2 = -s_L / b, s_R / b, -th
+            e0, e1 = 0.5 * s_L, 0.5 * s_R
+            kf, kg = ds * fp, ds * gp
+            x_0, x_1, x_2 = e0 * f + kf * t0, e1 * f + kf * t1, kf * t2
+            y_0, y_1, y_2 = e0 * g + kg * t0, e1 * g + kg * t1, kg * t2
+            d0, d1, d2 = x0 - q0, x1 - q1, x2 - q2
+            # Whitened innovations of the relinearized model around the prior.
+            rx = wx * (zx - ds * f + x_0 * d0 + x_1 * d1 + x_2 * d2)
+            ry = wy * (zy - ds * g + y_0 * d0 + y_1 * d1 + y_2 * d2)
+            rt = wt * (_wrap(zt - th) + t0 * d0 + t1 * d1 + t2 * d2)
+            m00 = a00 + wx * x_0 * x_0 + wy * y_0 * y_0 + wt * t0 * t0
+            m01 = a01 + wx * x_0 * x_1 + wy * y_0 * y_1 + wt * t0 * t1
+            m02 = a02 + wx * x_0 * x_2 + wy * y_0 * y_2 + wt * t0 * t2
+            m11 = a11 + wx * x_1 * x_1 + wy * y_1 * y_1 + wt * t1 * t1
+            m12 = a12 + wx * x_1 * x_2 + wy * y_1 * y_2 + wt * t1 * t2
+            m22 = a22 + wx * x_2 * x_2 + wy * y_2 * y_2 + wt * t2 * t2
+            s0, s1, s2 = _solve3(m00, m01, m02, m11, m12, m22,
+                                 x_0 * rx + y_0 * ry + t0 * rt,
+                                 x_1 * rx + y_1 * ry + t1 * rt,
+                                 x_2 * rx + y_2 * ry + t2 * rt)
+            largest = max(abs(s0), abs(s1), abs(s2))
+            if largest > _MAX_LOG_STEP:  # trust region
+                shrink = _MAX_LOG_STEP / largest
+                s0, s1, s2 = s0 * shrink, s1 * shrink, s2 * shrink
+            x0, x1, x2 = q0 + s0, q1 + s1, q2 + s2
+        if math.isfinite(x0 + x1 + x2 + m00 + m01 + m02 + m11 + m12 + m22):
+            self._q = [x0, x1, x2]
+            self._info = [[m00, m01, m02], [m01, m11, m12], [m02, m12, m22]]
         self.n_segments += 1
 
     @property

@@ -54,7 +54,8 @@ def test_jacobian_matches_central_differences(ds, dtheta, p):
         # O(eps |f| / h), both far below the tolerance for relative steps h = 1e-4.
         fd = (4 * central(j, 5e-5) - central(j, 1e-4)) / 3
         analytic = jac[:, j] * x[j]  # derivative with respect to the relative parameter
-        rounding = 10 * np.finfo(float).eps / 5e-5 * travel
+        # (+ the spacing of subnormal numbers, the resolution of values that small)
+        rounding = 10 * (np.finfo(float).eps * travel + np.finfo(float).smallest_subnormal) / 5e-5
         tol = 1e-6 * np.maximum(np.abs(jac * x).max(axis=1), value) + rounding
         assert np.all(np.abs(fd - analytic) <= tol), (j, fd, analytic)
 
