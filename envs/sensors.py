@@ -76,8 +76,13 @@ class RelativePoseSensor:
 
     def measure(self, true_increment: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy body-frame increment (dx, dy, dtheta); one fresh noise draw per segment."""
-        return rng.normal(np.asarray(true_increment, dtype=float), self._sigma)
+        return _add_noise(true_increment, self._sigma, rng)
 
     def absolute(self, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy world pose (x, y, theta); theta stays continuous (not wrapped)."""
-        return rng.normal(np.asarray(pose, dtype=float), self._sigma)
+        return _add_noise(pose, self._sigma, rng)
+
+
+def _add_noise(values: np.ndarray, sigma: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """values + sigma * standard normal draws (3 of them, in order)."""
+    return np.asarray(values, dtype=float) + sigma * rng.standard_normal(3)

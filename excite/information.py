@@ -65,6 +65,13 @@ def _as_vector(values: Params | ArrayLike) -> FloatArray:
     return values.as_array() if isinstance(values, Params) else np.asarray(values, dtype=float)
 
 
+def _as_floats(values: Params | ArrayLike) -> tuple[float, float, float]:
+    if isinstance(values, Params):
+        return values.r_L, values.r_R, values.b
+    r_L, r_R, b = np.asarray(values, dtype=float).reshape(3).tolist()
+    return r_L, r_R, b
+
+
 def scaled_jacobian(
     dphi_L: ArrayLike,
     dphi_R: ArrayLike,
@@ -100,8 +107,8 @@ def _information_rows(
     That is half the work of the Jacobian itself (the environment's hot path).
     """
     s = as_sigma(sigma)
-    r_L, r_R, b = _as_vector(params).tolist()
-    c_L, c_R, c_b = _as_vector(params if scale is None else scale).tolist()
+    r_L, r_R, b = _as_floats(params)
+    c_L, c_R, c_b = _as_floats(params if scale is None else scale)
     phi = np.array([np.ravel(dphi_L), np.ravel(dphi_R)], dtype=float)  # (2, N)
     sigma_xy, sigma_y, sigma_theta = s.tolist()
     if sigma_y != sigma_xy:
@@ -157,11 +164,12 @@ def information_matrix(
     :func:`_information_from_moments`); beyond, from the vectorized rows.
     """
     s = as_sigma(sigma)
+    sigma_x, sigma_y, sigma_theta = s.tolist()
     phi_L, phi_R = np.ravel(dphi_L), np.ravel(dphi_R)
-    if phi_L.size <= _LOOP_MAX and s[0] == s[1] and phi_L.size == phi_R.size:
+    if phi_L.size <= _LOOP_MAX and sigma_x == sigma_y and phi_L.size == phi_R.size:
         return _information_from_moments(
-            phi_L.tolist(), phi_R.tolist(), _as_vector(params).tolist(),
-            _as_vector(params if scale is None else scale).tolist(), *s[1:].tolist())
+            phi_L.tolist(), phi_R.tolist(), _as_floats(params),
+            _as_floats(params if scale is None else scale), sigma_x, sigma_theta)
     rows = _information_rows(phi_L, phi_R, params, s, scale).reshape(3, -1)
     return rows @ rows.T
 
@@ -171,7 +179,8 @@ _LOOP_MAX = 32
 
 
 def _information_from_moments(
-    phi_L: list[float], phi_R: list[float], params: list[float], scale: list[float],
+    phi_L: list[float], phi_R: list[float], params: tuple[float, float, float],
+    scale: tuple[float, float, float],
     sigma_xy: float, sigma_theta: float,
 ) -> FloatArray:
     """F from the rows of :func:`_information_rows`, which are linear in phi = (dphi_L,

@@ -134,7 +134,8 @@ class OnlineEstimator:
 
     @property
     def params(self) -> Params:
-        return Params(*(math.exp(qi) for qi in self._q))
+        q0, q1, q2 = self._q
+        return Params(math.exp(q0), math.exp(q1), math.exp(q2))
 
     @property
     def covariance(self) -> NDArray[np.float64]:
