@@ -3,7 +3,9 @@
 At every segment it predicts, with the kinematic model at the current estimate, the
 information each candidate command would add, and picks the one that raises sigma_min of all
 segments most, among those predicted to stay clear of the walls. With ``lookahead`` it scores
-each of the best first moves by the best second move that can follow it.
+each of the best first moves by the best second move that can follow it. Mirror-image commands
+(forward and backward, say) add the same information; such ties go to the move predicted to
+end nearest the arena centre, not to the last bit of rounding.
 """
 
 from __future__ import annotations
@@ -21,6 +23,9 @@ from agents.motion import (
 from agents.protocols import Protocol
 from envs.env import RobotKnowledge
 from excite.information import segment_information
+
+#: Relative score difference below which two commands count as equally informative.
+TIE_TOLERANCE = 1e-9
 
 
 def command_grid(n: int, limit: float = 1.0) -> np.ndarray:
@@ -62,7 +67,17 @@ class GreedyPlanner(Protocol):
         score = np.where(ok, score, -np.inf)
         if self.lookahead and knowledge.n_segments + 1 < knowledge.budget:
             score = self._two_step_scores(knowledge, gains, score)
-        return self.candidates[int(np.argmax(score))]
+        return self.candidates[self._best(score, knowledge)]
+
+    def _best(self, score: np.ndarray, knowledge: RobotKnowledge) -> int:
+        """Index of the best score; ties (within 1e-9) go to the most central end pose."""
+        top = float(np.max(score))
+        tied = np.flatnonzero(score >= top - TIE_TOLERANCE * abs(top))
+        if tied.size == 1:
+            return int(tied[0])
+        dphi = wheel_increments(self.candidates[tied], knowledge)
+        ends = predicted_poses(knowledge.pose, dphi, knowledge.estimate)[:, -1, :2]
+        return int(tied[np.argmin(np.hypot(ends[:, 0], ends[:, 1]))])
 
     def _two_step_scores(self, knowledge: RobotKnowledge, gains: np.ndarray,
                          score: np.ndarray) -> np.ndarray:

@@ -56,6 +56,34 @@ def test_greedy_beats_scripted_information_on_the_ideal_env_and_nears_the_oracle
     assert 0.9 * oracle.sigma_min < results["greedy"] <= 1.02 * oracle.sigma_min
 
 
+def test_greedy_breaks_mirror_ties_towards_the_centre():
+    """(l, r) and (-l, -r) add exactly the same information; the planner takes the one that
+    ends nearer the centre whenever both are safe, whatever the rounding."""
+    import gymnasium as gym
+
+    from agents.greedy import command_information
+    from agents.motion import predicted_poses, safe_actions, wheel_increments
+
+    env = gym.make(IDEAL, budget=12, max_episode_steps=12, arena_size=12.0)
+    env.reset(seed=5, options={"pose": (0.8, -0.5, 0.3)})
+    planner = GreedyPlanner(grid=11)
+    planner.reset(np.random.default_rng(0))
+    checked = 0
+    for _ in range(12):
+        knowledge = env.unwrapped.knowledge()
+        action = planner.plan(knowledge)
+        pair = np.array([action, -action])
+        gains = command_information(pair, knowledge)
+        np.testing.assert_allclose(gains[0], gains[1], rtol=1e-12, atol=1e-9)
+        if safe_actions(pair, knowledge).all():
+            ends = predicted_poses(knowledge.pose, wheel_increments(pair, knowledge),
+                                   knowledge.estimate)[:, -1, :2]
+            assert np.hypot(*ends[0]) <= np.hypot(*ends[1]) + 1e-9
+            checked += 1
+        env.step(action)
+    assert checked >= 6
+
+
 def test_greedy_lookahead_runs_and_is_at_least_as_informative_here():
     env = make_env(IDEAL, 6)
     values = []
