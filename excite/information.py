@@ -72,6 +72,15 @@ def _as_floats(values: Params | ArrayLike) -> tuple[float, float, float]:
     return r_L, r_R, b
 
 
+def _increments(dphi_L: ArrayLike, dphi_R: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Wheel increments as two flat float arrays of one length (broadcast if they differ)."""
+    phi_L = np.ravel(np.asarray(dphi_L, dtype=float))
+    phi_R = np.ravel(np.asarray(dphi_R, dtype=float))
+    if phi_L.size != phi_R.size:
+        phi_L, phi_R = np.broadcast_arrays(phi_L, phi_R)
+    return phi_L, phi_R
+
+
 def scaled_jacobian(
     dphi_L: ArrayLike,
     dphi_R: ArrayLike,
@@ -109,7 +118,7 @@ def _information_rows(
     s = as_sigma(sigma)
     r_L, r_R, b = _as_floats(params)
     c_L, c_R, c_b = _as_floats(params if scale is None else scale)
-    phi = np.array([np.ravel(dphi_L), np.ravel(dphi_R)], dtype=float)  # (2, N)
+    phi = np.array(_increments(dphi_L, dphi_R))  # (2, N), a copy
     sigma_xy, sigma_y, sigma_theta = s.tolist()
     if sigma_y != sigma_xy:
         return scaled_jacobian(phi[0], phi[1], (r_L, r_R, b), s,
@@ -165,8 +174,8 @@ def information_matrix(
     """
     s = as_sigma(sigma)
     sigma_x, sigma_y, sigma_theta = s.tolist()
-    phi_L, phi_R = np.ravel(dphi_L), np.ravel(dphi_R)
-    if phi_L.size <= _LOOP_MAX and sigma_x == sigma_y and phi_L.size == phi_R.size:
+    phi_L, phi_R = _increments(dphi_L, dphi_R)
+    if phi_L.size <= _LOOP_MAX and sigma_x == sigma_y:
         return _information_from_moments(
             phi_L.tolist(), phi_R.tolist(), _as_floats(params),
             _as_floats(params if scale is None else scale), sigma_x, sigma_theta)

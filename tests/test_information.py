@@ -140,3 +140,15 @@ def test_eigen_3x3_of_environment_like_information():
         got, _ = I.eigen_3x3(f)
         assert np.allclose(got, lam, rtol=0, atol=50 * np.finfo(float).eps * lam[-1])
         assert math.sqrt(max(got[0], 0.0)) == pytest.approx(I.sigma_min(f), rel=1e-6, abs=1e-9)
+
+
+def test_increments_broadcast_like_the_jacobian():
+    p, sigma = Params(0.05, 0.051, 0.3), (2e-3, 2e-3, 1e-3)
+    right = np.linspace(-20, 20, 40)
+    expected = _reference(np.column_stack([np.full(40, 3.0), right]), p, sigma, p)
+    for n in (5, 40):  # both summation paths
+        np.testing.assert_allclose(
+            I.information_matrix(3.0, right[:n], p, sigma),
+            _reference(np.column_stack([np.full(n, 3.0), right[:n]]), p, sigma, p), rtol=1e-13)
+    np.testing.assert_allclose(I.segment_information(3.0, right, p, sigma).sum(axis=0),
+                               expected, rtol=1e-13)
