@@ -73,8 +73,8 @@ class GreedyPlanner(Protocol):
         """Index of the best score; ties (within 1e-9) go to the most central end pose."""
         top = float(np.max(score))
         tied = np.flatnonzero(score >= top - TIE_TOLERANCE * abs(top))
-        if tied.size == 1:
-            return int(tied[0])
+        if tied.size <= 1:  # one best, or no comparable score (nan)
+            return int(tied[0]) if tied.size else int(np.argmax(score))
         dphi = wheel_increments(self.candidates[tied], knowledge)
         ends = predicted_poses(knowledge.pose, dphi, knowledge.estimate)[:, -1, :2]
         return int(tied[np.argmin(np.hypot(ends[:, 0], ends[:, 1]))])

@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from excite.kinematics import (
     Params,
+    _as_params,
     increment_jacobian,
     sinc_and_derivative,
     sinc_cosc_scalar,
@@ -46,6 +47,7 @@ Sigma = tuple[float, float, float]
 
 #: Default external-sensor noise (sigma_x [m], sigma_y [m], sigma_theta [rad]).
 DEFAULT_SIGMA: Sigma = (2e-3, 2e-3, 1e-3)
+_EPS = float(np.finfo(float).eps)
 
 
 def as_sigma(sigma: ArrayLike) -> FloatArray:
@@ -65,20 +67,28 @@ def _as_vector(values: Params | ArrayLike) -> FloatArray:
     return values.as_array() if isinstance(values, Params) else np.asarray(values, dtype=float)
 
 
-def _as_floats(values: Params | ArrayLike) -> tuple[float, float, float]:
-    if isinstance(values, Params):
-        return values.r_L, values.r_R, values.b
-    r_L, r_R, b = np.asarray(values, dtype=float).reshape(3).tolist()
-    return r_L, r_R, b
-
-
 def _increments(dphi_L: ArrayLike, dphi_R: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Wheel increments as two flat float arrays of one length (broadcast if they differ)."""
-    phi_L = np.ravel(np.asarray(dphi_L, dtype=float))
-    phi_R = np.ravel(np.asarray(dphi_R, dtype=float))
-    if phi_L.size != phi_R.size:
+    """Wheel increments as two flat float arrays of one length (broadcast, then flattened)."""
+    phi_L, phi_R = np.asarray(dphi_L, dtype=float), np.asarray(dphi_R, dtype=float)
+    if phi_L.shape != phi_R.shape:
         phi_L, phi_R = np.broadcast_arrays(phi_L, phi_R)
-    return phi_L, phi_R
+    return np.ravel(phi_L), np.ravel(phi_R)
+
+
+def _chord_coefficients(
+    params: tuple[float, float, float], scale: tuple[float, float, float], sigma_xy: float
+) -> tuple[float, ...]:
+    """Constants that make every chord-frame row linear in (dphi_L, dphi_R, v):
+
+    v = dtheta / 2 = v_L dphi_L + v_R dphi_R; w = ds / (2 sigma_xy) = w_L dphi_L + w_R dphi_R;
+    heading gradient d(dtheta)/dp times the column scale = (h_L dphi_L, h_R dphi_R, h_v v);
+    d(ds)/dp times the column scale, / sigma_xy = (e_L dphi_L, e_R dphi_R, 0).
+    Returns (v_L, v_R, w_L, w_R, h_L, h_R, h_v, e_L, e_R).
+    """
+    r_L, r_R, b = params
+    c_L, c_R, c_b = scale
+    return (-0.5 * r_L / b, 0.5 * r_R / b, 0.25 * r_L / sigma_xy, 0.25 * r_R / sigma_xy,
+            -c_L / b, c_R / b, -2.0 * c_b / b, 0.5 * c_L / sigma_xy, 0.5 * c_R / sigma_xy)
 
 
 def scaled_jacobian(
@@ -116,26 +126,23 @@ def _information_rows(
     That is half the work of the Jacobian itself (the environment's hot path).
     """
     s = as_sigma(sigma)
-    r_L, r_R, b = _as_floats(params)
-    c_L, c_R, c_b = _as_floats(params if scale is None else scale)
+    p = _as_params(params)
+    scale = p if scale is None else _as_params(scale)
     phi = np.array(_increments(dphi_L, dphi_R))  # (2, N), a copy
     sigma_xy, sigma_y, sigma_theta = s.tolist()
     if sigma_y != sigma_xy:
-        return scaled_jacobian(phi[0], phi[1], (r_L, r_R, b), s,
-                               (c_L, c_R, c_b)).transpose(2, 1, 0)
-    # v = dtheta / 2 and the whitened half travel ds / (2 sigma_xy): linear in the increments.
-    v, travel = np.array([-0.5 * r_L / b, 0.5 * r_R / b,
-                          0.25 * r_L / sigma_xy, 0.25 * r_R / sigma_xy]).reshape(2, 2) @ phi
+        return scaled_jacobian(phi[0], phi[1], p, s, scale).transpose(2, 1, 0)
+    v_L, v_R, w_L, w_R, h_L, h_R, h_v, e_L, e_R = _chord_coefficients(p, scale, sigma_xy)
+    v, w = np.array([v_L, v_R, w_L, w_R]).reshape(2, 2) @ phi
     sinc, dsinc = sinc_and_derivative(v)
     rows = np.empty((3, 3, phi.shape[1]))
-    heading = rows[:, 2]  # d(dtheta)/dp times the column scale, whitened at the end
+    heading = rows[:, 2]  # the heading gradient, whitened at the end
     heading[:2] = phi
     heading[2] = v
-    heading *= np.array([-c_L / b, c_R / b, -2.0 * c_b / b]).reshape(3, 1)
-    np.multiply(heading, travel * dsinc, out=rows[:, 0])
-    np.multiply(heading, travel * sinc, out=rows[:, 1])
-    # d(ds)/d(r_L, r_R) = (dphi_L, dphi_R) / 2
-    phi *= np.array([0.5 * c_L / sigma_xy, 0.5 * c_R / sigma_xy]).reshape(2, 1)
+    heading *= np.array([h_L, h_R, h_v]).reshape(3, 1)
+    np.multiply(heading, w * dsinc, out=rows[:, 0])
+    np.multiply(heading, w * sinc, out=rows[:, 1])
+    phi *= np.array([e_L, e_R]).reshape(2, 1)
     phi *= sinc
     rows[:2, 0] += phi
     heading *= 1.0 / sigma_theta
@@ -176,84 +183,104 @@ def information_matrix(
     sigma_x, sigma_y, sigma_theta = s.tolist()
     phi_L, phi_R = _increments(dphi_L, dphi_R)
     if phi_L.size <= _LOOP_MAX and sigma_x == sigma_y:
-        return _information_from_moments(
-            phi_L.tolist(), phi_R.tolist(), _as_floats(params),
-            _as_floats(params if scale is None else scale), sigma_x, sigma_theta)
+        left, right = phi_L.tolist(), phi_R.tolist()
+        if math.isfinite(sum(left) + sum(right)):  # else as the rows: nan
+            p = _as_params(params)
+            coefficients = _chord_coefficients(p, p if scale is None else _as_params(scale),
+                                               sigma_x)
+            return _information_from_moments(left, right, coefficients, sigma_theta)
     rows = _information_rows(phi_L, phi_R, params, s, scale).reshape(3, -1)
     return rows @ rows.T
 
 
-#: Segment count up to which the pure-Python moments beat numpy's per-call overhead.
+#: Segment count up to which the pure-Python moments beat numpy's per-call overhead (measured
+#: inside the environment's step, where numpy calls run with cold caches).
 _LOOP_MAX = 32
 
 
 def _information_from_moments(
-    phi_L: list[float], phi_R: list[float], params: tuple[float, float, float],
-    scale: tuple[float, float, float],
-    sigma_xy: float, sigma_theta: float,
+    phi_L: list[float], phi_R: list[float], coefficients: tuple[float, ...], sigma_theta: float
 ) -> FloatArray:
-    """F from the rows of :func:`_information_rows`, which are linear in phi = (dphi_L,
-    dphi_R) up to per-segment factors: heading row t = H phi, chord rows
-    r1 = (w dsinc) H phi + sinc E phi and r2 = (w sinc) H phi, w the whitened half travel.
-    Hence F = H A H^T + H M E^T + E M H^T + E S E^T with the 2x2 moments
-    A = sum (w^2 (sinc^2 + dsinc^2) + 1 / sigma_theta^2) phi phi^T,
-    M = sum w sinc dsinc phi phi^T and S = sum sinc^2 phi phi^T.
+    """F from the rows of :func:`_information_rows`, in one pure-Python pass.
+
+    With t = (h_L dphi_L, h_R dphi_R, h_v v) the heading gradient and e = (e_L dphi_L,
+    e_R dphi_R, 0) that of the whitened travel (:func:`_chord_coefficients`), the rows are
+    t / sigma_theta, w dsinc t + sinc e and w sinc t, so
+    F = sum a t t^T + m (t e^T + e t^T) + sinc^2 e e^T with the per-segment weights
+    a = w^2 (sinc^2 + dsinc^2) + 1 / sigma_theta^2 and m = w sinc dsinc: weighted moments of
+    (dphi_L, dphi_R, v), v summed as itself (not expanded), so F's b entries stay >= 0.
     """
-    r_L, r_R, b = params
-    c_L, c_R, c_b = scale
-    v_L, v_R = -0.5 * r_L / b, 0.5 * r_R / b  # v = dtheta / 2 = v_L dphi_L + v_R dphi_R
-    w_L, w_R = 0.25 * r_L / sigma_xy, 0.25 * r_R / sigma_xy  # w = ds / (2 sigma_xy)
+    v_L, v_R, w_L, w_R, h_L, h_R, h_v, e_L, e_R = coefficients
     heading_weight = 1.0 / (sigma_theta * sigma_theta)
-    a11 = a12 = a22 = m11 = m12 = m22 = s11 = s12 = s22 = 0.0
+    a_ll = a_lr = a_rr = a_lv = a_rv = a_vv = 0.0
+    m_ll = m_lr = m_rr = m_lv = m_rv = s_ll = s_lr = s_rr = 0.0
     for left, right in zip(phi_L, phi_R, strict=True):
         v = v_L * left + v_R * right
         w = w_L * left + w_R * right
         sinc, _, dsinc, _ = sinc_cosc_scalar(v)
         sinc2 = sinc * sinc
-        weight_a = w * w * (sinc2 + dsinc * dsinc) + heading_weight
-        weight_m = w * sinc * dsinc
-        ll, lr, rr = left * left, left * right, right * right
-        a11 += weight_a * ll
-        a12 += weight_a * lr
-        a22 += weight_a * rr
-        m11 += weight_m * ll
-        m12 += weight_m * lr
-        m22 += weight_m * rr
-        s11 += sinc2 * ll
-        s12 += sinc2 * lr
-        s22 += sinc2 * rr
-    # H = [[h0, 0], [0, h1], [g0, g1]] (column-scaled d(dtheta)/dp); E = [[e0, 0], [0, e1], 0].
-    h0, h1 = -c_L / b, c_R / b
-    g0, g1 = -2.0 * c_b / b * v_L, -2.0 * c_b / b * v_R
-    e0, e1 = 0.5 * c_L / sigma_xy, 0.5 * c_R / sigma_xy
-    f00 = h0 * h0 * a11 + 2.0 * h0 * e0 * m11 + e0 * e0 * s11
-    f01 = h0 * h1 * a12 + (h0 * e1 + h1 * e0) * m12 + e0 * e1 * s12
-    f11 = h1 * h1 * a22 + 2.0 * h1 * e1 * m22 + e1 * e1 * s22
-    f02 = h0 * (g0 * a11 + g1 * a12) + e0 * (g0 * m11 + g1 * m12)
-    f12 = h1 * (g0 * a12 + g1 * a22) + e1 * (g0 * m12 + g1 * m22)
-    f22 = g0 * g0 * a11 + 2.0 * g0 * g1 * a12 + g1 * g1 * a22
+        a = w * w * (sinc2 + dsinc * dsinc) + heading_weight
+        m = w * sinc * dsinc
+        ll, lr, rr, lv, rv = left * left, left * right, right * right, left * v, right * v
+        a_ll += a * ll
+        a_lr += a * lr
+        a_rr += a * rr
+        a_lv += a * lv
+        a_rv += a * rv
+        a_vv += a * v * v
+        m_ll += m * ll
+        m_lr += m * lr
+        m_rr += m * rr
+        m_lv += m * lv
+        m_rv += m * rv
+        s_ll += sinc2 * ll
+        s_lr += sinc2 * lr
+        s_rr += sinc2 * rr
+    f00 = h_L * h_L * a_ll + 2.0 * h_L * e_L * m_ll + e_L * e_L * s_ll
+    f01 = h_L * h_R * a_lr + (h_L * e_R + h_R * e_L) * m_lr + e_L * e_R * s_lr
+    f11 = h_R * h_R * a_rr + 2.0 * h_R * e_R * m_rr + e_R * e_R * s_rr
+    f02 = h_v * (h_L * a_lv + e_L * m_lv)
+    f12 = h_v * (h_R * a_rv + e_R * m_rv)
+    f22 = h_v * h_v * a_vv
     return np.array([[f00, f01, f02], [f01, f11, f12], [f02, f12, f22]])
 
 
 def eigen_3x3(information: ArrayLike) -> tuple[tuple[float, float, float],
                                                tuple[float, float, float]]:
-    """Eigenvalues (ascending) of a symmetric 3x3 matrix and the unit eigenvector of the
-    smallest, in a few microseconds of pure Python (numpy.linalg.eigh spends more than that on
-    call overhead), with errors of order eps * ||F|| like LAPACK's.
+    """Eigenvalues (ascending) of a symmetric 3x3 matrix (its upper triangle is read) and the
+    unit eigenvector of the smallest, in a few microseconds of pure Python (numpy.linalg.eigh
+    spends more than that on call overhead), with errors of order eps * ||F|| like LAPACK's.
 
-    The closed form (Smith 1961) gives the eigenvalue farther from the middle one accurately
-    (the other extreme is ill-conditioned when it nearly coincides with the middle); its
-    eigenvector is the longest cross product of two rows of F - lambda I, and the other two
-    come from the exact 2x2 problem on the plane orthogonal to it.
+    After scaling F by its largest entry, the closed form (Smith 1961) locates the eigenvalue
+    farther from the middle one (the other extreme is ill-conditioned when it nearly coincides
+    with the middle); its eigenvector is the longest cross product of two rows of F - lambda I;
+    the 2x2 problem on the plane orthogonal to it gives the other two eigenvalues exactly, and
+    the trace the isolated one. NaN entries give NaN results.
     """
-    (a00, a01, a02), (_, a11, a12), (_, _, a22) = np.asarray(information, dtype=float).tolist()
+    entries = np.asarray(information, dtype=float).tolist()
+    (a00, a01, a02), (_, a11, a12), (_, _, a22) = entries
+    values = (a00, a01, a02, a11, a12, a22)
+    if not all(map(math.isfinite, values)):
+        nan = math.nan
+        return (nan, nan, nan), (nan, nan, nan)
+    size = max(map(abs, values))
+    if size == 0.0:
+        return (0.0, 0.0, 0.0), (1.0, 0.0, 0.0)
+    (low, middle, high), weakest = _unit_eigen_3x3(
+        a00 / size, a01 / size, a02 / size, a11 / size, a12 / size, a22 / size)
+    return (low * size, middle * size, high * size), weakest
+
+
+def _unit_eigen_3x3(a00: float, a01: float, a02: float, a11: float, a12: float,
+                    a22: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """:func:`eigen_3x3` of a matrix whose largest entry has magnitude 1."""
     trace = a00 + a11 + a22
     q = trace / 3.0
     d0, d1, d2 = a00 - q, a11 - q, a22 - q
     p2 = (d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
-    if not p2 > 0.0:  # a multiple of the identity
-        return (q, q, q), (1.0, 0.0, 0.0)
     p = math.sqrt(p2)
+    if p <= 4.0 * _EPS * abs(q):  # a multiple of the identity to working precision
+        return (q, q, q), (1.0, 0.0, 0.0)
     det = d0 * (d1 * d2 - a12 * a12) - a01 * (a01 * d2 - a12 * a02) + a02 * (a01 * a12 - d1 * a02)
     r = min(max(det / (2.0 * p * p2), -1.0), 1.0)
     top_is_isolated = r >= 0.0  # then top - middle >= sqrt(3) p, else middle - bottom is

@@ -63,8 +63,8 @@ _DCOSC = _coefficients(lambda k: (-1) ** k * (2 * k + 1) / factorial(2 * k + 2))
 
 def _series(coeffs: tuple[float, ...], u2):
     """Horner evaluation in u^2; works on Python floats and numpy arrays alike."""
-    acc = coeffs[0]
-    for c in coeffs[1:]:
+    acc = 0.0
+    for c in coeffs:
         acc = acc * u2 + c
     return acc
 
@@ -89,8 +89,11 @@ def _dsinc_series(u: FloatArray) -> FloatArray:
 # The series term of power k (in u^2) matters once u^2 reaches this (increasing in k).
 _DSINC_THRESHOLDS = tuple(
     (1e-18 * abs(_DSINC[-1]) / abs(_DSINC[-1 - k])) ** (1.0 / k) for k in range(1, _N_TERMS))
-_DSINC_ASCENDING = np.array(_DSINC[::-1])
 _DSINC_TRUNCATED = tuple(_DSINC[_N_TERMS - 1 - k:] for k in range(_N_TERMS))  # k + 1 terms
+_DSINC_ASCENDING = np.array(_DSINC[::-1])
+_POWERS = np.arange(float(_N_TERMS))
+#: Up to this many values a power table is faster than Horner's per-term loop (measured).
+_POWER_TABLE_SIZE = 64
 # The first three terms: exact (truncation < 1e-25) below TINY_THRESHOLD.
 _SINC3, _COSC3, _DSINC3, _DCOSC3 = _SINC[-3:], _COSC[-3:], _DSINC[-3:], _DCOSC[-3:]
 
@@ -98,9 +101,6 @@ _SINC3, _COSC3, _DSINC3, _DCOSC3 = _SINC[-3:], _COSC[-3:], _DSINC[-3:], _DCOSC[-
 def _dsinc_terms(largest_u2: float) -> tuple[float, ...]:
     """The series coefficients of sinc' that matter up to u^2 = largest_u2 (Horner order)."""
     return _DSINC_TRUNCATED[bisect_right(_DSINC_THRESHOLDS, largest_u2)]
-_POWERS = np.arange(float(_N_TERMS))
-#: Up to this many values a power table is faster than Horner's per-term loop (measured).
-_POWER_TABLE_SIZE = 64
 
 
 @dataclass(frozen=True)
@@ -172,13 +172,15 @@ def sinc_family(u: ArrayLike, derivatives: bool = True) -> tuple[FloatArray, ...
 
 
 def sinc_and_derivative(u: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """(sinc(u), sinc'(u)) of a 1-D array: the two functions the information needs.
+    """(sinc(u), sinc'(u)) of an array: the two functions the information needs.
 
     sin(u) / u is accurate to an ulp or two for every u != 0 (u = 0 gives 1); sinc'(u) =
     (cos u - sinc u) / u loses 3 eps / u^2 to cancellation, so it uses its series for
     |u| < 1, as :func:`sinc_family` does.
     """
     u = np.asarray(u, dtype=float)
+    if u.ndim == 0:
+        return tuple(x.reshape(()) for x in sinc_and_derivative(u.reshape(1)))
     safe = np.where(u == 0.0, 1e-300, u)  # sin(1e-300) / 1e-300 == 1 exactly
     f = np.sin(safe) / safe
     fp = (np.cos(safe) - f) / safe

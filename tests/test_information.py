@@ -21,7 +21,10 @@ params_values = st.builds(
     Params, st.floats(0.02, 0.2), st.floats(0.02, 0.2), st.floats(0.1, 1.0)
 )
 TINY = 1e-300  # below the normal range (products of increments ~1e-150 land there)
-sigmas = st.sampled_from([(2e-3, 2e-3, 1e-3), (1e-2, 1e-2, 5e-2), (2e-3, 5e-3, 1e-3)])
+sigmas = st.one_of(
+    st.builds(lambda xy, th: (xy, xy, th), st.floats(1e-6, 1.0), st.floats(1e-6, 3.0)),
+    st.sampled_from([(2e-3, 2e-3, 1e-3), (2e-3, 5e-3, 1e-3)]),  # the last: sigma_x != sigma_y
+)
 
 
 def _reference(phi: np.ndarray, p: Params, sigma, scale: Params) -> np.ndarray:
@@ -138,8 +141,12 @@ def test_eigen_3x3_of_environment_like_information():
         f = I.information_matrix(phi[:, 0], phi[:, 1], p, (2e-3, 2e-3, 1e-3))
         lam, _ = np.linalg.eigh(f)
         got, _ = I.eigen_3x3(f)
-        assert np.allclose(got, lam, rtol=0, atol=50 * np.finfo(float).eps * lam[-1])
-        assert math.sqrt(max(got[0], 0.0)) == pytest.approx(I.sigma_min(f), rel=1e-6, abs=1e-9)
+        tol = 50 * np.finfo(float).eps * lam[-1]
+        assert np.allclose(got, lam, rtol=0, atol=tol)
+        # |sqrt(a) - sqrt(b)| <= sqrt(|a - b|): sigma_min is known to sqrt(tol) where the
+        # smallest eigenvalue sits at the rounding level (a single segment: rank 2).
+        assert math.sqrt(max(got[0], 0.0)) == pytest.approx(I.sigma_min(f), rel=1e-9,
+                                                            abs=math.sqrt(tol))
 
 
 def test_increments_broadcast_like_the_jacobian():
@@ -152,3 +159,63 @@ def test_increments_broadcast_like_the_jacobian():
             _reference(np.column_stack([np.full(n, 3.0), right[:n]]), p, sigma, p), rtol=1e-13)
     np.testing.assert_allclose(I.segment_information(3.0, right, p, sigma).sum(axis=0),
                                expected, rtol=1e-13)
+
+
+def test_straight_segments_leave_b_entries_exact_and_f_psd():
+    """The b entries come from sums of v = dtheta / 2 itself, not from an expansion in the
+    wheel increments that would cancel for straight segments: exactly straight segments give
+    exactly zero b entries, nearly straight ones a non-negative F[2, 2] that agrees with the
+    Jacobian's up to the conditioning of dtheta = (r_R dphi_R - r_L dphi_L) / b itself."""
+    rng = np.random.default_rng(4)
+    p, sigma = Params(0.05, 0.05, 0.3), (2e-3, 2e-3, 1e-3)
+    eps = np.finfo(float).eps
+    for _ in range(300):
+        n = int(rng.integers(1, I._LOOP_MAX + 1))
+        left = rng.uniform(-40, 40, n)
+        straight = I.information_matrix(left, left, p, sigma)
+        assert np.all(straight[2] == 0.0) and np.all(straight[:, 2] == 0.0)
+        right = left * (1.0 + rng.choice([1e-12, 1e-8, 1e-4], n))
+        f = I.information_matrix(left, right, p, sigma)
+        expected = _reference(np.column_stack([left, right]), p, sigma, p)
+        assert f[2, 2] >= 0.0
+        travel = p.r_L * np.abs(left) + p.r_R * np.abs(right)
+        kappa = np.max(travel / np.abs(p.r_R * right - p.r_L * left))  # of dtheta
+        tol = (1e-13 + 10 * eps * kappa) * np.abs(expected)
+        assert np.all(np.abs(f - expected) <= tol + TINY), (f, expected)
+
+
+def test_non_finite_increments_give_nan_like_the_jacobian():
+    p, sigma = Params(0.05, 0.05, 0.3), (2e-3, 2e-3, 1e-3)
+    for bad in (np.inf, -np.inf, np.nan):
+        for n in (3, I._LOOP_MAX + 3):  # both summation paths
+            left = np.ones(n)
+            left[1] = bad
+            with np.errstate(invalid="ignore"):
+                assert np.isnan(I.information_matrix(left, np.ones(n), p, sigma)).any()
+
+
+def test_mismatched_increment_shapes_are_rejected_like_the_jacobian():
+    p, sigma = Params(0.05, 0.05, 0.3), (2e-3, 2e-3, 1e-3)
+    for function in (I.information_matrix, I.segment_information, I.scaled_jacobian):
+        with pytest.raises(ValueError):
+            function(np.ones((2, 3)), np.ones((3, 2)), p, sigma)
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e-200, 1e-100, 1.0, 1e100, 1e200, 1e300])
+def test_eigen_3x3_at_any_scale(scale):
+    rng = np.random.default_rng(5)
+    for f in (np.diag([1.0, 2.0, 3.0]), np.eye(3) + 1e-100 * (1 - np.eye(3)),
+              np.eye(3) + 1e-160 * (1 - np.eye(3)), _random_symmetric(rng, [1e-8, 0.5, 1.0])):
+        (low, mid, high), v = I.eigen_3x3(f * scale)
+        lam, vec = np.linalg.eigh(f)
+        np.testing.assert_allclose(np.array([low, mid, high]) / scale, lam, rtol=0,
+                                   atol=20 * np.finfo(float).eps * lam[-1])
+        assert abs(np.linalg.norm(v) - 1.0) <= 1e-15
+
+
+def test_eigen_3x3_propagates_nan_and_inf():
+    for bad in (np.nan, np.inf):
+        f = np.eye(3)
+        f[0, 1] = f[1, 0] = bad
+        values, vector = I.eigen_3x3(f)
+        assert np.isnan(values).all() and np.isnan(vector).all()
