@@ -24,7 +24,7 @@ from excite.kinematics import (
     _as_params,
     increment_jacobian,
     sinc_and_derivative,
-    sinc_cosc_scalar,
+    sinc_and_derivative_scalar,
 )
 
 __all__ = [
@@ -217,7 +217,7 @@ def _information_from_moments(
     for left, right in zip(phi_L, phi_R, strict=True):
         v = v_L * left + v_R * right
         w = w_L * left + w_R * right
-        sinc, _, dsinc, _ = sinc_cosc_scalar(v)
+        sinc, dsinc = sinc_and_derivative_scalar(v)
         sinc2 = sinc * sinc
         a = w * w * (sinc2 + dsinc * dsinc) + heading_weight
         m = w * sinc * dsinc

@@ -32,6 +32,7 @@ __all__ = [
     "increment_jacobian",
     "sinc_family",
     "sinc_and_derivative",
+    "sinc_and_derivative_scalar",
     "sinc_cosc_scalar",
     "wrap_angle",
 ]
@@ -188,6 +189,18 @@ def sinc_and_derivative(u: ArrayLike) -> tuple[FloatArray, FloatArray]:
     if small.any():
         fp[small] = _dsinc_series(u[small])
     return f, fp
+
+
+def sinc_and_derivative_scalar(u: float) -> tuple[float, float]:
+    """(sinc(u), sinc'(u)) of one Python float, with the branches of
+    :func:`sinc_and_derivative`: the hot loop of :func:`excite.information_matrix`."""
+    if abs(u) < SERIES_THRESHOLD:
+        if u == 0.0:
+            return 1.0, 0.0
+        u2 = u * u
+        return math.sin(u) / u, u * _series(_dsinc_terms(u2), u2)
+    f = math.sin(u) / u
+    return f, (math.cos(u) - f) / u
 
 
 def sinc_cosc_scalar(u: float, derivatives: bool = True) -> tuple[float, ...]:
