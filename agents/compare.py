@@ -10,6 +10,7 @@ where it stopped, losing and duplicating nothing.
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
 import os
@@ -27,11 +28,11 @@ from agents.catalog import make_protocol
 from agents.oracle import oracle_design
 from agents.protocols import Protocol
 from excite.information import crlb_relative_std
+from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
 
 COLUMNS = ("protocol", "episode", "segment", "r_L_err", "r_R_err", "b_err", "sigma_min",
            "oracle_sigma_min", "rel_std_r_L", "rel_std_r_R", "rel_std_b", "collision",
            "x", "y", "theta", "distance")
-DEFAULT_ENV = "excite/DiffDriveCalib-v0"
 
 
 class CompareError(ValueError):
@@ -42,8 +43,8 @@ class CompareError(ValueError):
 class CompareSettings:
     """What makes two runs comparable (stored in DIR/config.json)."""
 
-    env_id: str = DEFAULT_ENV
-    segments: int = 30
+    env_id: str = DEFAULT_ENV_ID
+    segments: int = DEFAULT_BUDGET
     seed: int = 0
 
 
@@ -82,6 +83,13 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[di
     return records
 
 
+@functools.cache
+def _worker_protocol(name: str, policy_path: str | None) -> Protocol:
+    """One instance per protocol and worker process (a learned policy is loaded once, not
+    every episode); run_protocol_episode resets it at the start of each episode."""
+    return make_protocol(name, policy_path)
+
+
 def run_episode(settings: CompareSettings, protocols: list[str], episode: int,
                 policy_path: str | None) -> list[dict]:
     """All requested protocols on episode ``episode`` (runs in a worker process)."""
@@ -93,7 +101,7 @@ def run_episode(settings: CompareSettings, protocols: list[str], episode: int,
                            base.max_wheel_speed, base.segment_duration).sigma_min
     rows = []
     for name in protocols:
-        for record in run_protocol_episode(env, make_protocol(name, policy_path), seed):
+        for record in run_protocol_episode(env, _worker_protocol(name, policy_path), seed):
             rows.append({"protocol": name, "episode": episode, "oracle_sigma_min": oracle,
                          **record})
     env.close()

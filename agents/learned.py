@@ -14,7 +14,7 @@ import numpy as np
 
 from agents.catalog import ProtocolError
 from agents.protocols import Protocol
-from envs.env import RobotKnowledge
+from envs.env import OBS_SIZE, RobotKnowledge
 
 
 class LearnedPolicy(Protocol):
@@ -53,9 +53,9 @@ class LearnedPolicy(Protocol):
             raise ProtocolError(f"{norm_path}: cannot load the observation normalization "
                                 f"saved with the policy ({exc})") from None
         expected = self.model.observation_space.shape
-        if expected != (16,):
+        if expected != (OBS_SIZE,):
             raise ProtocolError(f"{path}: policy expects observations of shape {expected}, "
-                                "the excite environment gives (16,)")
+                                f"the excite environment gives ({OBS_SIZE},)")
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         obs = self.normalization.normalize_obs(knowledge.observation[None, :])

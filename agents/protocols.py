@@ -49,39 +49,37 @@ class Protocol(ABC):
         return variants[int(np.argmax(ok))] if ok.any() else turn_to_center(knowledge)
 
 
-class Straight(Protocol):
-    """Back-and-forth straight runs (identifies r_L/r_R and the scale, never b)."""
-
-    name = "straight"
+class _AtSpeed(Protocol):
+    """A scripted maneuver at one commanded speed (fraction of the motor limit)."""
 
     def __init__(self, speed: float = 0.5):
         self.speed = speed
+
+
+class Straight(_AtSpeed):
+    """Back-and-forth straight runs (identifies r_L/r_R and the scale, never b)."""
+
+    name = "straight"
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         direction = 1.0 if self.step_index % 2 == 0 else -1.0
         return np.array([direction * self.speed, direction * self.speed])
 
 
-class Spin(Protocol):
+class Spin(_AtSpeed):
     """In-place rotations alternating direction (identifies r/b, never the scale)."""
 
     name = "spin"
-
-    def __init__(self, speed: float = 0.5):
-        self.speed = speed
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         direction = 1.0 if self.step_index % 2 == 0 else -1.0
         return np.array([-direction * self.speed, direction * self.speed])
 
 
-class StraightSpin(Protocol):
+class StraightSpin(_AtSpeed):
     """The lesson's minimal pair alternated: straight run, spin, back, spin back, ..."""
 
     name = "straight_spin"
-
-    def __init__(self, speed: float = 0.5):
-        self.speed = speed
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         phase = self.step_index % 4
@@ -91,7 +89,7 @@ class StraightSpin(Protocol):
         return np.array([-direction * self.speed, direction * self.speed])
 
 
-class UMBmark(Protocol):
+class UMBmark(_AtSpeed):
     """Borenstein & Feng's bidirectional square: one straight segment per side, one 90-degree
     in-place turn per corner; a clockwise square, then a counter-clockwise one, repeated.
 
@@ -101,9 +99,6 @@ class UMBmark(Protocol):
     """
 
     name = "umbmark"
-
-    def __init__(self, speed: float = 0.5):
-        self.speed = speed
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         phase = self.step_index % 16  # 8 segments a square: 4 sides, 4 corners
@@ -127,14 +122,11 @@ class RandomCommands(Protocol):
         return candidates[int(np.argmax(ok))] if ok.any() else candidates[0]
 
 
-class Arcs(Protocol):
+class Arcs(_AtSpeed):
     """Arcs of varying curvature, alternating turn direction (figure-eights), both ways."""
 
     name = "arcs"
     CURVATURES = (0.3, -0.3, 0.7, -0.7, 1.0, -1.0, 0.5, -0.5)
-
-    def __init__(self, speed: float = 0.5):
-        self.speed = speed
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         k = self.CURVATURES[self.step_index % len(self.CURVATURES)]

@@ -15,17 +15,18 @@
 from __future__ import annotations
 
 import gc
-import resource
 import statistics
 import time
 import tracemalloc
 
 import gymnasium as gym
 import numpy as np
+from bench_simulation import peak_rss_mib
 
 import excite  # noqa: F401
+from excite.registration import DEFAULT_ENV_ID
 
-ENV_ID = "excite/DiffDriveCalib-v0"
+ENV_ID = DEFAULT_ENV_ID
 
 
 def _actions(n: int, seed: int = 0) -> np.ndarray:
@@ -83,8 +84,7 @@ def memory(steps: int = 100_000, checkpoints: int = 5) -> dict:
             gc.collect()
             live.append(tracemalloc.get_traced_memory()[0] / 2**20)
     tracemalloc.stop()
-    peak_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10  # kB -> MiB (Linux)
-    return {"found_mib": found, "live_mib": live, "peak_rss_mib": peak_rss}
+    return {"found_mib": found, "live_mib": live, "peak_rss_mib": peak_rss_mib()}
 
 
 def main() -> dict:

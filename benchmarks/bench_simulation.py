@@ -52,7 +52,7 @@ def throughput(ideal: bool, n_segments: int, seed: int = 0) -> float:
     return n_segments * SEGMENT / best
 
 
-def _rss_mib() -> float:
+def peak_rss_mib() -> float:
     """Peak resident set size of this process (MiB, Linux ru_maxrss is in KiB)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
@@ -74,7 +74,7 @@ def memory(n_segments: int, windows: int = 5, seed: int = 0) -> list[dict]:
                     "segments": (w + 1) * per_window,
                     "traced_kib": current / 1024,
                     "peak_kib": peak / 1024,
-                    "rss_mib": _rss_mib(),
+                    "rss_mib": peak_rss_mib(),
                 }
             )
     finally:

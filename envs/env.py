@@ -18,6 +18,7 @@ from excite.data import Segments
 from excite.information import eigen_3x3, information_matrix
 from excite.kinematics import Params
 from excite.online import OnlineEstimator
+from excite.registration import DEFAULT_BUDGET
 
 
 class Estimator(Protocol):
@@ -150,7 +151,7 @@ class DiffDriveCalibEnv(gym.Env):
     def default_config() -> dict[str, Any]:
         return {
             "ideal": False,  # True: roll without slip or lag (the kinematic model is exact)
-            "budget": 30,  # segments per episode
+            "budget": DEFAULT_BUDGET,  # segments per episode
             "segment_duration": 1.0,  # s the command is held (a multiple of 1 / physics_hz)
             "settle_time": 0.0,  # s of zero command after it (> 0: stop-and-go segments)
             "arena_size": 4.0,  # m, square arena side

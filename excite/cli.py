@@ -17,6 +17,7 @@ from pathlib import Path
 
 from excite import __version__
 from excite.data import DataError
+from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_UNIDENTIFIABLE = 0, 1, 2, 3
 
@@ -215,7 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--protocol", required=True, metavar="NAME")
     sim.add_argument("--segments", type=_positive_int, required=True, metavar="N")
     sim.add_argument("--seed", type=int, default=0, metavar="S")
-    sim.add_argument("--env", default="excite/DiffDriveCalib-v0", metavar="ID")
+    sim.add_argument("--env", default=DEFAULT_ENV_ID, metavar="ID")
     sim.add_argument("--policy", metavar="PATH", help="policy file for --protocol learned")
     sim.add_argument("--out", required=True, metavar="FILE.csv",
                      help="segment CSV; the hidden truth goes to FILE.truth.json")
@@ -225,9 +226,9 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--protocols", metavar="A,B,...",
                       help="default: every protocol available (learned if a policy exists)")
     cmp_.add_argument("--episodes", type=_positive_int, default=20, metavar="N")
-    cmp_.add_argument("--segments", type=_positive_int, default=30, metavar="K")
+    cmp_.add_argument("--segments", type=_positive_int, default=DEFAULT_BUDGET, metavar="K")
     cmp_.add_argument("--seed", type=int, default=0, metavar="S")
-    cmp_.add_argument("--env", default="excite/DiffDriveCalib-v0", metavar="ID")
+    cmp_.add_argument("--env", default=DEFAULT_ENV_ID, metavar="ID")
     cmp_.add_argument("--workers", type=_positive_int, default=None, metavar="W",
                       help="worker processes (default: all cores)")
     cmp_.add_argument("--out", default="excite_compare", metavar="DIR")

@@ -63,10 +63,6 @@ def as_sigma(sigma: ArrayLike) -> FloatArray:
     return s
 
 
-def _as_vector(values: Params | ArrayLike) -> FloatArray:
-    return values.as_array() if isinstance(values, Params) else np.asarray(values, dtype=float)
-
-
 def _increments(dphi_L: ArrayLike, dphi_R: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Wheel increments as two flat float arrays of one length (broadcast, then flattened)."""
     phi_L, phi_R = np.asarray(dphi_L, dtype=float), np.asarray(dphi_R, dtype=float)
@@ -103,8 +99,8 @@ def scaled_jacobian(
     params: where the Jacobian is evaluated. scale: the nominal values that multiply the
     columns (default: params itself).
     """
-    p = _as_vector(params)
-    scale_arr = p if scale is None else _as_vector(scale)
+    p = np.array(_as_params(params))
+    scale_arr = p if scale is None else np.array(_as_params(scale))
     jac = increment_jacobian(dphi_L, dphi_R, p)
     return jac / as_sigma(sigma)[:, None] * scale_arr[None, :]
 

@@ -15,8 +15,9 @@ import sys
 
 ENTRY_POINT = "envs.env:DiffDriveCalibEnv"
 DEFAULT_BUDGET = 30  # segments per episode
+DEFAULT_ENV_ID = "excite/DiffDriveCalib-v0"
 ENV_IDS = {
-    "excite/DiffDriveCalib-v0": {"ideal": False},
+    DEFAULT_ENV_ID: {"ideal": False},
     "excite/DiffDriveCalibIdeal-v0": {"ideal": True},
 }
 
