@@ -5,13 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 
 from agents.protocols import SCRIPTED, Protocol
+from excite.errors import ExciteError
 
 #: The policy file shipped with excite (the default of the `learned` protocol).
 SHIPPED_POLICY = Path(__file__).parent / "policies" / "excite_ppo.zip"
 PROTOCOL_NAMES = (*SCRIPTED, "greedy", "learned")
 
 
-class ProtocolError(ValueError):
+class ProtocolError(ExciteError, ValueError):
     """An unknown protocol, or a learned policy that cannot be loaded."""
 
 

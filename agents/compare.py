@@ -27,6 +27,7 @@ import excite  # noqa: F401  (registers the environment ids in worker processes)
 from agents.catalog import make_protocol
 from agents.oracle import oracle_design
 from agents.protocols import Protocol
+from excite.errors import ExciteError
 from excite.information import crlb_relative_std
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
 
@@ -35,7 +36,7 @@ COLUMNS = ("protocol", "episode", "segment", "r_L_err", "r_R_err", "b_err", "sig
            "x", "y", "theta", "distance")
 
 
-class CompareError(ValueError):
+class CompareError(ExciteError, ValueError):
     """Bad settings for a comparison (e.g. an output folder made with other settings)."""
 
 

@@ -37,13 +37,14 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNorm
 from tqdm import tqdm
 
 import excite  # noqa: F401  (registers the environment ids)
+from excite.errors import ExciteError
 
 ALGOS = {"ppo": PPO, "sac": SAC}
 CONFIG_DIR = Path(__file__).parent / "configs"
 VEC_ENVS = {"subproc": SubprocVecEnv, "dummy": DummyVecEnv}
 
 
-class TrainingError(ValueError):
+class TrainingError(ExciteError, ValueError):
     """Bad training settings, or nothing to resume from."""
 
 

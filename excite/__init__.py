@@ -10,7 +10,8 @@ with gymnasium, see :mod:`excite.registration`)::
 """
 
 from excite.calibration import CalibrationResult, calibrate
-from excite.data import DataError, Segments, load_segments, save_segments
+from excite.data import Segments, load_segments, save_segments
+from excite.errors import DataError, ExciteError
 from excite.kinematics import Params, increment_jacobian, predict_increment
 from excite.online import OnlineEstimator
 from excite.registration import install as _install_gymnasium_ids
@@ -22,6 +23,7 @@ __version__ = "0.1.0"
 __all__ = [
     "CalibrationResult",
     "DataError",
+    "ExciteError",
     "OnlineEstimator",
     "Params",
     "Segments",

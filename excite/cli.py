@@ -16,13 +16,13 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from excite import __version__
-from excite.data import DataError
+from excite.errors import DataError, ExciteError
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_UNIDENTIFIABLE = 0, 1, 2, 3
 
 
-class UsageError(Exception):
+class UsageError(ExciteError):
     """Bad input or usage: reported as one line, exit status 2."""
 
 

@@ -15,15 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from excite.errors import DataError
+
 __all__ = ["COLUMNS", "DataError", "Segments", "load_segments", "save_segments"]
 
 COLUMNS = ("dphi_L", "dphi_R", "dx_gt", "dy_gt", "dtheta_gt")
 MIN_SEGMENTS = 3
 _FIELDS = ("dphi_L", "dphi_R", "dx", "dy", "dtheta")
-
-
-class DataError(ValueError):
-    """Malformed segment data; the message names the file and line where known."""
 
 
 @dataclass(frozen=True)

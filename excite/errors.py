@@ -1,0 +1,15 @@
+"""excite's exceptions: one base class, so callers can catch everything excite raises on
+purpose (bad data, bad settings) apart from programming errors."""
+
+from __future__ import annotations
+
+__all__ = ["ExciteError", "DataError"]
+
+
+class ExciteError(Exception):
+    """Base class of every error excite raises for bad input or settings."""
+
+
+class DataError(ExciteError, ValueError):
+    """Malformed or insufficient data; the message names the file and line (or topic) where
+    known."""
