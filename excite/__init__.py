@@ -12,7 +12,8 @@ with gymnasium, see :mod:`excite.registration`)::
 from excite.calibration import CalibrationResult, calibrate
 from excite.data import Segments, load_segments, save_segments
 from excite.errors import DataError, ExciteError
-from excite.kinematics import Params, increment_jacobian, predict_increment
+from excite.kinematics import Params, predict_increment
+from excite.models import SensorPose, increment_jacobian
 from excite.online import OnlineEstimator
 from excite.registration import install as _install_gymnasium_ids
 
@@ -27,6 +28,7 @@ __all__ = [
     "OnlineEstimator",
     "Params",
     "Segments",
+    "SensorPose",
     "calibrate",
     "increment_jacobian",
     "load_segments",

@@ -1,58 +1,129 @@
-"""Batch calibration of (r_L, r_R, b): weighted maximum likelihood by Levenberg–Marquardt.
+"""Batch calibration of (r_L, r_R, b), and of the pose of the external sensor, by weighted
+maximum likelihood.
 
-``calibrate(segments)`` needs no initial guess (a linear first estimate starts it) and no
-noise levels (per-channel sigmas are estimated from the residuals, iterating estimate /
-re-weight), returns a :class:`CalibrationResult` with the covariance (inverse Fisher
-information at the solution) and an identifiability verdict on the whitened, relatively
-scaled Jacobian (DESIGN.md).
+``calibrate(segments)`` needs no initial guess (closed-form starts, :mod:`excite.starts`) and
+no noise levels (per-channel sigmas are estimated jointly with the parameters,
+:mod:`excite.solver`). It chooses between the axle model and the sensor-pose model
+(``sensor_pose="auto"``: a likelihood-ratio test at the 99.9% level, when the data determine
+the sensor pose), tests whether the chosen model fits the data, and returns a
+:class:`CalibrationResult` with the covariance (inverse Fisher information at the solution),
+an identifiability verdict in words and the fit verdict in words.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
 
-from excite.data import DataError, Segments
+from excite.data import Segments
+from excite.errors import DataError
 from excite.information import as_sigma, inverse_information
-from excite.kinematics import Params, sinc_family, wrap_angle
+from excite.kinematics import Params
+from excite.models import AXLE, SENSOR_POSE, FixedSensorPoseModel, SegmentModel, SensorPose
+from excite.solver import Fit, Loss, Problem, levenberg_marquardt, normal_system
+from excite.starts import (
+    DEFAULT_NOMINAL,
+    body_frame_estimate,
+    initial_estimate,
+    sensor_pose_estimate,
+)
 
-__all__ = ["CalibrationResult", "calibrate", "initial_estimate", "DEFAULT_NOMINAL"]
+__all__ = ["CalibrationResult", "FitTest", "calibrate", "initial_estimate", "DEFAULT_NOMINAL",
+           "chi2_quantile"]
 
 FloatArray = NDArray[np.float64]
-Loss = Literal["linear", "huber"]
+SensorPoseOption = Literal["auto", "axle", "estimate"] | SensorPose
 
-#: Used only for directions the data cannot determine when no initial guess is given.
-DEFAULT_NOMINAL = Params(0.05, 0.05, 0.30)
-#: Huber threshold on whitened residuals (95% efficiency under Gaussian noise).
-HUBER_K = 1.345
 #: A segment is an outlier when its whitened squared residual exceeds this chi2(3) quantile.
 OUTLIER_QUANTILE = 0.999
-#: Data determine p when the worst-direction relative std 1/sigma_min is at most this.
+#: Level of the likelihood-ratio test of the axle model against the sensor-pose model, and of
+#: the goodness-of-fit test against given noise levels.
+TEST_LEVEL = 0.999
+#: Data determine the parameters when the worst-direction relative std 1/sigma_min is at most
+#: this.
 DEFAULT_MAX_RELATIVE_STD = 0.1
-_MAD_TO_STD = 1.482602218505602
-_PARAM_NAMES = ("r_L", "r_R", "b")
+#: Each trimming pass drops at most this fraction of the segments (Censi et al. drop 1%).
+TRIM_PASS = 0.01
+#: Whitened residuals correlate with |dtheta| "significantly" above this z value.
+_TREND_Z = 3.0
+_CHANNELS = ("x", "y", "theta")
+
+
+def chi2_quantile(q: float, dof: float) -> float:
+    """The q-quantile of the chi-square distribution with ``dof`` degrees of freedom (scipy's
+    special function, imported on first use: scipy.stats is too slow to import)."""
+    from scipy.special import chdtri
+
+    return float(chdtri(dof, 1.0 - q))
+
+
+def _chi2_survival(x: float, dof: float) -> float:
+    from scipy.special import chdtrc
+
+    return float(chdtrc(dof, x))
+
+
+@dataclass(frozen=True)
+class FitTest:
+    """Whether the chosen model fits the data, in numbers and words.
+
+    ok: the verdict. message: the reason in words. noise_ratio: per channel (x, y, theta), the
+    residual std of the chosen model over the reference noise level (the given sigma, or the
+    residual std of the sensor-pose alternative); None when there is no reference.
+    lr_statistic / lr_threshold: the likelihood-ratio statistic against the sensor-pose
+    alternative (None when not tested) and its 99.9% chi-square quantile. turn_trend_z: the
+    z value of the correlation between the position residuals and |dtheta| (> 3: the residuals
+    grow with the turn rate, the signature of an off-axle sensor).
+    """
+
+    ok: bool
+    message: str
+    noise_ratio: FloatArray | None = None
+    lr_statistic: float | None = None
+    lr_threshold: float | None = None
+    turn_trend_z: float | None = None
+
+    def to_dict(self) -> dict:
+        ratio = None if self.noise_ratio is None else dict(
+            zip(_CHANNELS, map(float, self.noise_ratio), strict=True))
+        return {"ok": self.ok, "message": self.message, "noise_ratio": ratio,
+                "lr_statistic": self.lr_statistic, "lr_threshold": self.lr_threshold,
+                "turn_trend_z": self.turn_trend_z}
 
 
 @dataclass(frozen=True)
 class CalibrationResult:
     """Outcome of :func:`calibrate` (modelled on scipy's OptimizeResult).
 
-    params: estimate (m). covariance: 3x3 (m^2), inverse Fisher information at the estimate,
-    inf along directions the data do not determine. std: sqrt(diag(covariance)) (m).
-    singular_values, condition_number: of the whitened, relatively scaled Jacobian (DESIGN.md),
-    descending. identifiable: whether 1/sigma_min <= max_relative_std. unidentifiable_direction:
-    None, or what is not determined, in words. sigma: noise std per channel (m, m, rad), given or
+    params: wheel parameters (m). covariance: their 3x3 covariance (m^2), inverse Fisher
+    information at the estimate, inf along directions the data do not determine.
+    std: sqrt(diag(covariance)) (m). model: "axle" or "sensor_pose". sensor_pose: the sensor's
+    pose in the body frame (estimated or given), None for the axle model; sensor_pose_std
+    (m, m, rad) when estimated. parameter_names / full_covariance: every estimated parameter
+    and their joint covariance (6x6 with the sensor pose estimated). model_choice: why this
+    model, in words. fit: :class:`FitTest`. singular_values, condition_number: of the whitened,
+    relatively scaled Jacobian over all estimated parameters (DESIGN.md), descending.
+    identifiable: whether 1/sigma_min <= max_relative_std. unidentifiable_direction: None, or
+    what is not determined, in words. sigma: noise std per channel (m, m, rad), given or
     estimated. rms_residual: raw residual RMS per channel. n_outliers: segments whose whitened
-    squared residual exceeds the 99.9% chi2(3) quantile.
+    squared residual exceeds the 99.9% chi2(3) quantile; n_trimmed: segments dropped by
+    trimming.
     """
 
     params: Params
     covariance: FloatArray
     std: FloatArray
+    model: str
+    sensor_pose: SensorPose | None
+    sensor_pose_std: FloatArray | None
+    parameter_names: tuple[str, ...]
+    full_covariance: FloatArray
+    model_choice: str
+    fit: FitTest
     singular_values: FloatArray
     condition_number: float
     identifiable: bool
@@ -60,6 +131,7 @@ class CalibrationResult:
     unidentifiable_vector: FloatArray | None
     n_segments: int
     n_outliers: int
+    n_trimmed: int
     rms_residual: FloatArray
     sigma: FloatArray
     sigma_estimated: bool
@@ -79,9 +151,13 @@ class CalibrationResult:
         def finite(x: float) -> float | None:
             return float(x) if np.isfinite(x) else None
 
+        def named(values, names) -> dict:
+            return {n: finite(v) for n, v in zip(names, values, strict=True)}
+
+        pose = self.sensor_pose
         return {
-            "params": dict(zip(_PARAM_NAMES, map(float, self.params.as_array()), strict=True)),
-            "std": {n: finite(s) for n, s in zip(_PARAM_NAMES, self.std, strict=True)},
+            "params": named(self.params.as_array(), AXLE.names),
+            "std": named(self.std, AXLE.names),
             "covariance": [[finite(v) for v in row] for row in self.covariance],
             "singular_values": [float(s) for s in self.singular_values],
             "condition_number": finite(self.condition_number),
@@ -89,34 +165,56 @@ class CalibrationResult:
             "unidentifiable_direction": self.unidentifiable_direction,
             "n_segments": self.n_segments,
             "n_outliers": self.n_outliers,
-            "rms_residual": dict(zip(("x", "y", "theta"), map(float, self.rms_residual),
-                                     strict=True)),
-            "sigma": dict(zip(("x", "y", "theta"), map(float, self.sigma), strict=True)),
+            "n_trimmed": self.n_trimmed,
+            "rms_residual": named(self.rms_residual, _CHANNELS),
+            "sigma": named(self.sigma, _CHANNELS),
             "sigma_estimated": self.sigma_estimated,
             "loss": self.loss,
             "converged": bool(self.converged),
             "iterations": self.iterations,
+            "model": self.model,
+            "model_choice": self.model_choice,
+            "sensor_pose": None if pose is None else named(pose.as_array(), _CHANNELS),
+            "sensor_pose_std": (None if self.sensor_pose_std is None
+                                else named(self.sensor_pose_std, _CHANNELS)),
+            "parameters": list(self.parameter_names),
+            "full_covariance": [[finite(v) for v in row] for row in self.full_covariance],
+            "fit": self.fit.to_dict(),
         }
 
     def summary(self) -> str:
         """Human-readable report."""
         p = self.params.as_array()
-        lines = [f"excite calibration: {self.n_segments} segments, loss={self.loss}"]
-        for name, value, s in zip(_PARAM_NAMES, p, self.std, strict=True):
+        lines = [f"excite calibration: {self.n_segments} segments, loss={self.loss}, "
+                 f"model={self.model}"]
+        for name, value, s in zip(AXLE.names, p, self.std, strict=True):
             rel = f"({100 * s / value:.3f}%)" if np.isfinite(s) else "(undetermined)"
             lines.append(f"  {name:<4}= {value:.6f} m  ± {s:.2e} m {rel}")
+        if self.sensor_pose is not None:
+            pose = self.sensor_pose.as_array()
+            std = self.sensor_pose_std
+            how = "given" if std is None else "estimated"
+            for name, unit, value, i in (("x", "m", pose[0], 0), ("y", "m", pose[1], 1),
+                                         ("theta", "rad", pose[2], 2)):
+                spread = "" if std is None else (
+                    f"  ± {std[i]:.2e} {unit}" if np.isfinite(std[i]) else "  (undetermined)")
+                extra = f" ({math.degrees(value):.2f} deg)" if name == "theta" else ""
+                lines.append(f"  sensor {name:<6}= {value:+.6f} {unit}{extra}{spread} ({how})")
         sv = ", ".join(f"{s:.4g}" for s in self.singular_values)
         lines += [
+            f"  model choice    = {self.model_choice}",
             f"  sigma_min       = {self.sigma_min:.4g}  (worst-direction relative std "
             f"{_inverse_or_inf(self.sigma_min):.3g})",
             f"  singular values = {sv};  condition number = {self.condition_number:.4g}",
             f"  identifiable    = {'yes' if self.identifiable else 'NO'}"
             + (f": {self.unidentifiable_direction}" if self.unidentifiable_direction else ""),
+            f"  fit             = {'ok' if self.fit.ok else 'NO'}: {self.fit.message}",
             "  residual RMS    = x {:.3e} m, y {:.3e} m, theta {:.3e} rad".format(
                 *self.rms_residual),
             "  noise sigma     = x {:.3e} m, y {:.3e} m, theta {:.3e} rad ({})".format(
                 *self.sigma, "estimated" if self.sigma_estimated else "given"),
-            f"  outliers        = {self.n_outliers}",
+            f"  outliers        = {self.n_outliers}"
+            + (f"; trimmed {self.n_trimmed}" if self.n_trimmed else ""),
             f"  converged       = {self.converged} after {self.iterations} iterations"
             f" ({self.message})",
         ]
@@ -133,240 +231,189 @@ def _as_segments(segments: Segments | ArrayLike) -> Segments:
     return Segments.from_array(segments)
 
 
-def _lstsq_from(gram: FloatArray, rhs: FloatArray, ref: FloatArray) -> tuple[FloatArray, int]:
-    """Solution of the normal equations gram x = rhs closest to ``ref`` (min-norm correction),
-    and the numerical rank of gram."""
-    if not np.any(gram):
-        return ref.copy(), 0
-    lam = np.linalg.eigvalsh(gram)
-    rank = int(np.sum(lam > lam[-1] * 1e-12))
-    return ref + _solve_psd(gram, rhs - gram @ ref), rank
+@dataclass
+class _ModelFit:
+    """A fitted model on one data set: the LM outcome, the relative information and the
+    verdict on what the data determine."""
 
-
-def initial_estimate(segments: Segments, fallback: Params = DEFAULT_NOMINAL) -> Params:
-    """Closed-form first estimate of (r_L, r_R, b), no guess needed.
-
-    With the measured heading change th_k, the translation is linear in the radii:
-    (dx, dy)_k = (sinc(th_k), cosc(th_k)) * (r_L dphi_L + r_R dphi_R) / 2; and the heading
-    change is linear in r/b: th_k = (r_R/b) dphi_R - (r_L/b) dphi_L. Directions the data do
-    not determine are taken from ``fallback`` (keeping its b/r ratio).
-    """
-    phi_L, phi_R, th = segments.dphi_L, segments.dphi_R, segments.dtheta
-    f, g = sinc_family(th, derivatives=False)
-    # Translation rows (f, g) * (phi_L, phi_R)/2 . (r_L, r_R): 2x2 normal equations.
-    phi = np.stack([phi_L, phi_R])
-    w = 0.25 * (f * f + g * g)
-    v = 0.5 * (f * segments.dx + g * segments.dy)
-    gram = np.einsum("ik,k,jk->ij", phi, w, phi)
-    r_ref = np.array([fallback.r_L, fallback.r_R])
-    radii, rank_trans = _lstsq_from(gram, np.einsum("ik,k->i", phi, v), r_ref)
-    if np.any(radii <= 0):
-        radii, rank_trans = r_ref, 0
-
-    b_ref = fallback.b * radii.mean() / r_ref.mean()
-    # Heading rows (-phi_L, phi_R) . (r_L/b, r_R/b).
-    signed = phi * np.array([[-1.0], [1.0]])
-    gram = np.einsum("ik,jk->ij", signed, signed)
-    ratios, rank_rot = _lstsq_from(gram, np.einsum("ik,k->i", signed, th), radii / b_ref)
-    if rank_trans == 0 and rank_rot > 0 and np.all(ratios > 0):
-        # Nothing translates: only r/b is known; the common scale comes from the fallback.
-        return Params(*(ratios * fallback.b), fallback.b)
-    b = b_ref
-    if rank_rot > 0:
-        chord = radii[1] * phi_R - radii[0] * phi_L  # = b * dtheta
-        denominator = float(np.einsum("k,k->", th, th))
-        candidate = float(np.einsum("k,k->", chord, th)) / denominator if denominator else 0.0
-        if np.isfinite(candidate) and 0.5 * b_ref < candidate < 2.0 * b_ref:
-            b = candidate
-    return Params(radii[0], radii[1], b)
-
-
-class _Evaluation:
-    """The model at p: raw residuals and relative Jacobian rows, channel-major.
-
-    raw[c, k]: residual (predicted - measured) of channel c (x, y, theta) of segment k.
-    jac[c, i, k]: d raw[c, k] / d p_i * p_i, the derivative with respect to the relative
-    parameters (Jacobian columns scaled by p).
-    """
-
-    def __init__(self, p: FloatArray, raw: FloatArray, jac: FloatArray):
-        self.p, self.raw, self.jac = p, raw, jac
-        self._unit: tuple[FloatArray, FloatArray, FloatArray] | None = None
-
-    def unit_system(self) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Per channel: J_c J_c^T (3,3,3), J_c r_c (3,3) and r_c . r_c (3,), for sigma = 1."""
-        if self._unit is None:
-            # einsum's own loops, not BLAS: threads only contend on these long, thin products.
-            info = np.einsum("cik,cjk->cij", self.jac, self.jac)
-            gradient = np.einsum("cik,ck->ci", self.jac, self.raw)
-            self._unit = (info, gradient, np.einsum("ck,ck->c", self.raw, self.raw))
-        return self._unit
-
-
-class _Model:
-    """Residuals and analytic Jacobian of one dataset, in the structure the solver needs."""
-
-    def __init__(self, seg: Segments):
-        self.phi_L, self.phi_R = seg.dphi_L, seg.dphi_R
-        self.dx, self.dy, self.dtheta = seg.dx, seg.dy, seg.dtheta
-        self.n = len(seg)
-
-    def evaluate(self, p: FloatArray) -> _Evaluation:
-        r_L, r_R, b = p
-        s_L, s_R = r_L * self.phi_L, r_R * self.phi_R
-        ds, th = 0.5 * (s_L + s_R), (s_R - s_L) / b
-        f, g, fp, gp = sinc_family(th)
-        raw = np.empty((3, self.n))
-        np.subtract(ds * f, self.dx, out=raw[0])
-        np.subtract(ds * g, self.dy, out=raw[1])
-        raw[2] = wrap_angle(th - self.dtheta)
-        # Relative derivatives of ds: (s_L, s_R, 0)/2; of th: (-s_L/b, s_R/b, -th).
-        a0, a1 = 0.5 * s_L, 0.5 * s_R
-        c0, c1, c2 = -s_L / b, s_R / b, -th
-        ex, ey = ds * fp, ds * gp
-        jac = np.empty((3, 3, self.n))
-        jac[0, 0], jac[0, 1], jac[0, 2] = f * a0 + ex * c0, f * a1 + ex * c1, ex * c2
-        jac[1, 0], jac[1, 1], jac[1, 2] = g * a0 + ey * c0, g * a1 + ey * c1, ey * c2
-        jac[2, 0], jac[2, 1], jac[2, 2] = c0, c1, c2
-        return _Evaluation(p, raw, jac)
-
-
-def _huber_cost(z: FloatArray) -> float:
-    a = np.abs(z)
-    return float(np.sum(np.where(a <= HUBER_K, 0.5 * z * z, HUBER_K * (a - 0.5 * HUBER_K))))
-
-
-@dataclass(frozen=True)
-class _System:
-    """Whitened, (Huber-)weighted normal equations of an evaluation for given sigma."""
-
-    channel_information: FloatArray  # (3 channels, 3, 3), relative parameters
-    gradient: FloatArray  # (3,)
-    cost: float
+    model: SegmentModel
+    problem: Problem
+    fit: Fit
+    weak: FloatArray  # (P, k) relative directions the data do not determine
 
     @property
-    def information(self) -> FloatArray:
-        return self.channel_information.sum(axis=0)
+    def theta(self) -> FloatArray:
+        return self.fit.theta
+
+    @property
+    def identifiable(self) -> bool:
+        return self.weak.shape[1] == 0
 
 
-def _system(ev: _Evaluation, sigma: FloatArray, loss: Loss) -> _System:
-    inv_var = 1.0 / (sigma * sigma)
-    if loss == "linear":
-        info, gradient, rss = ev.unit_system()
-        return _System(info * inv_var[:, None, None], inv_var @ gradient,
-                       0.5 * float(inv_var @ rss))
-    z = ev.raw / sigma[:, None]
-    w = (HUBER_K / np.maximum(np.abs(z), HUBER_K)) * inv_var[:, None]
-    weighted = ev.jac * w[:, None, :]
-    info = np.einsum("cik,cjk->cij", weighted, ev.jac)
-    gradient = np.einsum("cik,ck->i", weighted, ev.raw)
-    return _System(info, gradient, _huber_cost(z))
+def _fit_model(model: SegmentModel, seg: Segments, start: FloatArray,
+               sigma: FloatArray | None, loss: Loss, max_iterations: int, tol: float,
+               max_relative_std: float) -> _ModelFit:
+    """LM from ``start``; directions the data cannot determine are then held at the start
+    instead of drifting to chase noise."""
+    problem = Problem(model, seg)
+    fit = levenberg_marquardt(problem, start, sigma, loss, max_iterations, tol)
+    lam, vec = np.linalg.eigh(fit.system.information)
+    weak = lam * max_relative_std**2 < 1.0
+    if np.any(weak):
+        refit = levenberg_marquardt(problem, start, fit.sigma, loss, max_iterations, tol,
+                                    frozen=vec[:, weak])
+        refit.iterations += fit.iterations
+        fit = refit
+    return _ModelFit(model, problem, fit, vec[:, weak])
 
 
-def _solve_psd(a: FloatArray, rhs: FloatArray) -> FloatArray:
-    """Solve a x = rhs for symmetric PSD a, ignoring numerically null directions."""
-    lam, vec = np.linalg.eigh(a)
-    keep = lam > max(lam[-1], 0.0) * 1e-12
-    coef = (vec.T @ rhs)[keep] / lam[keep]
-    return vec[:, keep] @ coef
+def _likelihood_ratio(small: _ModelFit, large: _ModelFit, sigma_given: bool,
+                      loss: Loss) -> float:
+    """2 log(L_large / L_small) >= 0 of two nested fits on the same data: with estimated
+    noise levels (linear loss) the profile likelihood N sum_c log(RSS_c,small / RSS_c,large);
+    otherwise the difference of the whitened costs at the larger model's noise levels."""
+    if loss == "linear" and not sigma_given:
+        rss_small = small.fit.ev.unit_system()[2]
+        rss_large = large.fit.ev.unit_system()[2]
+        floor = large.problem.sigma_floor**2
+        ratio = np.maximum(rss_small, floor) / np.maximum(rss_large, floor)
+        return max(float(small.problem.n * np.sum(np.log(ratio))), 0.0)
+    sigma = large.fit.sigma
+    cost_small = normal_system(small.fit.ev, sigma, loss).cost
+    cost_large = normal_system(large.fit.ev, sigma, loss).cost
+    return max(2.0 * (cost_small - cost_large), 0.0)
 
 
-def _estimate_sigma(ev: _Evaluation, system: _System | None, loss: Loss) -> FloatArray:
-    """Per-channel noise std from the residuals at an evaluation.
-
-    linear: sqrt(RSS_c / (N - h_c)), with h_c = tr(F^-1 F_c) the degrees of freedom the fit
-    takes from channel c (REML-style); huber: 1.4826 * median |residual| (MAD).
-    """
-    raw = ev.raw
-    if loss == "huber":
-        sigma = _MAD_TO_STD * np.median(np.abs(raw), axis=1)
-    else:
-        dof = np.full(3, float(raw.shape[1]))
-        if system is not None:
-            inverse = np.linalg.pinv(system.information, hermitian=True)
-            dof -= np.einsum("ij,cji->c", inverse, system.channel_information)
-        sigma = np.sqrt(ev.unit_system()[2] / np.maximum(dof, 1.0))
-    # Floor for noise-free data: 1e-12 of the measured magnitudes (never divide by zero).
-    return np.maximum(sigma, 1e-12 * (np.sqrt(ev.unit_system()[2] / raw.shape[1]) + 1e-300))
+def _turn_trend_z(mf: _ModelFit) -> float:
+    """z value of the correlation between |dtheta| and the squared position residuals."""
+    turn = np.abs(mf.problem.measured[2])
+    raw = mf.fit.ev.raw
+    size = raw[0] ** 2 + raw[1] ** 2
+    if turn.std() == 0 or size.std() == 0:
+        return 0.0
+    corr = float(np.corrcoef(turn, size)[0, 1])
+    return corr * math.sqrt(mf.problem.n)
 
 
-@dataclass
-class _Fit:
-    ev: _Evaluation
-    system: _System
-    sigma: FloatArray
-    iterations: int
-    converged: bool
-    message: str
+def _noise_ratio(mf: _ModelFit, reference: FloatArray) -> FloatArray:
+    rss = mf.fit.ev.unit_system()[2]
+    return np.sqrt(rss / mf.problem.n) / reference
 
 
-def _levenberg_marquardt(
-    model: _Model,
-    p0: FloatArray,
-    sigma: FloatArray | None,
-    loss: Loss,
-    max_iterations: int,
-    tol: float,
-    frozen: FloatArray | None = None,
-) -> _Fit:
-    """Minimise the whitened (Huber-)cost; steps are relative: p <- p * (1 + step).
+def _goodness_of_fit(mf: _ModelFit, sigma: FloatArray) -> tuple[bool, FloatArray]:
+    """Residuals against given noise levels: per channel RSS / sigma^2 ~ chi2(N - h_c); fails
+    when any channel exceeds its quantile at the test level (Bonferroni over 3 channels)."""
+    system = normal_system(mf.fit.ev, sigma, "linear")
+    inverse = np.linalg.pinv(system.information, hermitian=True)
+    dof = mf.problem.n - np.einsum("ij,cji->c", inverse, system.channel_information)
+    statistic = mf.fit.ev.unit_system()[2] / sigma**2
+    survival = np.array([_chi2_survival(s, d) for s, d in zip(statistic, dof, strict=True)])
+    ratio = np.sqrt(statistic / np.maximum(dof, 1.0))
+    return bool(np.all(survival > (1.0 - TEST_LEVEL) / 3.0)), ratio
 
-    sigma None: re-estimate the noise levels at every iterate (joint iteration), until both
-    the step and the noise levels settle. frozen: (3, k) orthonormal relative directions the
-    steps must not move along.
-    """
-    estimate = sigma is None
-    ev = model.evaluate(p0)
-    if estimate:
-        sigma = _estimate_sigma(ev, None, loss)
-    system = _system(ev, sigma, loss)
-    lam = 1e-3
 
-    def damped_step() -> FloatArray:
-        a = system.information
-        step = _solve_psd(a + lam * np.diag(np.diag(a)), -system.gradient)
-        return step if frozen is None else step - frozen @ (frozen.T @ step)
+def _channels_in_words(ratio: FloatArray, worse: FloatArray) -> str:
+    names = [n for n, bad in zip(("x", "y", "theta"), worse, strict=True) if bad]
+    names = names or ["x", "y", "theta"]
+    largest = max(ratio[i] for i, n in enumerate(("x", "y", "theta")) if n in names)
+    return f"{largest:.1f}x the noise level in {', '.join(names)}"
 
-    for iteration in range(1, max_iterations + 1):
-        settled = True
-        if estimate:
-            new_sigma = _estimate_sigma(ev, system, loss)
-            settled = bool(np.all(np.abs(new_sigma / sigma - 1.0) < 1e-6))
-            if not settled:
-                sigma = new_sigma
-                system = _system(ev, sigma, loss)
-        step = damped_step()
-        if np.max(np.abs(step)) < tol and settled:
-            return _Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
-        while True:
-            trial = ev.p * (1.0 + step)
-            if np.all(trial > 0):
-                ev_trial = model.evaluate(trial)
-                system_trial = _system(ev_trial, sigma, loss)
-                if system_trial.cost <= system.cost:
-                    break
-            lam *= 10.0
-            if lam > 1e12:
-                return _Fit(ev, system, sigma, iteration, True, "no further decrease of the cost")
-            step = damped_step()
-        ev, system = ev_trial, system_trial
-        lam = max(lam / 10.0, 1e-12)
-    return _Fit(ev, system, sigma, max_iterations, False, "maximum number of iterations reached")
+
+def _fit_test(chosen: _ModelFit, alternative: _ModelFit | None, lr: float | None,
+              threshold: float, sigma_given: FloatArray | None, loss: Loss,
+              forced: str) -> FitTest:
+    """The fit verdict of the chosen model (see :class:`FitTest`). ``forced`` names what the
+    user imposed: "axle", "pose" (a given sensor pose) or "" (nothing)."""
+    trend = _turn_trend_z(chosen)
+    if alternative is not None and lr is not None and lr > threshold:
+        if sigma_given is None:
+            ratio = chosen.fit.sigma / alternative.fit.sigma
+        else:
+            ratio = _noise_ratio(chosen, sigma_given)
+        grows = " and grow with the turn rate" if trend > _TREND_Z else ""
+        words = _channels_in_words(ratio, ratio > 1.5)
+        _, pose = alternative.model.split(alternative.theta)
+        where = f"(x {pose.x:+.4f} m, y {pose.y:+.4f} m, theta {pose.theta:+.4f} rad)"
+        if forced == "axle":
+            verdict = (f"the residuals are {words}{grows}: the sensor is not on the axle "
+                       f"(the sensor-pose model puts it at {where}); "
+                       "try --sensor-pose estimate")
+        else:
+            verdict = (f"the residuals are {words}{grows}: the sensor is not at the given "
+                       f"pose (the data put it at {where}); try --sensor-pose estimate")
+        return FitTest(False, verdict, ratio, lr, threshold, trend)
+    if sigma_given is not None and loss == "linear":
+        ok, ratio = _goodness_of_fit(chosen, sigma_given)
+        if not ok:
+            grows = " and grow with the turn rate" if trend > _TREND_Z else ""
+            hint = ("; the sensor may be off the axle: try --sensor-pose estimate"
+                    if grows and chosen.model is AXLE else "")
+            return FitTest(False, f"the residuals are {_channels_in_words(ratio, ratio > 1.2)}"
+                           f" given{grows}: the model or the given noise levels are wrong"
+                           f"{hint}", ratio, lr, threshold, trend)
+        return FitTest(True, "the residuals match the given noise levels", ratio, lr,
+                       threshold, trend)
+    if alternative is not None and lr is not None:
+        return FitTest(True, f"the sensor-pose model does not fit significantly better "
+                       f"(likelihood ratio {lr:.3g} <= {threshold:.3g})", None, lr, threshold,
+                       trend)
+    return FitTest(True, "no alternative to test against (noise levels estimated)", None, lr,
+                   threshold, trend)
+
+
+def _moving_segments(seg: Segments, sigma: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Masks of the segments that turn (|dtheta| > 3 sigma_theta) and that translate (the
+    sensor's displacement beyond what a pure turn explains is not known here, so: the
+    wheels move together, |dphi_L + dphi_R| > |dphi_R - dphi_L| / 10)."""
+    turning = np.abs(seg.dtheta) > 3.0 * sigma[2]
+    together = np.abs(seg.dphi_L + seg.dphi_R)
+    translating = together > 0.1 * np.abs(seg.dphi_R - seg.dphi_L) + 1e-12
+    return turning, translating
 
 
 def _describe_direction(v: FloatArray, seg: Segments, sigma: FloatArray) -> str:
-    """Words for a relative-parameter null direction v (unit vector over r_L, r_R, b)."""
+    """Words for a relative-parameter null direction v (unit vector over the parameters)."""
     v = v if v[np.argmax(np.abs(v))] > 0 else -v
+    turning, translating = _moving_segments(seg, sigma)
+    if v.size == 6:
+        if v[3] ** 2 + v[4] ** 2 > 0.8:
+            why = "no segment turns" if not turning.any() else "the turns do not separate it"
+            return f"sensor x, y: {why}"
+        if abs(v[5]) > 0.9:
+            why = ("no segment translates" if not translating.any()
+                   else "the translations do not separate it")
+            return f"sensor theta: {why}"
+        if np.sum(v[3:] ** 2) < 0.1:
+            return _describe_direction(v[:3] / np.linalg.norm(v[:3]), seg, sigma)
+        terms = " ".join(f"{c:+.2f}*{n}" for c, n in zip(v, SENSOR_POSE.names, strict=True))
+        return f"the relative combination {terms}"
     if abs(v[2]) > 0.9:
-        turning = np.abs(seg.dtheta) > 3.0 * sigma[2]
-        why = "no segment turns" if not np.any(turning) else "the turns do not separate it"
+        why = "no segment turns" if not turning.any() else "the turns do not separate it"
         return f"b: {why}"
     if float(v @ np.ones(3)) / np.sqrt(3.0) > 0.95:
         return "the common scale of r_L, r_R and b: no segment translates"
     if abs(v[2]) < 0.1 and v[0] * v[1] < 0 and abs(abs(v[0]) - abs(v[1])) < 0.2:
         return "the ratio r_L/r_R: every segment has the same wheel-speed ratio"
-    terms = " ".join(f"{c:+.2f}*{n}" for c, n in zip(v, _PARAM_NAMES, strict=True))
+    terms = " ".join(f"{c:+.2f}*{n}" for c, n in zip(v, AXLE.names, strict=True))
     return f"the relative combination {terms}"
+
+
+def _trimmed(seg: Segments, model: SegmentModel, start: FloatArray, sigma: FloatArray | None,
+             loss: Loss, trim: float, max_iterations: int, tol: float) -> FloatArray:
+    """Mask of the segments kept after dropping the fraction ``trim`` with the largest
+    whitened residuals, at most 1% per pass with a refit after each (Censi et al.)."""
+    keep = np.ones(len(seg), dtype=bool)
+    target = int(round(trim * len(seg)))
+    theta = start
+    while (dropped := int(np.sum(~keep))) < target:
+        fit = levenberg_marquardt(Problem(model, seg[keep]), theta, sigma, loss,
+                                  max_iterations, tol)
+        theta = fit.theta
+        z2 = np.sum((fit.ev.raw / fit.sigma[:, None]) ** 2, axis=0)
+        count = min(max(1, int(math.ceil(TRIM_PASS * len(seg)))), target - dropped)
+        kept = np.flatnonzero(keep)
+        keep[kept[np.argsort(z2)[::-1][:count]]] = False
+    return keep
 
 
 def calibrate(
@@ -375,19 +422,30 @@ def calibrate(
     sigma: ArrayLike | None = None,
     loss: Loss = "linear",
     *,
+    sensor_pose: SensorPoseOption = "auto",
+    trim: float = 0.0,
     max_iterations: int = 100,
     tol: float = 1e-8,
     max_relative_std: float = DEFAULT_MAX_RELATIVE_STD,
 ) -> CalibrationResult:
-    """Estimate p = (r_L, r_R, b) from segments by weighted maximum likelihood.
+    """Estimate p = (r_L, r_R, b), and the sensor pose, from segments by weighted maximum
+    likelihood.
 
-    segments: Segments or an (N, 5) array in CSV column order (N >= 3).
-    initial: starting Params; None finds its own start (:func:`initial_estimate`).
+    segments: Segments or an (N, 5) array in CSV column order (N >= 3); (dx, dy, dtheta) is
+        the external sensor's own motion in its frame at the segment's start.
+    initial: starting Params; None finds its own start (closed form). The sensor-pose model
+        always starts from Censi's closed form (any mounting angle).
     sigma: measurement noise std (sigma_x [m], sigma_y [m], sigma_theta [rad]) or
         (sigma_xy, sigma_theta); None estimates them from the residuals, re-weighting at
         every iteration until they settle.
     loss: "linear" (Gaussian maximum likelihood) or "huber" (robust to slip outliers; the
         threshold is 1.345 whitened standard deviations).
+    sensor_pose: "auto" (default: estimate the sensor pose when the data determine it and it
+        improves the fit significantly, a likelihood-ratio test at the 99.9% level; else the
+        axle model), "axle" (the sensor is on the axle midpoint, facing forward), "estimate"
+        (always estimate it), or a :class:`SensorPose` (known mounting).
+    trim: fraction of segments to drop as outliers (largest whitened residuals), at most 1%
+        per pass with a refit after each; 0 keeps all.
     max_relative_std: identifiability threshold on 1/sigma_min.
     """
     seg = _as_segments(segments)
@@ -395,47 +453,109 @@ def calibrate(
         raise DataError(f"{len(seg)} segment(s); at least 3 are needed")
     if loss not in ("linear", "huber"):
         raise ValueError(f"loss must be 'linear' or 'huber', got {loss!r}")
-    if initial is None:
-        p = initial_estimate(seg).as_array()
-    else:
-        p = (initial if isinstance(initial, Params) else Params.from_array(initial)).as_array()
-    start = p
-
-    model = _Model(seg)
+    if not (isinstance(sensor_pose, SensorPose) or sensor_pose in ("auto", "axle", "estimate")):
+        raise ValueError("sensor_pose must be 'auto', 'axle', 'estimate' or a SensorPose, "
+                         f"got {sensor_pose!r}")
+    if not 0.0 <= trim < 0.5:
+        raise ValueError(f"trim must be a fraction in [0, 0.5), got {trim}")
+    if not np.any(seg.dphi_L) and not np.any(seg.dphi_R):
+        raise DataError("no segment moves: every wheel increment is 0")
     given = None if sigma is None else as_sigma(sigma)
-    fit = _levenberg_marquardt(model, p, given, loss, max_iterations, tol)
-    lam, vec = np.linalg.eigh(fit.system.information)
-    weak = lam * max_relative_std**2 < 1.0
-    if np.any(weak):
-        # The data cannot determine these directions: hold them at the start instead of
-        # letting the fit wander along them to chase noise.
-        refit = _levenberg_marquardt(model, start, fit.sigma, loss, max_iterations, tol,
-                                     frozen=vec[:, weak])
-        refit.iterations += fit.iterations
-        fit = refit
-    return _result(seg, fit, sigma is None, loss, max_relative_std)
+    fallback = DEFAULT_NOMINAL
+    if initial is not None:
+        fallback = initial if isinstance(initial, Params) else Params.from_array(initial)
+    axle_start = (initial_estimate(seg) if initial is None else fallback).as_array()
+    settings = (loss, max_iterations, tol)
+
+    if isinstance(sensor_pose, SensorPose):
+        primary: SegmentModel = FixedSensorPoseModel(sensor_pose)
+        start = (body_frame_estimate(seg, sensor_pose, fallback) if initial is None
+                 else fallback).as_array()
+    elif sensor_pose == "axle":
+        primary, start = AXLE, axle_start
+    else:
+        primary = SENSOR_POSE
+        wheels, pose = sensor_pose_estimate(seg, fallback)
+        start = np.append(wheels.as_array(), pose.as_array())
+    keep = (_trimmed(seg, primary, start, given, *settings, trim) if trim
+            else np.ones(len(seg), dtype=bool))
+    data = seg[keep] if trim else seg
+
+    def fit(model: SegmentModel, theta0: FloatArray) -> _ModelFit:
+        return _fit_model(model, data, theta0, given, *settings, max_relative_std)
+
+    threshold = chi2_quantile(TEST_LEVEL, 3)
+    chosen = fit(primary, start)
+    alternative, lr, choice = None, None, ""
+    if primary is SENSOR_POSE:
+        sensor_fit = chosen
+        axle_fit = fit(AXLE, axle_start) if sensor_pose == "auto" else None
+        if axle_fit is not None:
+            lr = _likelihood_ratio(axle_fit, sensor_fit, given is not None, loss)
+            if not sensor_fit.identifiable:
+                chosen, choice = axle_fit, (
+                    "axle: the data do not determine the sensor pose ("
+                    + _describe_direction(sensor_fit.weak[:, 0], data,
+                                          sensor_fit.fit.sigma) + ")")
+            elif lr <= threshold:
+                chosen, choice = axle_fit, (
+                    f"axle: the sensor-pose model does not fit significantly better "
+                    f"(likelihood ratio {lr:.3g} <= {threshold:.3g})")
+            else:
+                choice = (f"sensor_pose: it fits significantly better than the axle model "
+                          f"(likelihood ratio {lr:.3g} > {threshold:.3g})")
+            if chosen is axle_fit:
+                alternative = sensor_fit if sensor_fit.identifiable else None
+        else:
+            choice = "sensor_pose: estimated, as asked"
+    else:
+        choice = ("axle: as asked" if primary is AXLE
+                  else "sensor_pose: at the given pose, as asked")
+        sensor_wheels, pose = sensor_pose_estimate(data, fallback)
+        candidate = fit(SENSOR_POSE, np.append(sensor_wheels.as_array(), pose.as_array()))
+        if candidate.identifiable:
+            alternative = candidate
+            lr = _likelihood_ratio(chosen, candidate, given is not None, loss)
+    forced = "" if sensor_pose in ("auto", "estimate") else (
+        "axle" if sensor_pose == "axle" else "pose")
+    test = _fit_test(chosen, alternative, lr, threshold, given, loss, forced)
+    return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
+                   len(seg) - len(data), sensor_pose if isinstance(sensor_pose, SensorPose)
+                   else None)
 
 
-def _result(seg: Segments, fit: _Fit, sigma_estimated: bool, loss: Loss,
-            max_relative_std: float) -> CalibrationResult:
-    p, info_rel = fit.ev.p, fit.system.information
+def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
+            max_relative_std: float, choice: str, test: FitTest, n_trimmed: int,
+            given_pose: SensorPose | None) -> CalibrationResult:
+    fit = mf.fit
+    theta, info_rel = fit.theta, fit.system.information
     lam, vec = np.linalg.eigh(info_rel)
     singular = np.sqrt(np.maximum(lam[::-1], 0.0))
     s_min = singular[-1]
     condition = singular[0] / s_min if s_min > 0 else float("inf")
-    covariance = inverse_information(info_rel) * np.outer(p, p)
+    scale = fit.ev.scale
+    full = inverse_information(info_rel) * np.outer(scale, scale)
     identifiable = bool(s_min > 0 and 1.0 / s_min <= max_relative_std)
     direction = vector = None
     if not identifiable:
         vector = vec[:, 0]
         direction = _describe_direction(vector, seg, fit.sigma)
+    params, pose = mf.model.split(theta)
+    pose_std = np.sqrt(np.diag(full)[3:6]) if mf.model is SENSOR_POSE else None
     raw = fit.ev.raw.T
     z = raw / fit.sigma
-    outliers = int(np.sum(np.sum(z * z, axis=1) > chi2.ppf(OUTLIER_QUANTILE, 3)))
+    outliers = int(np.sum(np.sum(z * z, axis=1) > chi2_quantile(OUTLIER_QUANTILE, 3)))
     return CalibrationResult(
-        params=Params.from_array(p),
-        covariance=covariance,
-        std=np.sqrt(np.diag(covariance)),
+        params=params,
+        covariance=full[:3, :3],
+        std=np.sqrt(np.diag(full)[:3]),
+        model="axle" if mf.model is AXLE else "sensor_pose",
+        sensor_pose=pose if given_pose is None else given_pose,
+        sensor_pose_std=pose_std,
+        parameter_names=mf.model.names,
+        full_covariance=full,
+        model_choice=choice,
+        fit=test,
         singular_values=singular,
         condition_number=float(condition),
         identifiable=identifiable,
@@ -443,6 +563,7 @@ def _result(seg: Segments, fit: _Fit, sigma_estimated: bool, loss: Loss,
         unidentifiable_vector=vector,
         n_segments=len(seg),
         n_outliers=outliers,
+        n_trimmed=n_trimmed,
         rms_residual=np.sqrt(np.mean(raw * raw, axis=0)),
         sigma=fit.sigma,
         sigma_estimated=sigma_estimated,

@@ -22,14 +22,15 @@ from numpy.typing import ArrayLike, NDArray
 from excite.kinematics import (
     Params,
     _as_params,
-    increment_jacobian,
     sinc_and_derivative,
     sinc_and_derivative_scalar,
 )
+from excite.models import AXLE, SegmentModel
 
 __all__ = [
     "Sigma",
     "as_sigma",
+    "as_theta",
     "scaled_jacobian",
     "segment_information",
     "information_matrix",
@@ -87,22 +88,30 @@ def _chord_coefficients(
             -c_L / b, c_R / b, -2.0 * c_b / b, 0.5 * c_L / sigma_xy, 0.5 * c_R / sigma_xy)
 
 
+def as_theta(params: Params | ArrayLike) -> FloatArray:
+    """Model parameters as a float array (..., P): Params gives (r_L, r_R, b)."""
+    return params.as_array() if isinstance(params, Params) else np.asarray(params, dtype=float)
+
+
 def scaled_jacobian(
     dphi_L: ArrayLike,
     dphi_R: ArrayLike,
     params: Params | ArrayLike,
     sigma: ArrayLike,
     scale: Params | ArrayLike | None = None,
+    model: SegmentModel = AXLE,
 ) -> FloatArray:
-    """Whitened, relatively scaled Jacobian of each segment, shape (N, 3, 3).
+    """Whitened, relatively scaled Jacobian of each segment, shape (N, 3, P).
 
-    params: where the Jacobian is evaluated. scale: the nominal values that multiply the
-    columns (default: params itself).
+    params: where the Jacobian is evaluated (Params, or the model's P parameters). scale: the
+    nominal parameters whose ``model.column_scale`` multiplies the columns (default: params
+    itself). model: the segment model (default the axle model).
     """
-    p = np.array(_as_params(params))
-    scale_arr = p if scale is None else np.array(_as_params(scale))
-    jac = increment_jacobian(dphi_L, dphi_R, p)
-    return jac / as_sigma(sigma)[:, None] * scale_arr[None, :]
+    theta = as_theta(params)
+    nominal = theta if scale is None else as_theta(scale)
+    phi_L, phi_R = _increments(dphi_L, dphi_R)
+    jac = model.jacobian(phi_L, phi_R, theta)
+    return jac / as_sigma(sigma)[:, None] * model.column_scale(nominal)[None, :]
 
 
 def _information_rows(
@@ -111,9 +120,13 @@ def _information_rows(
     params: Params | ArrayLike,
     sigma: ArrayLike,
     scale: Params | ArrayLike | None,
+    model: SegmentModel = AXLE,
 ) -> FloatArray:
-    """Rows R (3 parameters, 3 rows, N segments) with R[:, :, k] R[:, :, k]^T = J_k^T J_k,
+    """Rows R (P parameters, 3 rows, N segments) with R[:, :, k] R[:, :, k]^T = J_k^T J_k,
     J_k the whitened, relatively scaled Jacobian of segment k (:func:`scaled_jacobian`).
+
+    For the axle model with sigma_x == sigma_y a tested specialisation (below) halves the
+    work; every other case takes the model's Jacobian.
 
     With sigma_x == sigma_y the two position rows may be turned by any angle without changing
     J^T J; turned by -dtheta/2 (onto the chord of the arc) they need only sinc and sinc' of
@@ -122,12 +135,12 @@ def _information_rows(
     That is half the work of the Jacobian itself (the environment's hot path).
     """
     s = as_sigma(sigma)
-    p = _as_params(params)
-    scale = p if scale is None else _as_params(scale)
     phi = np.array(_increments(dphi_L, dphi_R))  # (2, N), a copy
     sigma_xy, sigma_y, sigma_theta = s.tolist()
-    if sigma_y != sigma_xy:
-        return scaled_jacobian(phi[0], phi[1], p, s, scale).transpose(2, 1, 0)
+    if sigma_y != sigma_xy or model is not AXLE:
+        return scaled_jacobian(phi[0], phi[1], params, s, scale, model).transpose(2, 1, 0)
+    p = _as_params(params)
+    scale = p if scale is None else _as_params(scale)
     v_L, v_R, w_L, w_R, h_L, h_R, h_v, e_L, e_R = _chord_coefficients(p, scale, sigma_xy)
     v, w = np.array([v_L, v_R, w_L, w_R]).reshape(2, 2) @ phi
     sinc, dsinc = sinc_and_derivative(v)
@@ -151,13 +164,15 @@ def segment_information(
     params: Params | ArrayLike,
     sigma: ArrayLike,
     scale: Params | ArrayLike | None = None,
+    model: SegmentModel = AXLE,
 ) -> FloatArray:
-    """Relative Fisher information J_k^T J_k of each segment on its own, shape (N, 3, 3).
+    """Relative Fisher information J_k^T J_k of each segment on its own, shape (N, P, P).
 
     dphi_L, dphi_R: wheel increments (rad), flattened to N segments. params: where J is
-    evaluated (m); scale: the column scale (default params).
+    evaluated (the model's parameters); scale: the nominal parameters of the column scale
+    (default params); model: the segment model (default the axle model).
     """
-    rows = _information_rows(dphi_L, dphi_R, params, sigma, scale)
+    rows = _information_rows(dphi_L, dphi_R, params, sigma, scale, model)
     return np.einsum("irn,jrn->nij", rows, rows)
 
 
@@ -167,8 +182,9 @@ def information_matrix(
     params: Params | ArrayLike,
     sigma: ArrayLike,
     scale: Params | ArrayLike | None = None,
+    model: SegmentModel = AXLE,
 ) -> FloatArray:
-    """F = sum_k J_k^T J_k of all segments, (3, 3): ``fisher_information(scaled_jacobian(...))``
+    """F = sum_k J_k^T J_k of all segments, (P, P): ``fisher_information(scaled_jacobian(...))``
     without forming the Jacobians (see :func:`segment_information` for the arguments).
 
     Up to ``_LOOP_MAX`` segments with sigma_x == sigma_y (the environment's step) F comes from
@@ -178,14 +194,15 @@ def information_matrix(
     s = as_sigma(sigma)
     sigma_x, sigma_y, sigma_theta = s.tolist()
     phi_L, phi_R = _increments(dphi_L, dphi_R)
-    if phi_L.size <= _LOOP_MAX and sigma_x == sigma_y:
+    if phi_L.size <= _LOOP_MAX and sigma_x == sigma_y and model is AXLE:
         left, right = phi_L.tolist(), phi_R.tolist()
         if math.isfinite(sum(left) + sum(right)):  # else as the rows: nan
             p = _as_params(params)
             coefficients = _chord_coefficients(p, p if scale is None else _as_params(scale),
                                                sigma_x)
             return _information_from_moments(left, right, coefficients, sigma_theta)
-    rows = _information_rows(phi_L, phi_R, params, s, scale).reshape(3, -1)
+    rows = _information_rows(phi_L, phi_R, params, s, scale, model)
+    rows = rows.reshape(rows.shape[0], -1)
     return rows @ rows.T
 
 
@@ -324,13 +341,13 @@ def _unit(a: tuple[float, float, float]) -> tuple[float, float, float]:
 
 
 def fisher_information(scaled_jac: ArrayLike) -> FloatArray:
-    """F = sum_k J_k^T J_k of scaled Jacobians shaped (..., N, 3, 3) -> (..., 3, 3)."""
+    """F = sum_k J_k^T J_k of scaled Jacobians shaped (..., N, 3, P) -> (..., P, P)."""
     j = np.asarray(scaled_jac, dtype=float)
     return np.einsum("...nki,...nkj->...ij", j, j)
 
 
 def sigma_min(information: ArrayLike) -> FloatArray | float:
-    """sqrt of the smallest eigenvalue of F (clipped at 0); works on stacks (..., 3, 3)."""
+    """sqrt of the smallest eigenvalue of F (clipped at 0); works on stacks (..., P, P)."""
     lam = np.linalg.eigvalsh(np.asarray(information, dtype=float))[..., 0]
     out = np.sqrt(np.maximum(lam, 0.0))
     return float(out) if out.ndim == 0 else out

@@ -27,9 +27,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "Arc",
     "Params",
     "predict_increment",
-    "increment_jacobian",
     "sinc_family",
     "sinc_and_derivative",
     "sinc_and_derivative_scalar",
@@ -232,6 +232,42 @@ def _as_params(params: Params | ArrayLike) -> tuple[float, float, float]:
     return float(r_L), float(r_R), float(b)
 
 
+class Arc:
+    """The constant-curvature arc of a batch of segments and, on request, its derivatives by
+    (r_L, r_R, b): the one derivation of the lesson's model (section 5) that every other
+    model builds on.
+
+    Arrays broadcast over the leading axes of the wheel increments and parameters:
+    ds, dtheta, f = sinc(dtheta), g = cosc(dtheta) (and fp, gp their derivatives);
+    dx = ds * f, dy = ds * g. ``d_ds`` and ``d_dtheta`` are the gradients of ds (m per m) and
+    dtheta (rad per m) by (r_L, r_R, b), as tuples of three arrays.
+    """
+
+    __slots__ = ("ds", "dtheta", "f", "g", "fp", "gp", "dx", "dy", "d_ds", "d_dtheta")
+
+    def __init__(self, phi_L: FloatArray, phi_R: FloatArray, r_L, r_R, b,
+                 derivatives: bool = True):
+        s_L, s_R = r_L * phi_L, r_R * phi_R
+        self.ds = 0.5 * (s_L + s_R)
+        self.dtheta = (s_R - s_L) / b
+        if derivatives:
+            self.f, self.g, self.fp, self.gp = sinc_family(self.dtheta)
+            inv_b = 1.0 / b
+            self.d_ds = (0.5 * phi_L, 0.5 * phi_R, 0.0)
+            self.d_dtheta = (-phi_L * inv_b, phi_R * inv_b, -self.dtheta * inv_b)
+        else:
+            self.f, self.g = sinc_family(self.dtheta, derivatives=False)
+        self.dx, self.dy = self.ds * self.f, self.ds * self.g
+
+    def position_derivatives(self) -> tuple[tuple, tuple]:
+        """d(dx)/d(r_L, r_R, b) and d(dy)/d(r_L, r_R, b) (m per m), by the chain rule
+        through ds and dtheta."""
+        ex, ey = self.ds * self.fp, self.ds * self.gp
+        d_dx = tuple(a * self.f + ex * t for a, t in zip(self.d_ds, self.d_dtheta, strict=True))
+        d_dy = tuple(a * self.g + ey * t for a, t in zip(self.d_ds, self.d_dtheta, strict=True))
+        return d_dx, d_dy
+
+
 def predict_increment(
     dphi_L: ArrayLike, dphi_R: ArrayLike, params: Params | ArrayLike
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -241,37 +277,6 @@ def predict_increment(
     params: Params or array-like (r_L, r_R, b) in meters.
     """
     r_L, r_R, b = _as_params(params)
-    s_L = r_L * np.asarray(dphi_L, dtype=float)
-    s_R = r_R * np.asarray(dphi_R, dtype=float)
-    ds = 0.5 * (s_R + s_L)
-    dtheta = (s_R - s_L) / b
-    f, g = sinc_family(dtheta, derivatives=False)
-    return ds * f, ds * g, dtheta
-
-
-def increment_jacobian(
-    dphi_L: ArrayLike, dphi_R: ArrayLike, params: Params | ArrayLike
-) -> FloatArray:
-    """Jacobian d(dx, dy, dtheta)/d(r_L, r_R, b) of each segment, shape (N, 3, 3).
-
-    Rows: dx, dy, dtheta. Columns: r_L, r_R, b. Units: m/m for the position rows,
-    rad/m for the heading row.
-    """
-    r_L, r_R, b = _as_params(params)
-    phi_L, phi_R = np.broadcast_arrays(np.atleast_1d(np.asarray(dphi_L, dtype=float)),
-                                       np.atleast_1d(np.asarray(dphi_R, dtype=float)))
-    ds = 0.5 * (r_L * phi_L + r_R * phi_R)
-    dtheta = (r_R * phi_R - r_L * phi_L) / b
-    f, g, fp, gp = sinc_family(dtheta)
-    jac = np.empty(phi_L.shape + (3, 3))
-    # Heading row: d(dtheta)/d(r_L, r_R, b); ds depends on the radii only: (phi_L, phi_R)/2.
-    th_L, th_R, th_b = jac[..., 2, 0], jac[..., 2, 1], jac[..., 2, 2]
-    np.multiply(phi_L, -1.0 / b, out=th_L)
-    np.multiply(phi_R, 1.0 / b, out=th_R)
-    np.multiply(dtheta, -1.0 / b, out=th_b)
-    for row, shape, shape_prime in ((0, f, fp), (1, g, gp)):
-        e = ds * shape_prime  # chain rule through dtheta
-        jac[..., row, 0] = 0.5 * phi_L * shape + e * th_L
-        jac[..., row, 1] = 0.5 * phi_R * shape + e * th_R
-        jac[..., row, 2] = e * th_b
-    return jac
+    arc = Arc(np.asarray(dphi_L, dtype=float), np.asarray(dphi_R, dtype=float), r_L, r_R, b,
+              derivatives=False)
+    return arc.dx, arc.dy, arc.dtheta

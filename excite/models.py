@@ -1,0 +1,277 @@
+"""Segment models: what a motion segment's measured increment is, as a function of the
+parameters. The single place where prediction, analytic Jacobian, parameter names, units,
+estimation transforms and information scales live; calibration, online estimation, the
+information measures and the planners take a model.
+
+Two models (DESIGN.md, "Sensor pose"):
+
+* :data:`AXLE` (``"axle"``, 3 parameters r_L, r_R, b in m): the external sensor measures the
+  body frame's own motion, the lesson's arc o = (dx, dy, dtheta).
+* :data:`SENSOR_POSE` (``"sensor_pose"``, 6 parameters r_L, r_R, b, l_x, l_y [m],
+  l_theta [rad]): the sensor is mounted at l = (l_x, l_y, l_theta) in the body frame and
+  measures its own motion in its own frame at the segment's start,
+  s = (-l) (+) o (+) l, i.e. s_xy = R(-l_theta) (o_xy + (R(dtheta) - I) l_xy), s_theta = dtheta
+  (Censi et al., T-RO 2013). With l = 0 it is the axle model.
+
+:class:`FixedSensorPoseModel` is the 3-parameter model of a sensor at a known pose.
+
+Arrays are batch-first: parameters theta (..., P), wheel increments (..., N); ``predict``
+gives (..., N, 3) and ``jacobian`` (..., N, 3, P). ``evaluate`` is the kernel, channel-major:
+predictions (3, ..., N) and derivatives (3, P, ..., N), the layout solvers want.
+
+Estimation transforms (how each parameter is stepped, and what "relative" means):
+``log`` for lengths that are positive (r_L, r_R, b), ``identity`` for offsets (l_x, l_y: may
+be 0; measured in units of a length scale, the nominal b), ``angle`` for l_theta (wrapped to
+(-pi, pi]). ``column_scale`` gives the factors that make the Jacobian relative (DESIGN.md):
+the value itself for ``log`` parameters, the nominal b for offsets, 1 rad for angles.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from excite.kinematics import Arc, Params, wrap_angle
+
+__all__ = [
+    "AXLE",
+    "SENSOR_POSE",
+    "AxleModel",
+    "FixedSensorPoseModel",
+    "SegmentModel",
+    "SensorPose",
+    "SensorPoseModel",
+    "increment_jacobian",
+    "sensor_to_body",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class SensorPose:
+    """Pose of the external pose sensor in the body frame: x forward, y left (m), theta
+    counter-clockwise (rad, wrapped to (-pi, pi])."""
+
+    x: float
+    y: float
+    theta: float
+
+    def __post_init__(self) -> None:
+        values = float(self.x), float(self.y), float(self.theta)
+        if not all(map(math.isfinite, values)):
+            raise ValueError(f"sensor pose must be finite (x, y in m, theta in rad), got {values}")
+        object.__setattr__(self, "x", values[0])
+        object.__setattr__(self, "y", values[1])
+        object.__setattr__(self, "theta", float(wrap_angle(values[2])))
+
+    def as_array(self) -> FloatArray:
+        return np.array([self.x, self.y, self.theta])
+
+
+class SegmentModel(ABC):
+    """A model of one segment's measured increment (dx, dy, dtheta) given the wheel
+    increments and P parameters theta (see the module doc for shapes and transforms)."""
+
+    name: str
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    transforms: tuple[str, ...]
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+    @abstractmethod
+    def evaluate(self, dphi_L: ArrayLike, dphi_R: ArrayLike, theta: ArrayLike,
+                 jacobian: bool = True) -> tuple[FloatArray, FloatArray | None]:
+        """Predictions (3, ..., N) and, if asked, derivatives (3, P, ..., N) by theta."""
+
+    def predict(self, dphi_L: ArrayLike, dphi_R: ArrayLike, theta: ArrayLike) -> FloatArray:
+        """Predicted measured increments (..., N, 3): dx, dy (m), dtheta (rad)."""
+        prediction, _ = self.evaluate(dphi_L, dphi_R, theta, jacobian=False)
+        return np.moveaxis(prediction, 0, -1)
+
+    def jacobian(self, dphi_L: ArrayLike, dphi_R: ArrayLike, theta: ArrayLike) -> FloatArray:
+        """d(dx, dy, dtheta)/d theta of each segment, (..., N, 3, P) in the parameters' units."""
+        _, jac = self.evaluate(dphi_L, dphi_R, theta)
+        return np.moveaxis(jac, (0, 1), (-2, -1))
+
+    def column_scale(self, nominal: ArrayLike) -> FloatArray:
+        """Factors (..., P) that make Jacobian columns relative at ``nominal`` (DESIGN.md):
+        the value for log parameters, the nominal b for offsets, 1 rad for angles."""
+        nominal = np.asarray(nominal, dtype=float)
+        b = nominal[..., 2:3]
+        columns = []
+        for i, transform in enumerate(self.transforms):
+            if transform == "log":
+                columns.append(nominal[..., i:i + 1])
+            elif transform == "identity":
+                columns.append(b)
+            else:
+                columns.append(np.ones_like(b))
+        return np.concatenate(columns, axis=-1)
+
+    def step(self, theta: ArrayLike, delta: ArrayLike, scale: ArrayLike) -> FloatArray:
+        """theta moved by ``delta`` in relative units: log parameters multiplied by exp(delta),
+        offsets moved by delta * scale, angles by delta (then wrapped)."""
+        theta, delta = np.asarray(theta, dtype=float), np.asarray(delta, dtype=float)
+        scale = np.asarray(scale, dtype=float)
+        out = np.empty(np.broadcast_shapes(theta.shape, delta.shape))
+        for i, transform in enumerate(self.transforms):
+            if transform == "log":
+                out[..., i] = theta[..., i] * np.exp(delta[..., i])
+            elif transform == "identity":
+                out[..., i] = theta[..., i] + delta[..., i] * scale[..., i]
+            else:
+                out[..., i] = wrap_angle(theta[..., i] + delta[..., i])
+        return out
+
+    def split(self, theta: ArrayLike) -> tuple[Params, SensorPose | None]:
+        """The wheel parameters and the sensor pose (None for the axle model) of theta (P,)."""
+        theta = np.asarray(theta, dtype=float).reshape(-1)
+        return Params(*theta[:3]), None
+
+
+def _broadcast_increments(dphi_L: ArrayLike, dphi_R: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    phi_L = np.asarray(dphi_L, dtype=float)
+    phi_R = np.asarray(dphi_R, dtype=float)
+    return np.broadcast_arrays(phi_L, phi_R) if phi_L.shape != phi_R.shape else (phi_L, phi_R)
+
+
+def _parameter(theta: FloatArray, i: int) -> FloatArray | float:
+    """Parameter i of theta (..., P), shaped to broadcast with increments (..., N)."""
+    return float(theta[i]) if theta.ndim == 1 else theta[..., i, None]
+
+
+class AxleModel(SegmentModel):
+    """The lesson's model: the sensor measures the axle midpoint's arc (3 parameters)."""
+
+    name = "axle"
+    names = ("r_L", "r_R", "b")
+    units = ("m", "m", "m")
+    transforms = ("log", "log", "log")
+
+    def evaluate(self, dphi_L, dphi_R, theta, jacobian=True):
+        phi_L, phi_R = _broadcast_increments(dphi_L, dphi_R)
+        theta = np.asarray(theta, dtype=float)
+        arc = Arc(phi_L, phi_R, *(_parameter(theta, i) for i in range(3)),
+                  derivatives=jacobian)
+        shape = np.broadcast_shapes(phi_L.shape, theta.shape[:-1] + (1,) * (phi_L.ndim > 0))
+        prediction = np.empty((3,) + shape)
+        prediction[0], prediction[1], prediction[2] = arc.dx, arc.dy, arc.dtheta
+        if not jacobian:
+            return prediction, None
+        jac = np.empty((3, 3) + shape)
+        (jac[0, 0], jac[0, 1], jac[0, 2]), (jac[1, 0], jac[1, 1], jac[1, 2]) = (
+            arc.position_derivatives())
+        jac[2, 0], jac[2, 1], jac[2, 2] = arc.d_dtheta
+        return prediction, jac
+
+
+class SensorPoseModel(SegmentModel):
+    """Sensor at l = (l_x, l_y, l_theta) in the body frame, estimated with the wheels
+    (6 parameters): s_xy = R(-l_theta) (o_xy + (R(dtheta) - I) l_xy), s_theta = dtheta."""
+
+    name = "sensor_pose"
+    names = ("r_L", "r_R", "b", "l_x", "l_y", "l_theta")
+    units = ("m", "m", "m", "m", "m", "rad")
+    transforms = ("log", "log", "log", "identity", "identity", "angle")
+
+    def evaluate(self, dphi_L, dphi_R, theta, jacobian=True):
+        theta = np.asarray(theta, dtype=float)
+        body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta[..., :3], jacobian)
+        return _to_sensor(body, body_jac, theta[..., 3:], theta.ndim == 1)
+
+    def split(self, theta):
+        theta = np.asarray(theta, dtype=float).reshape(-1)
+        return Params(*theta[:3]), SensorPose(*theta[3:6])
+
+
+class FixedSensorPoseModel(SegmentModel):
+    """The sensor-pose model with the sensor at a known pose: 3 parameters r_L, r_R, b."""
+
+    name = "fixed_sensor_pose"
+    names = AxleModel.names
+    units = AxleModel.units
+    transforms = AxleModel.transforms
+
+    def __init__(self, pose: SensorPose):
+        self.pose = pose
+
+    def evaluate(self, dphi_L, dphi_R, theta, jacobian=True):
+        theta = np.asarray(theta, dtype=float)
+        body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta, jacobian)
+        prediction, jac = _to_sensor(body, body_jac, self.pose.as_array(), True)
+        return prediction, (None if jac is None else jac[:, :3])
+
+    def split(self, theta):
+        return Params(*np.asarray(theta, dtype=float).reshape(-1)[:3]), self.pose
+
+
+def _to_sensor(body: FloatArray, body_jac: FloatArray | None, pose: FloatArray,
+               single: bool) -> tuple[FloatArray, FloatArray | None]:
+    """The sensor's increment from the body's (3, ..., N) and its derivatives (3, 3, ..., N),
+    for a sensor pose (..., 3); derivatives by (r_L, r_R, b, l_x, l_y, l_theta)."""
+    if single:
+        l_x, l_y, l_t = (float(v) for v in pose)
+    else:
+        l_x, l_y, l_t = (pose[..., i, None] for i in range(3))
+    o_x, o_y, th = body
+    sin_th, cos_m1 = np.sin(th), -2.0 * np.sin(0.5 * th) ** 2  # cos - 1 without cancellation
+    u_x = o_x + cos_m1 * l_x - sin_th * l_y
+    u_y = o_y + sin_th * l_x + cos_m1 * l_y
+    c, s = np.cos(l_t), np.sin(l_t)
+    prediction = np.empty_like(body, shape=(3,) + np.broadcast_shapes(u_x.shape, np.shape(c)))
+    prediction[0] = c * u_x + s * u_y
+    prediction[1] = c * u_y - s * u_x
+    prediction[2] = th
+    if body_jac is None:
+        return prediction, None
+    jac = np.empty((3, 6) + prediction.shape[1:])
+    # d u / d(dtheta) = dR/d(dtheta) l_xy, turned with the heading derivative of each wheel
+    # parameter; then R(-l_theta) of everything that moves u.
+    rot_x = -sin_th * l_x - (1.0 + cos_m1) * l_y
+    rot_y = (1.0 + cos_m1) * l_x - sin_th * l_y
+    for k in range(3):
+        du_x = body_jac[0, k] + rot_x * body_jac[2, k]
+        du_y = body_jac[1, k] + rot_y * body_jac[2, k]
+        jac[0, k] = c * du_x + s * du_y
+        jac[1, k] = c * du_y - s * du_x
+        jac[2, k] = body_jac[2, k]
+    jac[0, 3], jac[1, 3] = c * cos_m1 + s * sin_th, c * sin_th - s * cos_m1  # by l_x
+    jac[0, 4], jac[1, 4] = s * cos_m1 - c * sin_th, c * cos_m1 + s * sin_th  # by l_y
+    jac[0, 5], jac[1, 5] = prediction[1], -prediction[0]  # by l_theta
+    jac[2, 3:] = 0.0
+    return prediction, jac
+
+
+AXLE = AxleModel()
+SENSOR_POSE = SensorPoseModel()
+
+
+def increment_jacobian(dphi_L: ArrayLike, dphi_R: ArrayLike,
+                       params: Params | ArrayLike) -> FloatArray:
+    """Jacobian d(dx, dy, dtheta)/d(r_L, r_R, b) of each segment, shape (N, 3, 3) (the axle
+    model's). Rows: dx, dy, dtheta. Columns: r_L, r_R, b. Units: m/m for the position rows,
+    rad/m for the heading row."""
+    theta = params.as_array() if isinstance(params, Params) else np.asarray(params, float)
+    return AXLE.jacobian(np.atleast_1d(np.asarray(dphi_L, dtype=float)),
+                         np.atleast_1d(np.asarray(dphi_R, dtype=float)), theta.reshape(3))
+
+
+def sensor_to_body(measured: ArrayLike, pose: SensorPose) -> FloatArray:
+    """The body's increments o (N, 3) from the sensor's s (N, 3) for a known sensor pose:
+    o = l (+) s (+) (-l), the inverse of the sensor-pose model's transform."""
+    s = np.asarray(measured, dtype=float)
+    l_x, l_y, l_t = pose.as_array()
+    c, si = math.cos(l_t), math.sin(l_t)
+    th = s[:, 2]
+    # l (+) s: position l_xy + R(l_t) s_xy; then (+) (-l): minus R(th) l_xy.
+    x = l_x + c * s[:, 0] - si * s[:, 1] - (np.cos(th) * l_x - np.sin(th) * l_y)
+    y = l_y + si * s[:, 0] + c * s[:, 1] - (np.sin(th) * l_x + np.cos(th) * l_y)
+    return np.column_stack([x, y, th])

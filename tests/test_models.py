@@ -1,0 +1,135 @@
+"""The segment models: analytic Jacobians against finite differences over the whole domain,
+the sensor-pose model against SE(2) composition, and the axle model as its l = 0 case."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from excite.kinematics import Params, predict_increment
+from excite.models import (
+    AXLE,
+    SENSOR_POSE,
+    FixedSensorPoseModel,
+    SensorPose,
+    increment_jacobian,
+    sensor_to_body,
+)
+
+from .conftest import TRUTH
+
+
+def compose(a, b):
+    """SE(2) composition a (+) b of (x, y, theta) rows."""
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    return np.stack([a[..., 0] + c * b[..., 0] - s * b[..., 1],
+                     a[..., 1] + s * b[..., 0] + c * b[..., 1], a[..., 2] + b[..., 2]], axis=-1)
+
+
+def inverse(a):
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    return np.stack([-c * a[..., 0] - s * a[..., 1], s * a[..., 0] - c * a[..., 1], -a[..., 2]],
+                    axis=-1)
+
+
+lengths = st.floats(0.01, 1.0)
+wheel = st.one_of(st.floats(-60.0, 60.0), st.floats(-1e-6, 1e-6), st.just(0.0))
+offset = st.floats(-0.5, 0.5)
+angle = st.floats(-math.pi, math.pi, exclude_min=True)
+
+
+def central_difference(model, phi_L, phi_R, theta, i, h):
+    up, down = theta.copy(), theta.copy()
+    up[i] += h
+    down[i] -= h
+    return (model.predict(phi_L, phi_R, up) - model.predict(phi_L, phi_R, down)) / (2 * h)
+
+
+@settings(max_examples=300, deadline=None)
+@given(r_L=lengths, r_R=lengths, b=lengths, phi_L=wheel, phi_R=wheel, l_x=offset, l_y=offset,
+       l_t=angle)
+def test_sensor_pose_jacobian_equals_finite_differences(r_L, r_R, b, phi_L, phi_R, l_x, l_y,
+                                                        l_t):
+    theta = np.array([r_L, r_R, b, l_x, l_y, l_t])
+    phi_L, phi_R = np.array([phi_L]), np.array([phi_R])
+    jac = SENSOR_POSE.jacobian(phi_L, phi_R, theta)[0]
+    for i in range(6):
+        h = 1e-6 * max(abs(theta[i]), 0.05)
+        numeric = central_difference(SENSOR_POSE, phi_L, phi_R, theta, i, h)[0]
+        # Central differences: error ~ h^2 * third derivative, plus rounding ~ eps * |s| / h.
+        size = np.abs(SENSOR_POSE.predict(phi_L, phi_R, theta)[0]).max() + 1.0
+        scale = max(abs(theta[i]), 0.05)
+        tol = 1e-6 * size * (1.0 + (np.abs(phi_L) + np.abs(phi_R)).max() * max(r_L, r_R) / b) ** 3
+        np.testing.assert_allclose(jac[:, i] * scale, numeric * scale, atol=tol, rtol=1e-5)
+
+
+@settings(max_examples=200, deadline=None)
+@given(r_L=lengths, r_R=lengths, b=lengths, phi_L=wheel, phi_R=wheel, l_x=offset, l_y=offset,
+       l_t=angle)
+def test_sensor_pose_prediction_is_se2_conjugation(r_L, r_R, b, phi_L, phi_R, l_x, l_y, l_t):
+    o = np.array(predict_increment(phi_L, phi_R, Params(r_L, r_R, b)), dtype=float)
+    l_pose = np.array([l_x, l_y, l_t])
+    expected = compose(compose(inverse(l_pose), o), l_pose)
+    got = SENSOR_POSE.predict(np.array([phi_L]), np.array([phi_R]),
+                              np.array([r_L, r_R, b, l_x, l_y, l_t]))[0]
+    np.testing.assert_allclose(got, expected, atol=1e-12 * (1 + np.abs(o).max()))
+    back = sensor_to_body(got[None, :], SensorPose(l_x, l_y, l_t))[0]
+    np.testing.assert_allclose(back, o, atol=1e-11 * (1 + np.abs(o).max()))
+
+
+@settings(max_examples=100, deadline=None)
+@given(r_L=lengths, r_R=lengths, b=lengths, phi_L=wheel, phi_R=wheel)
+def test_sensor_pose_model_at_zero_is_the_axle_model(r_L, r_R, b, phi_L, phi_R):
+    phi_L, phi_R = np.array([phi_L]), np.array([phi_R])
+    p = np.array([r_L, r_R, b])
+    axle = AXLE.jacobian(phi_L, phi_R, p)
+    sensor = SENSOR_POSE.jacobian(phi_L, phi_R, np.append(p, [0.0, 0.0, 0.0]))
+    np.testing.assert_allclose(sensor[..., :3], axle, rtol=1e-13, atol=1e-300)
+    np.testing.assert_allclose(SENSOR_POSE.predict(phi_L, phi_R, np.append(p, [0, 0, 0])),
+                               AXLE.predict(phi_L, phi_R, p), rtol=1e-13, atol=1e-300)
+
+
+def test_axle_jacobian_is_the_public_increment_jacobian(rng):
+    phi_L, phi_R = rng.normal(0, 5, 50), rng.normal(0, 5, 50)
+    np.testing.assert_array_equal(increment_jacobian(phi_L, phi_R, TRUTH),
+                                  AXLE.jacobian(phi_L, phi_R, TRUTH.as_array()))
+
+
+def test_fixed_sensor_pose_model_is_the_first_three_columns(rng):
+    pose = SensorPose(0.05, -0.03, 1.8)
+    phi_L, phi_R = rng.normal(0, 5, 20), rng.normal(0, 5, 20)
+    full = np.append(TRUTH.as_array(), pose.as_array())
+    fixed = FixedSensorPoseModel(pose)
+    np.testing.assert_array_equal(fixed.jacobian(phi_L, phi_R, TRUTH.as_array()),
+                                  SENSOR_POSE.jacobian(phi_L, phi_R, full)[..., :3])
+    assert fixed.split(TRUTH.as_array()) == (TRUTH, pose)
+
+
+def test_models_are_batch_first(rng):
+    """theta (B, P) with increments (B, N): robot b's rows equal the single-robot call."""
+    thetas = np.column_stack([rng.uniform(0.04, 0.06, (4, 2)), rng.uniform(0.2, 0.4, 4),
+                              rng.uniform(-0.1, 0.1, (4, 2)), rng.uniform(-3, 3, 4)])
+    phi_L, phi_R = rng.normal(0, 8, (4, 7)), rng.normal(0, 8, (4, 7))
+    batch = SENSOR_POSE.jacobian(phi_L, phi_R, thetas)
+    assert batch.shape == (4, 7, 3, 6)
+    for i in range(4):
+        np.testing.assert_allclose(batch[i], SENSOR_POSE.jacobian(phi_L[i], phi_R[i], thetas[i]),
+                                   rtol=1e-14, atol=1e-300)
+    assert AXLE.predict(phi_L, phi_R, thetas[:, :3]).shape == (4, 7, 3)
+
+
+def test_column_scale_and_step_follow_the_transforms():
+    theta = np.array([0.05, 0.051, 0.3, 0.0, -0.02, 3.1])
+    scale = SENSOR_POSE.column_scale(theta)
+    np.testing.assert_array_equal(scale, [0.05, 0.051, 0.3, 0.3, 0.3, 1.0])
+    moved = SENSOR_POSE.step(theta, np.array([0.1, 0, 0, 0.1, 0, 0.1]), scale)
+    np.testing.assert_allclose(moved[:5], [0.05 * math.exp(0.1), 0.051, 0.3, 0.03, -0.02])
+    assert moved[5] == pytest.approx(3.2 - 2 * math.pi)  # wrapped
+
+
+def test_sensor_pose_rejects_non_finite_values():
+    with pytest.raises(ValueError, match="finite"):
+        SensorPose(0.0, float("nan"), 0.0)
+    assert SensorPose(0, 0, 3 * math.pi).theta == pytest.approx(math.pi)
