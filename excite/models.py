@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from excite.kinematics import Arc, Params, wrap_angle
+from excite.kinematics import Arc, Params, sinc_cosc_scalar, wrap_angle
 
 __all__ = [
     "AXLE",
@@ -90,6 +90,14 @@ class SegmentModel(ABC):
     def evaluate(self, dphi_L: ArrayLike, dphi_R: ArrayLike, theta: ArrayLike,
                  jacobian: bool = True) -> tuple[FloatArray, FloatArray | None]:
         """Predictions (3, ..., N) and, if asked, derivatives (3, P, ..., N) by theta."""
+
+    @abstractmethod
+    def evaluate_scalar(self, dphi_L: float, dphi_R: float,
+                        theta: tuple[float, ...]) -> tuple[tuple[float, float, float],
+                                                          tuple[tuple[float, ...], ...]]:
+        """One segment in pure Python (the online filter's hot path, microseconds): the
+        prediction (dx, dy, dtheta) and the three Jacobian rows (each P floats); the same
+        numbers as :meth:`evaluate` (tested)."""
 
     def predict(self, dphi_L: ArrayLike, dphi_R: ArrayLike, theta: ArrayLike) -> FloatArray:
         """Predicted measured increments (..., N, 3): dx, dy (m), dtheta (rad)."""
@@ -172,6 +180,18 @@ class AxleModel(SegmentModel):
         jac[2, 0], jac[2, 1], jac[2, 2] = arc.d_dtheta
         return prediction, jac
 
+    def evaluate_scalar(self, dphi_L, dphi_R, theta):
+        r_L, r_R, b = theta[0], theta[1], theta[2]
+        s_L, s_R = r_L * dphi_L, r_R * dphi_R
+        ds, th = 0.5 * (s_L + s_R), (s_R - s_L) / b
+        f, g, fp, gp = sinc_cosc_scalar(th)
+        t = (-dphi_L / b, dphi_R / b, -th / b)
+        a = (0.5 * dphi_L, 0.5 * dphi_R, 0.0)
+        kf, kg = ds * fp, ds * gp
+        return ((ds * f, ds * g, th),
+                (tuple(a[i] * f + kf * t[i] for i in range(3)),
+                 tuple(a[i] * g + kg * t[i] for i in range(3)), t))
+
 
 class SensorPoseModel(SegmentModel):
     """Sensor at l = (l_x, l_y, l_theta) in the body frame, estimated with the wheels
@@ -186,6 +206,10 @@ class SensorPoseModel(SegmentModel):
         theta = np.asarray(theta, dtype=float)
         body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta[..., :3], jacobian)
         return _to_sensor(body, body_jac, theta[..., 3:], theta.ndim == 1)
+
+    def evaluate_scalar(self, dphi_L, dphi_R, theta):
+        body, body_jac = AXLE.evaluate_scalar(dphi_L, dphi_R, theta)
+        return _to_sensor_scalar(body, body_jac, theta[3], theta[4], theta[5])
 
     def split(self, theta):
         theta = np.asarray(theta, dtype=float).reshape(-1)
@@ -208,6 +232,12 @@ class FixedSensorPoseModel(SegmentModel):
         body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta, jacobian)
         prediction, jac = _to_sensor(body, body_jac, self.pose.as_array(), True)
         return prediction, (None if jac is None else jac[:, :3])
+
+    def evaluate_scalar(self, dphi_L, dphi_R, theta):
+        body, body_jac = AXLE.evaluate_scalar(dphi_L, dphi_R, theta)
+        prediction, rows = _to_sensor_scalar(body, body_jac, self.pose.x, self.pose.y,
+                                             self.pose.theta)
+        return prediction, tuple(row[:3] for row in rows)
 
     def split(self, theta):
         return Params(*np.asarray(theta, dtype=float).reshape(-1)[:3]), self.pose
@@ -248,6 +278,29 @@ def _to_sensor(body: FloatArray, body_jac: FloatArray | None, pose: FloatArray,
     jac[0, 5], jac[1, 5] = prediction[1], -prediction[0]  # by l_theta
     jac[2, 3:] = 0.0
     return prediction, jac
+
+
+def _to_sensor_scalar(body: tuple[float, float, float], body_jac: tuple[tuple[float, ...], ...],
+                      l_x: float, l_y: float, l_t: float):
+    """:func:`_to_sensor` of one segment in pure Python."""
+    o_x, o_y, th = body
+    half = math.sin(0.5 * th)
+    sin_th, cos_m1 = math.sin(th), -2.0 * half * half
+    u_x = o_x + cos_m1 * l_x - sin_th * l_y
+    u_y = o_y + sin_th * l_x + cos_m1 * l_y
+    c, s = math.cos(l_t), math.sin(l_t)
+    s_x, s_y = c * u_x + s * u_y, c * u_y - s * u_x
+    rot_x = -sin_th * l_x - (1.0 + cos_m1) * l_y
+    rot_y = (1.0 + cos_m1) * l_x - sin_th * l_y
+    jx, jy, jt = body_jac
+    row_x, row_y = [], []
+    for k in range(3):
+        du_x, du_y = jx[k] + rot_x * jt[k], jy[k] + rot_y * jt[k]
+        row_x.append(c * du_x + s * du_y)
+        row_y.append(c * du_y - s * du_x)
+    row_x += (c * cos_m1 + s * sin_th, s * cos_m1 - c * sin_th, s_y)
+    row_y += (c * sin_th - s * cos_m1, c * cos_m1 + s * sin_th, -s_x)
+    return (s_x, s_y, th), (tuple(row_x), tuple(row_y), (jt[0], jt[1], jt[2], 0.0, 0.0, 0.0))
 
 
 AXLE = AxleModel()

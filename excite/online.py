@@ -1,7 +1,9 @@
-"""Online estimation of (r_L, r_R, b): an iterated extended information filter.
+"""Online estimation of a segment model's parameters: an iterated extended information filter.
 
 Each segment updates the estimate and its information matrix at constant cost (pure-Python
-3x3 arithmetic: microseconds, independent of how many segments came before).
+P x P arithmetic: microseconds, independent of how many segments came before). The axle model
+(r_L, r_R, b) has an unrolled 3x3 update (the environment's hot path), a tested
+specialisation of the general update that serves every other model (the sensor-pose model).
 
 The filter runs on log-parameters q = log p. The heading change is invariant under a common
 scale of (r_L, r_R, b); in q that invariant direction is (1, 1, 1) wherever the estimate is,
@@ -16,14 +18,28 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from excite.information import DEFAULT_SIGMA, as_sigma, inverse_information, sigma_min
+from excite.information import (
+    DEFAULT_SIGMA,
+    as_sigma,
+    as_theta,
+    inverse_information,
+    sigma_min,
+)
 from excite.kinematics import Params, sinc_cosc_scalar
+from excite.models import AXLE, SegmentModel, SensorPose
 
 __all__ = ["OnlineEstimator"]
 
 _TWO_PI = 2.0 * math.pi
-#: Trust region: one segment may change no parameter by more than a factor exp(0.5).
+#: Trust region: one segment may change no parameter by more than a factor exp(0.5) (or an
+#: offset by 0.5 b, an angle by 0.5 rad).
 _MAX_LOG_STEP = 0.5
+#: A second Gauss–Newton iteration is taken only after a first step larger than this (in the
+#: chart's units): smaller steps change the linearization by far less than the posterior std.
+_RELINEARIZE = 1e-3
+#: Default prior std, relative to the chart (module doc of excite.models): 10% of a length,
+#: 0.1 b for an offset, 0.5 rad for an angle.
+DEFAULT_PRIOR = {"log": 0.1, "identity": 0.1, "angle": 0.5}
 
 
 def _wrap(a: float) -> float:
@@ -43,22 +59,29 @@ def _solve3(m00: float, m01: float, m02: float, m11: float, m12: float, m22: flo
 
 
 class OnlineEstimator:
-    """Recursive estimate of p = (r_L, r_R, b) from one segment at a time.
+    """Recursive estimate of a segment model's parameters (default: the axle model's
+    p = (r_L, r_R, b)) from one segment at a time.
 
     Information form with an iterated update (Gauss–Newton on each new segment, the past
-    summarised by the current estimate and its information matrix) in log-parameters: after
-    the last segment it agrees with :func:`excite.calibrate` on the same data to a small
-    fraction of a standard deviation.
+    summarised by the current estimate and its information matrix) in the model's chart:
+    log-parameters for lengths (the heading is invariant under a common scale of (r_L, r_R,
+    b), and in log-parameters that direction is (1, 1, 1) wherever the estimate is, so the
+    precise heading information gathered at rough early estimates does not leak into the
+    scale), offsets in units of the nominal b, angles in rad. After the last segment it agrees
+    with :func:`excite.calibrate` on the same data to a small fraction of a standard deviation.
 
-    initial: the nominal robot, the prior mean (Params or (r_L, r_R, b) in m).
-    prior_std: prior standard deviation (m): a scalar for all three parameters or three
-        values; None means 10% of ``initial``.
+    initial: the nominal robot, the prior mean: Params or the model's P parameters
+        ((r_L, r_R, b) in m, then l_x, l_y [m], l_theta [rad] for the sensor-pose model).
+    prior_std: prior standard deviation in the parameters' units: a scalar for all or P
+        values; None means 10% of each length, 0.1 b for offsets and 0.5 rad for angles.
     sigma: measurement noise (sigma_x [m], sigma_y [m], sigma_theta [rad]).
     iterations: Gauss–Newton iterations per update (1 = extended information filter).
+    model: the segment model (default :data:`excite.models.AXLE`).
 
-    Attributes after updates: ``params`` (Params), ``covariance`` (3x3, m^2, posterior),
-    ``information`` (3x3, dimensionless: the data's whitened Fisher information with columns
-    scaled by ``initial``, DESIGN.md), ``sigma_min`` (its smallest singular value),
+    Attributes after updates: ``params`` (Params), ``sensor_pose`` (SensorPose or None),
+    ``theta`` (all P parameters), ``covariance`` (P x P, posterior, in the parameters' units),
+    ``information`` (P x P, dimensionless: the data's whitened Fisher information with columns
+    scaled at ``initial``, DESIGN.md), ``sigma_min`` (its smallest singular value),
     ``n_segments``.
     """
 
@@ -68,12 +91,22 @@ class OnlineEstimator:
         prior_std: float | ArrayLike | None = None,
         sigma: ArrayLike = DEFAULT_SIGMA,
         iterations: int = 2,
+        model: SegmentModel = AXLE,
     ):
-        nominal = initial if isinstance(initial, Params) else Params.from_array(initial)
-        self.nominal = nominal
-        scale = nominal.as_array()
-        std = 0.1 * scale if prior_std is None else np.broadcast_to(
-            np.asarray(prior_std, dtype=float), (3,))
+        theta = as_theta(initial).astype(float).reshape(-1)
+        if theta.size != model.size:
+            raise ValueError(f"initial must have the {model.size} parameters "
+                             f"{', '.join(model.names)}, got {theta.size} values")
+        self.model = model
+        self.nominal = Params(*theta[:3])
+        self._nominal_theta = theta
+        self._scale = model.column_scale(theta)  # the chart's units (offsets: nominal b)
+        self._log = [t == "log" for t in model.transforms]
+        chart_units = np.where(self._log, theta, self._scale)
+        if prior_std is None:
+            std = np.array([DEFAULT_PRIOR[t] for t in model.transforms]) * chart_units
+        else:
+            std = np.broadcast_to(np.asarray(prior_std, dtype=float), (model.size,))
         if not np.all(np.isfinite(std)) or np.any(std <= 0):
             raise ValueError(f"prior_std must be positive and finite, got {prior_std}")
         if iterations < 1:
@@ -81,22 +114,67 @@ class OnlineEstimator:
         self.sigma = as_sigma(sigma)
         self._w = [float(x) for x in 1.0 / self.sigma**2]
         self._iterations = int(iterations)
-        self._prior = np.diag((scale / std) ** 2)  # information of log p
-        self._q = [math.log(x) for x in scale]
+        self._prior = np.diag((chart_units / std) ** 2)  # information in the chart
+        self._q = [math.log(x) if log else x / c
+                   for x, log, c in zip(theta.tolist(), self._log, self._scale.tolist(),
+                                        strict=True)]
         self._info = [[float(x) for x in row] for row in self._prior]
         self.n_segments = 0
+        self._update = self._update_axle if model is AXLE else self._update_general
+        self._w_array = np.array(self._w)[:, None]
+        self._units = self._scale.tolist()
+
+    def _to_theta(self, q: list[float]) -> tuple[float, ...]:
+        return tuple(math.exp(x) if log else x * c
+                     for x, log, c in zip(q, self._log, self._units, strict=True))
 
     def update(self, dphi_L: float, dphi_R: float, dx: float, dy: float, dtheta: float) -> None:
-        """Fold in one segment: wheel increments (rad) and measured body-frame increment."""
-        phi_L, phi_R = float(dphi_L), float(dphi_R)
-        zx, zy, zt = float(dx), float(dy), float(dtheta)
-        if not all(map(math.isfinite, (phi_L, phi_R, zx, zy, zt))):
+        """Fold in one segment: wheel increments (rad) and the measured increment (the
+        sensor's motion in its frame at the segment's start; m, m, rad)."""
+        values = (float(dphi_L), float(dphi_R), float(dx), float(dy), float(dtheta))
+        if not all(map(math.isfinite, values)):
             raise ValueError("segment values must be finite")
+        self._update(*values)
+        self.n_segments += 1
+
+    def _update_general(self, phi_L: float, phi_R: float, zx: float, zy: float,
+                        zt: float) -> None:
+        """The update for any model (P x P algebra in numpy; the model in pure Python)."""
+        q = np.array(self._q)
+        info = np.asarray(self._info)
+        x = q
+        for iteration in range(self._iterations):
+            theta = self._to_theta(x.tolist())
+            (px, py, pt), rows = self.model.evaluate_scalar(phi_L, phi_R, theta)
+            h = np.array(rows)
+            h *= [t if log else c for t, log, c in zip(theta, self._log, self._units,
+                                                       strict=True)]
+            weighted = h * self._w_array
+            innovation = np.array((zx - px, zy - py, _wrap(zt - pt))) + h @ (x - q)
+            m = info + weighted.T @ h
+            try:
+                step = np.linalg.solve(m, weighted.T @ innovation)
+            except np.linalg.LinAlgError:
+                return
+            largest = max(map(abs, step.tolist()))
+            if largest > _MAX_LOG_STEP:  # trust region
+                step *= _MAX_LOG_STEP / largest
+            previous, x = x, q + step
+            change = largest if iteration == 0 else max(map(abs, (x - previous).tolist()))
+            if change < _RELINEARIZE:
+                break
+        new_q = x.tolist()
+        if math.isfinite(sum(new_q) + float(np.trace(m))):  # PSD: a finite diagonal bounds m
+            self._q, self._info = new_q, m
+
+    def _update_axle(self, phi_L: float, phi_R: float, zx: float, zy: float,
+                     zt: float) -> None:
+        """The axle model's update, unrolled (a specialisation of :meth:`_update_general`)."""
         wx, wy, wt = self._w
         q0, q1, q2 = self._q
         (a00, a01, a02), (_, a11, a12), (_, _, a22) = self._info
         x0, x1, x2 = q0, q1, q2  # the iterate, in log-parameters
-        for _ in range(self._iterations):
+        for iteration in range(self._iterations):
             b = math.exp(x2)
             s_L, s_R = math.exp(x0) * phi_L, math.exp(x1) * phi_R  # wheel travel (m)
             ds, th = 0.5 * (s_L + s_R), (s_R - s_L) / b
@@ -126,28 +204,53 @@ class OnlineEstimator:
             if largest > _MAX_LOG_STEP:  # trust region
                 shrink = _MAX_LOG_STEP / largest
                 s0, s1, s2 = s0 * shrink, s1 * shrink, s2 * shrink
+            previous = (x0, x1, x2)
             x0, x1, x2 = q0 + s0, q1 + s1, q2 + s2
+            change = largest if iteration == 0 else max(
+                abs(x0 - previous[0]), abs(x1 - previous[1]), abs(x2 - previous[2]))
+            if change < _RELINEARIZE:
+                break
         if math.isfinite(x0 + x1 + x2 + m00 + m01 + m02 + m11 + m12 + m22):
             self._q = [x0, x1, x2]
             self._info = [[m00, m01, m02], [m01, m11, m12], [m02, m12, m22]]
-        self.n_segments += 1
+
+    @property
+    def theta(self) -> NDArray[np.float64]:
+        """All P parameters of the model (angles wrapped to (-pi, pi])."""
+        theta = np.array(self._to_theta(self._q))
+        for i, transform in enumerate(self.model.transforms):
+            if transform == "angle":
+                theta[i] = _wrap(theta[i])
+        return theta
 
     @property
     def params(self) -> Params:
-        q0, q1, q2 = self._q
-        return Params(math.exp(q0), math.exp(q1), math.exp(q2))
+        if self.model is AXLE:
+            q0, q1, q2 = self._q
+            return Params(math.exp(q0), math.exp(q1), math.exp(q2))
+        return Params(*self._to_theta(self._q)[:3])
+
+    @property
+    def sensor_pose(self) -> SensorPose | None:
+        return self.model.split(self.theta)[1]
+
+    def _chart_derivative(self) -> NDArray[np.float64]:
+        """d theta / d q at the estimate: the value for log parameters, else the chart unit."""
+        theta = np.array(self._to_theta(self._q))
+        return np.where(self._log, theta, self._scale)
 
     @property
     def covariance(self) -> NDArray[np.float64]:
-        """Posterior covariance of (r_L, r_R, b) in m^2 (first order from log-parameters)."""
-        p = self.params.as_array()
-        return inverse_information(np.array(self._info)) * np.outer(p, p)
+        """Posterior covariance of theta (P x P; m^2, m rad, rad^2; first order from the
+        chart)."""
+        d = self._chart_derivative()
+        return inverse_information(np.array(self._info)) * np.outer(d, d)
 
     @property
     def information(self) -> NDArray[np.float64]:
-        """The data's dimensionless Fisher information (prior excluded, columns scaled by
-        ``initial``)."""
-        ratio = self.nominal.as_array() / self.params.as_array()
+        """The data's dimensionless Fisher information (prior excluded, columns scaled at
+        ``initial``, DESIGN.md)."""
+        ratio = self.model.column_scale(self._nominal_theta) / self._chart_derivative()
         return (np.array(self._info) - self._prior) * np.outer(ratio, ratio)
 
     @property

@@ -133,3 +133,17 @@ def test_sensor_pose_rejects_non_finite_values():
     with pytest.raises(ValueError, match="finite"):
         SensorPose(0.0, float("nan"), 0.0)
     assert SensorPose(0, 0, 3 * math.pi).theta == pytest.approx(math.pi)
+
+
+@settings(max_examples=200, deadline=None)
+@given(r_L=lengths, r_R=lengths, b=lengths, phi_L=wheel, phi_R=wheel, l_x=offset, l_y=offset,
+       l_t=angle)
+def test_scalar_evaluation_equals_the_vectorized_one(r_L, r_R, b, phi_L, phi_R, l_x, l_y, l_t):
+    for model, theta in ((AXLE, (r_L, r_R, b)), (SENSOR_POSE, (r_L, r_R, b, l_x, l_y, l_t)),
+                         (FixedSensorPoseModel(SensorPose(l_x, l_y, l_t)), (r_L, r_R, b))):
+        prediction, rows = model.evaluate_scalar(phi_L, phi_R, theta)
+        expected, jac = model.evaluate(np.array([phi_L]), np.array([phi_R]), np.array(theta))
+        size = 1e-12 * (1.0 + np.abs(expected).max())
+        np.testing.assert_allclose(prediction, expected[:, 0], rtol=1e-12, atol=size)
+        np.testing.assert_allclose(np.array(rows), jac[:, :, 0], rtol=1e-11,
+                                   atol=1e-12 * (1.0 + np.abs(jac).max()))

@@ -91,3 +91,41 @@ def test_pickles(rng):
     clone = pickle.loads(pickle.dumps(est))
     assert clone.params == est.params
     np.testing.assert_array_equal(clone.information, est.information)
+
+
+def sensor_dataset(rng, n, theta, sigma=SIGMA):
+    from excite import Segments
+    from excite.models import SENSOR_POSE
+
+    phi_L, phi_R = rng.normal(0.0, 0.4, n), rng.normal(0.0, 0.4, n)
+    measured = SENSOR_POSE.predict(phi_L, phi_R, theta) + rng.normal(size=(n, 3)) * sigma
+    return Segments(phi_L, phi_R, *measured.T)
+
+
+def test_general_update_is_the_unrolled_axle_update(rng):
+    """The axle model's unrolled update is a specialisation: the general one gives the same."""
+    seg = lesson_dataset(rng, 100, TRUTH)
+    fast = run(OnlineEstimator(NOMINAL, sigma=SIGMA), seg)
+    general = OnlineEstimator(NOMINAL, sigma=SIGMA)
+    general._update = general._update_general
+    run(general, seg)
+    np.testing.assert_allclose(general.theta, fast.theta, rtol=1e-10)
+    np.testing.assert_allclose(general.information, fast.information, rtol=1e-8, atol=1e-6)
+
+
+def test_sensor_pose_model_online_agrees_with_batch(rng):
+    from excite.models import SENSOR_POSE
+
+    truth = np.array([0.050, 0.051, 0.300, 0.05, -0.03, 0.3])
+    nominal = np.array([0.05, 0.05, 0.30, 0.04, -0.02, 0.2])
+    seg = sensor_dataset(rng, 400, truth)
+    batch = calibrate(seg, sigma=SIGMA, sensor_pose="estimate")
+    online = run(OnlineEstimator(nominal, sigma=SIGMA, model=SENSOR_POSE), seg)
+    batch_theta = np.append(batch.params.as_array(), batch.sensor_pose.as_array())
+    z = (online.theta - batch_theta) / np.sqrt(np.diag(batch.full_covariance))
+    assert np.all(np.abs(z) < 0.3), z
+    assert online.covariance.shape == (6, 6) and online.information.shape == (6, 6)
+    expected = sigma_min(fisher_information(scaled_jacobian(
+        seg.dphi_L, seg.dphi_R, online.theta, SIGMA, scale=nominal, model=SENSOR_POSE)))
+    assert online.sigma_min == pytest.approx(expected, rel=0.05)
+    assert online.sensor_pose is not None and online.params.b == pytest.approx(0.3, rel=0.05)
