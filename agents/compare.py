@@ -91,6 +91,17 @@ def _worker_protocol(name: str, policy_path: str | None) -> Protocol:
     return make_protocol(name, policy_path)
 
 
+def incompatible_protocols(protocols: list[str], env_id: str, segments: int,
+                           policy_path: str | None = None) -> dict[str, str]:
+    """Protocols that cannot run on ``env_id`` (e.g. a policy trained for another observation
+    layout), with the reason in words."""
+    env = make_env(env_id, segments)
+    shape = env.observation_space.shape
+    env.close()
+    reasons = {name: make_protocol(name, policy_path).incompatibility(shape) for name in protocols}
+    return {name: reason for name, reason in reasons.items() if reason}
+
+
 def run_episode(settings: CompareSettings, protocols: list[str], episode: int,
                 policy_path: str | None) -> list[dict]:
     """All requested protocols on episode ``episode`` (runs in a worker process)."""
@@ -98,8 +109,9 @@ def run_episode(settings: CompareSettings, protocols: list[str], episode: int,
     seed = episode_seed(settings.seed, episode)
     env.reset(seed=seed)
     base = env.unwrapped
-    oracle = oracle_design(base.true_params, base.sigma, base.nominal, settings.segments,
-                           base.max_wheel_speed, base.segment_duration).sigma_min
+    oracle = oracle_design(base.true_theta, base.sigma, base.nominal_theta, settings.segments,
+                           base.max_wheel_speed, base.segment_duration,
+                           model=base.model).sigma_min
     rows = []
     for name in protocols:
         for record in run_protocol_episode(env, _worker_protocol(name, policy_path), seed):

@@ -36,10 +36,11 @@ def command_grid(n: int, limit: float = 1.0) -> np.ndarray:
 
 
 def command_information(actions: np.ndarray, knowledge: RobotKnowledge) -> np.ndarray:
-    """Relative Fisher information (n, 3, 3) each command would add, predicted at the estimate."""
+    """Relative Fisher information (n, P, P) each command would add, predicted with the
+    knowledge's segment model at the estimate."""
     dphi = wheel_increments(actions, knowledge)
-    return segment_information(dphi[:, 0], dphi[:, 1], knowledge.estimate, knowledge.sigma,
-                               scale=knowledge.nominal)
+    return segment_information(dphi[:, 0], dphi[:, 1], knowledge.theta, knowledge.sigma,
+                               scale=knowledge.nominal_theta, model=knowledge.model)
 
 
 def smallest_eigenvalue(information: np.ndarray) -> np.ndarray:

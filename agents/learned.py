@@ -14,7 +14,7 @@ import numpy as np
 
 from agents.catalog import ProtocolError
 from agents.protocols import Protocol
-from envs.env import OBS_SIZE, RobotKnowledge
+from envs.env import RobotKnowledge
 
 
 class LearnedPolicy(Protocol):
@@ -52,12 +52,20 @@ class LearnedPolicy(Protocol):
         except (OSError, pickle.UnpicklingError, EOFError, AttributeError) as exc:
             raise ProtocolError(f"{norm_path}: cannot load the observation normalization "
                                 f"saved with the policy ({exc})") from None
-        expected = self.model.observation_space.shape
-        if expected != (OBS_SIZE,):
-            raise ProtocolError(f"{path}: policy expects observations of shape {expected}, "
-                                f"the excite environment gives ({OBS_SIZE},)")
+        self.path = path
+        self.observation_shape = tuple(self.model.observation_space.shape)
+
+    def incompatibility(self, observation_shape: tuple[int, ...]) -> str | None:
+        if tuple(observation_shape) == self.observation_shape:
+            return None
+        return (f"{self.path.name} was trained for observations of shape "
+                f"{self.observation_shape}, this environment gives {tuple(observation_shape)} "
+                "(another observation layout)")
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
+        reason = self.incompatibility(knowledge.observation.shape)
+        if reason:
+            raise ProtocolError(reason)
         obs = self.normalization.normalize_obs(knowledge.observation[None, :])
         action, _ = self.model.predict(obs, deterministic=True)
         return np.asarray(action, dtype=float).reshape(2)

@@ -19,6 +19,7 @@ from scipy.optimize import linprog
 from agents.greedy import command_grid
 from excite.information import segment_information
 from excite.kinematics import Params
+from excite.models import AXLE, SegmentModel
 
 
 @dataclass(frozen=True)
@@ -34,23 +35,26 @@ class OracleDesign:
 
 
 def oracle_design(
-    params: Params,
+    params: Params | np.ndarray,
     sigma: np.ndarray,
-    nominal: Params,
+    nominal: Params | np.ndarray,
     budget: int,
     max_wheel_speed: float,
     segment_duration: float,
     grid: int = 41,
     rtol: float = 1e-4,
     max_iterations: int = 200,
+    model: SegmentModel = AXLE,
 ) -> OracleDesign:
     """E-optimal design over a grid x grid set of commands in [-1, 1]^2, the standstill
-    (no information) left out (see module doc)."""
+    (no information) left out (see module doc). params / nominal: the model's true and
+    nominal parameters (Params for the axle model)."""
     commands = command_grid(grid)
     dphi = commands * max_wheel_speed * segment_duration
-    info = segment_information(dphi[:, 0], dphi[:, 1], params, sigma, scale=nominal)
+    info = segment_information(dphi[:, 0], dphi[:, 1], params, sigma, scale=nominal,
+                               model=model)
     n = len(commands)
-    cuts = list(np.eye(3))
+    cuts = list(np.eye(model.size))
     objective = np.zeros(n + 1)
     objective[-1] = -1.0  # maximise t
     a_eq = np.append(np.ones(n), 0.0)[None, :]

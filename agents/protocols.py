@@ -31,6 +31,11 @@ class Protocol(ABC):
         self.rng = rng
         self.step_index = 0
 
+    def incompatibility(self, observation_shape: tuple[int, ...]) -> str | None:
+        """Why this protocol cannot run on an environment with this observation shape, or
+        None (every protocol that plans from the knowledge itself runs anywhere)."""
+        return None
+
     def act(self, knowledge: RobotKnowledge) -> np.ndarray:
         """The action for the next segment."""
         action = np.clip(np.asarray(self.plan(knowledge), dtype=float), -1.0, 1.0)

@@ -17,6 +17,7 @@ from envs.simulation import Simulation, SimulationConfig
 from excite.data import Segments
 from excite.information import eigen_3x3, information_matrix
 from excite.kinematics import Params
+from excite.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose, body_to_sensor
 from excite.online import OnlineEstimator
 from excite.registration import DEFAULT_BUDGET
 
@@ -34,16 +35,27 @@ class Estimator(Protocol):
     def covariance(self) -> np.ndarray: ...
 
 
-#: estimator_factory(nominal robot, sensor sigma (sx, sy, sth)) -> a fresh estimator.
-EstimatorFactory = Callable[[Params, np.ndarray], Estimator]
+#: estimator_factory(nominal, sensor sigma (sx, sy, sth)) -> a fresh estimator. nominal is
+#: the nominal robot's Params on the axle model, and the nominal parameter array
+#: (r_L, r_R, b, l_x, l_y, l_theta) when the env estimates the sensor pose.
+EstimatorFactory = Callable[[Params | np.ndarray, np.ndarray], Estimator]
 
 
-def default_estimator(nominal: Params, sigma: np.ndarray) -> OnlineEstimator:
-    """OnlineEstimator started at the nominal robot, with the sensor's noise levels."""
-    return OnlineEstimator(nominal, sigma=sigma)
+def default_estimator(nominal: Params | np.ndarray, sigma: np.ndarray) -> OnlineEstimator:
+    """OnlineEstimator started at the nominal robot (and sensor pose), with the sensor's noise
+    levels; the sensor-pose model when ``nominal`` has six parameters."""
+    if isinstance(nominal, Params) or len(nominal) == AXLE.size:
+        return OnlineEstimator(nominal, sigma=sigma)
+    return OnlineEstimator(nominal, sigma=sigma, model=SENSOR_POSE)
 
 
-OBS_SIZE = 16
+def observation_size(model: SegmentModel) -> int:
+    """Length of the observation vector for a model with P parameters: 3 P + 7."""
+    return 3 * model.size + 7
+
+
+#: The observation length on the axle model.
+OBS_SIZE = observation_size(AXLE)
 
 
 @dataclass(frozen=True)
@@ -51,10 +63,11 @@ class RobotKnowledge:
     """What the robot knows after n segments: everything a planner may use, never the truth.
 
     observation: the env's observation vector. estimate: current estimate (m). information:
-    relative Fisher information of the log at the estimate (3x3). log: (n, 5) calibration rows.
-    pose: measured world pose (x, y, theta). nominal: the nominal robot. sigma: sensor noise
-    (m, m, rad). max_wheel_speed: motor limit (rad/s); segment_duration (s); arena_size (m);
-    budget (segments).
+    relative Fisher information of the log at the estimate (P x P). log: (n, 5) calibration
+    rows. pose: the body's measured world pose (x, y, theta). nominal: the nominal robot.
+    sigma: sensor noise (m, m, rad). max_wheel_speed: motor limit (rad/s); segment_duration
+    (s); arena_size (m); budget (segments). model: the segment model; theta / nominal_theta:
+    the current estimate and the nominal values of all its P parameters.
     """
 
     observation: np.ndarray
@@ -68,6 +81,15 @@ class RobotKnowledge:
     segment_duration: float
     arena_size: float
     budget: int
+    model: SegmentModel = AXLE
+    theta: np.ndarray | None = None
+    nominal_theta: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.theta is None:
+            object.__setattr__(self, "theta", self.estimate.as_array())
+        if self.nominal_theta is None:
+            object.__setattr__(self, "nominal_theta", self.nominal.as_array())
 
     @property
     def n_segments(self) -> int:
@@ -98,20 +120,28 @@ class DiffDriveCalibEnv(gym.Env):
     non-finite actions raise ``ValueError``.
 
     ## Observation space
-    ``Box(float32, (16,))``, only what a real robot could know (never the hidden truth):
+    ``Box(float32, (3 P + 7,))`` for a model of P parameters (16 on the axle model, 25 with
+    the sensor pose), only what a real robot could know (never the hidden truth):
 
-    | index | meaning |
-    |-------|---------|
-    | 0-2   | estimate / nominal - 1 for (r_L, r_R, b), clipped to [-1, 1] |
-    | 3-5   | log1p of the eigenvalues (ascending) of the information matrix F, / 10 |
-    | 6-8   | eigenvector of F's smallest eigenvalue (the worst-known direction) |
-    | 9-10  | measured position x, y divided by the arena half-size |
-    | 11-12 | cos, sin of the measured heading |
-    | 13-14 | the previous action |
-    | 15    | fraction of the segment budget used |
+    | index       | meaning |
+    |-------------|---------|
+    | 0 .. P-1    | estimate relative to nominal (r_L, r_R, b: estimate / nominal - 1; sensor l_x, l_y: (estimate - nominal) / nominal b; l_theta: in rad), clipped to [-1, 1] |
+    | P .. 2P-1   | log1p of the eigenvalues (ascending) of the information matrix F, / 10 |
+    | 2P .. 3P-1  | eigenvector of F's smallest eigenvalue (the worst-known direction) |
+    | 3P, 3P+1    | measured position x, y divided by the arena half-size |
+    | 3P+2, 3P+3  | cos, sin of the measured heading |
+    | 3P+4, 3P+5  | the previous action |
+    | 3P+6        | fraction of the segment budget used |
 
     F is the whitened, relatively scaled Fisher information of all segments so far at the
     current estimate (DESIGN.md); sigma_min = sqrt(lambda_min(F)).
+
+    ## Sensor pose
+    With ``sensor_pose`` set (the id ``excite/DiffDriveCalibSensor-v0``), the pose sensor is
+    mounted at a hidden pose l = (l_x, l_y, l_theta) in the body frame, drawn uniformly per
+    episode from the configured ranges; it measures its own motion in its own frame (DESIGN.md,
+    "Sensor pose"). The nominal mounting is the middle of the ranges. The default estimator and
+    the reward then use the sensor-pose model: six parameters, sigma_min over all six.
 
     ## Reward
     A sum of named terms, each reported in ``info["reward_terms"]``:
@@ -166,6 +196,9 @@ class DiffDriveCalibEnv(gym.Env):
             "time_cost": 0.0,
             "accuracy_weight": 0.0,  # privileged term (uses the hidden truth)
             "target_sigma_min": None,  # terminate once sigma_min reaches it
+            # None: the pose sensor sits on the axle. Else the ranges the hidden mounting is
+            # drawn from: {"x": (lo, hi) m, "y": (lo, hi) m, "theta": (lo, hi) rad}.
+            "sensor_pose": None,
         }
 
     def __init__(
@@ -189,6 +222,11 @@ class DiffDriveCalibEnv(gym.Env):
         self.distribution = RobotDistribution(**cfg["robot"])
         nominal = self.distribution.nominal()
         self.nominal = Params(*nominal.kinematic_params())
+        self.sensor_ranges = _sensor_ranges(cfg["sensor_pose"])
+        self.model: SegmentModel = AXLE if self.sensor_ranges is None else SENSOR_POSE
+        self.nominal_theta = self.nominal.as_array()
+        if self.sensor_ranges is not None:
+            self.nominal_theta = np.append(self.nominal_theta, self.sensor_ranges.mean(axis=1))
         self.max_wheel_speed = nominal.max_wheel_speed
         self.sim = Simulation(SimulationConfig(
             arena_width=cfg["arena_size"], arena_height=cfg["arena_size"],
@@ -201,8 +239,9 @@ class DiffDriveCalibEnv(gym.Env):
         self.estimator_factory = estimator_factory or default_estimator
 
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
-        low = np.array([-1] * 3 + [0] * 3 + [-1] * 3 + [-1.5] * 2 + [-1] * 4 + [0], np.float32)
-        high = np.array([1] * 3 + [5] * 3 + [1] * 3 + [1.5] * 2 + [1] * 4 + [1], np.float32)
+        p = self.model.size
+        low = np.array([-1] * p + [0] * p + [-1] * p + [-1.5] * 2 + [-1] * 4 + [0], np.float32)
+        high = np.array([1] * p + [5] * p + [1] * p + [1.5] * 2 + [1] * 4 + [1], np.float32)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self._renderer = None
         self._robot: RobotSpec | None = None
@@ -216,16 +255,21 @@ class DiffDriveCalibEnv(gym.Env):
         self.sim.reset(robot, sim_rng, pose=options.get("pose"))
         self._robot = robot
         self._sensor_rng = np.random.default_rng(self.np_random.integers(2**63))
-        self.estimator = self.estimator_factory(self.nominal, self.sigma.copy())
+        self._mount = None if self.sensor_ranges is None else SensorPose(
+            *self.np_random.uniform(self.sensor_ranges[:, 0], self.sensor_ranges[:, 1]))
+        self.estimator = self.estimator_factory(
+            self.nominal if self.model is AXLE else self.nominal_theta.copy(), self.sigma.copy())
         self._log = np.empty((self.budget, 5))  # calibration rows; grows if stepped past budget
         self._n = 0
         self._paths: list[np.ndarray] = [self.sim.pose[None, :]]
         self._last_action = (0.0, 0.0)
         self._sigma_min = 0.0
         self._estimate = self.nominal
-        self._information = np.zeros((3, 3))
-        self._eigen = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))  # eigenvalues, weakest direction
-        self._measured_pose = self.sim.pose_sensor.absolute(self.sim.pose, self._sensor_rng)
+        self._theta = self.nominal_theta
+        p = self.model.size
+        self._information = np.zeros((p, p))
+        self._eigen = ((0.0,) * p, (1.0,) + (0.0,) * (p - 1))  # eigenvalues, weakest direction
+        self._measured_pose = self._measure_pose(self.sim.pose)
         self._error = self.max_relative_error
         if self.render_mode == "human":
             self.render()
@@ -241,6 +285,9 @@ class DiffDriveCalibEnv(gym.Env):
         outcome = self.sim.run_segment(left * self.max_wheel_speed, right * self.max_wheel_speed,
                                        self.segment_duration, self.config["settle_time"])
         row = outcome.measurement
+        if self._mount is not None:  # the sensor measures its own motion, in its own frame
+            sensed = body_to_sensor(outcome.true_increment[None, :], self._mount)[0]
+            row = np.concatenate([row[:2], sensed + self.sigma * self._sensor_rng.standard_normal(3)])
         self.estimator.update(*row.tolist())
         if self._n == len(self._log):
             self._log = np.concatenate([self._log, np.empty_like(self._log)])
@@ -248,12 +295,11 @@ class DiffDriveCalibEnv(gym.Env):
         self._n += 1
         self._paths.append(outcome.path[1:])
         self._last_action = (left, right)
-        self._measured_pose = self.sim.pose_sensor.absolute(outcome.pose_end, self._sensor_rng)
-
         previous, previous_error = self._sigma_min, self._error
-        self._estimate = self._read_estimate()
-        self._information = self.information_at(self._estimate)
-        self._eigen = eigen_3x3(self._information)
+        self._estimate, self._theta = self._read_estimate()
+        self._measured_pose = self._measure_pose(outcome.pose_end)
+        self._information = self.information_at(self._theta)
+        self._eigen = _eigen(self._information)
         self._sigma_min = math.sqrt(max(self._eigen[0][0], 0.0))
         n = self._n
         config = self.config
@@ -276,7 +322,7 @@ class DiffDriveCalibEnv(gym.Env):
             "sigma_min": self._sigma_min,
             "collision": bool(outcome.collision),
             "measurement": row,
-            "estimate": self._estimate.as_array(),
+            "estimate": self._theta.copy(),
             "n_segments": n,
         }
         if self.render_mode == "human":
@@ -284,9 +330,24 @@ class DiffDriveCalibEnv(gym.Env):
         return self._observation(), float(sum(terms.values())), terminated, truncated, info
 
     # -- what the robot knows ------------------------------------------------------------------
-    def _read_estimate(self) -> Params:
+    def _read_estimate(self) -> tuple[Params, np.ndarray]:
+        """The estimator's wheel parameters and all model parameters (an estimator without
+        ``theta`` leaves the sensor pose at its nominal value)."""
         p = self.estimator.params
-        return p if isinstance(p, Params) else Params.from_array(p)
+        params = p if isinstance(p, Params) else Params.from_array(p)
+        theta = getattr(self.estimator, "theta", None)
+        if theta is None or len(theta) != self.model.size:
+            theta = np.append(params.as_array(), self.nominal_theta[3:])
+        return params, np.asarray(theta, dtype=float)
+
+    def _measure_pose(self, body_pose: np.ndarray) -> np.ndarray:
+        """The body's world pose as the robot knows it: the sensor's noisy world pose, taken
+        back to the body with the estimated mounting."""
+        if self._mount is None:
+            return self.sim.pose_sensor.absolute(body_pose, self._sensor_rng)
+        sensor = _compose(body_pose, self._mount.as_array())
+        reading = self.sim.pose_sensor.absolute(sensor, self._sensor_rng)
+        return _compose(reading, _inverse(self._theta[3:6]))
 
     @property
     def estimate(self) -> Params:
@@ -298,12 +359,14 @@ class DiffDriveCalibEnv(gym.Env):
         """The calibration log of this episode so far."""
         return Segments.from_array(self._log[: self._n])
 
-    def information_at(self, params: Params) -> np.ndarray:
-        """Relative Fisher information of this episode's segments evaluated at ``params``."""
+    def information_at(self, theta: Params | np.ndarray) -> np.ndarray:
+        """Relative Fisher information (P x P) of this episode's segments evaluated at
+        ``theta`` (the model's parameters; Params on the axle model)."""
         if not self._n:
-            return np.zeros((3, 3))
+            return np.zeros((self.model.size,) * 2)
         log = self._log[: self._n]
-        return information_matrix(log[:, 0], log[:, 1], params, self.sigma, scale=self.nominal)
+        return information_matrix(log[:, 0], log[:, 1], theta, self.sigma,
+                                  scale=self.nominal_theta, model=self.model)
 
     @property
     def sigma_min(self) -> float:
@@ -316,20 +379,24 @@ class DiffDriveCalibEnv(gym.Env):
             information=self._information.copy(), log=self._log[: self._n].copy(),
             pose=self._measured_pose.copy(), nominal=self.nominal, sigma=self.sigma.copy(),
             max_wheel_speed=self.max_wheel_speed, segment_duration=self.segment_duration,
-            arena_size=float(self.config["arena_size"]), budget=self.budget)
+            arena_size=float(self.config["arena_size"]), budget=self.budget, model=self.model,
+            theta=self._theta.copy(), nominal_theta=self.nominal_theta.copy())
 
     def _observation(self) -> np.ndarray:
-        (lam0, lam1, lam2), weakest = self._eigen
+        eigenvalues, weakest = self._eigen
         sign = 1.0 if max(weakest, key=abs) >= 0 else -1.0  # a unique sign for the direction
         estimate, nominal = self._estimate, self.nominal
+        relative = [estimate.r_L / nominal.r_L - 1.0, estimate.r_R / nominal.r_R - 1.0,
+                    estimate.b / nominal.b - 1.0]
+        if self.model is not AXLE:
+            offset = (self._theta[3:] - self.nominal_theta[3:]).tolist()
+            relative += [offset[0] / nominal.b, offset[1] / nominal.b, offset[2]]
         x, y, theta = self._measured_pose.tolist()
         to_unit = 2.0 / self.config["arena_size"]
         obs = np.array([
-            estimate.r_L / nominal.r_L - 1.0, estimate.r_R / nominal.r_R - 1.0,
-            estimate.b / nominal.b - 1.0,
-            0.1 * math.log1p(max(lam0, 0.0)), 0.1 * math.log1p(max(lam1, 0.0)),
-            0.1 * math.log1p(max(lam2, 0.0)),
-            sign * weakest[0], sign * weakest[1], sign * weakest[2],
+            *relative,
+            *(0.1 * math.log1p(max(lam, 0.0)) for lam in eigenvalues),
+            *(sign * v for v in weakest),
             x * to_unit, y * to_unit, math.cos(theta), math.sin(theta),
             *self._last_action,
             self._n / self.budget,
@@ -344,6 +411,19 @@ class DiffDriveCalibEnv(gym.Env):
         if self._robot is None:
             raise RuntimeError("call reset() first")
         return Params(*self._robot.kinematic_params())
+
+    @property
+    def true_sensor_pose(self) -> SensorPose | None:
+        """The hidden sensor mounting (None: on the axle); for evaluation only."""
+        if self._robot is None:
+            raise RuntimeError("call reset() first")
+        return self._mount
+
+    @property
+    def true_theta(self) -> np.ndarray:
+        """All hidden model parameters (wheels, then the sensor pose); evaluation only."""
+        theta = self.true_params.as_array()
+        return theta if self._mount is None else np.append(theta, self._mount.as_array())
 
     @property
     def robot(self) -> RobotSpec:
@@ -393,3 +473,38 @@ class DiffDriveCalibEnv(gym.Env):
         state = copy.copy(self.__dict__)
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
         return state
+
+
+def _sensor_ranges(config: dict | None) -> np.ndarray | None:
+    """The (3, 2) ranges (low, high) of the hidden sensor mounting (x, y [m], theta [rad])."""
+    if config is None:
+        return None
+    if not isinstance(config, dict) or set(config) - {"x", "y", "theta"}:
+        raise ValueError('sensor_pose must be None or {"x": (lo, hi), "y": (lo, hi), '
+                         f'"theta": (lo, hi)}}, got {config!r}')
+    ranges = np.array([config.get(k, (0.0, 0.0)) for k in ("x", "y", "theta")], dtype=float)
+    if ranges.shape != (3, 2) or not np.all(np.isfinite(ranges)) or np.any(
+            ranges[:, 0] > ranges[:, 1]) or np.any(np.abs(ranges[2]) > math.pi):
+        raise ValueError(f"sensor_pose ranges must be finite (lo, hi) pairs with lo <= hi "
+                         f"(theta within [-pi, pi]), got {config!r}")
+    return ranges
+
+
+def _eigen(information: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Eigenvalues (ascending) and the weakest eigenvector; closed form for 3 x 3."""
+    if information.shape == (3, 3):
+        return eigen_3x3(information)
+    lam, vec = np.linalg.eigh(information)
+    return tuple(lam.tolist()), tuple(vec[:, 0].tolist())
+
+
+def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """SE(2) composition a (+) b of (x, y, theta) poses."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
+
+
+def _inverse(a: np.ndarray) -> np.ndarray:
+    """SE(2) inverse of an (x, y, theta) pose."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])

@@ -45,6 +45,7 @@ __all__ = [
     "SegmentModel",
     "SensorPose",
     "SensorPoseModel",
+    "body_to_sensor",
     "increment_jacobian",
     "sensor_to_body",
 ]
@@ -164,6 +165,9 @@ class AxleModel(SegmentModel):
     units = ("m", "m", "m")
     transforms = ("log", "log", "log")
 
+    def __reduce__(self) -> str:
+        return "AXLE"  # one instance: code compares models by identity
+
     def evaluate(self, dphi_L, dphi_R, theta, jacobian=True):
         phi_L, phi_R = _broadcast_increments(dphi_L, dphi_R)
         theta = np.asarray(theta, dtype=float)
@@ -201,6 +205,9 @@ class SensorPoseModel(SegmentModel):
     names = ("r_L", "r_R", "b", "l_x", "l_y", "l_theta")
     units = ("m", "m", "m", "m", "m", "rad")
     transforms = ("log", "log", "log", "identity", "identity", "angle")
+
+    def __reduce__(self) -> str:
+        return "SENSOR_POSE"
 
     def evaluate(self, dphi_L, dphi_R, theta, jacobian=True):
         theta = np.asarray(theta, dtype=float)
@@ -315,6 +322,12 @@ def increment_jacobian(dphi_L: ArrayLike, dphi_R: ArrayLike,
     theta = params.as_array() if isinstance(params, Params) else np.asarray(params, float)
     return AXLE.jacobian(np.atleast_1d(np.asarray(dphi_L, dtype=float)),
                          np.atleast_1d(np.asarray(dphi_R, dtype=float)), theta.reshape(3))
+
+
+def body_to_sensor(body: ArrayLike, pose: SensorPose) -> FloatArray:
+    """The sensor's increments s (N, 3) from the body's o (N, 3): s = (-l) (+) o (+) l."""
+    prediction, _ = _to_sensor(np.asarray(body, dtype=float).T, None, pose.as_array(), True)
+    return prediction.T
 
 
 def sensor_to_body(measured: ArrayLike, pose: SensorPose) -> FloatArray:
