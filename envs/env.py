@@ -125,7 +125,7 @@ class DiffDriveCalibEnv(gym.Env):
 
     | index       | meaning |
     |-------------|---------|
-    | 0 .. P-1    | estimate relative to nominal (r_L, r_R, b: estimate / nominal - 1; sensor l_x, l_y: (estimate - nominal) / nominal b; l_theta: in rad), clipped to [-1, 1] |
+    | 0 .. P-1    | estimate relative to nominal, clipped to [-1, 1] (*) |
     | P .. 2P-1   | log1p of the eigenvalues (ascending) of the information matrix F, / 10 |
     | 2P .. 3P-1  | eigenvector of F's smallest eigenvalue (the worst-known direction) |
     | 3P, 3P+1    | measured position x, y divided by the arena half-size |
@@ -133,8 +133,9 @@ class DiffDriveCalibEnv(gym.Env):
     | 3P+4, 3P+5  | the previous action |
     | 3P+6        | fraction of the segment budget used |
 
-    F is the whitened, relatively scaled Fisher information of all segments so far at the
-    current estimate (DESIGN.md); sigma_min = sqrt(lambda_min(F)).
+    (*) r_L, r_R, b: estimate / nominal - 1; sensor l_x, l_y: (estimate - nominal) / nominal b;
+    l_theta: estimate - nominal in rad. F is the whitened, relatively scaled Fisher information
+    of all segments so far at the current estimate (DESIGN.md); sigma_min = sqrt(lambda_min(F)).
 
     ## Sensor pose
     With ``sensor_pose`` set (the id ``excite/DiffDriveCalibSensor-v0``), the pose sensor is
@@ -287,7 +288,8 @@ class DiffDriveCalibEnv(gym.Env):
         row = outcome.measurement
         if self._mount is not None:  # the sensor measures its own motion, in its own frame
             sensed = body_to_sensor(outcome.true_increment[None, :], self._mount)[0]
-            row = np.concatenate([row[:2], sensed + self.sigma * self._sensor_rng.standard_normal(3)])
+            noise = self.sigma * self._sensor_rng.standard_normal(3)
+            row = np.concatenate([row[:2], sensed + noise])
         self.estimator.update(*row.tolist())
         if self._n == len(self._log):
             self._log = np.concatenate([self._log, np.empty_like(self._log)])
