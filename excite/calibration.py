@@ -362,39 +362,44 @@ def _fit_test(chosen: _ModelFit, alternative: _ModelFit | None, lr: float | None
 
 
 def _moving_segments(seg: Segments, sigma: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Masks of the segments that turn (|dtheta| > 3 sigma_theta) and that translate (the
-    sensor's displacement beyond what a pure turn explains is not known here, so: the
-    wheels move together, |dphi_L + dphi_R| > |dphi_R - dphi_L| / 10)."""
+    """Masks of the segments that turn (|dtheta| > 3 sigma_theta) and whose body translates
+    (the wheels move together: |dphi_L + dphi_R| > |dphi_R - dphi_L| / 10)."""
     turning = np.abs(seg.dtheta) > 3.0 * sigma[2]
     together = np.abs(seg.dphi_L + seg.dphi_R)
     translating = together > 0.1 * np.abs(seg.dphi_R - seg.dphi_L) + 1e-12
     return turning, translating
 
 
-def _describe_direction(v: FloatArray, seg: Segments, sigma: FloatArray) -> str:
-    """Words for a relative-parameter null direction v (unit vector over the parameters)."""
-    v = v if v[np.argmax(np.abs(v))] > 0 else -v
+def _describe_weak(weak: FloatArray, theta: FloatArray, seg: Segments,
+                   sigma: FloatArray) -> str:
+    """Words for the relative-parameter directions the data do not determine (the columns of
+    ``weak``, orthonormal): every named group of parameters that lies in them, with why."""
+    p = weak.shape[0]
     turning, translating = _moving_segments(seg, sigma)
-    if v.size == 6:
-        if v[3] ** 2 + v[4] ** 2 > 0.8:
-            why = "no segment turns" if not turning.any() else "the turns do not separate it"
-            return f"sensor x, y: {why}"
-        if abs(v[5]) > 0.9:
-            why = ("no segment translates" if not translating.any()
-                   else "the translations do not separate it")
-            return f"sensor theta: {why}"
-        if np.sum(v[3:] ** 2) < 0.1:
-            return _describe_direction(v[:3] / np.linalg.norm(v[:3]), seg, sigma)
-        terms = " ".join(f"{c:+.2f}*{n}" for c, n in zip(v, SENSOR_POSE.names, strict=True))
-        return f"the relative combination {terms}"
-    if abs(v[2]) > 0.9:
-        why = "no segment turns" if not turning.any() else "the turns do not separate it"
-        return f"b: {why}"
-    if float(v @ np.ones(3)) / np.sqrt(3.0) > 0.95:
-        return "the common scale of r_L, r_R and b: no segment translates"
-    if abs(v[2]) < 0.1 and v[0] * v[1] < 0 and abs(abs(v[0]) - abs(v[1])) < 0.2:
-        return "the ratio r_L/r_R: every segment has the same wheel-speed ratio"
-    terms = " ".join(f"{c:+.2f}*{n}" for c, n in zip(v, AXLE.names, strict=True))
+    no_turn = "no segment turns" if not turning.any() else "the turns do not separate it"
+    no_move = ("no segment translates" if not translating.any()
+               else "the translations do not separate it")
+    scale = np.zeros(p)
+    scale[:3] = 1.0
+    if p == 6:  # a common scale of every length leaves the measurements unchanged
+        scale[3:5] = theta[3:5] / theta[2]
+    groups = [("b", [np.eye(p)[2]], no_turn),
+              ("the common scale of r_L, r_R and b", [scale], "no segment translates"),
+              ("the ratio r_L/r_R", [np.eye(p)[0] - np.eye(p)[1]],
+               "every segment has the same wheel-speed ratio")]
+    if p == 6:
+        groups = [("sensor x, y", [np.eye(p)[3], np.eye(p)[4]], no_turn),
+                  ("sensor theta", [np.eye(p)[5]], no_move)] + groups
+    words = []
+    for name, directions, why in groups:
+        inside = [float(np.sum((weak.T @ (d / np.linalg.norm(d))) ** 2)) for d in directions]
+        if min(inside) > 0.9:
+            words.append(f"{name}: {why}")
+    if words:
+        return "; ".join(words)
+    v = weak[:, 0] if weak[np.argmax(np.abs(weak[:, 0])), 0] > 0 else -weak[:, 0]
+    names = SENSOR_POSE.names if p == 6 else AXLE.names
+    terms = " ".join(f"{c:+.2f}*{n}" for c, n in zip(v, names, strict=True))
     return f"the relative combination {terms}"
 
 
@@ -477,7 +482,7 @@ def calibrate(
         primary = SENSOR_POSE
         wheels, pose = sensor_pose_estimate(seg, fallback)
         start = np.append(wheels.as_array(), pose.as_array())
-    keep = (_trimmed(seg, primary, start, given, *settings, trim) if trim
+    keep = (_trimmed(seg, primary, start, given, loss, trim, max_iterations, tol) if trim
             else np.ones(len(seg), dtype=bool))
     data = seg[keep] if trim else seg
 
@@ -495,8 +500,8 @@ def calibrate(
             if not sensor_fit.identifiable:
                 chosen, choice = axle_fit, (
                     "axle: the data do not determine the sensor pose ("
-                    + _describe_direction(sensor_fit.weak[:, 0], data,
-                                          sensor_fit.fit.sigma) + ")")
+                    + _describe_weak(sensor_fit.weak, sensor_fit.theta, data,
+                                     sensor_fit.fit.sigma) + ")")
             elif lr <= threshold:
                 chosen, choice = axle_fit, (
                     f"axle: the sensor-pose model does not fit significantly better "
@@ -539,7 +544,8 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
     direction = vector = None
     if not identifiable:
         vector = vec[:, 0]
-        direction = _describe_direction(vector, seg, fit.sigma)
+        weak = vec[:, lam * max_relative_std**2 < 1.0]
+        direction = _describe_weak(weak, theta, seg, fit.sigma)
     params, pose = mf.model.split(theta)
     pose_std = np.sqrt(np.diag(full)[3:6]) if mf.model is SENSOR_POSE else None
     raw = fit.ev.raw.T

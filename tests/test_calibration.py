@@ -1,9 +1,10 @@
 import json
+import warnings
 
 import numpy as np
 import pytest
 
-from excite import Params, calibrate
+from excite import DataError, Params, calibrate
 from excite.calibration import initial_estimate
 from excite.information import crlb_relative_std, fisher_information, scaled_jacobian
 from excite.synthetic import lesson_dataset
@@ -128,3 +129,114 @@ def test_rejects_bad_arguments(rng):
         calibrate(seg, sigma=(1e-3, -1, 1))
     with pytest.raises(ValueError, match="at least 3"):
         calibrate(seg.as_array()[:2])
+
+
+# -- the sensor pose -------------------------------------------------------------------------
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from excite import SensorPose, Segments  # noqa: E402
+from excite.models import SENSOR_POSE  # noqa: E402
+
+OFF_AXLE = np.array([0.05, -0.03, 1.8])
+
+
+def sensor_segments(rng, n=200, pose=OFF_AXLE, sigma=(2e-3, 2e-3, 1e-3), wheel_std=2.0,
+                    phi=None):
+    phi_L, phi_R = phi if phi is not None else rng.normal(0.0, wheel_std, (2, n))
+    theta = np.append(TRUTH.as_array(), pose)
+    measured = SENSOR_POSE.predict(phi_L, phi_R, theta)
+    measured = measured + rng.normal(size=measured.shape) * np.asarray(sigma)
+    return Segments(phi_L, phi_R, *measured.T)
+
+
+@settings(max_examples=40, deadline=None)
+@given(l_x=st.floats(-0.3, 0.3), l_y=st.floats(-0.3, 0.3),
+       l_t=st.floats(-np.pi, np.pi, exclude_min=True), seed=st.integers(0, 2**32 - 1))
+def test_exact_data_give_the_exact_sensor_pose_for_any_mounting_without_a_guess(l_x, l_y, l_t,
+                                                                              seed):
+    rng = np.random.default_rng(seed)
+    seg = sensor_segments(rng, 60, (l_x, l_y, l_t), sigma=(0.0, 0.0, 0.0))
+    result = calibrate(seg, sensor_pose="estimate")
+    np.testing.assert_allclose(result.params.as_array(), TRUTH.as_array(), rtol=1e-7)
+    np.testing.assert_allclose(result.sensor_pose.as_array()[:2], [l_x, l_y], atol=1e-8)
+    assert abs(np.angle(np.exp(1j * (result.sensor_pose.theta - l_t)))) < 1e-8
+    assert result.identifiable and result.fit.ok
+
+
+def test_auto_estimates_an_off_axle_sensor_and_says_why(rng):
+    result = calibrate(sensor_segments(rng))
+    assert result.model == "sensor_pose" and result.sensor_pose_std is not None
+    assert "fits significantly better" in result.model_choice
+    z = (result.sensor_pose.as_array() - OFF_AXLE) / result.sensor_pose_std
+    assert np.all(np.abs(z) < 4), z
+    assert result.full_covariance.shape == (6, 6) and result.singular_values.size == 6
+    d = result.to_dict()
+    assert d["model"] == "sensor_pose" and set(d["sensor_pose"]) == {"x", "y", "theta"}
+    assert d["fit"]["ok"] is True
+
+
+def test_auto_keeps_the_axle_model_on_axle_data(rng):
+    result = calibrate(lesson_dataset(rng, 200, TRUTH))
+    assert result.model == "axle" and result.sensor_pose is None
+    assert "does not fit significantly better" in result.model_choice and result.fit.ok
+
+
+def test_forcing_the_axle_model_on_an_off_axle_sensor_is_a_misfit_in_words(rng):
+    result = calibrate(sensor_segments(rng), sensor_pose="axle")
+    assert not result.fit.ok
+    assert "the sensor is not on the axle" in result.fit.message
+    assert "try --sensor-pose estimate" in result.fit.message
+    assert result.fit.noise_ratio[:2].max() > 3 and result.fit.lr_statistic > 100
+
+
+def test_a_wrong_given_sensor_pose_is_a_misfit_and_the_right_one_fits(rng):
+    seg = sensor_segments(rng)
+    wrong = calibrate(seg, sensor_pose=SensorPose(0.0, 0.0, 1.8))
+    assert not wrong.fit.ok and "not at the given pose" in wrong.fit.message
+    right = calibrate(seg, sensor_pose=SensorPose(*OFF_AXLE), sigma=(2e-3, 2e-3, 1e-3))
+    assert right.fit.ok and right.model == "sensor_pose" and right.sensor_pose_std is None
+    assert np.all(np.abs(right.params.as_array() / TRUTH.as_array() - 1) < 5 * right.std
+                  / TRUTH.as_array())
+
+
+def test_given_noise_levels_that_are_too_small_fail_the_fit(rng):
+    seg = lesson_dataset(rng, 200, TRUTH)
+    result = calibrate(seg, sigma=(2e-4, 2e-4, 1e-4), sensor_pose="axle")
+    assert not result.fit.ok and "noise level" in result.fit.message
+
+
+def test_sensor_pose_identifiability_in_words(rng):
+    straight = sensor_segments(rng, 60, phi=np.repeat(rng.uniform(5, 20, (1, 60)), 2, axis=0)
+                               * np.array([[TRUTH.r_R], [TRUTH.r_L]]) / TRUTH.r_L)
+    result = calibrate(straight, sensor_pose="estimate")
+    assert not result.identifiable
+    assert "sensor x, y: no segment turns" in result.unidentifiable_direction
+    turns = rng.uniform(-20, 20, 60)
+    spins = sensor_segments(rng, 60, phi=np.stack([-turns * TRUTH.r_R / TRUTH.r_L, turns]))
+    result = calibrate(spins, sensor_pose="estimate")
+    assert not result.identifiable
+    assert "sensor theta: no segment translates" in result.unidentifiable_direction
+    auto = calibrate(spins)
+    assert auto.model == "axle" and "do not determine the sensor pose" in auto.model_choice
+
+
+def test_trimming_drops_the_worst_segments_one_percent_per_pass(rng):
+    seg = lesson_dataset(rng, 300, TRUTH)
+    rows = seg.as_array()
+    rows[:6, 2] += 0.5  # six gross outliers
+    result = calibrate(rows, trim=0.02, sensor_pose="axle")
+    assert result.n_trimmed == 6 and result.n_segments == 294
+    assert np.all(np.abs(result.params.as_array() / TRUTH.as_array() - 1) < 4 * result.std
+                  / TRUTH.as_array())
+
+
+def test_all_zero_data_and_exact_data(rng):
+    with pytest.raises(DataError, match="no segment moves"):
+        calibrate(np.zeros((10, 5)))
+    seg = exact_segments(rng.normal(0, 0.4, 50), rng.normal(0, 0.4, 50))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = calibrate(seg)  # sigma estimated as (almost) zero: a floor, not a division
+    np.testing.assert_allclose(result.params.as_array(), TRUTH.as_array(), rtol=1e-9)
+    assert result.converged and result.identifiable
