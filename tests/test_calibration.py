@@ -135,7 +135,7 @@ def test_rejects_bad_arguments(rng):
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-from excite import SensorPose, Segments  # noqa: E402
+from excite import Segments, SensorPose  # noqa: E402
 from excite.models import SENSOR_POSE  # noqa: E402
 
 OFF_AXLE = np.array([0.05, -0.03, 1.8])
