@@ -10,7 +10,7 @@ with gymnasium, see :mod:`excite.registration`)::
 """
 
 from excite.calibration import CalibrationResult, calibrate
-from excite.data import Segments, load_segments, save_segments
+from excite.data import Segments, load_segment_files, load_segments, save_segments
 from excite.errors import DataError, ExciteError
 from excite.kinematics import Params, predict_increment
 from excite.models import SensorPose, increment_jacobian
@@ -31,6 +31,7 @@ __all__ = [
     "SensorPose",
     "calibrate",
     "increment_jacobian",
+    "load_segment_files",
     "load_segments",
     "predict_increment",
     "save_segments",

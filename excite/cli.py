@@ -3,7 +3,8 @@
 Heavy layers (gymnasium, pymunk, torch, matplotlib) are imported lazily inside the
 subcommands that need them. Exit status: 0 success; 2 bad input or usage (one line
 ``excite: error: ...`` on stderr); 3 when ``calibrate`` finds the data cannot determine all
-three parameters (the report is still printed).
+the parameters, 4 when the model does not fit the data (the report is still printed, with
+the reason in words). A closed stdout (``| head``) is a normal end.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from excite import __version__
 from excite.errors import DataError, ExciteError
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
 
-EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_UNIDENTIFIABLE = 0, 1, 2, 3
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_UNIDENTIFIABLE, EXIT_MISFIT = 0, 1, 2, 3, 4
 
 
 class UsageError(ExciteError):
@@ -58,26 +59,61 @@ def _params_arg(text: str):
     return Params(*_floats(text, ("RL", "RR", "B"), "--init"))
 
 
+def _sensor_pose_arg(text: str):
+    """--sensor-pose: auto, axle, estimate, or X,Y,THETA (m, m, rad) in the body frame."""
+    from excite.models import SensorPose
+
+    if text in ("auto", "axle", "estimate"):
+        return text
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise UsageError(f"--sensor-pose must be auto, axle, estimate or X,Y,THETA "
+                         f"(m, m, rad), got {text!r}")
+    try:
+        return SensorPose(*map(float, parts))
+    except ValueError:
+        raise UsageError(f"--sensor-pose: X,Y,THETA must be finite numbers, got {text!r}"
+                         ) from None
+
+
+def _fraction_arg(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0.0 <= value < 0.5:
+        raise argparse.ArgumentTypeError(f"must be a fraction in [0, 0.5), got {text!r}")
+    return value
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from excite.calibration import calibrate
-    from excite.data import load_segments
-    from excite.export import write_ros2_yaml
+    from excite.data import load_segment_files
+    from excite.export import static_transform_command, write_ros2_yaml
 
-    segments = load_segments(args.file)
     sigma = _sigma_arg(args.sigma) if args.sigma else None
     initial = _params_arg(args.init) if args.init else None
-    result = calibrate(segments, initial=initial, sigma=sigma, loss=args.loss)
+    sensor_pose = _sensor_pose_arg(args.sensor_pose)
+    segments = load_segment_files(args.files)
+    result = calibrate(segments, initial=initial, sigma=sigma, loss=args.loss,
+                       sensor_pose=sensor_pose, trim=args.trim)
+    estimated_pose = result.sensor_pose if result.sensor_pose_std is not None else None
     if args.json:
         print(json.dumps(result.to_dict(), indent=2))
     else:
         print(result.summary())
+        if estimated_pose is not None:
+            print(f"  sensor transform: {static_transform_command(estimated_pose)}")
     if args.ros2_yaml:
         try:
-            write_ros2_yaml(args.ros2_yaml, result.params, nominal=initial)
+            write_ros2_yaml(args.ros2_yaml, result.params, nominal=initial,
+                            sensor_pose=estimated_pose)
         except OSError as exc:
             raise UsageError(f"cannot write {args.ros2_yaml}: {exc.strerror}") from None
         if not args.json:
             print(f"wrote ROS 2 diff_drive_controller parameters to {args.ros2_yaml}")
+    if not result.fit.ok:
+        return EXIT_MISFIT
     return EXIT_OK if result.identifiable else EXIT_UNIDENTIFIABLE
 
 
@@ -153,7 +189,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
     import numpy as np
 
     from agents.catalog import ProtocolError
-    from agents.compare import COLUMNS, CompareError, CompareSettings, run_comparison
+    from agents.compare import (
+        COLUMNS,
+        CompareError,
+        CompareSettings,
+        incompatible_protocols,
+        run_comparison,
+    )
     from agents.report import format_table, plot_comparison, summarize
 
     env_id = _env_id(args.env)
@@ -161,6 +203,15 @@ def cmd_compare(args: argparse.Namespace) -> int:
         raise UsageError(f"--policy: no such file {args.policy}")
     protocols = _protocol_names(args.protocols, args.policy)
     settings = CompareSettings(env_id=env_id, segments=args.segments, seed=args.seed)
+    try:
+        skipped = incompatible_protocols(protocols, env_id, args.segments, args.policy)
+    except ProtocolError as exc:
+        raise UsageError(str(exc)) from None
+    for name, reason in skipped.items():
+        print(f"excite: skipping {name}: {reason}", file=sys.stderr)
+    protocols = [name for name in protocols if name not in skipped]
+    if not protocols:
+        raise UsageError("no protocol can run on this environment")
     try:
         rows = run_comparison(args.out, protocols, args.episodes, settings, args.workers,
                               args.policy)
@@ -200,16 +251,26 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"excite {__version__}")
     sub = parser.add_subparsers(dest="command", parser_class=_Parser, metavar="COMMAND")
 
-    cal = sub.add_parser("calibrate", help="estimate r_L, r_R, b from a segment CSV")
-    cal.add_argument("file", metavar="FILE.csv")
+    cal = sub.add_parser("calibrate", help="estimate r_L, r_R, b (and the sensor pose) from "
+                         "segment files (one data set)")
+    cal.add_argument("files", nargs="+", metavar="FILE",
+                     help="segment CSV or Censi tuple files (*.tuple)")
     cal.add_argument("--json", action="store_true", help="print one JSON object")
     cal.add_argument("--sigma", metavar="SX,SY,STH",
                      help="noise std of dx, dy (m) and dtheta (rad); default: estimated")
     cal.add_argument("--loss", choices=("linear", "huber"), default="linear")
     cal.add_argument("--init", metavar="RL,RR,B",
                      help="initial guess / nominal robot in meters; default: found from data")
+    cal.add_argument("--sensor-pose", default="auto", metavar="auto|axle|estimate|X,Y,THETA",
+                     help="pose sensor mounting: auto (default: estimated when the data "
+                     "determine it and it fits significantly better), axle, estimate, or a "
+                     "known pose in the body frame (m, m, rad)")
+    cal.add_argument("--trim", type=_fraction_arg, default=0.0, metavar="FRACTION",
+                     help="drop this fraction of segments with the largest residuals "
+                     "(1%% per pass)")
     cal.add_argument("--ros2-yaml", metavar="OUT.yaml",
-                     help="write diff_drive_controller parameters (nominal from --init)")
+                     help="write diff_drive_controller parameters (nominal from --init) and "
+                     "the sensor's static transform when estimated")
     cal.set_defaults(handler=cmd_calibrate)
 
     sim = sub.add_parser("simulate", help="drive a simulated robot with a protocol, write its log")
@@ -262,6 +323,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, DataError) as exc:
         print(f"excite: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:  # stdout closed by the reader (| head): a normal end
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
+        return EXIT_OK
     except KeyboardInterrupt:
         print("excite: interrupted (compare keeps finished episodes: re-run the same command "
               "to continue)", file=sys.stderr)

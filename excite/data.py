@@ -1,15 +1,27 @@
-"""Segment data: the lesson's CSV format, read with validation of every row.
+"""Segment data: the lesson's CSV format and Censi tuple files, read with validation.
 
 A segment CSV has the columns ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` (radians, radians,
 meters, meters, radians; the pose increment in the body frame at the segment's start, dtheta
 continuous), one row per segment. The header line is optional; blank lines and lines starting
 with ``#`` are ignored. Any other malformed line is an error naming the file and line.
+
+A Censi tuple file (Censi et al., "Simultaneous calibration of odometry and sensor parameters
+for mobile robots", T-RO 2013) is a stream of JSON objects (not a JSON array) separated by any
+whitespace, ``{"T": s, "phi_l": rad/s, "phi_r": rad/s, "sm": [x, y, theta], ...}``, one segment
+per object, extra keys ignored. The segment is ``dphi_L = phi_l * T``, ``dphi_R = phi_r * T``
+and ``(dx, dy, dtheta) = sm`` (m, m, rad): the sensor's own motion in the sensor frame at the
+segment's start. Between objects, ``#`` starts a comment that runs to the end of the line. A
+file is read as a tuple file when its name ends in ``.tuple`` or its first character that is
+not whitespace or in a comment line is ``{``; otherwise it is a segment CSV.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,11 +29,22 @@ from numpy.typing import ArrayLike, NDArray
 
 from excite.errors import DataError
 
-__all__ = ["COLUMNS", "DataError", "Segments", "load_segments", "save_segments"]
+__all__ = [
+    "COLUMNS",
+    "DataError",
+    "Segments",
+    "load_segment_files",
+    "load_segments",
+    "save_segments",
+]
 
 COLUMNS = ("dphi_L", "dphi_R", "dx_gt", "dy_gt", "dtheta_gt")
 MIN_SEGMENTS = 3
 _FIELDS = ("dphi_L", "dphi_R", "dx", "dy", "dtheta")
+TUPLE_SUFFIX = ".tuple"
+TUPLE_KEYS = ("T", "phi_l", "phi_r", "sm")
+# Whitespace and "#" comments (to the end of the line) between the objects of a tuple file.
+_TUPLE_GAP = re.compile(r"(?:\s+|#[^\n]*)*")
 
 
 @dataclass(frozen=True)
@@ -91,30 +114,38 @@ def _parse_line(fields: list[str], where: str) -> list[float]:
     return values
 
 
-def load_segments(path: str | os.PathLike[str]) -> Segments:
-    """Read a segment CSV, validating every row.
-
-    Raises DataError naming the file (and line) for: a missing or unreadable file, binary
-    content, a wrong column count, text or NaN/inf in a number, fewer than 3 segments.
-    """
-    name = os.fspath(path)
+def _read_text(name: str, is_tuple_name: bool) -> str:
+    """The file's text (UTF-8, BOM removed); DataError naming the file if it is not text."""
+    kind = "tuple" if is_tuple_name else "CSV"
     try:
         with open(name, "rb") as handle:
             raw = handle.read()
     except FileNotFoundError:
         raise DataError(f"{name}: no such file") from None
     except IsADirectoryError:
-        raise DataError(f"{name}: is a directory, not a CSV file") from None
+        raise DataError(f"{name}: is a directory, not a {kind} file") from None
     except OSError as exc:
         raise DataError(f"{name}: cannot read: {exc.strerror}") from None
     if b"\x00" in raw:
-        raise DataError(f"{name}: binary data, not a CSV text file")
+        raise DataError(f"{name}: binary data, not a {kind} text file")
     try:
-        text = raw.decode("utf-8-sig")
+        return raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         line = raw[: exc.start].count(b"\n") + 1
         raise DataError(f"{name}:{line}: not UTF-8 text") from None
 
+
+def _looks_like_tuples(text: str) -> bool:
+    """True when the first character outside blank and ``#`` comment lines is ``{``."""
+    for line in text.splitlines():
+        stripped = line.strip()
+        if stripped and not stripped.startswith("#"):
+            return stripped.startswith("{")
+    return False
+
+
+def _csv_rows(name: str, text: str) -> list[list[float]]:
+    """Rows of a segment CSV in column order; DataError naming file and line if malformed."""
     rows: list[list[float]] = []
     seen_content = False
     for number, line in enumerate(text.splitlines(), start=1):
@@ -127,13 +158,155 @@ def load_segments(path: str | os.PathLike[str]) -> Segments:
             continue
         seen_content = True
         rows.append(_parse_line(fields, f"{name}:{number}"))
-    if not rows:
-        raise DataError(f"{name}: no segments (the file is empty or has only a header)")
+    return rows
+
+
+def _show(value: object, limit: int = 40) -> str:
+    """A short one-line JSON rendering of a value for an error message."""
+    text = json.dumps(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _json_type(value: object) -> str:
+    if isinstance(value, dict):
+        return "an object"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, bool):
+        return "a boolean"
+    if value is None:
+        return "null"
+    return "a number"
+
+
+def _tuple_number(value: object, label: str, where: str) -> float:
+    """A finite float from a JSON number (booleans are not numbers)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise DataError(f"{where}: {label} must be a number, found {_show(value)}")
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond float range
+        number = math.inf
+    if not math.isfinite(number):
+        raise DataError(f"{where}: {label} is not finite: {_show(value)}")
+    return number
+
+
+def _tuple_row(obj: object, where: str) -> list[float]:
+    """[dphi_L, dphi_R, dx, dy, dtheta] from one decoded tuple object."""
+    if not isinstance(obj, dict):
+        hint = " (a tuple file is a stream of objects, not a JSON array)" if isinstance(
+            obj, list
+        ) else ""
+        raise DataError(f"{where}: expected a JSON object, found {_json_type(obj)}{hint}")
+    for key in TUPLE_KEYS:
+        if key not in obj:
+            raise DataError(f'{where}: missing key "{key}"')
+    duration = _tuple_number(obj["T"], '"T"', where)
+    if duration <= 0.0:
+        raise DataError(f'{where}: "T" must be > 0 s, found {_show(obj["T"])}')
+    phi_l = _tuple_number(obj["phi_l"], '"phi_l"', where)
+    phi_r = _tuple_number(obj["phi_r"], '"phi_r"', where)
+    sm = obj["sm"]
+    if not isinstance(sm, list) or len(sm) != 3:
+        raise DataError(f'{where}: "sm" must be a list of 3 numbers, found {_show(sm)}')
+    motion = [_tuple_number(v, f'"sm"[{i}]', where) for i, v in enumerate(sm)]
+    dphi_L, dphi_R = phi_l * duration, phi_r * duration
+    for key, value in (("phi_l", dphi_L), ("phi_r", dphi_R)):
+        if not math.isfinite(value):
+            raise DataError(f'{where}: "{key}" * "T" overflows')
+    return [dphi_L, dphi_R, *motion]
+
+
+def _tuple_rows(name: str, text: str) -> list[list[float]]:
+    """Rows of a Censi tuple file; DataError naming file, object number and line if malformed.
+
+    The objects are decoded one after the other with ``json.JSONDecoder().raw_decode``;
+    whitespace and ``#`` comments between them are skipped.
+    """
+    decoder = json.JSONDecoder()
+    rows: list[list[float]] = []
+    index, line, counted = 0, 1, 0
+    while True:
+        index = _TUPLE_GAP.match(text, index).end()
+        if index >= len(text):
+            return rows
+        line += text.count("\n", counted, index)
+        counted = index
+        where = f"{name}: object {len(rows) + 1} (line {line})"
+        try:
+            obj, index = decoder.raw_decode(text, index)
+        except json.JSONDecodeError as exc:
+            raise DataError(
+                f"{where}: invalid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
+            ) from None
+        except RecursionError:
+            raise DataError(f"{where}: invalid JSON: nested too deeply") from None
+        rows.append(_tuple_row(obj, where))
+
+
+def _load_rows(path: str | os.PathLike[str]) -> tuple[str, list[list[float]]]:
+    """The file's name and its segment rows (CSV column order), in whichever format it is.
+
+    Raises DataError for an unreadable or malformed file or one without segments, but does
+    not check the minimum number of segments.
+    """
+    name = os.fspath(path)
+    is_tuple_name = name.lower().endswith(TUPLE_SUFFIX)
+    text = _read_text(name, is_tuple_name)
+    if is_tuple_name or _looks_like_tuples(text):
+        rows = _tuple_rows(name, text)
+        if not rows:
+            raise DataError(f"{name}: no segments (the tuple file has no JSON objects)")
+    else:
+        rows = _csv_rows(name, text)
+        if not rows:
+            raise DataError(f"{name}: no segments (the file is empty or has only a header)")
+    return name, rows
+
+
+def _too_few(what: str, count: int, total: str = "") -> DataError:
+    return DataError(
+        f"{what}: {count} segment(s){total}; at least {MIN_SEGMENTS} are needed "
+        "to determine r_L, r_R and b"
+    )
+
+
+def load_segments(path: str | os.PathLike[str]) -> Segments:
+    """Read a segment CSV or a Censi tuple file (see the module docstring), validating all.
+
+    The format is chosen by the name (``*.tuple``) or else by the content (a first ``{``).
+    For a tuple file dx, dy, dtheta are the sensor's motion in the sensor frame (m, m, rad).
+    Raises DataError naming the file (and line, and for a tuple file the object number) for:
+    a missing or unreadable file, binary content, a wrong column count, text or NaN/inf in a
+    number, invalid JSON, a missing or bad key, T <= 0, fewer than 3 segments.
+    """
+    name, rows = _load_rows(path)
     if len(rows) < MIN_SEGMENTS:
-        raise DataError(
-            f"{name}: {len(rows)} segment(s); at least {MIN_SEGMENTS} are needed "
-            "to determine r_L, r_R and b"
-        )
+        raise _too_few(name, len(rows))
+    return Segments.from_array(np.array(rows))
+
+
+def load_segment_files(paths: Sequence[str | os.PathLike[str]]) -> Segments:
+    """Read several files, each a segment CSV or a tuple file, as one data set, in order.
+
+    Every file must parse and hold at least one segment (DataError naming it otherwise); the
+    minimum of 3 segments applies to the total. Units and frames are those of each format.
+    """
+    if isinstance(paths, str | bytes | os.PathLike):
+        raise TypeError("load_segment_files expects a sequence of paths, not a single path")
+    if not paths:
+        raise DataError("no segment files given")
+    names: list[str] = []
+    rows: list[list[float]] = []
+    for path in paths:
+        name, file_rows = _load_rows(path)
+        names.append(name)
+        rows.extend(file_rows)
+    if len(rows) < MIN_SEGMENTS:
+        raise _too_few(", ".join(names), len(rows), " in total" if len(names) > 1 else "")
     return Segments.from_array(np.array(rows))
 
 

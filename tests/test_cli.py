@@ -161,3 +161,97 @@ def test_import_excite_stays_light():
                            "print('gymnasium' in sys.modules)"],
                           capture_output=True, text=True, check=True)
     assert proc.stdout.strip() == "False"
+    # scipy.stats alone took ~2 s to import: excite imports no scipy at all (its time is in
+    # benchmarks/bench_import.py).
+    proc = subprocess.run([sys.executable, "-c", "import sys, excite; "
+                           "print(sorted(m for m in sys.modules if m.startswith('scipy')))"],
+                          capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == "[]"
+
+
+# -- the sensor pose, misfit exit status, several files, closed stdout -------------------------
+def off_axle_csv(tmp_path, rng, name="off.csv", n=200):
+    from excite import Segments
+    from excite.models import SENSOR_POSE
+
+    phi = rng.normal(0.0, 2.0, (2, n))
+    theta = np.append(TRUTH.as_array(), [0.05, -0.03, 1.8])
+    measured = SENSOR_POSE.predict(*phi, theta) + rng.normal(size=(n, 3)) * [2e-3, 2e-3, 1e-3]
+    path = tmp_path / name
+    save_segments(path, Segments(*phi, *measured.T))
+    return path
+
+
+def test_off_axle_sensor_is_estimated_by_default(capsys, tmp_path, rng):
+    code, out, _ = run_cli(capsys, "calibrate", off_axle_csv(tmp_path, rng), "--json")
+    d = json.loads(out)
+    assert code == 0 and d["model"] == "sensor_pose" and d["fit"]["ok"]
+    assert abs(d["sensor_pose"]["theta"] - 1.8) < 5 * d["sensor_pose_std"]["theta"]
+    assert len(d["full_covariance"]) == 6 and d["parameters"][3:] == ["l_x", "l_y", "l_theta"]
+
+
+def test_forced_axle_on_off_axle_data_is_exit_4_with_the_reason(capsys, tmp_path, rng):
+    code, out, err = run_cli(capsys, "calibrate", off_axle_csv(tmp_path, rng),
+                             "--sensor-pose", "axle")
+    assert code == 4 and err == ""
+    assert "fit             = NO" in out and "the sensor is not on the axle" in out
+    assert "try --sensor-pose estimate" in out
+
+
+def test_given_sensor_pose_and_static_transform_export(capsys, tmp_path, rng):
+    path = off_axle_csv(tmp_path, rng)
+    code, out, _ = run_cli(capsys, "calibrate", path, "--sensor-pose", "0.05,-0.03,1.8")
+    assert code == 0 and "sensor theta = +1.800000 rad" in out and "(given)" in out
+    out_yaml = tmp_path / "ddc.yaml"
+    code, out, _ = run_cli(capsys, "calibrate", path, "--sensor-pose", "estimate",
+                           "--ros2-yaml", out_yaml)
+    text = out_yaml.read_text()
+    assert code == 0 and "static_transform_publisher --x 0.0" in text
+    assert "--frame-id base_link --child-frame-id sensor" in text
+    assert "sensor transform: ros2 run tf2_ros static_transform_publisher" in out
+
+
+def test_several_files_are_one_data_set(capsys, tmp_path, rng):
+    a, b = off_axle_csv(tmp_path, rng, "a.csv", 100), off_axle_csv(tmp_path, rng, "b.csv", 100)
+    code, out, _ = run_cli(capsys, "calibrate", a, b, "--json")
+    assert code == 0 and json.loads(out)["n_segments"] == 200
+
+
+@pytest.mark.parametrize("extra, fragment", [
+    (["--sensor-pose", "somewhere"], "--sensor-pose must be auto, axle, estimate or X,Y,THETA"),
+    (["--sensor-pose", "0,0,nan"], "--sensor-pose: X,Y,THETA must be finite"),
+    (["--sensor-pose", "0,a,0"], "--sensor-pose: X,Y,THETA must be finite"),
+    (["--trim", "0.7"], "must be a fraction in [0, 0.5)"),
+    (["--trim", "x"], "not a number"),
+])
+def test_bad_sensor_options_are_one_line_errors(capsys, good_csv, extra, fragment):
+    assert_one_line_error(*run_cli(capsys, "calibrate", good_csv, *extra)[::2], fragment)
+
+
+def test_all_zero_log_is_a_one_line_error(capsys, tmp_path):
+    path = tmp_path / "zeros.csv"
+    path.write_text("0,0,0,0,0\n" * 10)
+    assert_one_line_error(*run_cli(capsys, "calibrate", path)[::2], "no segment moves")
+
+
+def test_noise_free_log_gives_the_exact_parameters_without_warnings(tmp_path, rng):
+    from .conftest import exact_segments
+
+    path = tmp_path / "exact.csv"
+    save_segments(path, exact_segments(rng.normal(0, 0.4, 60), rng.normal(0, 0.4, 60)))
+    proc = subprocess.run([sys.executable, "-W", "error", "-m", "excite.cli", "calibrate",
+                           str(path), "--json"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ""
+    params = json.loads(proc.stdout)["params"]
+    np.testing.assert_allclose([params[k] for k in ("r_L", "r_R", "b")], TRUTH.as_array(),
+                               rtol=1e-9)
+
+
+def test_closed_stdout_is_a_normal_end(good_csv):
+    """As `excite calibrate log.csv | head -3`, with the reader gone before the first write."""
+    proc = subprocess.Popen([sys.executable, "-m", "excite.cli", "calibrate", str(good_csv)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # the reader leaves before excite has written anything
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0 and err == b"", err
