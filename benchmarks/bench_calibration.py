@@ -2,10 +2,12 @@
 
 1. Efficiency: Monte Carlo over datasets of the lesson's kind (200 segments, wheel increments
    ~ N(0, 0.4^2) rad, truth (0.050, 0.051, 0.300) m) in three noise regimes; RMSE of each
-   parameter divided by the Cramér–Rao bound at the truth, for excite with sigma given, with
-   sigma estimated, and for the lesson's unweighted estimator.
-2. Speed: 100k segments, excite vs the lesson's estimator on the same data, same process,
-   median of repeats.
+   parameter divided by the Cramér–Rao bound at the truth, for excite's axle model with sigma
+   given, with sigma estimated, and for the lesson's unweighted estimator (the default
+   sensor_pose="auto" on these data: benchmarks/bench_sensor_pose.py).
+2. Speed: 100k segments, excite (the axle model, as the lesson's; and the default
+   sensor_pose="auto") vs the lesson's estimator on the same data, same process, median of
+   repeats.
 3. Online update latency: median per update at 100 and at 100k segments processed.
 
 Usage: python benchmarks/bench_calibration.py [--datasets 1000] [--workers 2]
@@ -40,8 +42,8 @@ def _one_dataset(args) -> np.ndarray:
     seg = lesson_dataset(np.random.default_rng(seed), 200, LESSON_TRUTH, sigma=sigma)
     truth = LESSON_TRUTH.as_array()
     rows = [
-        calibrate(seg, sigma=sigma).params.as_array() / truth - 1,
-        calibrate(seg).params.as_array() / truth - 1,
+        calibrate(seg, sigma=sigma, sensor_pose="axle").params.as_array() / truth - 1,
+        calibrate(seg, sensor_pose="axle").params.as_array() / truth - 1,
         lesson_calibrate(seg) / truth - 1,
         crlb_relative_std(fisher_information(
             scaled_jacobian(seg.dphi_L, seg.dphi_R, LESSON_TRUTH, sigma))),
@@ -75,11 +77,13 @@ def speed(n: int = 100_000, repeats: int = 5) -> dict:
     seg = lesson_dataset(np.random.default_rng(1), n, LESSON_TRUTH)
     sigma = (2e-3, 2e-3, 1e-3)
     t_lesson = _median_time(lambda: lesson_calibrate(seg), repeats)
-    t_given = _median_time(lambda: calibrate(seg, sigma=sigma), repeats)
-    t_est = _median_time(lambda: calibrate(seg), repeats)
+    t_given = _median_time(lambda: calibrate(seg, sigma=sigma, sensor_pose="axle"), repeats)
+    t_est = _median_time(lambda: calibrate(seg, sensor_pose="axle"), repeats)
+    t_auto = _median_time(lambda: calibrate(seg), repeats)
     return {"segments": n, "lesson_s": t_lesson, "excite_sigma_given_s": t_given,
             "excite_sigma_estimated_s": t_est, "ratio_given": t_given / t_lesson,
-            "ratio_estimated": t_est / t_lesson}
+            "ratio_estimated": t_est / t_lesson, "excite_auto_s": t_auto,
+            "ratio_auto": t_auto / t_lesson}
 
 
 def online_latency() -> dict:
@@ -117,7 +121,8 @@ def main(argv=None) -> dict:
     print(f"\n100k segments, median of 5: lesson {spd['lesson_s']:.3f} s, "
           f"excite sigma given {spd['excite_sigma_given_s']:.3f} s "
           f"({spd['ratio_given']:.3f}x), sigma estimated {spd['excite_sigma_estimated_s']:.3f} s "
-          f"({spd['ratio_estimated']:.3f}x)")
+          f"({spd['ratio_estimated']:.3f}x); sensor_pose='auto' (both models fitted and "
+          f"tested) {spd['excite_auto_s']:.3f} s ({spd['ratio_auto']:.3f}x)")
     lat = online_latency()
     print("Online update median: " + ", ".join(f"{k} = {v:.1f} us" for k, v in lat.items()))
     return {"efficiency": eff, "speed": spd, "online": lat}

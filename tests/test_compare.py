@@ -202,6 +202,21 @@ def test_compare_cli_writes_summary_and_plots(tmp_path, capsys):
         assert image.shape[0] > 100 and image.std() > 0.01
 
 
+def test_compare_runs_on_the_sensor_env_and_skips_a_policy_of_another_layout(tmp_path, capsys):
+    """greedy and the oracle plan with the six-parameter model; the shipped policy (trained on
+    the axle env's 16 observations) is skipped with a one-line message, the rest runs."""
+    code = main(["compare", "--protocols", "greedy,umbmark,learned", "--episodes", "2",
+                 "--segments", "6", "--env", "excite/DiffDriveCalibSensor-v0", "--workers",
+                 "1", "--out", str(tmp_path)])
+    out, err = capsys.readouterr()
+    assert code == 0
+    skipped = [line for line in err.splitlines() if line.startswith("excite: skipping")]
+    assert len(skipped) == 1 and "another observation layout" in skipped[0]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert set(summary["protocols"]) == {"greedy", "umbmark"}
+    assert summary["protocols"]["greedy"]["sigma_min"]["median"] > 0
+
+
 @pytest.mark.parametrize(
     "argv, fragment",
     [
