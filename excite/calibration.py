@@ -74,8 +74,11 @@ class FitTest:
     ok: the verdict. message: the reason in words. noise_ratio: per channel (x, y, theta), the
     residual std of the chosen model over the reference noise level (the given sigma, or the
     residual std of the sensor-pose alternative); None when there is no reference.
-    lr_statistic / lr_threshold: the likelihood-ratio statistic against the sensor-pose
-    alternative (None when not tested) and its 99.9% chi-square quantile. turn_trend_z: the
+    statistic / statistic_name / threshold: the test of the model against the sensor-pose
+    alternative ("likelihood ratio" when both were fitted, as ``auto`` does; "score" (Rao's
+    test at the chosen model's estimate, one evaluation) when a model was imposed, the
+    alternative then fitted only to describe a misfit); None when not tested; the threshold is
+    the 99.9% chi-square quantile with 3 degrees of freedom. turn_trend_z: the
     z value of the correlation between the position residuals and |dtheta| (> 3: the residuals
     grow with the turn rate, the signature of an off-axle sensor).
     """
@@ -83,15 +86,17 @@ class FitTest:
     ok: bool
     message: str
     noise_ratio: FloatArray | None = None
-    lr_statistic: float | None = None
-    lr_threshold: float | None = None
+    statistic: float | None = None
+    statistic_name: str | None = None
+    threshold: float | None = None
     turn_trend_z: float | None = None
 
     def to_dict(self) -> dict:
         ratio = None if self.noise_ratio is None else dict(
             zip(_CHANNELS, map(float, self.noise_ratio), strict=True))
         return {"ok": self.ok, "message": self.message, "noise_ratio": ratio,
-                "lr_statistic": self.lr_statistic, "lr_threshold": self.lr_threshold,
+                "statistic": self.statistic, "statistic_name": self.statistic_name,
+                "threshold": self.threshold,
                 "turn_trend_z": self.turn_trend_z}
 
 
@@ -319,13 +324,23 @@ def _channels_in_words(ratio: FloatArray, worse: FloatArray) -> str:
     return f"{largest:.1f}x the noise level in {', '.join(names)}"
 
 
-def _fit_test(chosen: _ModelFit, alternative: _ModelFit | None, lr: float | None,
-              threshold: float, sigma_given: FloatArray | None, loss: Loss,
-              forced: str) -> FitTest:
+def _score_statistic(data: Segments, theta: FloatArray, sigma: FloatArray, loss: Loss) -> float:
+    """Rao's score statistic g^T F^-1 g of the sensor-pose model at ``theta`` (the imposed
+    model's estimate, with its sensor pose): chi-square with 3 degrees of freedom when the
+    imposed model is right."""
+    system = normal_system(Problem(SENSOR_POSE, data).evaluate(theta), sigma, loss)
+    gradient = system.gradient
+    return float(gradient @ np.linalg.pinv(system.information, hermitian=True) @ gradient)
+
+
+def _fit_test(chosen: _ModelFit, alternative: _ModelFit | None, statistic: float | None,
+              statistic_name: str | None, threshold: float, sigma_given: FloatArray | None,
+              loss: Loss, forced: str) -> FitTest:
     """The fit verdict of the chosen model (see :class:`FitTest`). ``forced`` names what the
     user imposed: "axle", "pose" (a given sensor pose) or "" (nothing)."""
     trend = _turn_trend_z(chosen)
-    if alternative is not None and lr is not None and lr > threshold:
+    numbers = (statistic, statistic_name, threshold, trend)
+    if alternative is not None and statistic is not None and statistic > threshold:
         if sigma_given is None:
             ratio = chosen.fit.sigma / alternative.fit.sigma
         else:
@@ -341,7 +356,7 @@ def _fit_test(chosen: _ModelFit, alternative: _ModelFit | None, lr: float | None
         else:
             verdict = (f"the residuals are {words}{grows}: the sensor is not at the given "
                        f"pose (the data put it at {where}); try --sensor-pose estimate")
-        return FitTest(False, verdict, ratio, lr, threshold, trend)
+        return FitTest(False, verdict, ratio, *numbers)
     if sigma_given is not None and loss == "linear":
         ok, ratio = _goodness_of_fit(chosen, sigma_given)
         if not ok:
@@ -350,15 +365,14 @@ def _fit_test(chosen: _ModelFit, alternative: _ModelFit | None, lr: float | None
                     if grows and chosen.model is AXLE else "")
             return FitTest(False, f"the residuals are {_channels_in_words(ratio, ratio > 1.2)}"
                            f" given{grows}: the model or the given noise levels are wrong"
-                           f"{hint}", ratio, lr, threshold, trend)
-        return FitTest(True, "the residuals match the given noise levels", ratio, lr,
-                       threshold, trend)
-    if alternative is not None and lr is not None:
-        return FitTest(True, f"the sensor-pose model does not fit significantly better "
-                       f"(likelihood ratio {lr:.3g} <= {threshold:.3g})", None, lr, threshold,
-                       trend)
-    return FitTest(True, "no alternative to test against (noise levels estimated)", None, lr,
-                   threshold, trend)
+                           f"{hint}", ratio, *numbers)
+        return FitTest(True, "the residuals match the given noise levels", ratio, *numbers)
+    if statistic is not None:
+        return FitTest(True, f"the sensor-pose alternative does not fit significantly better "
+                       f"({statistic_name} {statistic:.3g} <= {threshold:.3g})", None,
+                       *numbers)
+    return FitTest(True, "no alternative to test against (noise levels estimated)", None,
+                   *numbers)
 
 
 def _moving_segments(seg: Segments, sigma: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -491,39 +505,44 @@ def calibrate(
 
     threshold = chi2_quantile(TEST_LEVEL, 3)
     chosen = fit(primary, start)
-    alternative, lr, choice = None, None, ""
+    alternative, statistic, name, choice = None, None, None, ""
     if primary is SENSOR_POSE:
         sensor_fit = chosen
         axle_fit = fit(AXLE, axle_start) if sensor_pose == "auto" else None
         if axle_fit is not None:
-            lr = _likelihood_ratio(axle_fit, sensor_fit, given is not None, loss)
+            statistic = _likelihood_ratio(axle_fit, sensor_fit, given is not None, loss)
+            name = "likelihood ratio"
             if not sensor_fit.identifiable:
                 chosen, choice = axle_fit, (
                     "axle: the data do not determine the sensor pose ("
                     + _describe_weak(sensor_fit.weak, sensor_fit.theta, data,
                                      sensor_fit.fit.sigma) + ")")
-            elif lr <= threshold:
+            elif statistic <= threshold:
                 chosen, choice = axle_fit, (
                     f"axle: the sensor-pose model does not fit significantly better "
-                    f"(likelihood ratio {lr:.3g} <= {threshold:.3g})")
+                    f"(likelihood ratio {statistic:.3g} <= {threshold:.3g})")
             else:
                 choice = (f"sensor_pose: it fits significantly better than the axle model "
-                          f"(likelihood ratio {lr:.3g} > {threshold:.3g})")
+                          f"(likelihood ratio {statistic:.3g} > {threshold:.3g})")
             if chosen is axle_fit:
                 alternative = sensor_fit if sensor_fit.identifiable else None
+                statistic = statistic if sensor_fit.identifiable else None
         else:
             choice = "sensor_pose: estimated, as asked"
     else:
         choice = ("axle: as asked" if primary is AXLE
                   else "sensor_pose: at the given pose, as asked")
-        sensor_wheels, pose = sensor_pose_estimate(data, fallback)
-        candidate = fit(SENSOR_POSE, np.append(sensor_wheels.as_array(), pose.as_array()))
-        if candidate.identifiable:
-            alternative = candidate
-            lr = _likelihood_ratio(chosen, candidate, given is not None, loss)
+        pose = np.zeros(3) if primary is AXLE else primary.pose.as_array()
+        statistic = _score_statistic(data, np.append(chosen.theta, pose),
+                                     chosen.fit.sigma, loss)
+        name = "score"
+        if statistic > threshold:  # describe the misfit: where the data put the sensor
+            sensor_wheels, sensor_start = sensor_pose_estimate(data, fallback)
+            alternative = fit(SENSOR_POSE, np.append(sensor_wheels.as_array(),
+                                                     sensor_start.as_array()))
     forced = "" if sensor_pose in ("auto", "estimate") else (
         "axle" if sensor_pose == "axle" else "pose")
-    test = _fit_test(chosen, alternative, lr, threshold, given, loss, forced)
+    test = _fit_test(chosen, alternative, statistic, name, threshold, given, loss, forced)
     return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
                    len(seg) - len(data), sensor_pose if isinstance(sensor_pose, SensorPose)
                    else None)

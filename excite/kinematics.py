@@ -259,13 +259,18 @@ class Arc:
             self.f, self.g = sinc_family(self.dtheta, derivatives=False)
         self.dx, self.dy = self.ds * self.f, self.ds * self.g
 
-    def position_derivatives(self) -> tuple[tuple, tuple]:
-        """d(dx)/d(r_L, r_R, b) and d(dy)/d(r_L, r_R, b) (m per m), by the chain rule
-        through ds and dtheta."""
+    def fill_jacobian(self, out: FloatArray) -> FloatArray:
+        """Write d(dx, dy, dtheta)/d(r_L, r_R, b) into ``out`` (3 rows, 3 parameters, ...)
+        (m per m, rad per m), by the chain rule through ds and dtheta, without temporaries."""
         ex, ey = self.ds * self.fp, self.ds * self.gp
-        d_dx = tuple(a * self.f + ex * t for a, t in zip(self.d_ds, self.d_dtheta, strict=True))
-        d_dy = tuple(a * self.g + ey * t for a, t in zip(self.d_ds, self.d_dtheta, strict=True))
-        return d_dx, d_dy
+        for k in range(3):
+            out[2, k] = self.d_dtheta[k]
+            np.multiply(ex, out[2, k], out=out[0, k])
+            np.multiply(ey, out[2, k], out=out[1, k])
+            if k < 2:  # ds does not depend on b
+                out[0, k] += self.d_ds[k] * self.f
+                out[1, k] += self.d_ds[k] * self.g
+        return out
 
 
 def predict_increment(

@@ -178,11 +178,7 @@ class AxleModel(SegmentModel):
         prediction[0], prediction[1], prediction[2] = arc.dx, arc.dy, arc.dtheta
         if not jacobian:
             return prediction, None
-        jac = np.empty((3, 3) + shape)
-        (jac[0, 0], jac[0, 1], jac[0, 2]), (jac[1, 0], jac[1, 1], jac[1, 2]) = (
-            arc.position_derivatives())
-        jac[2, 0], jac[2, 1], jac[2, 2] = arc.d_dtheta
-        return prediction, jac
+        return prediction, arc.fill_jacobian(np.empty((3, 3) + shape))
 
     def evaluate_scalar(self, dphi_L, dphi_R, theta):
         r_L, r_R, b = theta[0], theta[1], theta[2]

@@ -187,7 +187,8 @@ def test_forcing_the_axle_model_on_an_off_axle_sensor_is_a_misfit_in_words(rng):
     assert not result.fit.ok
     assert "the sensor is not on the axle" in result.fit.message
     assert "try --sensor-pose estimate" in result.fit.message
-    assert result.fit.noise_ratio[:2].max() > 3 and result.fit.lr_statistic > 100
+    assert result.fit.noise_ratio[:2].max() > 3 and result.fit.statistic > 100
+    assert result.fit.statistic_name == "score"
 
 
 def test_a_wrong_given_sensor_pose_is_a_misfit_and_the_right_one_fits(rng):
