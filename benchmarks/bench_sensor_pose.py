@@ -25,14 +25,13 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 from tqdm import tqdm
 
 sys.path.insert(0, os.path.dirname(__file__))
-from bench_calibration import REGIMES, _median_time  # noqa: E402
+from bench_calibration import REGIMES, _median_time, update_latency  # noqa: E402
 from lesson_baseline import lesson_calibrate  # noqa: E402
 
 from excite import OnlineEstimator, Segments, calibrate  # noqa: E402
@@ -178,19 +177,7 @@ def online_latency() -> dict:
     seg = sensor_dataset(np.random.default_rng(6), 5000, TRUTH, REGIMES["(2e-3, 1e-3)"])
     rows = [tuple(map(float, r)) for r in seg.as_array()]
     nominal = np.append(LESSON_TRUTH.as_array(), POSE + np.array([0.01, 0.01, 0.1]))
-    est = OnlineEstimator(nominal, model=SENSOR_POSE)
-    out = {}
-    for mark in (100, 100_000):
-        while est.n_segments < mark - 2000:
-            est.update(*rows[est.n_segments % len(rows)])
-        times = []
-        for _ in range(2000):
-            row = rows[est.n_segments % len(rows)]
-            t0 = time.perf_counter_ns()
-            est.update(*row)
-            times.append(time.perf_counter_ns() - t0)
-        out[f"median_us_at_{mark}"] = float(np.median(times)) / 1e3
-    return out
+    return update_latency(OnlineEstimator(nominal, model=SENSOR_POSE), rows)
 
 
 def main(argv=None) -> dict:
