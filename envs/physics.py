@@ -9,6 +9,12 @@ Two implementations of one `Drive` interface:
 Frames and units: world frame x right, y up, theta counter-clockwise (rad, continuous);
 body frame x forward, y left, origin at the axle midpoint (the reference point of every
 pose). The left wheel is at +b/2 on body y, the right at -b/2. Meters, radians, seconds.
+
+Nothing here is sized for one robot: the chassis footprint, mass, inertia, friction and motor
+lag all come from the RobotSpec. The fixed lengths are the walls' half-thickness (0.05 m:
+a chassis moves at most a few cm per tick at the presets' speeds, far less than its own size,
+so it cannot cross a wall within one tick) and pymunk's contact slop (1 mm of tolerated
+overlap, small against any chassis).
 """
 
 from __future__ import annotations
@@ -20,11 +26,12 @@ from typing import Protocol
 import numpy as np
 import pymunk
 
-from envs.robot import RobotSpec
+from envs.robot import DEFAULT_CHASSIS_SIZE, RobotSpec
 from excite.kinematics import sinc_cosc_scalar, sinc_family
 
 GRAVITY = 9.81  # m/s^2
-CHASSIS_SIZE = 0.36  # m, side of the square footprint centred on the axle midpoint
+#: m, (length, width) of the default robot's footprint: contains_footprint's default chassis.
+DEFAULT_CHASSIS = (DEFAULT_CHASSIS_SIZE, DEFAULT_CHASSIS_SIZE)
 WALL_RADIUS = 0.05  # m, half-thickness of the arena's wall segments
 SLIP_ITERATIONS = 6  # Gauss-Seidel sweeps over the two wheels when a friction cap binds
 _CHASSIS_TYPE, _WALL_TYPE = 1, 2  # pymunk collision types
@@ -33,6 +40,9 @@ _CHASSIS_TYPE, _WALL_TYPE = 1, 2  # pymunk collision types
 @dataclass(frozen=True)
 class Arena:
     """Rectangular arena centred at the world origin; walls on its boundary.
+
+    The arena knows nothing of the robot: whether a robot fits is checked against its own
+    chassis (`contains_footprint`, `Simulation.reset`).
 
     Attributes:
         width: extent along world x (m).
@@ -45,20 +55,29 @@ class Arena:
     def __post_init__(self) -> None:
         for name in ("width", "height"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > CHASSIS_SIZE * math.sqrt(2)):
-                raise ValueError(
-                    f"Arena.{name} must be finite and larger than the chassis diagonal "
-                    f"({CHASSIS_SIZE * math.sqrt(2):.3f} m), got {value}"
-                )
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"Arena.{name} must be finite and > 0, got {value}")
 
     def contains_footprint(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray,
-                           margin: float | np.ndarray = 0.0) -> np.ndarray:
-        """Whether the square chassis footprint at poses (x, y, theta) is inside the walls,
-        at least ``margin`` (m, broadcast with the poses) away from them."""
-        half = 0.5 * CHASSIS_SIZE
-        # Corner extent of a square rotated by theta, along each world axis.
-        reach = half * (np.abs(np.cos(theta)) + np.abs(np.sin(theta))) + margin
-        return (np.abs(x) + reach <= 0.5 * self.width) & (np.abs(y) + reach <= 0.5 * self.height)
+                           margin: float | np.ndarray = 0.0,
+                           chassis: tuple[float, float] = DEFAULT_CHASSIS) -> np.ndarray:
+        """Whether the chassis footprint at poses (x, y, theta) is inside the walls, at least
+        ``margin`` (m, broadcast with the poses) away from them.
+
+        chassis: (length along body x, width along body y) of the rectangular footprint (m),
+        centred on the axle midpoint; the default robot's 0.36 m square by default (use
+        ``RobotSpec.chassis`` for another robot).
+        """
+        length, width = chassis
+        c, s = np.abs(np.cos(theta)), np.abs(np.sin(theta))
+        # Corner extent of the rectangle rotated by theta, along each world axis.
+        if length == width:  # a square: one product, as before presets existed
+            reach_x = reach_y = 0.5 * length * (c + s) + margin
+        else:
+            reach_x = 0.5 * (length * c + width * s) + margin
+            reach_y = 0.5 * (length * s + width * c) + margin
+        return (np.abs(x) + reach_x <= 0.5 * self.width) & (
+            np.abs(y) + reach_y <= 0.5 * self.height)
 
 
 class Drive(Protocol):
@@ -134,7 +153,8 @@ class IdealDrive:
         path[1:, 0] = x0 + c * bx - s * by
         path[1:, 1] = y0 + s * bx + c * by
         path[1:, 2] = th0 + dth
-        inside = self.arena.contains_footprint(path[1:, 0], path[1:, 1], path[1:, 2])
+        inside = self.arena.contains_footprint(path[1:, 0], path[1:, 1], path[1:, 2],
+                                               chassis=robot.chassis)
         ticks_done = int(np.argmin(inside)) if not inside.all() else n_ticks
         path[ticks_done + 1 :] = path[ticks_done]
         self._pose = path[ticks_done].copy()
@@ -221,11 +241,11 @@ class PymunkDrive:
             wall.collision_type = _WALL_TYPE
             wall.friction = 0.5
             space.add(wall)
-        d, half = robot.com_offset, 0.5 * CHASSIS_SIZE
+        d, hl, hw = robot.com_offset, 0.5 * robot.chassis_length, 0.5 * robot.chassis_width
         body = pymunk.Body(robot.mass, robot.inertia)
         body.angle = angle
         body.position = com
-        footprint = [(-d - half, -half), (-d + half, -half), (-d + half, half), (-d - half, half)]
+        footprint = [(-d - hl, -hw), (-d + hl, -hw), (-d + hl, hw), (-d - hl, hw)]
         chassis = pymunk.Poly(body, footprint)
         chassis.collision_type = _CHASSIS_TYPE
         chassis.friction = 0.5

@@ -6,8 +6,7 @@ import math
 
 import numpy as np
 
-from envs.physics import CHASSIS_SIZE
-from envs.robot import RobotSpec
+from envs.robot import DEFAULT_CHASSIS_SIZE, RobotSpec
 from excite.kinematics import Params
 
 
@@ -45,14 +44,15 @@ class ArenaRenderer:
         x, y, th = pose
         c, s = math.cos(th), math.sin(th)
         rot = np.array([[c, -s], [s, c]])
-        h = 0.5 * CHASSIS_SIZE
-        body = np.array([[-h, -h], [h, -h], [h, h], [-h, h], [-h, -h]]) @ rot.T + (x, y)
+        hl, hw = 0.5 * robot.chassis_length, 0.5 * robot.chassis_width
+        body = np.array([[-hl, -hw], [hl, -hw], [hl, hw], [-hl, hw], [-hl, -hw]]) @ rot.T + (x, y)
         ax.fill(body[:, 0], body[:, 1], color="tab:orange", alpha=0.6)
         for side, radius in ((1, robot.r_L), (-1, robot.r_R)):
             wheel = np.array([[-radius, 0.0], [radius, 0.0]]) + (0.0, side * robot.b / 2)
             wheel = wheel @ rot.T + (x, y)
             ax.plot(wheel[:, 0], wheel[:, 1], "k-", lw=4)
-        ax.arrow(x, y, 0.25 * c, 0.25 * s, width=0.02, color="k")
+        scale = robot.chassis_length / DEFAULT_CHASSIS_SIZE  # heading arrow sized to the robot
+        ax.arrow(x, y, 0.25 * scale * c, 0.25 * scale * s, width=0.02 * scale, color="k")
         self.fig.suptitle(
             f"segment {n_segments}/{budget}   sigma_min {sigma_min:.1f}\n"
             f"estimate r_L {estimate.r_L * 1e3:.2f} mm, r_R {estimate.r_R * 1e3:.2f} mm, "

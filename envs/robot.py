@@ -7,10 +7,15 @@ frame's origin is the axle midpoint, the reference point of every pose in this p
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 
 import numpy as np
+
+#: m, side of the default robot's square chassis footprint.
+DEFAULT_CHASSIS_SIZE = 0.36
 
 
 def _require(condition: bool, message: str) -> None:
@@ -39,6 +44,8 @@ class RobotSpec:
         max_wheel_speed: wheel angular speed limit (rad/s).
         wheel_load_fraction: share of the weight carried by the two drive wheels (the rest
             rests on a frictionless caster), in (0, 1].
+        chassis_length, chassis_width: the rectangular chassis footprint (m) along body x and
+            body y, centred on the axle midpoint; the walls collide with it.
     """
 
     r_L: float
@@ -51,11 +58,14 @@ class RobotSpec:
     motor_tau: float
     max_wheel_speed: float
     wheel_load_fraction: float
+    chassis_length: float = DEFAULT_CHASSIS_SIZE
+    chassis_width: float = DEFAULT_CHASSIS_SIZE
 
     def __post_init__(self) -> None:
         values = [getattr(self, f.name) for f in fields(self)]
         _require(_finite(*values), f"RobotSpec values must be finite, got {self}")
-        for name in ("r_L", "r_R", "b", "mass", "inertia", "mu", "motor_tau", "max_wheel_speed"):
+        for name in ("r_L", "r_R", "b", "mass", "inertia", "mu", "motor_tau", "max_wheel_speed",
+                     "chassis_length", "chassis_width"):
             _require(getattr(self, name) > 0, f"RobotSpec.{name} must be > 0")
         _require(
             0 < self.wheel_load_fraction <= 1,
@@ -66,6 +76,16 @@ class RobotSpec:
         """The calibrated quantities (r_L, r_R, b), in meters."""
         return (self.r_L, self.r_R, self.b)
 
+    @property
+    def chassis(self) -> tuple[float, float]:
+        """The chassis footprint (length along body x, width along body y), in meters."""
+        return (self.chassis_length, self.chassis_width)
+
+    def fits_chassis(self) -> bool:
+        """Whether both wheel contacts and the center of mass lie inside the chassis footprint
+        (b < chassis width, |com_offset| < half the chassis length)."""
+        return self.b < self.chassis_width and abs(self.com_offset) < 0.5 * self.chassis_length
+
 
 @dataclass(frozen=True)
 class RobotDistribution:
@@ -74,7 +94,12 @@ class RobotDistribution:
     Relative ranges are half-widths: r_L, r_R and b are each drawn uniformly and independently
     in nominal * [1 - rel, 1 + rel]; mass likewise with `mass_rel`. The inertia scales with the
     drawn mass (same mass distribution). mu and com_offset are drawn uniformly in absolute
-    ranges. Motor lag, speed limit and load fraction are not randomized.
+    ranges. Motor lag, speed limit, load fraction and the chassis are not randomized.
+
+    Every robot the distribution can draw fits its chassis: the widest b is narrower than the
+    chassis and the center of mass stays within half its length. The default values are the
+    small default robot; `PRESETS` holds real robots and `robot_distribution` builds one from
+    a preset name and overrides.
     """
 
     radius: float = 0.05
@@ -91,9 +116,11 @@ class RobotDistribution:
     mass_rel: float = 0.20
     mu_range: tuple[float, float] = (0.5, 1.0)
     com_offset_range: tuple[float, float] = (0.0, 0.06)
+    chassis_length: float = DEFAULT_CHASSIS_SIZE
+    chassis_width: float = DEFAULT_CHASSIS_SIZE
 
     def __post_init__(self) -> None:
-        self.nominal()  # validates the nominal values through RobotSpec
+        nominal = self.nominal()  # validates the nominal values through RobotSpec
         for name in ("radius_rel", "separation_rel", "mass_rel"):
             rel = getattr(self, name)
             _require(
@@ -107,6 +134,36 @@ class RobotDistribution:
                 f"RobotDistribution.{name} must be finite with low <= high, got {(lo, hi)}",
             )
         _require(self.mu_range[0] > 0, f"RobotDistribution.mu_range must be > 0: {self.mu_range}")
+        widest = self.separation * (1 + self.separation_rel)
+        farthest = max(abs(self.com_offset), *(abs(v) for v in self.com_offset_range))
+        _require(
+            nominal.fits_chassis() and widest < self.chassis_width
+            and farthest < 0.5 * self.chassis_length,
+            f"RobotDistribution: robots drawn must fit the {self.chassis_length} x "
+            f"{self.chassis_width} m chassis: widest b {widest:.4g} m must be < the chassis "
+            f"width, |com_offset| up to {farthest:.4g} m must be < half the chassis length",
+        )
+
+    @property
+    def max_speed(self) -> float:
+        """The nominal robot's top linear speed, radius * max_wheel_speed (m/s)."""
+        return self.radius * self.max_wheel_speed
+
+    def arena_size(self, segment_duration: float = 1.0) -> float:
+        """Recommended side (m) of the square arena for this robot.
+
+        The larger of ARENA_SEGMENTS (4) segments driven straight at full speed (4 *
+        max_speed * segment_duration) and ARENA_CHASSIS (10) lengths of the chassis' longer
+        side, rounded to the millimetre. The default robot (1 m/s, 0.36 m chassis) gets
+        exactly 4.0 m at 1-s segments.
+        """
+        _require(
+            math.isfinite(segment_duration) and segment_duration > 0,
+            f"segment_duration must be finite and > 0, got {segment_duration}",
+        )
+        travel = ARENA_SEGMENTS * self.max_speed * segment_duration
+        body = ARENA_CHASSIS * max(self.chassis_length, self.chassis_width)
+        return round(max(travel, body), 3)
 
     def nominal(self) -> RobotSpec:
         """The nominal robot (what the engineer believes before calibration)."""
@@ -121,6 +178,8 @@ class RobotDistribution:
             motor_tau=self.motor_tau,
             max_wheel_speed=self.max_wheel_speed,
             wheel_load_fraction=self.wheel_load_fraction,
+            chassis_length=self.chassis_length,
+            chassis_width=self.chassis_width,
         )
 
     def sample(self, rng: np.random.Generator) -> RobotSpec:
@@ -141,4 +200,149 @@ class RobotDistribution:
             motor_tau=self.motor_tau,
             max_wheel_speed=self.max_wheel_speed,
             wheel_load_fraction=self.wheel_load_fraction,
+            chassis_length=self.chassis_length,
+            chassis_width=self.chassis_width,
         )
+
+
+#: Full-speed segments that fit across the recommended arena (RobotDistribution.arena_size).
+ARENA_SEGMENTS = 4
+#: Chassis lengths (longer side) that fit across the recommended arena, at least.
+ARENA_CHASSIS = 10
+#: m/s^2, the acceleration at which a full-speed step from rest starts on every preset: the
+#: default robot's (1.0 m/s top speed / 0.05 s motor lag). With it a full-speed step slips and
+#: a step to 0.2 of the limit (4 m/s^2) stays near the grip limit (mu g load ~ 4-10 m/s^2) on
+#: every preset, as on the default robot.
+PRESET_STEP_ACCELERATION = 20.0
+
+
+def scaled_distribution(
+    *,
+    radius: float,
+    separation: float,
+    mass: float,
+    max_speed: float,
+    chassis_length: float,
+    chassis_width: float,
+    wheel_load_fraction: float,
+) -> RobotDistribution:
+    """A robot distribution from published geometry, with the unpublished values estimated.
+
+    Published (arguments): wheel radius and separation (m), mass (kg), top linear speed (m/s),
+    chassis footprint (m), share of the weight on the driven wheels. Estimated, scaled to the
+    robot the way the default robot's values sit on its 0.36 m chassis:
+
+    - inertia: a uniform box of the footprint, mass * (length^2 + width^2) / 12;
+    - com_offset: length / 9 ahead of the axle, drawn in (0, length / 6) (the default robot:
+      0.04 m in (0, 0.06) on 0.36 m);
+    - motor_tau: max_speed / PRESET_STEP_ACCELERATION (same starting acceleration of a
+      full-speed step as the default robot);
+    - max_wheel_speed: max_speed / radius (rad/s);
+    - friction and the randomization half-widths: the default robot's.
+    """
+    return RobotDistribution(
+        radius=radius,
+        separation=separation,
+        mass=mass,
+        inertia=mass * (chassis_length**2 + chassis_width**2) / 12.0,
+        com_offset=chassis_length / 9.0,
+        com_offset_range=(0.0, chassis_length / 6.0),
+        motor_tau=max_speed / PRESET_STEP_ACCELERATION,
+        max_wheel_speed=max_speed / radius,
+        wheel_load_fraction=wheel_load_fraction,
+        chassis_length=chassis_length,
+        chassis_width=chassis_width,
+    )
+
+
+#: Named robots. Each is modelled as a two-wheel differential drive with its published nominal
+#: geometry; the hidden robots are drawn around it (5 % on r and b, 20 % on mass). Footprints
+#: are centred on the axle midpoint (the real Burger's body sits 32 mm behind its axle).
+#: Jackal and Husky are four-wheel skid-steer robots: all their weight is on driven wheels
+#: (load fraction 1), and their real effective track, which calibration measures, is wider than
+#: the geometric one (their ROS 1 controllers use wheel_separation_multiplier 1.5 and 1.875).
+PRESETS: dict[str, RobotDistribution] = {
+    # The small default robot (unchanged): 0.05 m wheels, b = 0.30 m, 4 kg, 1 m/s, 0.36 m chassis.
+    "default": RobotDistribution(),
+    # ROBOTIS TurtleBot3 Burger. Wheel radius 0.033 m and separation 0.160 m: ROBOTIS-GIT/
+    # turtlebot3, turtlebot3_node/param/burger.yaml (wheels: radius, separation); mass 1 kg,
+    # max translational velocity 0.22 m/s, size (L x W) 138 x 178 mm: ROBOTIS e-manual,
+    # TurtleBot3 > Specifications > Hardware Specifications. The width is b + one 18 mm wheel.
+    # Estimated: load fraction 0.8 (a ball caster carries the rest, like the default robot).
+    "turtlebot3": scaled_distribution(
+        radius=0.033, separation=0.160, mass=1.0, max_speed=0.22,
+        chassis_length=0.138, chassis_width=0.178, wheel_load_fraction=0.8,
+    ),
+    # Clearpath Jackal. Wheel radius 0.098 m and track 0.37559 m: jackal/jackal,
+    # jackal_description/urdf/jackal.urdf.xacro (wheel_radius, track); mass 17 kg, max speed
+    # 2.0 m/s, external size 508 x 430 mm: Clearpath Jackal user manual, system
+    # specifications. The width is about b + one 40 mm wheel (the URDF's wheel_width).
+    "jackal": scaled_distribution(
+        radius=0.098, separation=0.37559, mass=17.0, max_speed=2.0,
+        chassis_length=0.508, chassis_width=0.430, wheel_load_fraction=1.0,
+    ),
+    # Clearpath Husky A200. Wheel radius 0.1651 m (13 in tyre): husky/husky,
+    # husky_description/urdf/husky.urdf.xacro (wheel_radius); effective track 0.555 m, mass
+    # 50 kg, max speed 1.0 m/s, size 990 x 670 mm: Clearpath Husky A200 user manual
+    # (docs.clearpathrobotics.com, "Robot Equations" and "System Specifications").
+    "husky": scaled_distribution(
+        radius=0.1651, separation=0.555, mass=50.0, max_speed=1.0,
+        chassis_length=0.990, chassis_width=0.670, wheel_load_fraction=1.0,
+    ),
+}
+
+_FIELDS = tuple(f.name for f in fields(RobotDistribution))
+_RANGES = ("mu_range", "com_offset_range")
+
+
+def robot_distribution(
+    spec: str | Mapping[str, object] | RobotDistribution | None = None,
+) -> RobotDistribution:
+    """The robot distribution a configuration names.
+
+    spec: None or {} for the default robot; a preset name (a key of PRESETS); a mapping with an
+    optional "preset" (default "default") plus RobotDistribution field overrides, e.g.
+    {"preset": "jackal", "radius_rel": 0.03}; or a RobotDistribution, returned as is.
+    Overrides replace the preset's values literally (derived values such as the inertia are not
+    recomputed). Raises ValueError for an unknown preset or key (naming the valid ones) and for
+    values the distribution rejects.
+    """
+    if spec is None or isinstance(spec, RobotDistribution):
+        return spec if spec is not None else PRESETS["default"]
+    if isinstance(spec, str):
+        return _preset(spec)
+    if not isinstance(spec, Mapping):
+        raise ValueError(
+            f"robot must be a preset name ({', '.join(PRESETS)}), a mapping of "
+            f"RobotDistribution overrides or a RobotDistribution, got {spec!r}"
+        )
+    overrides = dict(spec)
+    base = _preset(overrides.pop("preset", "default"))
+    unknown = sorted(str(k) for k in overrides if k not in _FIELDS)
+    if unknown:
+        raise ValueError(
+            f"unknown robot key(s) {', '.join(unknown)}; valid: preset, {', '.join(_FIELDS)}"
+        )
+    for name in _RANGES:
+        if name in overrides:
+            overrides[name] = _pair(name, overrides[name])
+    try:
+        return dataclasses.replace(base, **overrides)
+    except TypeError as exc:  # e.g. a string where a number belongs
+        raise ValueError(f"bad robot value: {exc}") from None
+
+
+def _preset(name: object) -> RobotDistribution:
+    key = name.strip().lower() if isinstance(name, str) else name
+    if key not in PRESETS:
+        raise ValueError(f"unknown robot preset {name!r}; valid presets: {', '.join(PRESETS)}")
+    return PRESETS[key]
+
+
+def _pair(name: str, value: object) -> tuple[float, float]:
+    """A (low, high) range from any two-element sequence (YAML and JSON give lists)."""
+    try:
+        low, high = value  # type: ignore[misc]
+        return (float(low), float(high))
+    except (TypeError, ValueError):
+        raise ValueError(f"robot {name} must be a (low, high) pair, got {value!r}") from None

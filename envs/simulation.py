@@ -13,11 +13,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from envs.physics import CHASSIS_SIZE, Arena, Drive, IdealDrive, PymunkDrive
-from envs.robot import RobotSpec
+from envs.physics import Arena, Drive, IdealDrive, PymunkDrive
+from envs.robot import DEFAULT_CHASSIS_SIZE, RobotSpec
 from envs.sensors import RelativePoseSensor, WheelEncoders, relative_pose
 
-SPAWN_MARGIN = 0.6  # m, minimum distance from a random start position to the walls
+#: m, minimum distance from a random start position to the walls for the default robot's
+#: 0.36 m chassis; other robots scale it with their chassis (`spawn_margin`).
+SPAWN_MARGIN = 0.6
+
+
+def spawn_margin(robot: RobotSpec) -> float:
+    """Minimum distance (m) from a random start position (the axle midpoint) to the walls:
+    SPAWN_MARGIN per 0.36 m of the chassis' longer side (5/3 of it), so any heading keeps the
+    footprint (half-diagonal at most 0.71 of the longer side) well clear of the walls."""
+    return SPAWN_MARGIN * (max(robot.chassis_length, robot.chassis_width) / DEFAULT_CHASSIS_SIZE)
 
 
 @dataclass(frozen=True)
@@ -26,6 +35,8 @@ class SimulationConfig:
 
     Attributes:
         arena_width, arena_height: arena extent along world x and y (m), centred at the origin.
+            Whether a robot fits is checked at `Simulation.reset` (it depends on the robot;
+            `RobotDistribution.arena_size()` recommends a size).
         physics_hz: physics tick rate (Hz). 50 Hz resolves the 0.05 s motor lag (exactly
             discretized) and keeps throughput high; the traction solver is stable at any rate.
         ideal: roll without slip or lag (the kinematic model is exact) instead of pymunk.
@@ -46,8 +57,8 @@ class SimulationConfig:
             raise ValueError(f"physics_hz must be finite and > 0, got {self.physics_hz}")
         for name in ("arena_width", "arena_height"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 2 * SPAWN_MARGIN):
-                raise ValueError(f"{name} must be > {2 * SPAWN_MARGIN} m, got {value}")
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0 m, got {value}")
         WheelEncoders(self.ticks_per_rev)  # validate the sensor settings early
         RelativePoseSensor(self.sigma_xy, self.sigma_theta)
 
@@ -106,23 +117,36 @@ class Simulation:
     ) -> None:
         """Place `robot` at rest and keep `rng` for all later noise.
 
-        pose: world (x, y, theta); None draws one from `rng`, at least SPAWN_MARGIN from the
-        walls, heading uniform in [-pi, pi). Wheel angles start at random (uniform in
+        pose: world (x, y, theta); None draws one from `rng`, at least `spawn_margin(robot)`
+        from the walls, heading uniform in [-pi, pi). Wheel angles start at random (uniform in
         [0, 2 pi)) so encoder quantization is not aligned with the start.
+
+        Raises ValueError when the robot does not fit its own chassis (b < chassis width,
+        |com_offset| < half its length), when a random start needs a wider arena
+        (2 spawn margins) or when the given pose puts the chassis outside the arena.
         """
-        if not robot.b < CHASSIS_SIZE or not abs(robot.com_offset) < 0.5 * CHASSIS_SIZE:
+        if not robot.fits_chassis():
             raise ValueError(
-                f"robot does not fit the {CHASSIS_SIZE} m chassis: b={robot.b}, "
-                f"com_offset={robot.com_offset}"
+                f"robot does not fit its {robot.chassis_length} x {robot.chassis_width} m "
+                f"chassis (length x width): b={robot.b}, com_offset={robot.com_offset}"
             )
         if pose is None:
-            half = np.array([self.arena.width, self.arena.height]) / 2 - SPAWN_MARGIN
+            margin = spawn_margin(robot)
+            half = np.array([self.arena.width, self.arena.height]) / 2 - margin
+            if not (half > 0).all():
+                raise ValueError(
+                    f"the {self.arena.width} x {self.arena.height} m arena is too small for "
+                    f"this robot's {robot.chassis_length} x {robot.chassis_width} m chassis: a "
+                    f"random start needs more than {2 * margin:.3g} m (RobotDistribution."
+                    f"arena_size() recommends a size)"
+                )
             pose = np.append(rng.uniform(-half, half), rng.uniform(-math.pi, math.pi))
         else:
             pose = np.asarray(pose, dtype=float)
             if pose.shape != (3,) or not np.isfinite(pose).all():
                 raise ValueError(f"pose must be 3 finite numbers (x, y, theta), got {pose}")
-            if not self.arena.contains_footprint(pose[0], pose[1], pose[2]):
+            if not self.arena.contains_footprint(pose[0], pose[1], pose[2],
+                                                 chassis=robot.chassis):
                 raise ValueError(f"pose {pose} puts the chassis outside the arena")
         wheel_angles = rng.uniform(0.0, 2.0 * math.pi, 2)
         self.drive.reset(robot, pose, wheel_angles)

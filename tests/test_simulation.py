@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from envs.physics import CHASSIS_SIZE, Arena
+from envs.physics import Arena
+from envs.robot import DEFAULT_CHASSIS_SIZE as CHASSIS_SIZE
 from envs.robot import RobotDistribution, RobotSpec
 from envs.sensors import RelativePoseSensor, WheelEncoders, relative_pose
 from envs.simulation import SPAWN_MARGIN, Simulation, SimulationConfig
@@ -61,12 +62,14 @@ def test_robot_distribution_samples_within_ranges():
         lambda: RobotSpec(0.05, 0.05, 0.3, 4.0, 0.05, 0.04, 0.8, 0.05, 20.0, 1.5),
         lambda: RobotSpec(0.05, -0.05, 0.3, 4.0, 0.05, 0.04, 0.8, 0.05, 20.0, 0.8),
         lambda: SimulationConfig(physics_hz=0.0),
-        lambda: SimulationConfig(arena_width=1.0),
+        lambda: SimulationConfig(arena_width=0.0),
+        lambda: SimulationConfig(arena_height=math.nan),
         lambda: SimulationConfig(ticks_per_rev=0),
         lambda: SimulationConfig(sigma_xy=-1e-3),
         lambda: Simulation(SimulationConfig(ticks_per_rev=0)),
         lambda: Simulation(SimulationConfig(sigma_theta=-1.0)),
-        lambda: Arena(0.3, 4.0),
+        lambda: Arena(0.0, 4.0),
+        lambda: Arena(4.0, math.inf),
         lambda: WheelEncoders(10.5),
     ],
 )
@@ -90,8 +93,11 @@ def test_bad_segment_and_reset_arguments_raise():
     with pytest.raises(ValueError):
         sim.reset(DIST.nominal(), rng, pose=np.array([0.0, 0.0]))
     wide = RobotSpec(0.05, 0.05, CHASSIS_SIZE, 4.0, 0.05, 0.0, 0.8, 0.05, 20.0, 0.8)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="does not fit its 0.36 x 0.36 m chassis"):
         sim.reset(wide, rng)
+    small = Simulation(SimulationConfig(arena_width=1.0))  # the arena fit depends on the robot
+    with pytest.raises(ValueError, match="arena is too small"):
+        small.reset(DIST.nominal(), rng)
 
 
 @pytest.mark.parametrize("ideal", [True, False])
