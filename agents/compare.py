@@ -47,6 +47,7 @@ class CompareSettings:
     env_id: str = DEFAULT_ENV_ID
     segments: int = DEFAULT_BUDGET
     seed: int = 0
+    robot: str = "default"  # a robot preset (envs.robot.PRESETS)
 
 
 def episode_seed(seed: int, episode: int) -> int:
@@ -54,8 +55,8 @@ def episode_seed(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
 
 
-def make_env(env_id: str, segments: int) -> gym.Env:
-    return gym.make(env_id, budget=segments, max_episode_steps=segments)
+def make_env(env_id: str, segments: int, robot: str = "default") -> gym.Env:
+    return gym.make(env_id, budget=segments, max_episode_steps=segments, robot=robot)
 
 
 def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[dict]:
@@ -91,11 +92,11 @@ def _worker_protocol(name: str, policy_path: str | None) -> Protocol:
     return make_protocol(name, policy_path)
 
 
-def incompatible_protocols(protocols: list[str], env_id: str, segments: int,
+def incompatible_protocols(protocols: list[str], settings: CompareSettings,
                            policy_path: str | None = None) -> dict[str, str]:
-    """Protocols that cannot run on ``env_id`` (e.g. a policy trained for another observation
-    layout), with the reason in words."""
-    env = make_env(env_id, segments)
+    """Protocols that cannot run with these settings (e.g. a policy trained for another
+    observation layout), with the reason in words."""
+    env = make_env(settings.env_id, settings.segments, settings.robot)
     shape = env.observation_space.shape
     env.close()
     reasons = {name: make_protocol(name, policy_path).incompatibility(shape) for name in protocols}
@@ -105,7 +106,7 @@ def incompatible_protocols(protocols: list[str], env_id: str, segments: int,
 def run_episode(settings: CompareSettings, protocols: list[str], episode: int,
                 policy_path: str | None) -> list[dict]:
     """All requested protocols on episode ``episode`` (runs in a worker process)."""
-    env = make_env(settings.env_id, settings.segments)
+    env = make_env(settings.env_id, settings.segments, settings.robot)
     seed = episode_seed(settings.seed, episode)
     env.reset(seed=seed)
     base = env.unwrapped

@@ -92,7 +92,8 @@ class GreedyPlanner(Protocol):
         two_step = np.full(score.shape, -np.inf)
         for index, end in zip(best, ends, strict=True):
             safe = is_safe(predicted_poses(end, second_dphi, knowledge.estimate),
-                           knowledge.arena_size, action_margin(self.candidates))
+                           knowledge.arena_size, action_margin(self.candidates),
+                           knowledge.chassis)
             if not safe.any():
                 continue
             info = knowledge.information + gains[index] + gains[safe]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from envs.env import RobotKnowledge
-from envs.physics import Arena
+from envs.physics import DEFAULT_CHASSIS, Arena
 from excite.kinematics import Params, predict_increment
 
 #: Fractions of the segment at which the predicted footprint is checked.
@@ -41,13 +41,13 @@ def predicted_poses(pose: np.ndarray, dphi: np.ndarray, params: Params,
     return np.stack([x + c * dx - s * dy, y + s * dx + c * dy, th + dth], axis=-1)
 
 
-def is_safe(poses: np.ndarray, arena_size: float, margin: float | np.ndarray = MARGIN
-            ) -> np.ndarray:
+def is_safe(poses: np.ndarray, arena_size: float, margin: float | np.ndarray = MARGIN,
+            chassis: tuple[float, float] = DEFAULT_CHASSIS) -> np.ndarray:
     """Whether the footprint at every pose (n, m, 3) stays inside the square arena, ``margin``
     (m, a scalar or one per candidate) from the walls."""
     margin = np.reshape(margin, (-1,) + (1,) * (poses.ndim - 2))
     inside = Arena(arena_size, arena_size).contains_footprint(
-        poses[..., 0], poses[..., 1], poses[..., 2], margin)
+        poses[..., 0], poses[..., 1], poses[..., 2], margin, chassis)
     return inside.all(axis=-1)
 
 
@@ -64,7 +64,8 @@ def safe_actions(actions: np.ndarray, knowledge: RobotKnowledge,
     dphi = wheel_increments(actions, knowledge)
     margin = action_margin(actions, speed_margin)
     return np.logical_and.reduce([
-        is_safe(predicted_poses(knowledge.pose, dphi, params), knowledge.arena_size, margin)
+        is_safe(predicted_poses(knowledge.pose, dphi, params), knowledge.arena_size, margin,
+                knowledge.chassis)
         for params in (knowledge.estimate, knowledge.nominal)])
 
 

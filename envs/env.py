@@ -12,7 +12,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from envs.robot import RobotDistribution, RobotSpec
+from envs.physics import DEFAULT_CHASSIS
+from envs.robot import RobotSpec, robot_distribution
 from envs.simulation import Simulation, SimulationConfig
 from excite.data import Segments
 from excite.information import eigen_3x3, information_matrix
@@ -66,7 +67,8 @@ class RobotKnowledge:
     relative Fisher information of the log at the estimate (P x P). log: (n, 5) calibration
     rows. pose: the body's measured world pose (x, y, theta). nominal: the nominal robot.
     sigma: sensor noise (m, m, rad). max_wheel_speed: motor limit (rad/s); segment_duration
-    (s); arena_size (m); budget (segments). model: the segment model; theta / nominal_theta:
+    (s); arena_size (m); budget (segments); chassis: the nominal footprint (length, width, m).
+    model: the segment model; theta / nominal_theta:
     the current estimate and the nominal values of all its P parameters.
     """
 
@@ -82,6 +84,7 @@ class RobotKnowledge:
     arena_size: float
     budget: int
     model: SegmentModel = AXLE
+    chassis: tuple[float, float] = DEFAULT_CHASSIS
     theta: np.ndarray | None = None
     nominal_theta: np.ndarray | None = None
 
@@ -185,12 +188,14 @@ class DiffDriveCalibEnv(gym.Env):
             "budget": DEFAULT_BUDGET,  # segments per episode
             "segment_duration": 1.0,  # s the command is held (a multiple of 1 / physics_hz)
             "settle_time": 0.0,  # s of zero command after it (> 0: stop-and-go segments)
-            "arena_size": 4.0,  # m, square arena side
+            "arena_size": None,  # m, square arena side; None: scaled with the robot (4 m default)
             "physics_hz": 50.0,  # physics tick rate
             "ticks_per_rev": 4096,  # encoder resolution
             "sigma_xy": 2e-3,  # m, pose sensor noise (per segment increment)
             "sigma_theta": 1e-3,  # rad
-            "robot": {},  # RobotDistribution overrides, e.g. {"radius_rel": 0.05}
+            # A preset ("default", "turtlebot3", "jackal", "husky") or RobotDistribution
+            # overrides, e.g. {"preset": "jackal", "radius_rel": 0.03}
+            "robot": {},
             "information_scale": 100.0,  # reward unit of sigma_min
             "collision_penalty": 1.0,
             "effort_cost": 0.0,
@@ -220,7 +225,9 @@ class DiffDriveCalibEnv(gym.Env):
             raise ValueError(f"budget must be at least 1 segment, got {cfg['budget']}")
         self.config = cfg
         self.render_mode = render_mode
-        self.distribution = RobotDistribution(**cfg["robot"])
+        self.distribution = robot_distribution(cfg["robot"])
+        if cfg["arena_size"] is None:
+            cfg["arena_size"] = self.distribution.arena_size()
         nominal = self.distribution.nominal()
         self.nominal = Params(*nominal.kinematic_params())
         self.sensor_ranges = _sensor_ranges(cfg["sensor_pose"])
@@ -382,6 +389,7 @@ class DiffDriveCalibEnv(gym.Env):
             pose=self._measured_pose.copy(), nominal=self.nominal, sigma=self.sigma.copy(),
             max_wheel_speed=self.max_wheel_speed, segment_duration=self.segment_duration,
             arena_size=float(self.config["arena_size"]), budget=self.budget, model=self.model,
+            chassis=self.distribution.nominal().chassis,
             theta=self._theta.copy(), nominal_theta=self.nominal_theta.copy())
 
     def _observation(self) -> np.ndarray:

@@ -139,6 +139,14 @@ def _env_id(text: str) -> str:
     return text
 
 
+def _robot_preset(text: str) -> str:
+    from envs.robot import PRESETS
+
+    if text not in PRESETS:
+        raise UsageError(f"unknown robot preset {text!r}; choose from {', '.join(PRESETS)}")
+    return text
+
+
 def _protocol_names(text: str | None, policy: str | None) -> list[str]:
     from agents.catalog import PROTOCOL_NAMES, default_protocols
 
@@ -161,6 +169,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from excite.data import save_segments
 
     env_id = _env_id(args.env)
+    robot = _robot_preset(args.robot)
     try:
         protocol = make_protocol(args.protocol, args.policy)
     except ProtocolError as exc:
@@ -168,7 +177,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if not out.parent.is_dir():
         raise UsageError(f"cannot write {out}: no such directory {out.parent}")
-    env = make_env(env_id, args.segments)
+    env = make_env(env_id, args.segments, robot)
     records = run_protocol_episode(env, protocol, args.seed)
     base = env.unwrapped
     save_segments(out, base.segments)
@@ -194,6 +203,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         CompareError,
         CompareSettings,
         incompatible_protocols,
+        make_env,
         run_comparison,
     )
     from agents.report import format_table, plot_comparison, summarize
@@ -202,9 +212,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if args.policy and not Path(args.policy).is_file():
         raise UsageError(f"--policy: no such file {args.policy}")
     protocols = _protocol_names(args.protocols, args.policy)
-    settings = CompareSettings(env_id=env_id, segments=args.segments, seed=args.seed)
+    settings = CompareSettings(env_id=env_id, segments=args.segments, seed=args.seed,
+                               robot=_robot_preset(args.robot))
     try:
-        skipped = incompatible_protocols(protocols, env_id, args.segments, args.policy)
+        skipped = incompatible_protocols(protocols, settings, args.policy)
     except ProtocolError as exc:
         raise UsageError(str(exc)) from None
     for name, reason in skipped.items():
@@ -222,10 +233,14 @@ def cmd_compare(args: argparse.Namespace) -> int:
     columns = {k: np.array([r[k] for r in rows]) for k in COLUMNS}
     summary = summarize(columns, seed=args.seed)
     summary["settings"] = {"env": env_id, "segments": args.segments, "seed": args.seed,
-                           "episodes": args.episodes, "protocols": protocols}
+                           "episodes": args.episodes, "protocols": protocols,
+                           "robot": settings.robot}
     out = Path(args.out)
     (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
-    plots = plot_comparison(columns, out, arena_size=4.0)
+    env = make_env(env_id, args.segments, settings.robot)
+    arena_size = float(env.unwrapped.config["arena_size"])
+    env.close()
+    plots = plot_comparison(columns, out, arena_size=arena_size)
     print(format_table(summary))
     print(f"\nresults: {out / 'segments.csv'}, {out / 'summary.json'}")
     print("plots:   " + ", ".join(str(p) for p in plots))
@@ -279,6 +294,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--seed", type=int, default=0, metavar="S")
     sim.add_argument("--env", default=DEFAULT_ENV_ID, metavar="ID")
     sim.add_argument("--policy", metavar="PATH", help="policy file for --protocol learned")
+    sim.add_argument("--robot", default="default", metavar="PRESET",
+                     help="robot preset: default, turtlebot3, jackal, husky")
     sim.add_argument("--out", required=True, metavar="FILE.csv",
                      help="segment CSV; the hidden truth goes to FILE.truth.json")
     sim.set_defaults(handler=cmd_simulate)
@@ -294,6 +311,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="worker processes (default: all cores)")
     cmp_.add_argument("--out", default="excite_compare", metavar="DIR")
     cmp_.add_argument("--policy", metavar="PATH", help="policy file for the learned protocol")
+    cmp_.add_argument("--robot", default="default", metavar="PRESET",
+                      help="robot preset: default, turtlebot3, jackal, husky")
     cmp_.set_defaults(handler=cmd_compare)
 
     trn = sub.add_parser("train", help="train an excitation policy (stable-baselines3)")

@@ -259,3 +259,18 @@ def test_sensor_pose_config_is_validated():
     for bad in ({"x": (0.2, 0.1)}, {"z": (0, 1)}, {"theta": (-4.0, 0.0)}, [0, 1]):
         with pytest.raises(ValueError, match="sensor_pose"):
             gym.make("excite/DiffDriveCalib-v0", sensor_pose=bad)
+
+
+@pytest.mark.parametrize("preset", ["turtlebot3", "jackal", "husky"])
+def test_robot_presets_scale_the_arena_and_run(preset):
+    from envs.robot import PRESETS
+
+    env = gym.make("excite/DiffDriveCalib-v0", robot=preset)
+    env.reset(seed=0)
+    base = env.unwrapped
+    assert base.config["arena_size"] == PRESETS[preset].arena_size()
+    assert base.nominal.b == PRESETS[preset].separation
+    assert base.knowledge().chassis == PRESETS[preset].nominal().chassis
+    for _ in range(5):
+        obs, *_ = env.step(env.action_space.sample())
+        assert env.observation_space.contains(obs)
