@@ -32,9 +32,11 @@ from excite.errors import DataError
 __all__ = [
     "COLUMNS",
     "DataError",
+    "MIN_SEGMENTS",
     "Segments",
     "load_segment_files",
     "load_segments",
+    "read_text",
     "save_segments",
 ]
 
@@ -114,9 +116,9 @@ def _parse_line(fields: list[str], where: str) -> list[float]:
     return values
 
 
-def _read_text(name: str, is_tuple_name: bool) -> str:
-    """The file's text (UTF-8, BOM removed); DataError naming the file if it is not text."""
-    kind = "tuple" if is_tuple_name else "CSV"
+def read_text(name: str, kind: str = "CSV") -> str:
+    """The file's text (UTF-8, BOM removed); DataError naming the file (a ``kind`` file) if
+    it cannot be read or is not text."""
     try:
         with open(name, "rb") as handle:
             raw = handle.read()
@@ -255,7 +257,7 @@ def _load_rows(path: str | os.PathLike[str]) -> tuple[str, list[list[float]]]:
     """
     name = os.fspath(path)
     is_tuple_name = name.lower().endswith(TUPLE_SUFFIX)
-    text = _read_text(name, is_tuple_name)
+    text = read_text(name, "tuple" if is_tuple_name else "CSV")
     if is_tuple_name or _looks_like_tuples(text):
         rows = _tuple_rows(name, text)
         if not rows:

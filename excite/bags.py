@@ -1,0 +1,246 @@
+"""ROS bags to time-series logs: wheel angles and the external sensor's poses.
+
+Reads rosbag2 (sqlite3 or mcap storage: a directory with ``metadata.yaml``, or a single
+``.db3`` / ``.mcap`` file) and ROS 1 (``.bag``) through the ``rosbags`` library (the ``ros``
+extra), imported only when a bag is read.
+
+* Wheel angles: ``sensor_msgs/msg/JointState`` messages on one topic; ``position`` (rad,
+  cumulative) of the two wheel joints, found by name in each message (any order; a message
+  lacking either joint is skipped).
+* Poses of the external sensor in the world frame: a ``geometry_msgs/msg/PoseStamped``,
+  ``geometry_msgs/msg/PoseWithCovarianceStamped`` or ``nav_msgs/msg/Odometry`` topic, or TF:
+  the transforms from ``parent`` to ``child`` in ``tf2_msgs/msg/TFMessage`` messages on
+  ``/tf``. Only direct parent -> child transforms are used (no chaining through other frames,
+  no inversion, not ``/tf_static``); record the transform you need directly. Leading ``/`` of
+  frame ids (ROS 1) are ignored. x, y in m; heading = yaw of the orientation quaternion (rad).
+* Times are the messages' header stamps (s), not receive times; each stream is put in stamp
+  order.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from excite.errors import DataError
+from excite.timeseries import TimeSeries
+
+__all__ = ["POSE_TYPES", "is_bag_path", "read_bag"]
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+TF_TOPIC = "/tf"
+#: Supported pose message types, and where each keeps its geometry_msgs/Pose.
+POSE_TYPES: dict[str, Callable[[Any], Any]] = {
+    "geometry_msgs/msg/PoseStamped": lambda msg: msg.pose,
+    "geometry_msgs/msg/PoseWithCovarianceStamped": lambda msg: msg.pose.pose,
+    "nav_msgs/msg/Odometry": lambda msg: msg.pose.pose,
+}
+BAG_SUFFIXES = (".bag", ".db3", ".mcap")
+MISSING_EXTRA = "reading bags needs the ros extra: pip install 'excite[ros]'"
+
+
+def is_bag_path(path: str | os.PathLike[str]) -> bool:
+    """Whether a path looks like a bag: a .bag, .db3 or .mcap file, or a directory holding a
+    rosbag2 metadata.yaml (by name only; read_bag checks the content)."""
+    p = Path(path)
+    return p.suffix.lower() in BAG_SUFFIXES or (p / "metadata.yaml").is_file()
+
+
+def _stamp(header: Any) -> int:
+    """A header stamp in ns."""
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def _yaw(q: Any) -> float:
+    """Heading (rad, in (-pi, pi]) of a quaternion: the rotation about z of its ZYX Euler
+    angles."""
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def _frame(frame_id: str) -> str:
+    return frame_id.lstrip("/")
+
+
+def _columns(rows: list[tuple[float, ...]], width: int, where: str) -> list[np.ndarray]:
+    """Rows (stamp in ns first) as columns in stamp order, the stamp in s."""
+    table = np.array(rows, dtype=float).reshape(-1, width)
+    if np.any(table[:, 0] == 0):
+        raise DataError(f"{where}: header stamps of zero (the publisher does not set them)")
+    table = table[np.argsort(table[:, 0], kind="stable")]
+    table[:, 0] *= 1e-9
+    return list(table.T)
+
+
+class _Joints:
+    """Collects (stamp, left angle, right angle) from JointState messages."""
+
+    def __init__(self, where: str, left: str, right: str) -> None:
+        self.where, self.left, self.right = where, left, right
+        self.rows: list[tuple[float, ...]] = []
+        self.names: set[str] = set()
+
+    def add(self, msg: Any) -> None:
+        names = list(msg.name)
+        self.names.update(names)
+        if self.left in names and self.right in names:
+            self.rows.append((_stamp(msg.header), msg.position[names.index(self.left)],
+                              msg.position[names.index(self.right)]))
+
+    def columns(self) -> list[np.ndarray]:
+        """[t (s), phi_L, phi_R (rad)]."""
+        for joint in (self.left, self.right):
+            if joint not in self.names:
+                present = ", ".join(sorted(self.names)) or "none"
+                raise DataError(f"{self.where}: no joint {joint!r}; joints present: {present}")
+        if not self.rows:
+            raise DataError(f"{self.where}: no message has both joints {self.left!r} and "
+                            f"{self.right!r}")
+        return _columns(self.rows, 3, self.where)
+
+
+class _Poses:
+    """Collects (stamp, x, y, yaw) from pose messages of one supported type."""
+
+    def __init__(self, where: str, msgtype: str) -> None:
+        self.where, self.pose_of = where, POSE_TYPES[msgtype]
+        self.rows: list[tuple[float, ...]] = []
+
+    def add(self, msg: Any) -> None:
+        pose = self.pose_of(msg)
+        self.rows.append((_stamp(msg.header), pose.position.x, pose.position.y,
+                          _yaw(pose.orientation)))
+
+    def columns(self) -> list[np.ndarray]:
+        """[t (s), x, y (m), theta (rad, wrapped)]."""
+        return _columns(self.rows, 4, self.where)
+
+
+class _Transforms:
+    """Collects (stamp, x, y, yaw) of the direct parent -> child transforms in TF messages."""
+
+    def __init__(self, where: str, parent: str, child: str) -> None:
+        self.where, self.pair = where, (_frame(parent), _frame(child))
+        self.rows: list[tuple[float, ...]] = []
+        self.pairs: set[tuple[str, str]] = set()
+
+    def add(self, msg: Any) -> None:
+        for transform in msg.transforms:
+            pair = (_frame(transform.header.frame_id), _frame(transform.child_frame_id))
+            self.pairs.add(pair)
+            if pair == self.pair:
+                t, q = transform.transform.translation, transform.transform.rotation
+                self.rows.append((_stamp(transform.header), t.x, t.y, _yaw(q)))
+
+    def columns(self) -> list[np.ndarray]:
+        """[t (s), x, y (m), theta (rad, wrapped)]."""
+        if not self.rows:
+            present = ", ".join(f"{a} -> {b}" for a, b in sorted(self.pairs)) or "none"
+            raise DataError(f"{self.where}: no transform {self.pair[0]} -> {self.pair[1]}; "
+                            f"frame pairs present: {present}")
+        return _columns(self.rows, 4, self.where)
+
+
+def _rosbags() -> tuple[Any, Any, tuple[type[Exception], ...]]:
+    """(AnyReader, a default typestore, the reading errors), or DataError without rosbags."""
+    try:
+        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.rosbag1 import ReaderError as Reader1Error
+        from rosbags.rosbag2 import ReaderError as Reader2Error
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise DataError(MISSING_EXTRA) from None
+    errors = (AnyReaderError, Reader1Error, Reader2Error)
+    return AnyReader, get_typestore(Stores.LATEST), errors
+
+
+@contextmanager
+def _opened(name: str) -> Iterator[Any]:
+    """An open AnyReader on a bag; DataError (one line) for anything that is not a bag or
+    cannot be read, or an empty bag."""
+    if not os.path.exists(name):
+        raise DataError(f"{name}: no such file or directory")
+    any_reader, typestore, errors = _rosbags()
+    try:
+        with any_reader([Path(name)], default_typestore=typestore) as reader:
+            if reader.message_count == 0:
+                raise DataError(f"{name}: empty bag (no messages)")
+            yield reader
+    except (*errors, FileNotFoundError) as exc:
+        raise DataError(f"{name}: not a readable ROS bag ({exc})") from None
+
+
+def _topic_list(topics: dict[str, str]) -> str:
+    return ", ".join(f"{topic} ({msgtype})" for topic, msgtype in sorted(topics.items()))
+
+
+def _require(name: str, topics: dict[str, str], topic: str, kinds: tuple[str, ...],
+             role: str) -> str:
+    """The message type of a topic that must exist with one of ``kinds``."""
+    if topic not in topics:
+        raise DataError(f"{name}: no topic {topic} ({role}); the bag has: {_topic_list(topics)}")
+    if topics[topic] not in kinds:
+        raise DataError(f"{name}: topic {topic} has type {topics[topic]}, not supported for "
+                        f"{role}; supported: {', '.join(kinds)}")
+    return topics[topic]
+
+
+def _pose_collector(name: str, topics: dict[str, str], pose_topic: str | None,
+                    tf: tuple[str, str] | None) -> tuple[str, _Poses | _Transforms, str]:
+    """(topic to read, its collector, the pose stream's source label)."""
+    if tf is not None:
+        _require(name, topics, TF_TOPIC, (TF_MESSAGE,), "transforms")
+        transforms = _Transforms(f"{name} {TF_TOPIC}", *tf)
+        parent, child = transforms.pair
+        return TF_TOPIC, transforms, f"{name} {TF_TOPIC} {parent}->{child}"
+    assert pose_topic is not None  # read_bag checked that exactly one source is given
+    msgtype = _require(name, topics, pose_topic, tuple(POSE_TYPES), "poses")
+    poses = _Poses(f"{name} {pose_topic}", msgtype)
+    return pose_topic, poses, poses.where
+
+
+def read_bag(
+    path: str | os.PathLike[str],
+    left_wheel: str,
+    right_wheel: str,
+    pose_topic: str | None = None,
+    tf: tuple[str, str] | None = None,
+    joint_states: str = "/joint_states",
+) -> TimeSeries:
+    """Read wheel angles and sensor poses from a ROS bag (see the module docstring).
+
+    left_wheel, right_wheel: joint names in the JointState messages on ``joint_states``.
+    Exactly one pose source: ``pose_topic`` (PoseStamped, PoseWithCovarianceStamped or
+    Odometry) or ``tf=(parent, child)`` (the child frame's pose in the parent, world, frame,
+    from /tf). Returns a TimeSeries on the header-stamp clocks (s), theta unwrapped; its source
+    names the bag and topics.
+
+    Raises DataError (one line) when rosbags is missing, the path is missing or not a bag, the
+    bag is empty, a topic is missing (listing the topics and types present) or of an
+    unsupported type (listing the supported ones), a joint is unknown (listing the joints
+    present), no transform parent -> child exists (listing the frame pairs present), or a
+    stream is invalid (too few samples, repeated stamps).
+    """
+    name = os.fspath(path)
+    if (pose_topic is None) == (tf is None):
+        raise DataError("give exactly one pose source: pose_topic or tf=(parent, child)")
+    with _opened(name) as reader:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        _require(name, topics, joint_states, (JOINT_STATE,), "wheel joint states")
+        joints = _Joints(f"{name} {joint_states}", left_wheel, right_wheel)
+        pose_key, poses, pose_source = _pose_collector(name, topics, pose_topic, tf)
+        collectors: dict[str, _Joints | _Poses | _Transforms] = {joint_states: joints,
+                                                                 pose_key: poses}
+        wanted = [c for c in reader.connections if c.topic in collectors]
+        for connection, _, raw in reader.messages(connections=wanted):
+            collectors[connection.topic].add(reader.deserialize(raw, connection.msgtype))
+    t_enc, phi_L, phi_R = joints.columns()
+    t_pose, x, y, theta = poses.columns()
+    return TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,
+                      source=(joints.where, pose_source))

@@ -1,0 +1,581 @@
+"""Time-series logs: reading, synchronisation, time offset, segmentation and its reports.
+
+Logs are simulated from exact kinematics: smooth wheel-speed profiles held constant over each
+fine step, so the body moves on exact differential-drive arcs between fine samples; an
+off-axle sensor at SENSOR in the body frame; encoder and pose samples taken at fine samples.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from excite import DataError, Params, SensorPose, predict_increment
+from excite.models import body_to_sensor
+from excite.timeseries import (
+    CUT_BY_GAP,
+    ENCODER_JUMP,
+    END_OF_LOG,
+    INSIDE_ENCODER_GAP,
+    OUTSIDE_ENCODERS,
+    POSE_JUMP,
+    STANDSTILL,
+    Limits,
+    TimeSeries,
+    estimate_time_offset,
+    is_timeseries_csv,
+    read_timeseries,
+    segment_timeseries,
+)
+
+TRUTH = Params(0.050, 0.051, 0.300)
+SENSOR = SensorPose(0.12, -0.04, 0.3)
+T0 = 1000.0  # s, the first encoder stamp
+
+
+# --------------------------------------------------------------------------- SE(2), test side
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a (+) b for poses (..., 3)."""
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    return np.stack([a[..., 0] + c * b[..., 0] - s * b[..., 1],
+                     a[..., 1] + s * b[..., 0] + c * b[..., 1], a[..., 2] + b[..., 2]], axis=-1)
+
+
+def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(-a) (+) b: pose b in the frame of pose a."""
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    d = b - a
+    return np.stack([c * d[..., 0] + s * d[..., 1], c * d[..., 1] - s * d[..., 0], d[..., 2]],
+                    axis=-1)
+
+
+# --------------------------------------------------------------------------- simulation
+
+
+@dataclass
+class Sim:
+    """A fine-grained exact trajectory: times (s, true clock = encoder clock), cumulative
+    wheel angles (rad), body and sensor world poses (n, 3)."""
+
+    t: np.ndarray
+    phi_L: np.ndarray
+    phi_R: np.ndarray
+    body: np.ndarray
+    sensor: np.ndarray
+
+
+def smoothstep(u: np.ndarray) -> np.ndarray:
+    u = np.clip(u, 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
+
+
+def wheel_rates(t: np.ndarray, standstill: tuple[float, float] | None = None,
+                hold: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Smooth wheel rates (rad/s): forward speed 0.1-0.4 m/s, turn rate within +-1.3 rad/s,
+    optionally zero over ``standstill`` (s) with 1 s ramps, optionally held constant over
+    each interval of ``hold`` s (exact arcs per interval)."""
+    if hold is not None:
+        t = (np.floor(t / hold) + 0.5) * hold
+    v = 0.25 + 0.15 * np.sin(2 * np.pi * t / 7.3)
+    w = 0.9 * np.sin(2 * np.pi * t / 5.1 + 1.0) + 0.4 * np.sin(2 * np.pi * t / 2.3)
+    if standstill is not None:
+        a, b = standstill
+        v, w = (u * smoothstep(np.maximum(a - t, t - b)) for u in (v, w))
+    return (v - 0.5 * TRUTH.b * w) / TRUTH.r_L, (v + 0.5 * TRUTH.b * w) / TRUTH.r_R
+
+
+def simulate(duration: float = 30.0, step: float = 0.01, **rates) -> Sim:
+    """Exact arcs over each fine step of constant wheel rates (evaluated mid-step)."""
+    n = int(round(duration / step))
+    t = step * np.arange(n + 1)
+    rate_L, rate_R = wheel_rates(t[:-1] + 0.5 * step, **rates)
+    dphi_L, dphi_R = rate_L * step, rate_R * step
+    dx, dy, dth = predict_increment(dphi_L, dphi_R, TRUTH)
+    theta = 0.5 + np.concatenate(([0.0], np.cumsum(dth)))
+    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
+    x = -2.0 + np.concatenate(([0.0], np.cumsum(c * dx - s * dy)))
+    y = 1.0 + np.concatenate(([0.0], np.cumsum(s * dx + c * dy)))
+    body = np.column_stack([x, y, theta])
+    return Sim(t, np.concatenate(([3.0], 3.0 + np.cumsum(dphi_L))),
+               np.concatenate(([-1.0], -1.0 + np.cumsum(dphi_R))), body,
+               compose(body, SENSOR.as_array()))
+
+
+def make_log(sim: Sim, enc_every: int = 1, pose_every: int = 2, offset: float = 0.0,
+             pose_shift: int = 0, noise: tuple[float, float] | None = None,
+             seed: int = 0) -> TimeSeries:
+    """Encoder samples at every ``enc_every``-th fine sample; pose samples at every
+    ``pose_every``-th (from ``pose_shift``), stamped on a clock ``offset`` s behind the
+    encoders (pose time + offset = encoder time), with optional noise (m, rad)."""
+    e = slice(0, None, enc_every)
+    p = slice(pose_shift, None, pose_every)
+    pose = sim.sensor[p].copy()
+    if noise is not None:
+        rng = np.random.default_rng(seed)
+        pose += rng.normal(size=pose.shape) * np.array([noise[0], noise[0], noise[1]])
+    return TimeSeries(T0 + sim.t[e], sim.phi_L[e], sim.phi_R[e], T0 + sim.t[p] - offset,
+                      *pose.T)
+
+
+def exact_rows(sim: Sim, t_start: np.ndarray, t_end: np.ndarray) -> np.ndarray:
+    """The true segments (N, 5) between fine-sample times (s, encoder clock)."""
+    i = np.rint((t_start - T0) / (sim.t[1] - sim.t[0])).astype(int)
+    j = np.rint((t_end - T0) / (sim.t[1] - sim.t[0])).astype(int)
+    rel = between(sim.sensor[i], sim.sensor[j])
+    return np.column_stack([sim.phi_L[j] - sim.phi_L[i], sim.phi_R[j] - sim.phi_R[i], rel])
+
+
+@pytest.fixture(scope="module")
+def sim() -> Sim:
+    return simulate()
+
+
+# --------------------------------------------------------------------------- CSV files
+
+
+def fmt(values: np.ndarray) -> list[str]:
+    return [repr(float(v)) for v in values]
+
+
+def write_combined(path, ts: TimeSeries, encoder_names=("phi_L", "phi_R"), scale=1.0) -> None:
+    """One file with header t,<encoder names>,x,y,theta; empty cells where a stream has no
+    sample."""
+    t = np.union1d(ts.t_enc, ts.t_pose)
+    enc = dict(zip(ts.t_enc, zip(fmt(ts.phi_L * scale), fmt(ts.phi_R * scale), strict=True),
+                   strict=True))
+    pose = dict(zip(ts.t_pose, zip(fmt(ts.x), fmt(ts.y), fmt(ts.theta), strict=True),
+                    strict=True))
+    lines = [",".join(("t", *encoder_names, "x", "y", "theta"))]
+    lines += [",".join((repr(float(ti)), *enc.get(ti, ("", "")), *pose.get(ti, ("", "", ""))))
+              for ti in t]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def write_pair(directory, ts: TimeSeries) -> tuple:
+    enc, pose = directory / "enc.csv", directory / "pose.csv"
+    enc.write_text("t,phi_L,phi_R\n" + "".join(
+        f"{a},{b},{c}\n" for a, b, c in zip(*map(fmt, (ts.t_enc, ts.phi_L, ts.phi_R)),
+                                            strict=True)))
+    pose.write_text("# poses\nt,x,y,theta\n" + "".join(
+        f"{a},{b},{c},{d}\n" for a, b, c, d in zip(*map(fmt, (ts.t_pose, ts.x, ts.y, ts.theta)),
+                                                   strict=True)))
+    return enc, pose
+
+
+def assert_same(a: TimeSeries, b: TimeSeries, atol: float = 0.0) -> None:
+    for name in ("t_enc", "phi_L", "phi_R", "t_pose", "x", "y", "theta"):
+        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=atol,
+                                   err_msg=name)
+
+
+@pytest.fixture(scope="module")
+def short_log() -> TimeSeries:
+    return make_log(simulate(duration=6.0, step=0.02), pose_every=3)
+
+
+def test_reads_combined_file_with_empty_cells(tmp_path, short_log):
+    path = tmp_path / "log.csv"
+    write_combined(path, short_log)
+    ts = read_timeseries(path)
+    assert_same(ts, short_log)
+    assert ts.source == (str(path), str(path))
+    assert ts.lines[0][0] == 2 and ts.lines[1][0] == 2  # the first row holds both streams
+    assert ts.location("pose", 1) == f"{path}:5"
+
+
+def test_reads_two_files_in_any_order(tmp_path, short_log):
+    enc, pose = write_pair(tmp_path, short_log)
+    a, b = read_timeseries([enc, pose]), read_timeseries([str(pose), str(enc)])
+    assert_same(a, short_log)
+    assert_same(b, short_log)
+    assert b.source == (str(enc), str(pose))
+    assert b.location("pose", 0) == f"{pose}:3"
+
+
+def test_ticks_become_angles(tmp_path, short_log):
+    ticks_per_rev = 4096
+    ticks = TimeSeries(short_log.t_enc, np.round(short_log.phi_L * ticks_per_rev / (2 * np.pi)),
+                       np.round(short_log.phi_R * ticks_per_rev / (2 * np.pi)),
+                       short_log.t_pose, short_log.x, short_log.y, short_log.theta)
+    path = tmp_path / "ticks.csv"
+    write_combined(path, ticks, ("ticks_L", "ticks_R"))
+    ts = read_timeseries(path, ticks_per_rev=ticks_per_rev)
+    np.testing.assert_allclose(ts.phi_L, ticks.phi_L * 2 * np.pi / ticks_per_rev, rtol=1e-15)
+    assert np.abs(ts.phi_R - short_log.phi_R).max() <= np.pi / ticks_per_rev + 1e-12
+
+
+def test_wrapped_headings_are_unwrapped(tmp_path, short_log):
+    assert np.ptp(short_log.theta) > 0.5  # the heading moves
+    spun = TimeSeries(short_log.t_enc, short_log.phi_L, short_log.phi_R, short_log.t_pose,
+                      short_log.x, short_log.y, short_log.theta + 40.0)
+    wrapped = np.angle(np.exp(1j * spun.theta))
+    path = tmp_path / "log.csv"
+    write_combined(path, TimeSeries(spun.t_enc, spun.phi_L, spun.phi_R, spun.t_pose,
+                                    spun.x, spun.y, wrapped))
+    theta = read_timeseries(path).theta
+    np.testing.assert_allclose(np.diff(theta), np.diff(spun.theta), atol=1e-12)
+    assert -np.pi < theta[0] <= np.pi
+
+
+def test_is_timeseries_csv(tmp_path):
+    cases = {
+        "combined.csv": ("t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n", True),
+        "enc.csv": ("# encoders\n\nT, phi_L, phi_R\n0,0,0\n", True),
+        "pose.csv": ("t,x,y,theta\n", True),
+        "segments.csv": ("dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt\n1,1,0.05,0,0\n", False),
+        "bare.csv": ("1,1,0.05,0,0\n", False),
+        "empty.csv": ("", False),
+    }
+    for name, (text, expected) in cases.items():
+        (tmp_path / name).write_text(text)
+        assert is_timeseries_csv(tmp_path / name) is expected, name
+    (tmp_path / "binary.csv").write_bytes(b"t,x\x00")
+    assert not is_timeseries_csv(tmp_path / "binary.csv")
+    assert not is_timeseries_csv(tmp_path / "missing.csv")
+
+
+GOOD = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.1,1,1,0.05,0,0\n0.2,2,2,0.1,0,0\n"
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("", "log.csv: empty file"),
+        ("1,1,0.05,0,0\n", "log.csv:1: not a time-series CSV"),
+        ("dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt\n", "log.csv:1: not a time-series CSV"),
+        ("t\n0\n", "log.csv:1: neither encoder (phi_L, phi_R) nor pose"),
+        ("t,phi_L,x,y,theta\n", "log.csv:1: missing column phi_R"),
+        ("t,phi_L,phi_R,x,theta\n", "log.csv:1: missing column y"),
+        ("t,phi_L,phi_R,x,y,theta,z\n", "log.csv:1: unknown column 'z'"),
+        ("t,phi_L,phi_R,phi_L,x,y,theta\n", "log.csv:1: column phi_L appears twice"),
+        ("t,phi_L,phi_R,ticks_L,ticks_R\n", "log.csv:1: both wheel angles"),
+        (GOOD + "0.3,3,3,0.15,0\n", "log.csv:5: expected 6 columns, found 5"),
+        (GOOD + "0.3,3,abc,0.15,0,0\n", "log.csv:5: phi_R is not a number: 'abc'"),
+        (GOOD + "0.3,3,3,nan,0,0\n", "log.csv:5: x is not finite"),
+        (GOOD + "0.3,inf,3,,,\n", "log.csv:5: phi_L is not finite"),
+        (GOOD + "0.2,3,3,,,\n", "log.csv:5: time does not increase"),
+        (GOOD + "0.3,,,0.1,0,0\n0.25,,,0.1,0,0\n", "log.csv:6: time does not increase"),
+        (GOOD + ",3,3,0.1,0,0\n", "log.csv:5: t is empty"),
+        (GOOD + "0.3,3,,0.1,0,0\n", "log.csv:5: phi_R is empty but other"),
+        (GOOD + "0.3,,,,,\n", "log.csv:5: the row has only a time"),
+        ("t,phi_L,phi_R,x,y,theta\n0,0,0,,,\n0.1,1,1,0,0,0\n", "log.csv: 1 pose sample(s)"),
+        ("t,phi_L,phi_R,x,y,theta\n", "log.csv: 0 encoder sample(s)"),
+        ("# ticks\nt,ticks_L,ticks_R,x,y,theta\n0,0,0,0,0,0\n",
+         "log.csv:2: encoder ticks (ticks_L, ticks_R) need the encoder resolution"),
+        ("t,phi_L,phi_R\n0,0,0\n0.1,1,1\n", "log.csv: only encoder columns"),
+        ("t,x,y,theta\n0,0,0,0\n0.1,1,1,0\n", "log.csv: only pose columns"),
+    ],
+)
+def test_bad_files_are_one_line_errors_naming_file_and_line(tmp_path, text, message):
+    path = tmp_path / "log.csv"
+    path.write_text(text)
+    with pytest.raises(DataError) as info:
+        read_timeseries(path)
+    assert message in str(info.value)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_bad_file_combinations(tmp_path):
+    enc = tmp_path / "enc.csv"
+    enc.write_text("t,phi_L,phi_R\n0,0,0\n0.1,1,1\n")
+    enc2 = tmp_path / "enc2.csv"
+    enc2.write_text("t,phi_L,phi_R\n0,0,0\n0.1,1,1\n")
+    both = tmp_path / "both.csv"
+    both.write_text(GOOD)
+    cases = [
+        ([enc, enc2], "are both encoder files"),
+        ([enc, both], "both.csv: has both encoder and pose columns"),
+        ([enc, enc2, both], "one CSV file or two"),
+        ([], "one CSV file or two"),
+        ([tmp_path / "missing.csv"], "missing.csv: no such file"),
+        ([tmp_path], "is a directory"),
+    ]
+    for paths, message in cases:
+        with pytest.raises(DataError, match=message):
+            read_timeseries(paths)
+    with pytest.raises(DataError, match="both.csv:1: ticks_per_rev given, but the encoder"):
+        read_timeseries(both, ticks_per_rev=1024)
+    with pytest.raises(DataError, match="ticks_per_rev must be positive"):
+        read_timeseries(both, ticks_per_rev=0)
+    (tmp_path / "bin.csv").write_bytes(b"t,x\x00\n")
+    with pytest.raises(DataError, match="binary data"):
+        read_timeseries(tmp_path / "bin.csv")
+    (tmp_path / "latin.csv").write_bytes(b"t,phi_L,phi_R\n0,\xe9,0\n")
+    with pytest.raises(DataError, match="latin.csv:2: not UTF-8"):
+        read_timeseries(tmp_path / "latin.csv")
+
+
+def test_timeseries_validates_arrays_and_names_times_without_lines():
+    t = np.arange(5.0)
+    with pytest.raises(DataError, match="encoders: the encoder columns have different lengths"):
+        TimeSeries(t, t[:4], t, t, t, t, t)
+    with pytest.raises(DataError, match=r"poses at t = 3.000000 s: time does not increase"):
+        TimeSeries(t, t, t, np.array([0, 1, 2, 3, 3.0]), t, t, t)
+    with pytest.raises(DataError, match=r"encoders at t = 2.000000 s: phi_R is not finite"):
+        TimeSeries(t, t, np.where(t == 2, np.inf, t), t, t, t, t)
+    ts = TimeSeries(t, t, t, t, t, t, t, source=("bag /joint_states", "bag /pose"))
+    assert ts.location("pose", 4) == "bag /pose at t = 4.000000 s"
+    with pytest.raises(ValueError):
+        ts.t_enc[0] = 1.0
+
+
+# --------------------------------------------------------------------------- segmentation
+
+
+def test_noise_free_windows_equal_exact_sensor_motion(sim):
+    ts = make_log(sim)
+    log = segment_timeseries(ts, window=1.0)
+    assert len(log.segments) == 30  # 0-30 s: the last window ends at the last sample
+    np.testing.assert_allclose(log.segments.as_array(), exact_rows(sim, log.t_start, log.t_end),
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(log.t_end - log.t_start, 1.0, atol=1e-9)
+    assert np.array_equal(log.t_start[1:], log.t_end[:-1])  # contiguous
+    assert not log.shares_endpoints[0] and log.shares_endpoints[1:].all()
+    assert log.report.n_segments == 30 and log.report.counts_text() == "nothing"
+    odd = segment_timeseries(ts, window=0.7)
+    assert odd.report.n_segments == 42 and odd.report.segments_dropped[END_OF_LOG] == 1
+    assert odd.report.dropped_ranges[END_OF_LOG] == ((T0 + 29.4, T0 + 30.0),)
+
+
+def test_segments_of_constant_wheel_rates_are_the_models_arcs():
+    """Independent check of the whole chain: wheel rates constant over each 1 s window make
+    every segment an exact arc, so the sensor's increment is (-l) (+) arc (+) l."""
+    sim = simulate(duration=20.0, step=0.01, hold=1.0)
+    log = segment_timeseries(make_log(sim, pose_every=5), window=1.0)
+    seg = log.segments
+    body = np.column_stack(predict_increment(seg.dphi_L, seg.dphi_R, TRUTH))
+    np.testing.assert_allclose(seg.measured, body_to_sensor(body, SENSOR), rtol=0, atol=1e-11)
+    assert np.abs(seg.dtheta).max() > 0.3 and np.abs(seg.dy).max() > 0.01
+
+
+def test_encoders_are_interpolated_at_pose_times(sim):
+    """Poses between encoder samples: encoder angles are interpolated linearly, within the
+    h^2 |phi''| / 8 bound; the poses themselves are exact."""
+    ts = make_log(sim, enc_every=4, pose_every=3, pose_shift=1)
+    log = segment_timeseries(ts, window=1.0)
+    exact = exact_rows(sim, log.t_start, log.t_end)
+    np.testing.assert_allclose(log.segments.measured, exact[:, 2:], rtol=0, atol=1e-12)
+    h = 0.04  # s, encoder period
+    assert np.abs(log.segments.as_array()[:, :2] - exact[:, :2]).max() < 2 * h**2 * 30 / 8
+
+
+def test_window_boundaries_land_on_the_next_pose_sample(sim):
+    ts = make_log(sim, pose_every=7)  # 0.07 s pose period
+    log = segment_timeseries(ts, window=0.5)
+    durations = log.t_end - log.t_start
+    assert durations.min() >= 0.5 - 0.07 and durations.max() <= 0.5 + 0.07
+    assert np.all(np.isin(log.t_start, ts.t_pose)) and np.all(np.isin(log.t_end, ts.t_pose))
+    grid = ts.t_pose[0] + 0.5 * np.arange(len(log.segments))
+    assert np.all(log.t_start >= grid - 1e-9) and np.all(log.t_start < grid + 0.07)
+
+
+def test_keyframes_by_distance_and_angle(sim):
+    ts = make_log(sim)
+    log = segment_timeseries(ts, min_distance=0.25, min_angle=0.4)
+    seg = log.segments
+    np.testing.assert_allclose(seg.as_array(), exact_rows(sim, log.t_start, log.t_end),
+                               rtol=0, atol=1e-12)
+    assert np.array_equal(log.t_start[1:], log.t_end[:-1]) and log.shares_endpoints[1:].all()
+    reached = (np.hypot(seg.dx, seg.dy) >= 0.25) | (np.abs(seg.dtheta) >= 0.4)
+    assert reached.all()
+    assert (np.hypot(seg.dx, seg.dy) < 0.25).any() and (np.abs(seg.dtheta) < 0.4).any()
+    # First crossing: no pose sample inside a segment reached either threshold.
+    pose = np.column_stack([ts.x, ts.y, ts.theta])
+    index = np.searchsorted(ts.t_pose, np.concatenate((log.t_start, log.t_end[-1:])))
+    for a, b in zip(index[:-1], index[1:], strict=True):
+        inner = between(pose[a], pose[a + 1:b])
+        assert (np.hypot(inner[:, 0], inner[:, 1]) < 0.25).all()
+        assert (np.abs(inner[:, 2]) < 0.4).all()
+
+
+def test_keyframes_by_distance_only(sim):
+    log = segment_timeseries(make_log(sim), min_distance=0.3)
+    spacing = np.hypot(log.segments.dx, log.segments.dy)
+    assert spacing.min() >= 0.3 and spacing.max() < 0.3 + 0.02  # one pose step past it
+
+
+@pytest.mark.parametrize("offset", [0.137, -0.052])
+def test_time_offset_synchronises_the_clocks(sim, offset):
+    ts = make_log(sim, offset=offset)
+    log = segment_timeseries(ts, window=1.0, time_offset=offset)
+    np.testing.assert_allclose(log.segments.as_array(), exact_rows(sim, log.t_start, log.t_end),
+                               rtol=0, atol=1e-9)
+    unsynchronised = segment_timeseries(ts, window=1.0)
+    assert not np.allclose(unsynchronised.segments.as_array()[:, :2],
+                           exact_rows(sim, unsynchronised.t_start,
+                                      unsynchronised.t_end)[:, :2], atol=1e-3)
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.0123, -0.2371, 0.4])
+def test_estimate_time_offset_recovers_a_known_offset(offset):
+    """100 Hz encoders, 50 Hz noisy poses (2 mm, 2 mrad), 2 minutes: within 5 % of the
+    encoder period (0.5 ms)."""
+    sim = simulate(duration=120.0, step=0.01)
+    ts = make_log(sim, offset=offset, noise=(0.002, 0.002), seed=7)
+    assert abs(estimate_time_offset(ts) - offset) < 0.05 * 0.01
+
+
+def test_estimate_time_offset_refuses_an_offset_beyond_the_search_range(sim):
+    with pytest.raises(DataError, match=r"not within \+-1.0 s"):
+        estimate_time_offset(make_log(sim, offset=1.5))
+    assert abs(estimate_time_offset(make_log(sim, offset=1.5), max_offset=2.0) - 1.5) < 1e-4
+
+
+def test_estimate_time_offset_refuses_without_turning():
+    t = np.linspace(0, 30, 3001)
+    straight = TimeSeries(t, 10 * t, 10 * t, t, 0.5 * t, 0 * t, 0 * t)
+    with pytest.raises(DataError, match="heading does not vary"):
+        estimate_time_offset(straight)
+    with pytest.raises(DataError, match="overlap for"):
+        estimate_time_offset(straight, max_offset=10.0)
+    rng = np.random.default_rng(1)
+    wheel = 10 * t + np.sin(t)  # straight at a varying speed
+    noisy = TimeSeries(t, wheel, wheel, t, 0.5 * t, 0 * t, rng.normal(0, 1e-3, t.size))
+    with pytest.raises(DataError, match="agree poorly"):
+        estimate_time_offset(noisy)
+
+
+def remove(ts: TimeSeries, stream: str, start: float, stop: float) -> TimeSeries:
+    """The log without the samples of one stream in [start, stop) (s, stream clock)."""
+    enc = np.ones(ts.t_enc.size, bool)
+    pose = np.ones(ts.t_pose.size, bool)
+    if stream == "encoder":
+        enc = (ts.t_enc < start) | (ts.t_enc >= stop)
+    else:
+        pose = (ts.t_pose < start) | (ts.t_pose >= stop)
+    return TimeSeries(ts.t_enc[enc], ts.phi_L[enc], ts.phi_R[enc], ts.t_pose[pose],
+                      ts.x[pose], ts.y[pose], ts.theta[pose])
+
+
+@pytest.mark.parametrize("stream", ["encoder", "pose"])
+def test_gap_longer_than_window_names_file_and_line(tmp_path, sim, stream):
+    path = tmp_path / "log.csv"
+    write_combined(path, remove(make_log(sim), stream, T0 + 10.0, T0 + 11.5))
+    ts = read_timeseries(path)
+    k = 0 if stream == "encoder" else 1
+    resume = int(np.searchsorted((ts.t_enc, ts.t_pose)[k], T0 + 11.5))
+    with pytest.raises(DataError) as info:
+        segment_timeseries(ts, window=1.0)
+    message = str(info.value)
+    assert message.startswith(f"{path}:{ts.lines[k][resume]}: gap of 1.5")
+    assert f"in the {stream} stream" in message and "longer than the window (1 s)" in message
+
+
+@pytest.mark.parametrize("stream", ["encoder", "pose"])
+def test_split_gaps_are_never_spanned(sim, stream):
+    ts = remove(make_log(sim), stream, T0 + 10.0, T0 + 11.5)
+    log = segment_timeseries(ts, window=1.0, on_gap="split")
+    assert not np.any((log.t_start < T0 + 11.5) & (log.t_end > T0 + 10.0))
+    np.testing.assert_allclose(log.segments.as_array(), exact_rows(sim, log.t_start, log.t_end),
+                               rtol=0, atol=1e-12)
+    report = log.report
+    assert [(g.stream, round(g.duration, 6)) for g in report.gaps] == [
+        (stream, 1.5 + (0.01 if stream == "encoder" else 0.02))]
+    assert report.segments_dropped[CUT_BY_GAP] == 1  # the window interrupted by the gap
+    after = log.t_start > T0 + 11.0
+    assert not log.shares_endpoints[np.argmax(after)]  # restarts after the gap
+    assert log.t_start[after][0] <= T0 + 11.5 + 0.02
+    if stream == "encoder":
+        assert report.samples_dropped[INSIDE_ENCODER_GAP] == 75
+    assert "Gap of 1.5" in report.summary()
+
+
+def test_short_gaps_split_without_error_and_dropouts_are_bridged(sim):
+    ts = make_log(sim)
+    cut = remove(remove(ts, "pose", T0 + 5.005, T0 + 5.1), "encoder", T0 + 20.005, T0 + 20.02)
+    log = segment_timeseries(cut, window=1.0)  # 0.1 s pose gap < window: no error
+    assert [g.stream for g in log.report.gaps] == ["pose"]
+    assert log.report.dropouts == {"encoder": 1, "pose": 0}
+    np.testing.assert_allclose(log.segments.as_array(), exact_rows(sim, log.t_start, log.t_end),
+                               rtol=0, atol=1e-12)
+    assert "1 encoder sample missed" in log.report.summary()
+    lenient = segment_timeseries(cut, window=1.0, limits=Limits(max_gap=0.5))
+    assert lenient.report.gaps == () and lenient.report.dropouts["pose"] == 4
+
+
+def test_pose_jump_drops_the_affected_segments(sim):
+    ts = make_log(sim)
+    x = ts.x.copy()
+    x[np.searchsorted(ts.t_pose, T0 + 12.5)] += 0.3  # a spike inside a window
+    x[np.searchsorted(ts.t_pose, T0 + 20.0):] += 0.5  # a relocalisation step at a boundary
+    jumped = TimeSeries(ts.t_enc, ts.phi_L, ts.phi_R, ts.t_pose, x, ts.y, ts.theta)
+    log = segment_timeseries(jumped, window=1.0)
+    report = log.report
+    assert report.segments_dropped[POSE_JUMP] == 2
+    assert report.dropped_ranges[POSE_JUMP] == ((T0 + 12.0, T0 + 13.0), (T0 + 19.0, T0 + 20.0))
+    np.testing.assert_allclose(log.segments.as_array(), exact_rows(sim, log.t_start, log.t_end),
+                               rtol=0, atol=1e-12)
+    assert not log.shares_endpoints[np.searchsorted(log.t_start, T0 + 13.0)]
+
+
+def test_encoder_reset_drops_the_affected_segment(sim):
+    ts = make_log(sim)
+    after = ts.t_enc > T0 + 7.305
+    reset = TimeSeries(ts.t_enc, np.where(after, ts.phi_L - 500.0, ts.phi_L), ts.phi_R,
+                       ts.t_pose, ts.x, ts.y, ts.theta)
+    log = segment_timeseries(reset, window=1.0)
+    assert log.report.segments_dropped[ENCODER_JUMP] == 1
+    assert log.report.dropped_ranges[ENCODER_JUMP] == ((T0 + 7.0, T0 + 8.0),)
+    assert np.abs(log.segments.dphi_L).max() < 50
+
+
+def test_standstills_are_dropped():
+    sim = simulate(duration=30.0, step=0.01, standstill=(10.0, 16.0))
+    log = segment_timeseries(make_log(sim), window=1.0)
+    report = log.report
+    assert report.segments_dropped[STANDSTILL] == 6
+    assert report.dropped_ranges[STANDSTILL] == ((T0 + 10.0, T0 + 16.0),)
+    assert "6 standstill (t = 1010.000-1016.000 s)" in report.summary()
+    assert report.counts_text() == "6 standstill"
+
+
+def test_pose_samples_outside_the_encoder_range_are_counted(sim):
+    ts = make_log(sim)
+    late = TimeSeries(ts.t_enc[100:], ts.phi_L[100:], ts.phi_R[100:], ts.t_pose, ts.x, ts.y,
+                      ts.theta)
+    report = segment_timeseries(late, window=1.0).report
+    assert report.samples_dropped[OUTSIDE_ENCODERS] == 50
+    assert report.counts_text() == "50 pose samples outside the encoder time range"
+    with pytest.raises(DataError, match=r"0 segment\(s\) after segmentation.*dropped: 1501 pose "
+                       "samples outside the encoder time range"):
+        segment_timeseries(ts, time_offset=100.0)
+
+
+def test_too_few_segments_and_bad_settings(sim):
+    ts = make_log(sim)
+    with pytest.raises(DataError, match="2 segment.s. after segmentation; at least 3"):
+        segment_timeseries(ts, window=12.0)
+    bad = [
+        (dict(window=0.0), "window must be positive"),
+        (dict(window=0.01), "shorter than the pose sample period"),
+        (dict(min_distance=-1.0), "min_distance must be positive"),
+        (dict(min_angle=math.inf), "min_angle must be positive"),
+        (dict(time_offset=math.nan), "time_offset must be finite"),
+        (dict(on_gap="ignore"), "on_gap must be"),
+    ]
+    for kwargs, message in bad:
+        with pytest.raises(DataError, match=message):
+            segment_timeseries(ts, **kwargs)
+
+
+def test_one_hour_100_hz_log_segments_in_under_two_seconds(capsys):
+    sim = simulate(duration=3600.0, step=0.01)
+    ts = make_log(sim, pose_every=1, offset=0.0031)
+    assert ts.t_enc.size == ts.t_pose.size == 360_001
+    timings = {}
+    for name, kwargs in (("windows", dict(window=1.0)),
+                         ("keyframes", dict(min_distance=0.2, min_angle=0.3))):
+        start = time.perf_counter()
+        log = segment_timeseries(ts, time_offset=0.0031, **kwargs)
+        timings[name] = time.perf_counter() - start
+        assert len(log.segments) > 3000
+    with capsys.disabled():
+        print(f"\n1-hour 100 Hz log: windows {timings['windows']:.3f} s, "
+              f"keyframes {timings['keyframes']:.3f} s")
+    assert max(timings.values()) < 2.0
