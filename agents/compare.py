@@ -92,13 +92,11 @@ def _worker_protocol(name: str, policy_path: str | None) -> Protocol:
     return make_protocol(name, policy_path)
 
 
-def incompatible_protocols(protocols: list[str], settings: CompareSettings,
+def incompatible_protocols(protocols: list[str], observation_shape: tuple[int, ...],
                            policy_path: str | None = None) -> dict[str, str]:
-    """Protocols that cannot run with these settings (e.g. a policy trained for another
-    observation layout), with the reason in words."""
-    env = make_env(settings.env_id, settings.segments, settings.robot)
-    shape = env.observation_space.shape
-    env.close()
+    """Protocols that cannot run on an env with this observation shape (e.g. a policy trained
+    for another observation layout), with the reason in words."""
+    shape = tuple(observation_shape)
     reasons = {name: make_protocol(name, policy_path).incompatibility(shape) for name in protocols}
     return {name: reason for name, reason in reasons.items() if reason}
 

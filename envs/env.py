@@ -236,6 +236,7 @@ class DiffDriveCalibEnv(gym.Env):
         if self.sensor_ranges is not None:
             self.nominal_theta = np.append(self.nominal_theta, self.sensor_ranges.mean(axis=1))
         self.max_wheel_speed = nominal.max_wheel_speed
+        self.chassis = nominal.chassis
         self.sim = Simulation(SimulationConfig(
             arena_width=cfg["arena_size"], arena_height=cfg["arena_size"],
             physics_hz=cfg["physics_hz"], ideal=bool(cfg["ideal"]),
@@ -344,6 +345,8 @@ class DiffDriveCalibEnv(gym.Env):
         ``theta`` leaves the sensor pose at its nominal value)."""
         p = self.estimator.params
         params = p if isinstance(p, Params) else Params.from_array(p)
+        if self.model is AXLE:
+            return params, params.as_array()
         theta = getattr(self.estimator, "theta", None)
         if theta is None or len(theta) != self.model.size:
             theta = np.append(params.as_array(), self.nominal_theta[3:])
@@ -389,7 +392,7 @@ class DiffDriveCalibEnv(gym.Env):
             pose=self._measured_pose.copy(), nominal=self.nominal, sigma=self.sigma.copy(),
             max_wheel_speed=self.max_wheel_speed, segment_duration=self.segment_duration,
             arena_size=float(self.config["arena_size"]), budget=self.budget, model=self.model,
-            chassis=self.distribution.nominal().chassis,
+            chassis=self.chassis,
             theta=self._theta.copy(), nominal_theta=self.nominal_theta.copy())
 
     def _observation(self) -> np.ndarray:
@@ -405,8 +408,8 @@ class DiffDriveCalibEnv(gym.Env):
         to_unit = 2.0 / self.config["arena_size"]
         obs = np.array([
             *relative,
-            *(0.1 * math.log1p(max(lam, 0.0)) for lam in eigenvalues),
-            *(sign * v for v in weakest),
+            *[0.1 * math.log1p(max(lam, 0.0)) for lam in eigenvalues],
+            *[sign * v for v in weakest],
             x * to_unit, y * to_unit, math.cos(theta), math.sin(theta),
             *self._last_action,
             self._n / self.budget,

@@ -544,13 +544,12 @@ def calibrate(
         "axle" if sensor_pose == "axle" else "pose")
     test = _fit_test(chosen, alternative, statistic, name, threshold, given, loss, forced)
     return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
-                   len(seg) - len(data), sensor_pose if isinstance(sensor_pose, SensorPose)
-                   else None)
+                   len(seg) - len(data))
 
 
 def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
-            max_relative_std: float, choice: str, test: FitTest, n_trimmed: int,
-            given_pose: SensorPose | None) -> CalibrationResult:
+            max_relative_std: float, choice: str, test: FitTest,
+            n_trimmed: int) -> CalibrationResult:
     fit = mf.fit
     theta, info_rel = fit.theta, fit.system.information
     lam, vec = np.linalg.eigh(info_rel)
@@ -575,7 +574,7 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
         covariance=full[:3, :3],
         std=np.sqrt(np.diag(full)[:3]),
         model="axle" if mf.model is AXLE else "sensor_pose",
-        sensor_pose=pose if given_pose is None else given_pose,
+        sensor_pose=pose,
         sensor_pose_std=pose_std,
         parameter_names=mf.model.names,
         full_covariance=full,

@@ -214,8 +214,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
     protocols = _protocol_names(args.protocols, args.policy)
     settings = CompareSettings(env_id=env_id, segments=args.segments, seed=args.seed,
                                robot=_robot_preset(args.robot))
+    env = make_env(env_id, args.segments, settings.robot)
+    shape, arena_size = env.observation_space.shape, float(env.unwrapped.config["arena_size"])
+    env.close()
     try:
-        skipped = incompatible_protocols(protocols, settings, args.policy)
+        skipped = incompatible_protocols(protocols, shape, args.policy)
     except ProtocolError as exc:
         raise UsageError(str(exc)) from None
     for name, reason in skipped.items():
@@ -237,9 +240,6 @@ def cmd_compare(args: argparse.Namespace) -> int:
                            "robot": settings.robot}
     out = Path(args.out)
     (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
-    env = make_env(env_id, args.segments, settings.robot)
-    arena_size = float(env.unwrapped.config["arena_size"])
-    env.close()
     plots = plot_comparison(columns, out, arena_size=arena_size)
     print(format_table(summary))
     print(f"\nresults: {out / 'segments.csv'}, {out / 'summary.json'}")

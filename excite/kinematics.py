@@ -228,8 +228,8 @@ def wrap_angle(a: ArrayLike) -> FloatArray:
 def _as_params(params: Params | ArrayLike) -> tuple[float, float, float]:
     if isinstance(params, Params):
         return params.r_L, params.r_R, params.b
-    r_L, r_R, b = np.asarray(params, dtype=float).reshape(3)
-    return float(r_L), float(r_R), float(b)
+    r_L, r_R, b = np.asarray(params, dtype=float).reshape(3).tolist()  # floats in one call
+    return r_L, r_R, b
 
 
 class Arc:

@@ -14,6 +14,7 @@ leak into the scale, which is what makes a filter in p drift from the batch solu
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -100,9 +101,10 @@ class OnlineEstimator:
         self.model = model
         self.nominal = Params(*theta[:3])
         self._nominal_theta = theta
-        self._scale = model.column_scale(theta)  # the chart's units (offsets: nominal b)
+        # The chart's unit of each non-log parameter (offsets: the nominal b; angles: 1 rad).
+        self._units = model.column_scale(theta).tolist()
         self._log = [t == "log" for t in model.transforms]
-        chart_units = np.where(self._log, theta, self._scale)
+        chart_units = self._chart_derivative(theta.tolist())
         if prior_std is None:
             std = np.array([DEFAULT_PRIOR[t] for t in model.transforms]) * chart_units
         else:
@@ -116,13 +118,11 @@ class OnlineEstimator:
         self._iterations = int(iterations)
         self._prior = np.diag((chart_units / std) ** 2)  # information in the chart
         self._q = [math.log(x) if log else x / c
-                   for x, log, c in zip(theta.tolist(), self._log, self._scale.tolist(),
-                                        strict=True)]
+                   for x, log, c in zip(theta.tolist(), self._log, self._units, strict=True)]
         self._info = [[float(x) for x in row] for row in self._prior]
         self.n_segments = 0
         self._update = self._update_axle if model is AXLE else self._update_general
         self._w_array = np.array(self._w)[:, None]
-        self._units = self._scale.tolist()
 
     def _to_theta(self, q: list[float]) -> tuple[float, ...]:
         return tuple(math.exp(x) if log else x * c
@@ -146,9 +146,7 @@ class OnlineEstimator:
         for iteration in range(self._iterations):
             theta = self._to_theta(x.tolist())
             (px, py, pt), rows = self.model.evaluate_scalar(phi_L, phi_R, theta)
-            h = np.array(rows)
-            h *= [t if log else c for t, log, c in zip(theta, self._log, self._units,
-                                                       strict=True)]
+            h = np.array(rows) * self._chart_derivative(theta)
             weighted = h * self._w_array
             innovation = np.array((zx - px, zy - py, _wrap(zt - pt))) + h @ (x - q)
             m = info + weighted.T @ h
@@ -225,32 +223,30 @@ class OnlineEstimator:
 
     @property
     def params(self) -> Params:
-        if self.model is AXLE:
-            q0, q1, q2 = self._q
-            return Params(math.exp(q0), math.exp(q1), math.exp(q2))
         return Params(*self._to_theta(self._q)[:3])
 
     @property
     def sensor_pose(self) -> SensorPose | None:
         return self.model.split(self.theta)[1]
 
-    def _chart_derivative(self) -> NDArray[np.float64]:
-        """d theta / d q at the estimate: the value for log parameters, else the chart unit."""
-        theta = np.array(self._to_theta(self._q))
-        return np.where(self._log, theta, self._scale)
+    def _chart_derivative(self, theta: Sequence[float]) -> NDArray[np.float64]:
+        """d theta / d q at theta: the value for log parameters, else the chart's unit."""
+        return np.array([t if log else c
+                         for t, log, c in zip(theta, self._log, self._units, strict=True)])
 
     @property
     def covariance(self) -> NDArray[np.float64]:
         """Posterior covariance of theta (P x P; m^2, m rad, rad^2; first order from the
         chart)."""
-        d = self._chart_derivative()
+        d = self._chart_derivative(self._to_theta(self._q))
         return inverse_information(np.array(self._info)) * np.outer(d, d)
 
     @property
     def information(self) -> NDArray[np.float64]:
         """The data's dimensionless Fisher information (prior excluded, columns scaled at
         ``initial``, DESIGN.md)."""
-        ratio = self.model.column_scale(self._nominal_theta) / self._chart_derivative()
+        ratio = (self.model.column_scale(self._nominal_theta)
+                 / self._chart_derivative(self._to_theta(self._q)))
         return (np.array(self._info) - self._prior) * np.outer(ratio, ratio)
 
     @property
