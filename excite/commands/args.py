@@ -1,0 +1,106 @@
+"""Argument types shared by the subcommands: each turns one command-line string into a value,
+or raises :class:`UsageError` with a one-line message naming the option."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+
+from excite.errors import ExciteError
+
+__all__ = ["UsageError", "floats", "sigma_arg", "params_arg", "sensor_pose_arg",
+           "fraction_arg", "positive_int", "env_id", "robot_preset"]
+
+
+class UsageError(ExciteError):
+    """Bad input or usage: reported as one line, exit status 2."""
+
+
+def floats(text: str, names: Sequence[str], what: str) -> tuple[float, ...]:
+    """Comma-separated positive finite numbers, one per name (``what`` is the option)."""
+    parts = text.split(",")
+    if len(parts) != len(names):
+        raise UsageError(f"{what} needs {len(names)} comma-separated values "
+                         f"({','.join(names)}), got {text!r}")
+    values = []
+    for name, part in zip(names, parts, strict=True):
+        try:
+            value = float(part)
+        except ValueError:
+            raise UsageError(f"{what}: {name} is not a number: {part!r}") from None
+        if not (value > 0 and value < float("inf")):
+            raise UsageError(f"{what}: {name} must be positive and finite, got {part!r}")
+        values.append(value)
+    return tuple(values)
+
+
+def sigma_arg(text: str) -> tuple[float, ...]:
+    """--sigma SX,SY,STH (m, m, rad)."""
+    return floats(text, ("SX", "SY", "STH"), "--sigma")
+
+
+def params_arg(text: str, what: str = "--init"):
+    """RL,RR,B (m) as :class:`excite.Params`."""
+    from excite.kinematics import Params
+
+    return Params(*floats(text, ("RL", "RR", "B"), what))
+
+
+def sensor_pose_arg(text: str):
+    """--sensor-pose: auto, axle, estimate, or X,Y,THETA (m, m, rad) in the body frame."""
+    from excite.models import SensorPose
+
+    if text in ("auto", "axle", "estimate"):
+        return text
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise UsageError(f"--sensor-pose must be auto, axle, estimate or X,Y,THETA "
+                         f"(m, m, rad), got {text!r}")
+    try:
+        return SensorPose(*map(float, parts))
+    except ValueError:
+        raise UsageError(f"--sensor-pose: X,Y,THETA must be finite numbers, got {text!r}"
+                         ) from None
+
+
+def fraction_arg(text: str) -> float:
+    """A fraction in [0, 0.5) (argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0.0 <= value < 0.5:
+        raise argparse.ArgumentTypeError(f"must be a fraction in [0, 0.5), got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """A whole number >= 1 (argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def env_id(text: str) -> str:
+    """An environment id registered with excite's environment class (its own or a user's)."""
+    import gymnasium
+
+    from excite.registration import ENTRY_POINT
+
+    ours = [k for k, spec in gymnasium.registry.items() if spec.entry_point == ENTRY_POINT]
+    if text not in ours:
+        raise UsageError(f"unknown environment {text!r}; use one of {', '.join(ours)}")
+    return text
+
+
+def robot_preset(text: str) -> str:
+    """A robot preset name of :data:`envs.robot.PRESETS`."""
+    from envs.robot import PRESETS
+
+    if text not in PRESETS:
+        raise UsageError(f"unknown robot preset {text!r}; choose from {', '.join(PRESETS)}")
+    return text
