@@ -74,6 +74,7 @@ __all__ = [
     "TimeSeries",
     "estimate_time_offset",
     "is_timeseries_csv",
+    "timeseries_streams",
     "read_timeseries",
     "segment_timeseries",
 ]
@@ -341,20 +342,39 @@ def _read_table(path: PathArg) -> _Table:
     return table
 
 
-def is_timeseries_csv(path: PathArg) -> bool:
-    """Whether a file's header (its first line that is neither blank nor a comment) names a
-    ``t`` column: a time-series CSV, as opposed to a segment CSV (header
-    ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none). Reads only up to the header; False when
-    the file cannot be read as text."""
+def _header_of(path: PathArg) -> set[str] | None:
+    """The lower-case names of a text file's first line that is neither blank nor a comment;
+    None when the file cannot be read as text or has no such line."""
     try:
         with open(os.fspath(path), encoding="utf-8-sig") as handle:
             for line in handle:
                 stripped = line.strip()
                 if stripped and not stripped.startswith("#"):
-                    return "\x00" not in stripped and "t" in _header_names(stripped)
+                    return None if "\x00" in stripped else set(_header_names(stripped))
     except (OSError, UnicodeDecodeError):
-        return False
-    return False
+        return None
+    return None
+
+
+def timeseries_streams(path: PathArg) -> frozenset[str]:
+    """The streams a time-series CSV holds, from its header: a subset of {"encoder", "pose"};
+    empty when the header names no ``t`` column (a segment CSV, header
+    ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none) or the file cannot be read as text.
+    Reads only up to the header."""
+    names = _header_of(path)
+    if not names or "t" not in names:
+        return frozenset()
+    wheels = {n.lower() for n in ANGLE_COLUMNS + TICK_COLUMNS}
+    return frozenset(kind for kind, columns in (("encoder", wheels), ("pose", set(POSE_COLUMNS)))
+                     if names & columns)
+
+
+def is_timeseries_csv(path: PathArg) -> bool:
+    """Whether a file's header names a ``t`` column: a time-series CSV, as opposed to a segment
+    CSV (header ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none); False when the file cannot
+    be read as text."""
+    names = _header_of(path)
+    return bool(names) and "t" in names
 
 
 def _path_list(paths: PathArg | Sequence[PathArg]) -> list[PathArg]:
