@@ -1,15 +1,20 @@
-"""Synthetic segment datasets of the lesson's kind, for demos, tests and benchmarks."""
+"""Synthetic data for demos, tests and benchmarks: segment datasets of the lesson's kind and
+time-series logs of a robot driving smooth curves (numpy only, exact kinematics)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from excite.data import Segments
 from excite.information import DEFAULT_SIGMA, as_sigma
 from excite.kinematics import Params, predict_increment
+from excite.models import SensorPose
+from excite.timeseries import TimeSeries
 
-__all__ = ["LESSON_TRUTH", "lesson_dataset"]
+__all__ = ["LESSON_TRUTH", "lesson_dataset", "SyntheticLog", "synthetic_log"]
 
 #: The robot of the lesson's synthetic example (m).
 LESSON_TRUTH = Params(0.050, 0.051, 0.300)
@@ -31,3 +36,89 @@ def lesson_dataset(
     truth = np.column_stack(predict_increment(dphi_L, dphi_R, params))
     measured = truth + rng.normal(size=(n, 3)) * s
     return Segments(dphi_L, dphi_R, *measured.T)
+
+
+@dataclass(frozen=True)
+class SyntheticLog:
+    """A synthetic time-series log and its truth: ``series`` (what a robot would record),
+    ``params`` and ``sensor_pose`` (the hidden robot), ``t`` (s, the fine simulation grid on
+    the encoder clock) and ``body`` (n, 3), the true body poses there (m, m, rad)."""
+
+    series: TimeSeries
+    params: Params
+    sensor_pose: SensorPose
+    t: NDArray[np.float64]
+    body: NDArray[np.float64]
+
+
+def _smooth_signal(rng: np.random.Generator, t: NDArray[np.float64], mean: float,
+                   amplitude: float, periods: tuple[float, ...]) -> NDArray[np.float64]:
+    """mean + amplitude * a sum of sinusoids with the given periods (s), random phases and
+    weights, normalised to peak amplitude at most ``amplitude``."""
+    weights = rng.uniform(0.5, 1.0, len(periods))
+    weights /= weights.sum()
+    phases = rng.uniform(0.0, 2.0 * np.pi, len(periods))
+    wave = sum(w * np.sin(2.0 * np.pi * t / p + ph)
+               for w, p, ph in zip(weights, periods, phases, strict=True))
+    return mean + amplitude * wave
+
+
+def synthetic_log(
+    rng: np.random.Generator,
+    duration: float = 60.0,
+    params: Params = LESSON_TRUTH,
+    sensor_pose: SensorPose | None = None,
+    *,
+    encoder_rate: float = 100.0,
+    pose_rate: float = 50.0,
+    pose_noise: tuple[float, float] = (0.0, 0.0),
+    slip: float = 0.0,
+    speed: float = 0.25,
+    turn_rate: float = 1.0,
+    ticks_per_rev: float | None = None,
+    step: float = 1e-3,
+) -> SyntheticLog:
+    """A robot driving smooth random curves (exact arcs on a fine grid of ``step`` s), recorded
+    as a time-series log.
+
+    Forward speed varies within speed * (0.4 .. 1.6) m/s and the turn rate within
+    +-``turn_rate`` rad/s (random sinusoids of periods 3-11 s). Encoders: cumulative wheel
+    angles at ``encoder_rate`` Hz (rad; floored to whole ticks when ``ticks_per_rev`` is
+    given). Poses: the sensor's world pose at ``pose_rate`` Hz, each sample with independent
+    Gaussian noise of std ``pose_noise`` = (sigma_xy [m], sigma_theta [rad]). ``slip``
+    (rad / sqrt(s)): the wheels' ground contact differs from the encoders by a random walk of
+    this intensity per wheel (independent noise on every segment's increments). Rates should
+    divide 1 / step so that samples fall on the grid.
+    """
+    from excite import se2
+
+    pose = sensor_pose if sensor_pose is not None else SensorPose(0.0, 0.0, 0.0)
+    n = int(round(duration / step))
+    t = step * np.arange(n + 1)
+    mid = t[:-1] + 0.5 * step
+    v = _smooth_signal(rng, mid, speed, 0.6 * speed, (7.3, 11.0, 4.1))
+    w = _smooth_signal(rng, mid, 0.0, turn_rate, (5.1, 2.9, 8.7))
+    rate_L = (v - 0.5 * params.b * w) / params.r_L
+    rate_R = (v + 0.5 * params.b * w) / params.r_R
+    enc_L, enc_R = rate_L * step, rate_R * step
+    ground_L = enc_L + slip * np.sqrt(step) * rng.normal(size=n)
+    ground_R = enc_R + slip * np.sqrt(step) * rng.normal(size=n)
+    dx, dy, dth = predict_increment(ground_L, ground_R, params)
+    theta = rng.uniform(-np.pi, np.pi) + np.concatenate(([0.0], np.cumsum(dth)))
+    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
+    x = np.concatenate(([0.0], np.cumsum(c * dx - s * dy)))
+    y = np.concatenate(([0.0], np.cumsum(s * dx + c * dy)))
+    body = np.column_stack([x, y, theta])
+    phi_L = rng.uniform(-10, 10) + np.concatenate(([0.0], np.cumsum(enc_L)))
+    phi_R = rng.uniform(-10, 10) + np.concatenate(([0.0], np.cumsum(enc_R)))
+    if ticks_per_rev is not None:
+        tick = 2.0 * np.pi / ticks_per_rev
+        phi_L, phi_R = np.floor(phi_L / tick) * tick, np.floor(phi_R / tick) * tick
+    e = slice(0, None, max(1, int(round(1.0 / (encoder_rate * step)))))
+    p = slice(0, None, max(1, int(round(1.0 / (pose_rate * step)))))
+    sensor = se2.compose(body[p], pose.as_array())
+    sensor += rng.normal(size=sensor.shape) * np.array([pose_noise[0], pose_noise[0],
+                                                         pose_noise[1]])
+    series = TimeSeries(t[e], phi_L[e], phi_R[e], t[p], *sensor.T,
+                        source=("synthetic encoders", "synthetic poses"))
+    return SyntheticLog(series, params, pose, t, body)

@@ -1,0 +1,196 @@
+"""Inputs of calibrate, segment and validate: segment files, time-series CSVs and ROS bags,
+with the options that read and cut the logs (one definition, shared by those commands).
+
+Each command-line input is one of: a segment file (segment CSV or Censi tuple file), a
+time-series CSV holding both streams, a pair of adjacent time-series CSVs (one with the
+encoder stream ``t,phi_L,phi_R``, the other with the pose stream ``t,x,y,theta``, in either
+order), or a ROS bag (``.bag``, ``.db3``, ``.mcap``, or a rosbag2 directory).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from excite.commands.args import UsageError
+from excite.data import Segments
+from excite.timeseries import SegmentedLog, TimeSeries
+
+__all__ = ["Log", "Input", "add_log_options", "group_inputs", "read_log", "segment_log",
+           "segment_inputs"]
+
+
+@dataclass(frozen=True)
+class Input:
+    """One data set on the command line: ``kind`` is "segments", "timeseries" or "bag";
+    ``paths`` its one or two files; ``name`` how messages call it."""
+
+    kind: str
+    paths: tuple[str, ...]
+
+    @property
+    def name(self) -> str:
+        return "+".join(self.paths)
+
+
+@dataclass(frozen=True)
+class Log:
+    """A time-series log read from an input, with the clock offset used for it (s; pose time
+    + offset = encoder time) and whether that offset was estimated."""
+
+    name: str
+    series: TimeSeries
+    time_offset: float
+    offset_estimated: bool
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0 < value < math.inf:
+        raise argparse.ArgumentTypeError(f"must be positive and finite, got {text!r}")
+    return value
+
+
+def _offset(text: str) -> float | str:
+    if text == "estimate":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds or 'estimate', "
+                                         f"got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
+
+
+def _frame_pair(text: str) -> tuple[str, str]:
+    parent, sep, child = text.partition(":")
+    if not sep or not parent or not child:
+        raise argparse.ArgumentTypeError(f"must be PARENT:CHILD, got {text!r}")
+    return parent, child
+
+
+def add_log_options(parser: argparse.ArgumentParser) -> None:
+    """The time-series and bag options (DESIGN.md, "Time-series logs")."""
+    group = parser.add_argument_group(
+        "time-series logs and ROS bags",
+        "a CSV with header t,phi_L,phi_R,x,y,theta (or two CSVs, one per stream, given one "
+        "after the other), or a ROS bag (.bag, .db3, .mcap, or a rosbag2 directory)")
+    group.add_argument("--window", type=_positive, default=1.0, metavar="S",
+                       help="segment duration in s (default 1)")
+    group.add_argument("--min-distance", type=_positive, metavar="M",
+                       help="keyframes instead of windows: a new segment after M meters ...")
+    group.add_argument("--min-angle", type=_positive, metavar="RAD",
+                       help="... or after turning RAD radians")
+    group.add_argument("--ticks-per-rev", type=_positive, metavar="N",
+                       help="encoder resolution, when the CSV has ticks_L,ticks_R columns")
+    group.add_argument("--time-offset", type=_offset, default=0.0, metavar="S|estimate",
+                       help="pose time + S = encoder time (s, default 0), or 'estimate' "
+                       "it from the data")
+    group.add_argument("--split-at-gaps", action="store_true",
+                       help="cut the log at gaps longer than the window instead of refusing "
+                       "it")
+    group.add_argument("--joint-states", default="/joint_states", metavar="TOPIC",
+                       help="bag topic of sensor_msgs/msg/JointState (default /joint_states)")
+    group.add_argument("--left-wheel", metavar="NAME", help="left wheel joint name (bags)")
+    group.add_argument("--right-wheel", metavar="NAME", help="right wheel joint name (bags)")
+    group.add_argument("--pose-topic", metavar="TOPIC",
+                       help="bag topic of the sensor's pose (PoseStamped, "
+                       "PoseWithCovarianceStamped or Odometry)")
+    group.add_argument("--tf", type=_frame_pair, metavar="PARENT:CHILD",
+                       help="the sensor's pose from /tf instead: CHILD's pose in PARENT")
+
+
+def _kind(path: str) -> tuple[str, frozenset[str]]:
+    from excite.bags import is_bag_path
+    from excite.timeseries import timeseries_streams
+
+    if is_bag_path(path):
+        return "bag", frozenset()
+    if not os.path.exists(path):
+        raise UsageError(f"{path}: no such file")
+    streams = timeseries_streams(path)
+    return ("timeseries" if streams else "segments"), streams
+
+
+def group_inputs(paths: Sequence[str]) -> list[Input]:
+    """The data sets of the command line, in order (see the module docstring)."""
+    inputs: list[Input] = []
+    pending: tuple[str, frozenset[str]] | None = None
+    for path in paths:
+        kind, streams = _kind(path)
+        if pending is not None:
+            first, first_streams = pending
+            if kind != "timeseries" or len(streams) != 1 or streams == first_streams:
+                (only,) = first_streams
+                raise UsageError(f"{first}: has only the {only} stream; give the file with "
+                                 "the other stream right after it")
+            inputs.append(Input("timeseries", (first, path)))
+            pending = None
+        elif kind == "timeseries" and len(streams) == 1:
+            pending = (path, streams)
+        else:
+            inputs.append(Input(kind, (path,)))
+    if pending is not None:
+        (only,) = pending[1]
+        raise UsageError(f"{pending[0]}: has only the {only} stream; give the file with the "
+                         "other stream right after it")
+    return inputs
+
+
+def read_log(args: argparse.Namespace, source: Input) -> Log:
+    """Read one time-series or bag input and settle its clock offset."""
+    from excite.timeseries import estimate_time_offset, read_timeseries
+
+    if source.kind == "bag":
+        from excite.bags import read_bag
+
+        if not args.left_wheel or not args.right_wheel:
+            raise UsageError(f"{source.name}: a bag needs --left-wheel and --right-wheel "
+                             "(joint names in the JointState messages)")
+        if (args.pose_topic is None) == (args.tf is None):
+            raise UsageError(f"{source.name}: a bag needs exactly one pose source: "
+                             "--pose-topic TOPIC or --tf PARENT:CHILD")
+        series = read_bag(source.paths[0], args.left_wheel, args.right_wheel,
+                          pose_topic=args.pose_topic, tf=args.tf,
+                          joint_states=args.joint_states)
+    elif source.kind == "timeseries":
+        series = read_timeseries(source.paths, ticks_per_rev=args.ticks_per_rev)
+    else:
+        raise UsageError(f"{source.name}: a segment file, not a time-series log or bag")
+    if args.time_offset == "estimate":
+        return Log(source.name, series, estimate_time_offset(series), True)
+    return Log(source.name, series, float(args.time_offset), False)
+
+
+def segment_log(args: argparse.Namespace, log: Log) -> SegmentedLog:
+    """Cut a log into segments with the command line's settings."""
+    from excite.timeseries import segment_timeseries
+
+    return segment_timeseries(log.series, window=args.window, min_distance=args.min_distance,
+                              min_angle=args.min_angle, time_offset=log.time_offset,
+                              on_gap="split" if args.split_at_gaps else "error")
+
+
+def segment_inputs(args: argparse.Namespace, inputs: Sequence[Input]
+                   ) -> list[tuple[Input, Segments, Log | None, SegmentedLog | None]]:
+    """Every input as segments: segment files are read, logs read and cut. Returns, per input,
+    (input, its segments, the log or None, the segmented log or None)."""
+    from excite.data import load_segments
+
+    parts = []
+    for source in inputs:
+        if source.kind == "segments":
+            parts.append((source, load_segments(source.paths[0]), None, None))
+        else:
+            log = read_log(args, source)
+            cut = segment_log(args, log)
+            parts.append((source, cut.segments, log, cut))
+    return parts

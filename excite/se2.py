@@ -1,0 +1,40 @@
+"""SE(2) poses (x, y, theta) as arrays (..., 3): x, y in m, theta in rad (not wrapped).
+
+``compose(a, b)`` is a (+) b: pose b, given in the frame of pose a, expressed in a's parent
+frame; ``between(a, b)`` is (-a) (+) b: pose b in the frame of pose a; ``inverse(a)`` is -a.
+Batch-first: every function broadcasts over the leading axes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["compose", "between", "inverse"]
+
+FloatArray = NDArray[np.float64]
+
+
+def compose(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """a (+) b for poses (..., 3)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    return np.stack([a[..., 0] + c * b[..., 0] - s * b[..., 1],
+                     a[..., 1] + s * b[..., 0] + c * b[..., 1], a[..., 2] + b[..., 2]], axis=-1)
+
+
+def between(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """(-a) (+) b for poses (..., 3): b in the frame of a (theta difference not wrapped)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    d = b - a
+    return np.stack([c * d[..., 0] + s * d[..., 1], c * d[..., 1] - s * d[..., 0], d[..., 2]],
+                    axis=-1)
+
+
+def inverse(a: ArrayLike) -> FloatArray:
+    """-a for poses (..., 3): a (+) (-a) = 0."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    return np.stack([-c * a[..., 0] - s * a[..., 1], s * a[..., 0] - c * a[..., 1], -a[..., 2]],
+                    axis=-1)
