@@ -55,6 +55,13 @@ class Segments:
 
     dphi_L, dphi_R: encoder increments (rad). dx, dy (m), dtheta (rad): measured pose
     increment in the body frame at the segment's start, dtheta continuous (unwrapped).
+
+    Segments cut from a time-series log also carry (all None otherwise):
+    t_start, t_end (N,): each segment's time span (s, encoder clock).
+    chained (N,) bool: segment k starts at the very pose sample where segment k - 1 ended, so
+    their measured increments share that sample's noise (calibration models the correlation).
+    sub_dphi_L, sub_dphi_R (N, K): each segment's consecutive encoder sub-increments (rad,
+    zero-padded, summing to dphi_L, dphi_R): the motion is their composition, not one arc.
     """
 
     dphi_L: NDArray[np.float64]
@@ -62,16 +69,36 @@ class Segments:
     dx: NDArray[np.float64]
     dy: NDArray[np.float64]
     dtheta: NDArray[np.float64]
+    t_start: NDArray[np.float64] | None = None
+    t_end: NDArray[np.float64] | None = None
+    chained: NDArray[np.bool_] | None = None
+    sub_dphi_L: NDArray[np.float64] | None = None
+    sub_dphi_R: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         arrays = [np.array(getattr(self, name), dtype=float).reshape(-1) for name in _FIELDS]
         if len({a.size for a in arrays}) != 1:
             raise DataError("segment arrays must all have the same length")
+        n = arrays[0].size
         for name, a in zip(_FIELDS, arrays, strict=True):
             if not np.all(np.isfinite(a)):
                 raise DataError(f"{name} contains NaN or inf")
             a.setflags(write=False)
             object.__setattr__(self, name, a)
+        for name, dtype, ndim in _OPTIONAL:
+            value = getattr(self, name)
+            if value is None:
+                continue
+            a = np.array(value, dtype=dtype)
+            if a.ndim != ndim or a.shape[0] != n or (dtype is float and not np.all(
+                    np.isfinite(a))):
+                raise DataError(f"{name} must be a finite array with {n} rows, got shape "
+                                f"{a.shape}")
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+        if (self.sub_dphi_L is None) != (self.sub_dphi_R is None) or (
+                self.sub_dphi_L is not None and self.sub_dphi_L.shape != self.sub_dphi_R.shape):
+            raise DataError("sub_dphi_L and sub_dphi_R must be given together, of one shape")
 
     @classmethod
     def from_array(cls, rows: ArrayLike) -> Segments:
@@ -80,6 +107,28 @@ class Segments:
         if a.ndim != 2 or a.shape[1] != 5:
             raise DataError(f"expected an (N, 5) array of segments, got shape {a.shape}")
         return cls(*a.T)
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[Segments]) -> Segments:
+        """One data set of several, in order; no segment is chained across parts. Times and
+        sub-steps are kept when every part has them (sub-steps zero-padded to one K)."""
+        def joined(name: str) -> NDArray | None:
+            values = [getattr(p, name) for p in parts]
+            return None if any(v is None for v in values) else np.concatenate(values)
+
+        chained = [np.zeros(len(p), dtype=bool) if p.chained is None else p.chained.copy()
+                   for p in parts]
+        for c in chained:
+            c[:1] = False
+        subs: list[NDArray | None] = [None, None]
+        if all(p.sub_dphi_L is not None for p in parts):
+            width = max(p.sub_dphi_L.shape[1] for p in parts)
+            subs = [np.concatenate([np.pad(getattr(p, name), ((0, 0), (0, width - getattr(
+                p, name).shape[1]))) for p in parts]) for name in ("sub_dphi_L", "sub_dphi_R")]
+        rows = np.concatenate([p.as_array() for p in parts])
+        return cls(*rows.T, t_start=joined("t_start"), t_end=joined("t_end"),
+                   chained=np.concatenate(chained) if any(p.chained is not None for p in parts)
+                   else None, sub_dphi_L=subs[0], sub_dphi_R=subs[1])
 
     def as_array(self) -> NDArray[np.float64]:
         """(N, 5) array in CSV column order."""
@@ -94,7 +143,21 @@ class Segments:
         return int(self.dphi_L.size)
 
     def __getitem__(self, index) -> Segments:
-        return Segments.from_array(self.as_array()[index].reshape(-1, 5))
+        """The segments at ``index`` (slice, mask or indices), in that order; a segment stays
+        chained only to the segment right before it in the original data."""
+        positions = np.arange(len(self))[index].reshape(-1)
+        optional = {}
+        for name, _, _ in _OPTIONAL:
+            value = getattr(self, name)
+            optional[name] = None if value is None else value[positions]
+        if self.chained is not None:
+            follows = np.concatenate(([False], np.diff(positions) == 1))
+            optional["chained"] = optional["chained"] & follows
+        return Segments(*self.as_array()[positions].T, **optional)
+
+
+_OPTIONAL = (("t_start", float, 1), ("t_end", float, 1), ("chained", bool, 1),
+             ("sub_dphi_L", float, 2), ("sub_dphi_R", float, 2))
 
 
 def _is_header(fields: list[str]) -> bool:

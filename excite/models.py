@@ -19,6 +19,12 @@ Arrays are batch-first: parameters theta (..., P), wheel increments (..., N); ``
 gives (..., N, 3) and ``jacobian`` (..., N, 3, P). ``evaluate`` is the kernel, channel-major:
 predictions (3, ..., N) and derivatives (3, P, ..., N), the layout solvers want.
 
+Sub-steps: a segment cut from a log need not be one arc (the curvature changes within it).
+With ``substeps=True`` the wheel increments are (..., N, K): each segment's K consecutive
+sub-increments (zero-padded: a zero sub-increment is the identity), and the body's motion is
+their composition o = a_1 (+) a_2 (+) ... (+) a_K (:func:`compose_substeps`); the sensor
+transform then applies to o as before. With K = 1 it is the single arc.
+
 Estimation transforms (how each parameter is stepped, and what "relative" means):
 ``log`` for lengths that are positive (r_L, r_R, b), ``identity`` for offsets (l_x, l_y: may
 be 0; measured in units of a length scale, the nominal b), ``angle`` for l_theta (wrapped to
@@ -46,6 +52,7 @@ __all__ = [
     "SensorPose",
     "SensorPoseModel",
     "body_to_sensor",
+    "compose_substeps",
     "increment_jacobian",
     "sensor_to_body",
 ]
@@ -89,8 +96,10 @@ class SegmentModel(ABC):
 
     @abstractmethod
     def evaluate(self, dphi_L: ArrayLike, dphi_R: ArrayLike, theta: ArrayLike,
-                 jacobian: bool = True) -> tuple[FloatArray, FloatArray | None]:
-        """Predictions (3, ..., N) and, if asked, derivatives (3, P, ..., N) by theta."""
+                 jacobian: bool = True, substeps: bool = False
+                 ) -> tuple[FloatArray, FloatArray | None]:
+        """Predictions (3, ..., N) and, if asked, derivatives (3, P, ..., N) by theta; with
+        ``substeps`` the increments are (..., N, K) sub-increments (see the module doc)."""
 
     @abstractmethod
     def evaluate_scalar(self, dphi_L: float, dphi_R: float,
@@ -152,9 +161,31 @@ def _broadcast_increments(dphi_L: ArrayLike, dphi_R: ArrayLike) -> tuple[FloatAr
     return np.broadcast_arrays(phi_L, phi_R) if phi_L.shape != phi_R.shape else (phi_L, phi_R)
 
 
-def _parameter(theta: FloatArray, i: int) -> FloatArray | float:
-    """Parameter i of theta (..., P), shaped to broadcast with increments (..., N)."""
-    return float(theta[i]) if theta.ndim == 1 else theta[..., i, None]
+def _parameter(theta: FloatArray, i: int, trailing: int = 1) -> FloatArray | float:
+    """Parameter i of theta (..., P), shaped to broadcast with increments that have
+    ``trailing`` axes more (..., N) or (..., N, K)."""
+    return float(theta[i]) if theta.ndim == 1 else theta[(..., i) + (None,) * trailing]
+
+
+def compose_substeps(prediction: FloatArray, jac: FloatArray | None
+                     ) -> tuple[FloatArray, FloatArray | None]:
+    """The composition a_1 (+) ... (+) a_K of body increments (3, ..., K) along the last
+    axis, and its derivatives (3, P, ..., K) -> (3, P, ...) by the chain rule: with
+    Theta_k the heading before sub-step k, X = sum_k R(Theta_k) a_k,xy and
+    Theta = sum_k a_k,theta (m, rad)."""
+    dx, dy, dth = prediction
+    heading = np.cumsum(dth, axis=-1) - dth  # Theta_k, exclusive
+    c, s = np.cos(heading), np.sin(heading)
+    world_x, world_y = c * dx - s * dy, s * dx + c * dy
+    out = np.stack([world_x.sum(axis=-1), world_y.sum(axis=-1), dth.sum(axis=-1)])
+    if jac is None:
+        return out, None
+    d_heading = np.cumsum(jac[2], axis=-1) - jac[2]  # (P, ..., K)
+    out_jac = np.stack([
+        (c * jac[0] - s * jac[1] - world_y * d_heading).sum(axis=-1),
+        (s * jac[0] + c * jac[1] + world_x * d_heading).sum(axis=-1),
+        jac[2].sum(axis=-1)])
+    return out, out_jac
 
 
 class AxleModel(SegmentModel):
@@ -168,17 +199,18 @@ class AxleModel(SegmentModel):
     def __reduce__(self) -> str:
         return "AXLE"  # one instance: code compares models by identity
 
-    def evaluate(self, dphi_L, dphi_R, theta, jacobian=True):
+    def evaluate(self, dphi_L, dphi_R, theta, jacobian=True, substeps=False):
         phi_L, phi_R = _broadcast_increments(dphi_L, dphi_R)
         theta = np.asarray(theta, dtype=float)
-        arc = Arc(phi_L, phi_R, *(_parameter(theta, i) for i in range(3)),
+        trailing = 1 + substeps
+        arc = Arc(phi_L, phi_R, *(_parameter(theta, i, trailing) for i in range(3)),
                   derivatives=jacobian)
-        shape = np.broadcast_shapes(phi_L.shape, theta.shape[:-1] + (1,) * (phi_L.ndim > 0))
+        shape = np.broadcast_shapes(phi_L.shape, theta.shape[:-1] + (1,) * min(phi_L.ndim,
+                                                                               trailing))
         prediction = np.empty((3,) + shape)
         prediction[0], prediction[1], prediction[2] = arc.dx, arc.dy, arc.dtheta
-        if not jacobian:
-            return prediction, None
-        return prediction, arc.fill_jacobian(np.empty((3, 3) + shape))
+        jac = arc.fill_jacobian(np.empty((3, 3) + shape)) if jacobian else None
+        return compose_substeps(prediction, jac) if substeps else (prediction, jac)
 
     def evaluate_scalar(self, dphi_L, dphi_R, theta):
         r_L, r_R, b = theta[0], theta[1], theta[2]
@@ -205,9 +237,9 @@ class SensorPoseModel(SegmentModel):
     def __reduce__(self) -> str:
         return "SENSOR_POSE"
 
-    def evaluate(self, dphi_L, dphi_R, theta, jacobian=True):
+    def evaluate(self, dphi_L, dphi_R, theta, jacobian=True, substeps=False):
         theta = np.asarray(theta, dtype=float)
-        body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta[..., :3], jacobian)
+        body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta[..., :3], jacobian, substeps)
         return _to_sensor(body, body_jac, theta[..., 3:], theta.ndim == 1)
 
     def evaluate_scalar(self, dphi_L, dphi_R, theta):
@@ -230,9 +262,9 @@ class FixedSensorPoseModel(SegmentModel):
     def __init__(self, pose: SensorPose):
         self.pose = pose
 
-    def evaluate(self, dphi_L, dphi_R, theta, jacobian=True):
+    def evaluate(self, dphi_L, dphi_R, theta, jacobian=True, substeps=False):
         theta = np.asarray(theta, dtype=float)
-        body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta, jacobian)
+        body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta, jacobian, substeps)
         prediction, jac = _to_sensor(body, body_jac, self.pose.as_array(), True)
         return prediction, (None if jac is None else jac[:, :3])
 

@@ -20,7 +20,7 @@ from excite.kinematics import wrap_angle
 from excite.models import SegmentModel
 
 __all__ = ["Loss", "HUBER_K", "Problem", "Evaluation", "System", "Fit", "solve_psd",
-           "levenberg_marquardt", "normal_system", "estimate_sigma"]
+           "damped_step", "levenberg_marquardt", "normal_system", "estimate_sigma"]
 
 FloatArray = NDArray[np.float64]
 Loss = Literal["linear", "huber"]
@@ -28,6 +28,11 @@ Loss = Literal["linear", "huber"]
 #: Huber threshold on whitened residuals (95% efficiency under Gaussian noise).
 HUBER_K = 1.345
 _MAD_TO_STD = 1.482602218505602
+#: Singular values of the weighted Jacobian below this fraction of the largest are treated as
+#: zero in a step (directions the data do not determine do not take steps driven by noise).
+RCOND = 1e-6
+#: The smallest Levenberg-Marquardt damping (relative to the information's diagonal).
+MIN_DAMPING = 1e-12
 #: Noise levels are floored at this fraction of the measured magnitudes (noise-free data).
 SIGMA_FLOOR = 1e-10
 
@@ -54,7 +59,11 @@ class Problem:
 
     def __init__(self, model: SegmentModel, segments: Segments):
         self.model = model
-        self.phi_L, self.phi_R = segments.dphi_L, segments.dphi_R
+        self.substeps = segments.sub_dphi_L is not None
+        if self.substeps:  # a segment of a log: the composition of its sub-steps
+            self.phi_L, self.phi_R = segments.sub_dphi_L, segments.sub_dphi_R
+        else:
+            self.phi_L, self.phi_R = segments.dphi_L, segments.dphi_R
         self.measured = np.stack([segments.dx, segments.dy, segments.dtheta])
         self.n = len(segments)
         position = float(np.sqrt(np.mean(self.measured[0] ** 2 + self.measured[1] ** 2)))
@@ -63,7 +72,8 @@ class Problem:
         self.sigma_floor = np.where(floor > 0, floor, 1e-300)
 
     def evaluate(self, theta: FloatArray) -> Evaluation:
-        prediction, jac = self.model.evaluate(self.phi_L, self.phi_R, theta)
+        prediction, jac = self.model.evaluate(self.phi_L, self.phi_R, theta,
+                                              substeps=self.substeps)
         raw = prediction - self.measured
         raw[2] = wrap_angle(raw[2])
         scale = self.model.column_scale(theta)
@@ -89,14 +99,42 @@ class System:
         return self.channel_information.sum(axis=0)
 
 
-def normal_system(ev: Evaluation, sigma: FloatArray, loss: Loss) -> System:
+def _weights(ev: Evaluation, sigma: FloatArray, loss: Loss) -> FloatArray:
+    """The weight of each residual (3, N): 1 / sigma_c^2, times Huber's k / max(|z|, k)."""
     inv_var = 1.0 / (sigma * sigma)
     if loss == "linear":
+        return np.broadcast_to(inv_var[:, None], ev.raw.shape)
+    z = ev.raw / sigma[:, None]
+    return (HUBER_K / np.maximum(np.abs(z), HUBER_K)) * inv_var[:, None]
+
+
+def damped_step(ev: Evaluation, sigma: FloatArray, loss: Loss, lam: float,
+                diagonal: FloatArray, basis: FloatArray | None = None) -> FloatArray:
+    """The Levenberg–Marquardt step in relative units: the least-squares solution of the
+    weighted linearised residuals with damping rows sqrt(lam * diagonal), solved on the
+    Jacobian itself (SVD, singular values below RCOND of the largest dropped) rather than the
+    normal equations. basis: (P, m) orthonormal directions the step is confined
+    to (None: all)."""
+    root = np.sqrt(_weights(ev, sigma, loss))
+    p = ev.jac.shape[1]
+    rows = (ev.jac * root[:, None, :]).transpose(0, 2, 1).reshape(-1, p)
+    damping = np.diag(np.sqrt(lam * np.maximum(diagonal, 0.0)))
+    lhs = np.vstack([rows, damping])
+    if basis is not None:
+        lhs = lhs @ basis
+    rhs = np.concatenate([-(ev.raw * root).reshape(-1), np.zeros(p)])
+    step = np.linalg.lstsq(lhs, rhs, rcond=RCOND)[0]
+    return step if basis is None else basis @ step
+
+
+def normal_system(ev: Evaluation, sigma: FloatArray, loss: Loss) -> System:
+    if loss == "linear":
+        inv_var = 1.0 / (sigma * sigma)
         info, gradient, rss = ev.unit_system()
         return System(info * inv_var[:, None, None], inv_var @ gradient,
                       0.5 * float(inv_var @ rss))
     z = ev.raw / sigma[:, None]
-    w = (HUBER_K / np.maximum(np.abs(z), HUBER_K)) * inv_var[:, None]
+    w = _weights(ev, sigma, loss)
     weighted = ev.jac * w[:, None, :]
     info = np.matmul(weighted, ev.jac.transpose(0, 2, 1))
     gradient = np.einsum("cik,ck->i", weighted, ev.raw)
@@ -170,10 +208,14 @@ def levenberg_marquardt(
     system = normal_system(ev, sigma, loss)
     lam = 1e-3
 
-    def damped_step() -> FloatArray:
-        a = system.information
-        step = solve_psd(a + lam * np.diag(np.diag(a)), -system.gradient)
-        return step if frozen is None else step - frozen @ (frozen.T @ step)
+    free = None  # the directions the steps may take: the complement of ``frozen``
+    if frozen is not None:
+        free = np.linalg.svd(np.eye(frozen.shape[0]) - frozen @ frozen.T)[0][
+            :, :frozen.shape[0] - frozen.shape[1]]
+
+    def step_now(damping: float) -> FloatArray:
+        return damped_step(ev, sigma, loss, damping, np.diag(system.information), free)
+
 
     for iteration in range(1, max_iterations + 1):
         settled = True
@@ -183,7 +225,7 @@ def levenberg_marquardt(
             if not settled:
                 sigma = new_sigma
                 system = normal_system(ev, sigma, loss)
-        step = damped_step()
+        step = step_now(lam)
         if np.max(np.abs(step)) < tol and settled:
             return Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
         while True:
@@ -196,7 +238,7 @@ def levenberg_marquardt(
             lam *= 10.0
             if lam > 1e12:
                 return Fit(ev, system, sigma, iteration, True, "no further decrease of the cost")
-            step = damped_step()
+            step = step_now(lam)
         ev, system = ev_trial, system_trial
-        lam = max(lam / 10.0, 1e-12)
+        lam = max(lam / 10.0, MIN_DAMPING)
     return Fit(ev, system, sigma, max_iterations, False, "maximum number of iterations reached")

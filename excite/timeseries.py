@@ -102,6 +102,9 @@ OUTSIDE_ENCODERS, INSIDE_ENCODER_GAP = "outside the encoder time range", "inside
 DROPOUT_RATIO = 1.5
 #: Default max_gap, in median periods of the stream.
 GAP_RATIO = 3.0
+#: Target duration of a segment's sub-steps (s), and their most per segment (_substeps).
+SUBSTEP = 0.05
+MAX_SUBSTEPS = 64
 
 
 # --------------------------------------------------------------------------- the streams
@@ -833,6 +836,22 @@ def _increments(ts: TimeSeries, t_pose: FloatArray, start: IntArray, end: IntArr
                             ts.theta[end] - ts.theta[start]])
 
 
+def _substeps(ts: TimeSeries, t_a: FloatArray, t_b: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Each segment's encoder sub-increments (N, K) over K equal sub-intervals of [t_a, t_b]
+    (s, encoder clock), zero-padded to the largest K: sub-intervals of about SUBSTEP s, never
+    shorter than the encoder period (within one the interpolated rates are constant), at most
+    MAX_SUBSTEPS. They sum to the segment's increments exactly."""
+    period = float(np.median(np.diff(ts.t_enc)))
+    duration = t_b - t_a
+    count = np.clip(np.ceil(duration / max(SUBSTEP, period) - 1e-9), 1, MAX_SUBSTEPS)
+    count = count.astype(np.int64)
+    j = np.arange(int(count.max()) + 1)
+    times = t_a[:, None] + duration[:, None] * np.minimum(j / count[:, None], 1.0)
+    times[j[None, :] >= count[:, None]] = np.repeat(t_b, j.size - count)  # exactly t_b
+    return tuple(np.diff(np.interp(times, ts.t_enc, phi), axis=1)
+                 for phi in (ts.phi_L, ts.phi_R))  # type: ignore[return-value]
+
+
 def _drop_reasons(ts: TimeSeries, t_pose: FloatArray, cut: _Cut, rows: FloatArray,
                   encoders: _StreamCheck, poses: _StreamCheck, limits: Limits
                   ) -> dict[str, BoolArray]:
@@ -940,10 +959,10 @@ def segment_timeseries(
     if report.n_segments < MIN_SEGMENTS:
         raise DataError(f"{ts.source[1]}: {report.n_segments} segment(s) after segmentation; "
                         f"at least {MIN_SEGMENTS} are needed (dropped: {report.counts_text()})")
-    return SegmentedLog(
-        segments=Segments.from_array(rows[keep]),
-        t_start=t_pose[start],
-        t_end=t_pose[end],
-        shares_endpoints=np.concatenate(([False], start[1:] == end[:-1])),
-        report=report,
-    )
+    t_start, t_end = t_pose[start], t_pose[end]
+    shares = np.concatenate(([False], start[1:] == end[:-1]))
+    sub_L, sub_R = _substeps(ts, t_start, t_end)
+    segments = Segments(*rows[keep].T, t_start=t_start, t_end=t_end, chained=shares,
+                        sub_dphi_L=sub_L, sub_dphi_R=sub_R)
+    return SegmentedLog(segments=segments, t_start=t_start, t_end=t_end,
+                        shares_endpoints=shares, report=report)

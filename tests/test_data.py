@@ -275,3 +275,40 @@ def test_load_segment_files_every_file_must_parse(tmp_path):
         load_segment_files([])
     with pytest.raises(TypeError, match="sequence of paths"):
         load_segment_files(str(good))
+
+
+def _chained_segments(n: int = 6) -> Segments:
+    rows = np.arange(n * 5, dtype=float).reshape(n, 5) + 1.0
+    subs = np.arange(n * 3, dtype=float).reshape(n, 3)
+    return Segments(*rows.T, t_start=np.arange(n, dtype=float), t_end=np.arange(n) + 1.0,
+                    chained=np.r_[False, np.ones(n - 1, dtype=bool)],
+                    sub_dphi_L=subs, sub_dphi_R=-subs)
+
+
+def test_selecting_segments_keeps_a_chain_only_between_neighbours():
+    seg = _chained_segments()
+    picked = seg[np.array([True, True, False, True, True, True])]
+    assert picked.chained.tolist() == [False, True, False, True, True]
+    np.testing.assert_array_equal(picked.t_start, [0, 1, 3, 4, 5])
+    assert picked.sub_dphi_L.shape == (5, 3)
+    assert seg[[3, 2]].chained.tolist() == [False, False]  # reversed order is no chain
+
+
+def test_concatenate_breaks_chains_between_parts_and_pads_substeps():
+    a, b = _chained_segments(4), _chained_segments(3)
+    b = Segments(*b.as_array().T, t_start=b.t_start, t_end=b.t_end, chained=b.chained,
+                 sub_dphi_L=b.sub_dphi_L[:, :2], sub_dphi_R=b.sub_dphi_R[:, :2])
+    both = Segments.concatenate([a, b])
+    assert both.chained.tolist() == [False, True, True, True, False, True, True]
+    assert both.sub_dphi_L.shape == (7, 3) and np.all(both.sub_dphi_L[4:, 2] == 0)
+    plain = Segments.concatenate([a, Segments.from_array(a.as_array())])
+    assert plain.sub_dphi_L is None and plain.t_start is None
+    assert plain.chained.tolist() == [False, True, True, True, False, False, False, False]
+
+
+def test_optional_columns_are_checked():
+    rows = np.ones((3, 5))
+    with pytest.raises(DataError, match="t_start"):
+        Segments(*rows.T, t_start=np.ones(2))
+    with pytest.raises(DataError, match="given together"):
+        Segments(*rows.T, sub_dphi_L=np.ones((3, 2)))

@@ -17,22 +17,9 @@ from excite.models import (
     increment_jacobian,
     sensor_to_body,
 )
+from excite.se2 import compose, inverse
 
 from .conftest import TRUTH
-
-
-def compose(a, b):
-    """SE(2) composition a (+) b of (x, y, theta) rows."""
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    return np.stack([a[..., 0] + c * b[..., 0] - s * b[..., 1],
-                     a[..., 1] + s * b[..., 0] + c * b[..., 1], a[..., 2] + b[..., 2]], axis=-1)
-
-
-def inverse(a):
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
-    return np.stack([-c * a[..., 0] - s * a[..., 1], s * a[..., 0] - c * a[..., 1], -a[..., 2]],
-                    axis=-1)
-
 
 lengths = st.floats(0.01, 1.0)
 wheel = st.one_of(st.floats(-60.0, 60.0), st.floats(-1e-6, 1e-6), st.just(0.0))
@@ -147,3 +134,55 @@ def test_scalar_evaluation_equals_the_vectorized_one(r_L, r_R, b, phi_L, phi_R, 
         np.testing.assert_allclose(prediction, expected[:, 0], rtol=1e-12, atol=size)
         np.testing.assert_allclose(np.array(rows), jac[:, :, 0], rtol=1e-11,
                                    atol=1e-12 * (1.0 + np.abs(jac).max()))
+
+
+# --------------------------------------------------------------------------- sub-steps
+
+substep_wheel = st.lists(st.floats(-8.0, 8.0), min_size=1, max_size=5)
+
+
+def substep_prediction(model, sub_L, sub_R, theta):
+    prediction, _ = model.evaluate(sub_L, sub_R, theta, jacobian=False, substeps=True)
+    return prediction[:, 0]
+
+
+@settings(max_examples=200, deadline=None)
+@given(r_L=lengths, r_R=lengths, b=lengths, left=substep_wheel, right=substep_wheel,
+       l_x=offset, l_y=offset, l_t=angle)
+def test_substep_jacobian_equals_finite_differences(r_L, r_R, b, left, right, l_x, l_y, l_t):
+    k = min(len(left), len(right))
+    sub_L, sub_R = np.array([left[:k]]), np.array([right[:k]])
+    theta = np.array([r_L, r_R, b, l_x, l_y, l_t])
+    _, jac = SENSOR_POSE.evaluate(sub_L, sub_R, theta, substeps=True)
+    for i in range(6):
+        h = 1e-6 * max(abs(theta[i]), 0.05)
+        up, down = theta.copy(), theta.copy()
+        up[i] += h
+        down[i] -= h
+        numeric = (substep_prediction(SENSOR_POSE, sub_L, sub_R, up)
+                   - substep_prediction(SENSOR_POSE, sub_L, sub_R, down)) / (2 * h)
+        scale = max(1.0, float(np.abs(jac[:, i, 0]).max()))
+        np.testing.assert_allclose(jac[:, i, 0], numeric, atol=2e-5 * scale)
+
+
+def test_substeps_compose_the_arcs_and_zero_padding_is_the_identity(rng):
+    sub_L, sub_R = rng.normal(0, 3, (7, 4)), rng.normal(0, 3, (7, 4))
+    theta = np.array([0.05, 0.051, 0.3, 0.1, -0.05, 0.4])
+    arcs = AXLE.predict(sub_L, sub_R, theta[:3])  # (7, 4, 3)
+    body = arcs[:, 0]
+    for k in range(1, 4):
+        body = compose(body, arcs[:, k])
+    pose = theta[3:]
+    sensor = compose(compose(inverse(pose), body), pose)
+    prediction, _ = SENSOR_POSE.evaluate(sub_L, sub_R, theta, jacobian=False, substeps=True)
+    np.testing.assert_allclose(prediction.T, sensor, atol=1e-12)
+    padded = [np.pad(a, ((0, 0), (0, 3))) for a in (sub_L, sub_R)]
+    again, _ = SENSOR_POSE.evaluate(*padded, theta, jacobian=False, substeps=True)
+    np.testing.assert_allclose(again, prediction, atol=1e-15)
+    one, _ = AXLE.evaluate(sub_L[:, :1], sub_R[:, :1], theta[:3], substeps=True)
+    arc, _ = AXLE.evaluate(sub_L[:, 0], sub_R[:, 0], theta[:3])
+    np.testing.assert_array_equal(one, arc)
+    batch, batch_jac = SENSOR_POSE.evaluate(sub_L, sub_R, np.stack([theta, theta]),
+                                            substeps=True)
+    assert batch.shape == (3, 2, 7) and batch_jac.shape == (3, 6, 2, 7)
+    np.testing.assert_allclose(batch[:, 1], prediction, atol=1e-15)
