@@ -24,6 +24,7 @@ from excite.errors import DataError
 from excite.information import as_sigma, inverse_information
 from excite.kinematics import Params
 from excite.models import AXLE, SENSOR_POSE, FixedSensorPoseModel, SegmentModel, SensorPose
+from excite.noise import ChainWhitener, NoiseLevels, estimate_noise
 from excite.solver import Fit, Loss, Problem, levenberg_marquardt, normal_system
 from excite.starts import (
     DEFAULT_NOMINAL,
@@ -51,6 +52,11 @@ TRIM_PASS = 0.01
 #: Whitened residuals correlate with |dtheta| "significantly" above this z value.
 _TREND_Z = 3.0
 _CHANNELS = ("x", "y", "theta")
+#: Most rounds of (estimate the noise levels, refit) for segments that share pose samples.
+NOISE_ROUNDS = 8
+#: The noise levels have settled when no level moves by more than this fraction.
+NOISE_RTOL = 0.01
+_UNIT_SIGMA = np.ones(3)
 
 
 def chi2_quantile(q: float, dof: float) -> float:
@@ -114,7 +120,10 @@ class CalibrationResult:
     relatively scaled Jacobian over all estimated parameters (DESIGN.md), descending.
     identifiable: whether 1/sigma_min <= max_relative_std. unidentifiable_direction: None, or
     what is not determined, in words. sigma: noise std per channel (m, m, rad), given or
-    estimated. rms_residual: raw residual RMS per channel. n_outliers: segments whose whitened
+    estimated. pose_sigma: for segments cut from a log that share pose samples, the noise std
+    of each pose sample (xy [m], theta [rad]) estimated with sigma (then sigma is the noise of
+    each segment's own, e.g. slip), the covariance accounting for the shared samples; else
+    None. rms_residual: raw residual RMS per channel. n_outliers: segments whose whitened
     squared residual exceeds the 99.9% chi2(3) quantile; n_trimmed: segments dropped by
     trimming.
     """
@@ -140,6 +149,7 @@ class CalibrationResult:
     rms_residual: FloatArray
     sigma: FloatArray
     sigma_estimated: bool
+    pose_sigma: FloatArray | None
     loss: str
     converged: bool
     iterations: int
@@ -174,6 +184,9 @@ class CalibrationResult:
             "rms_residual": named(self.rms_residual, _CHANNELS),
             "sigma": named(self.sigma, _CHANNELS),
             "sigma_estimated": self.sigma_estimated,
+            "pose_sigma": (None if self.pose_sigma is None
+                           else dict(zip(("xy", "theta"), map(float, self.pose_sigma),
+                                         strict=True))),
             "loss": self.loss,
             "converged": bool(self.converged),
             "iterations": self.iterations,
@@ -217,7 +230,10 @@ class CalibrationResult:
             "  residual RMS    = x {:.3e} m, y {:.3e} m, theta {:.3e} rad".format(
                 *self.rms_residual),
             "  noise sigma     = x {:.3e} m, y {:.3e} m, theta {:.3e} rad ({})".format(
-                *self.sigma, "estimated" if self.sigma_estimated else "given"),
+                *self.sigma, "estimated" if self.sigma_estimated else "given")
+            + ("" if self.pose_sigma is None else " per segment; pose samples: xy "
+               "{:.3e} m, theta {:.3e} rad (shared by consecutive segments)".format(
+                   *self.pose_sigma)),
             f"  outliers        = {self.n_outliers}"
             + (f"; trimmed {self.n_trimmed}" if self.n_trimmed else ""),
             f"  converged       = {self.converged} after {self.iterations} iterations"
@@ -254,13 +270,21 @@ class _ModelFit:
     def identifiable(self) -> bool:
         return self.weak.shape[1] == 0
 
+    @property
+    def channel_std(self) -> FloatArray:
+        """The noise level per channel the fit implies: its sigma, or with correlated noise
+        (whitened, sigma = 1) the residual RMS."""
+        if self.problem.whitener is None:
+            return self.fit.sigma
+        return np.sqrt(np.mean(self.fit.ev.residual**2, axis=1))
+
 
 def _fit_model(model: SegmentModel, seg: Segments, start: FloatArray,
                sigma: FloatArray | None, loss: Loss, max_iterations: int, tol: float,
-               max_relative_std: float) -> _ModelFit:
+               max_relative_std: float, whitener: ChainWhitener | None = None) -> _ModelFit:
     """LM from ``start``; directions the data cannot determine are then held at the start
-    instead of drifting to chase noise."""
-    problem = Problem(model, seg)
+    instead of drifting to chase noise. With a whitener, sigma must be ones."""
+    problem = Problem(model, seg, whitener)
     fit = levenberg_marquardt(problem, start, sigma, loss, max_iterations, tol)
     lam, vec = np.linalg.eigh(fit.system.information)
     weak = lam * max_relative_std**2 < 1.0
@@ -292,7 +316,7 @@ def _likelihood_ratio(small: _ModelFit, large: _ModelFit, sigma_given: bool,
 def _turn_trend_z(mf: _ModelFit) -> float:
     """z value of the correlation between |dtheta| and the squared position residuals."""
     turn = np.abs(mf.problem.measured[2])
-    raw = mf.fit.ev.raw
+    raw = mf.fit.ev.residual
     size = raw[0] ** 2 + raw[1] ** 2
     if turn.std() == 0 or size.std() == 0:
         return 0.0
@@ -324,11 +348,12 @@ def _channels_in_words(ratio: FloatArray, worse: FloatArray) -> str:
     return f"{largest:.1f}x the noise level in {', '.join(names)}"
 
 
-def _score_statistic(data: Segments, theta: FloatArray, sigma: FloatArray, loss: Loss) -> float:
+def _score_statistic(data: Segments, theta: FloatArray, sigma: FloatArray, loss: Loss,
+                     whitener: ChainWhitener | None) -> float:
     """Rao's score statistic g^T F^-1 g of the sensor-pose model at ``theta`` (the imposed
     model's estimate, with its sensor pose): chi-square with 3 degrees of freedom when the
     imposed model is right."""
-    system = normal_system(Problem(SENSOR_POSE, data).evaluate(theta), sigma, loss)
+    system = normal_system(Problem(SENSOR_POSE, data, whitener).evaluate(theta), sigma, loss)
     gradient = system.gradient
     return float(gradient @ np.linalg.pinv(system.information, hermitian=True) @ gradient)
 
@@ -342,7 +367,7 @@ def _fit_test(chosen: _ModelFit, alternative: _ModelFit | None, statistic: float
     numbers = (statistic, statistic_name, threshold, trend)
     if alternative is not None and statistic is not None and statistic > threshold:
         if sigma_given is None:
-            ratio = chosen.fit.sigma / alternative.fit.sigma
+            ratio = chosen.channel_std / alternative.channel_std
         else:
             ratio = _noise_ratio(chosen, sigma_given)
         grows = " and grow with the turn rate" if trend > _TREND_Z else ""
@@ -367,10 +392,13 @@ def _fit_test(chosen: _ModelFit, alternative: _ModelFit | None, statistic: float
                            f" given{grows}: the model or the given noise levels are wrong"
                            f"{hint}", ratio, *numbers)
         return FitTest(True, "the residuals match the given noise levels", ratio, *numbers)
-    if statistic is not None:
+    if statistic is not None and chosen.model is not SENSOR_POSE:
         return FitTest(True, f"the sensor-pose alternative does not fit significantly better "
                        f"({statistic_name} {statistic:.3g} <= {threshold:.3g})", None,
                        *numbers)
+    if statistic is not None:
+        return FitTest(True, "the sensor-pose model is the largest model: nothing to test it "
+                       "against (noise levels estimated)", None, *numbers)
     return FitTest(True, "no alternative to test against (noise levels estimated)", None,
                    *numbers)
 
@@ -499,9 +527,15 @@ def calibrate(
     keep = (_trimmed(seg, primary, start, given, loss, trim, max_iterations, tol) if trim
             else np.ones(len(seg), dtype=bool))
     data = seg[keep] if trim else seg
+    levels, whitener = None, None
+    if given is None and data.chained is not None and data.chained.any():
+        levels, whitener = _correlated_noise(primary, data, start, loss, max_iterations, tol,
+                                             max_relative_std)
+    fit_sigma = _UNIT_SIGMA if whitener is not None else given
 
     def fit(model: SegmentModel, theta0: FloatArray) -> _ModelFit:
-        return _fit_model(model, data, theta0, given, *settings, max_relative_std)
+        return _fit_model(model, data, theta0, fit_sigma, *settings, max_relative_std,
+                          whitener)
 
     threshold = chi2_quantile(TEST_LEVEL, 3)
     chosen = fit(primary, start)
@@ -510,13 +544,13 @@ def calibrate(
         sensor_fit = chosen
         axle_fit = fit(AXLE, axle_start) if sensor_pose == "auto" else None
         if axle_fit is not None:
-            statistic = _likelihood_ratio(axle_fit, sensor_fit, given is not None, loss)
+            statistic = _likelihood_ratio(axle_fit, sensor_fit, fit_sigma is not None, loss)
             name = "likelihood ratio"
             if not sensor_fit.identifiable:
                 chosen, choice = axle_fit, (
                     "axle: the data do not determine the sensor pose ("
                     + _describe_weak(sensor_fit.weak, sensor_fit.theta, data,
-                                     sensor_fit.fit.sigma) + ")")
+                                     sensor_fit.channel_std) + ")")
             elif statistic <= threshold:
                 chosen, choice = axle_fit, (
                     f"axle: the sensor-pose model does not fit significantly better "
@@ -534,7 +568,7 @@ def calibrate(
                   else "sensor_pose: at the given pose, as asked")
         pose = np.zeros(3) if primary is AXLE else primary.pose.as_array()
         statistic = _score_statistic(data, np.append(chosen.theta, pose),
-                                     chosen.fit.sigma, loss)
+                                     chosen.fit.sigma, loss, whitener)
         name = "score"
         if statistic > threshold:  # describe the misfit: where the data put the sensor
             sensor_wheels, sensor_start = sensor_pose_estimate(data, fallback)
@@ -544,12 +578,33 @@ def calibrate(
         "axle" if sensor_pose == "axle" else "pose")
     test = _fit_test(chosen, alternative, statistic, name, threshold, given, loss, forced)
     return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
-                   len(seg) - len(data))
+                   len(seg) - len(data), levels)
+
+
+def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, loss: Loss,
+                      max_iterations: int, tol: float, max_relative_std: float
+                      ) -> tuple[NoiseLevels, ChainWhitener]:
+    """Noise levels of segments that share pose samples (:mod:`excite.noise`), estimated with
+    the parameters: a fit with independent per-channel noise, then rounds of (estimate the
+    five levels from the residuals' moments, refit whitened) until the levels settle."""
+    settings = (loss, max_iterations, tol, max_relative_std)
+    mf = _fit_model(model, data, start, None, *settings)
+    floor = mf.problem.sigma_floor
+    levels = estimate_noise(data, mf.fit.ev.residual, model.size, floor)
+    for _ in range(NOISE_ROUNDS):
+        whitener = ChainWhitener(data, levels)
+        mf = _fit_model(model, data, mf.theta, _UNIT_SIGMA, *settings, whitener)
+        new = estimate_noise(data, mf.fit.ev.residual, model.size, floor)
+        settled = new.close_to(levels, NOISE_RTOL)
+        levels = new
+        if settled:
+            break
+    return levels, ChainWhitener(data, levels)
 
 
 def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
             max_relative_std: float, choice: str, test: FitTest,
-            n_trimmed: int) -> CalibrationResult:
+            n_trimmed: int, levels: NoiseLevels | None = None) -> CalibrationResult:
     fit = mf.fit
     theta, info_rel = fit.theta, fit.system.information
     lam, vec = np.linalg.eigh(info_rel)
@@ -563,11 +618,11 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
     if not identifiable:
         vector = vec[:, 0]
         weak = vec[:, lam * max_relative_std**2 < 1.0]
-        direction = _describe_weak(weak, theta, seg, fit.sigma)
+        direction = _describe_weak(weak, theta, seg, mf.channel_std)
     params, pose = mf.model.split(theta)
     pose_std = np.sqrt(np.diag(full)[3:6]) if mf.model is SENSOR_POSE else None
-    raw = fit.ev.raw.T
-    z = raw / fit.sigma
+    raw = fit.ev.residual.T
+    z = fit.ev.raw.T / fit.sigma
     outliers = int(np.sum(np.sum(z * z, axis=1) > chi2_quantile(OUTLIER_QUANTILE, 3)))
     return CalibrationResult(
         params=params,
@@ -589,8 +644,9 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
         n_outliers=outliers,
         n_trimmed=n_trimmed,
         rms_residual=np.sqrt(np.mean(raw * raw, axis=0)),
-        sigma=fit.sigma,
+        sigma=fit.sigma if levels is None else levels.sigma,
         sigma_estimated=sigma_estimated,
+        pose_sigma=None if levels is None else levels.pose,
         loss=loss,
         converged=fit.converged,
         iterations=fit.iterations,

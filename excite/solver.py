@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from excite.data import Segments
 from excite.kinematics import wrap_angle
 from excite.models import SegmentModel
+from excite.noise import ChainWhitener
 
 __all__ = ["Loss", "HUBER_K", "Problem", "Evaluation", "System", "Fit", "solve_psd",
            "damped_step", "levenberg_marquardt", "normal_system", "estimate_sigma"]
@@ -39,10 +40,14 @@ SIGMA_FLOOR = 1e-10
 
 class Evaluation:
     """The model at theta: raw residuals (3, N) (predicted - measured, heading wrapped) and
-    relative Jacobian rows (3, P, N): d raw[c, k] / d theta_i * column_scale_i."""
+    relative Jacobian rows (3, P, N): d raw[c, k] / d theta_i * column_scale_i. With a
+    whitener, raw and jac are whitened (innovations) and ``residual`` keeps the predicted -
+    measured values; otherwise ``residual`` is ``raw``."""
 
-    def __init__(self, theta: FloatArray, scale: FloatArray, raw: FloatArray, jac: FloatArray):
+    def __init__(self, theta: FloatArray, scale: FloatArray, raw: FloatArray, jac: FloatArray,
+                 residual: FloatArray | None = None):
         self.theta, self.scale, self.raw, self.jac = theta, scale, raw, jac
+        self.residual = raw if residual is None else residual
         self._unit: tuple[FloatArray, FloatArray, FloatArray] | None = None
 
     def unit_system(self) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -55,10 +60,15 @@ class Evaluation:
 
 
 class Problem:
-    """A data set and a model: evaluates residuals and relative Jacobians at theta."""
+    """A data set and a model: evaluates residuals and relative Jacobians at theta. whitener:
+    an :class:`excite.noise.ChainWhitener` for segments whose noise is correlated (then fit
+    with sigma = 1), or None (independent segments, per-channel sigma)."""
 
-    def __init__(self, model: SegmentModel, segments: Segments):
+    def __init__(self, model: SegmentModel, segments: Segments,
+                 whitener: ChainWhitener | None = None):
         self.model = model
+        self.segments = segments
+        self.whitener = whitener
         self.substeps = segments.sub_dphi_L is not None
         if self.substeps:  # a segment of a log: the composition of its sub-steps
             self.phi_L, self.phi_R = segments.sub_dphi_L, segments.sub_dphi_R
@@ -78,7 +88,10 @@ class Problem:
         raw[2] = wrap_angle(raw[2])
         scale = self.model.column_scale(theta)
         jac *= scale[None, :, None]
-        return Evaluation(theta, scale, raw, jac)
+        if self.whitener is None:
+            return Evaluation(theta, scale, raw, jac)
+        white, white_jac = self.whitener.whiten(raw, jac)
+        return Evaluation(theta, scale, white, white_jac, residual=raw)
 
 
 def huber_cost(z: FloatArray) -> float:

@@ -1,0 +1,96 @@
+"""``excite validate``: does the calibration help? Dead-reckon held-out logs with the nominal
+and the calibrated robot and compare both with the external poses (:mod:`excite.validation`
+holds the method and the metrics)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+from excite.commands.args import UsageError, params_arg
+from excite.commands.logs import add_log_options
+
+EXIT_OK = 0
+
+
+def _sensor_pose(text: str):
+    """--nominal-sensor-pose X,Y,THETA (m, m, rad, in the body frame) as a SensorPose."""
+    from excite.models import SensorPose
+
+    parts = text.split(",")
+    try:
+        values = [float(part) for part in parts]
+    except ValueError:
+        values = []
+    if len(values) != 3 or not all(map(math.isfinite, values)):
+        raise UsageError(f"--nominal-sensor-pose must be X,Y,THETA (three finite numbers: m, m, "
+                         f"rad), got {text!r}")
+    return SensorPose(*values)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    val = sub.add_parser(
+        "validate", help="does the calibration help? dead-reckon held-out logs with the "
+        "nominal and the calibrated parameters and compare with the external poses",
+        description="Dead-reckon each log's encoders (exact arcs between encoder samples, "
+        "from the log's first external pose) with the nominal and with the calibrated robot, "
+        "and report per log and overall (mean over logs, ratio of the means): end-point "
+        "position error (m), end-point heading error (rad), RMS path error (m) and the ratio "
+        "calibrated / nominal; UMBmark's E_max,syst (m) when a log is a bidirectional square. "
+        "The segmentation options (--window, --min-distance, --min-angle, --split-at-gaps) do "
+        "not apply: validation uses every pose sample.")
+    val.add_argument("logs", nargs="+", metavar="LOG",
+                     help="time-series CSV (or a pair of stream CSVs) or ROS bag, not used "
+                     "for the calibration")
+    val.add_argument("--params", required=True, metavar="RESULT.json",
+                     help="the calibration: the output of excite calibrate --json (params, "
+                     "sensor_pose, and optionally nominal)")
+    val.add_argument("--nominal", metavar="RL,RR,B",
+                     help="nominal wheel radii and separation (m); default: the params file's "
+                     "\"nominal\" key")
+    val.add_argument("--nominal-sensor-pose", metavar="X,Y,THETA",
+                     help="the nominal robot's sensor pose in the body frame (m, m, rad); "
+                     "default: the calibrated one, so that the comparison measures the wheel "
+                     "calibration")
+    val.add_argument("--plot", metavar="OUT.png",
+                     help="write an overlay of the measured, nominal and calibrated paths "
+                     "(needs the sim extra: matplotlib)")
+    val.add_argument("--json", action="store_true", help="print one JSON object")
+    add_log_options(val)
+    val.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from excite.commands.logs import group_inputs, read_log
+    from excite.validation import read_params_file, summarize, validate_log
+
+    result_file = read_params_file(args.params)
+    nominal_params = (params_arg(args.nominal, "--nominal") if args.nominal
+                      else result_file.nominal)
+    if nominal_params is None:
+        raise UsageError(f"{args.params}: no \"nominal\" parameters; give --nominal RL,RR,B "
+                         "(m)")
+    nominal_pose = (_sensor_pose(args.nominal_sensor_pose) if args.nominal_sensor_pose
+                    else result_file.sensor_pose)
+    calibrated = (result_file.params, result_file.sensor_pose)
+    validations = []
+    for source in group_inputs(args.logs):
+        log = read_log(args, source)
+        validations.append(validate_log(log.series, log.time_offset, calibrated,
+                                        (nominal_params, nominal_pose), name=log.name))
+    result = summarize(validations)
+    if args.plot:
+        from excite.validation_plot import plot_validation
+
+        try:
+            plot_validation(result, args.plot)
+        except OSError as exc:
+            raise UsageError(f"cannot write {args.plot}: {exc.strerror or exc}") from None
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=2))
+    else:
+        print(result.summary())
+        if args.plot:
+            print(f"wrote the path overlay to {args.plot}")
+    return EXIT_OK

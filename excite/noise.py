@@ -1,0 +1,148 @@
+"""Correlated measurement noise of segments cut from a log: each pose sample's noise enters
+the two segments that share it.
+
+Model (DESIGN.md, "Time-series logs"; frames: the sensor's world poses and its increments in
+its own frame at each segment start). A segment's measured increment is
+z_k = (-P_k) (+) P_{k+1} of two pose samples P = (p, theta), plus noise of its own:
+
+* pose-sample noise, independent per sample: isotropic std ``sigma_xy`` (m) on p and
+  ``sigma_theta`` (rad) on theta;
+* segment noise, independent per segment (wheel slip, encoder quantisation, model error):
+  std ``sigma`` = (x [m], y [m], theta [rad]).
+
+Linearised at the measured increments d_k = (dx_k, dy_k) (J = rotation by +90 degrees,
+R(a) = rotation by a, Delta_k = dtheta_k), the covariance of the stacked increments is
+block tridiagonal over chains of segments that share their end and start samples:
+
+    C_kk      = diag(sigma^2) + [[2 sxy^2 I + sth^2 (J d_k)(J d_k)^T,  sth^2 J d_k],
+                                 [sth^2 (J d_k)^T,                    2 sth^2   ]]
+    C_(k-1)k  = [[-sxy^2 R(Delta_(k-1)),  0     ],
+                 [-sth^2 (J d_k)^T,       -sth^2]]          (only when k is chained to k-1)
+
+:class:`ChainWhitener` factors C (banded Cholesky, bandwidth 5, O(N)) and whitens residuals
+and Jacobians, so that the weighted least-squares fit is the (linearised) maximum-likelihood
+fit under this model. :func:`estimate_noise` estimates the five noise levels from residuals by
+their lag-0 and lag-1 moments.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from excite.data import Segments
+
+__all__ = ["NoiseLevels", "ChainWhitener", "estimate_noise"]
+
+FloatArray = NDArray[np.float64]
+_BAND = 5  # lower bandwidth of C in segment-major order (x, y, theta per segment)
+
+
+@dataclass(frozen=True)
+class NoiseLevels:
+    """sigma: segment noise std (x [m], y [m], theta [rad]); pose: pose-sample noise std
+    (xy [m], theta [rad])."""
+
+    sigma: FloatArray
+    pose: FloatArray
+
+    def close_to(self, other: NoiseLevels, rtol: float) -> bool:
+        a = np.concatenate([self.sigma, self.pose])
+        b = np.concatenate([other.sigma, other.pose])
+        return bool(np.all(np.abs(a - b) <= rtol * np.maximum(np.abs(b), 1e-300)
+                           + 1e-3 * np.max(np.abs(b))))
+
+
+def _perpendicular(segments: Segments) -> tuple[FloatArray, FloatArray]:
+    """J d_k = (-dy_k, dx_k) (m)."""
+    return -segments.dy, segments.dx
+
+
+def _chained(segments: Segments) -> NDArray[np.bool_]:
+    return (np.zeros(len(segments), dtype=bool) if segments.chained is None
+            else segments.chained)
+
+
+class ChainWhitener:
+    """Whitening by the Cholesky factor of the covariance C of the stacked increments (see
+    the module doc), for given noise levels."""
+
+    def __init__(self, segments: Segments, levels: NoiseLevels):
+        from scipy.linalg import cholesky_banded
+
+        n = len(segments)
+        sx2, sy2, st2 = levels.sigma**2
+        pxy2, pth2 = levels.pose**2
+        jx, jy = _perpendicular(segments)
+        # lower band storage: band[i - j, j] = C[i, j] for i >= j, rows/cols 3k + channel
+        band = np.zeros((_BAND + 1, 3 * n))
+        diag = band[0].reshape(n, 3)
+        diag[:, 0] = sx2 + 2 * pxy2 + pth2 * jx * jx
+        diag[:, 1] = sy2 + 2 * pxy2 + pth2 * jy * jy
+        diag[:, 2] = st2 + 2 * pth2
+        band[1].reshape(n, 3)[:, 0] = pth2 * jx * jy  # C[y, x]
+        band[1].reshape(n, 3)[:, 1] = pth2 * jy  # C[theta, y]
+        band[2].reshape(n, 3)[:, 0] = pth2 * jx  # C[theta, x]
+        chained = _chained(segments)
+        if chained.any():
+            k = np.flatnonzero(chained)  # block (k, k - 1): rows of segment k, cols of k - 1
+            c, s = np.cos(segments.dtheta[k - 1]), np.sin(segments.dtheta[k - 1])
+            # C[(k-1) rows, k cols] = [[-pxy2 R, 0], [-pth2 (J d_k)^T, -pth2]]; store its
+            # transpose C[k rows, (k-1) cols] at offsets i - j = 3 + a - b.
+            zero, c_xy, s_xy = np.zeros(k.size), pxy2 * c, pxy2 * s
+            # entry (a, b) = C[3k + a, 3(k-1) + b] = block C_(k-1)k at (b, a); stored at
+            # band offset i - j = 3 + a - b
+            entries = {(0, 0): -c_xy, (0, 1): -s_xy, (1, 0): s_xy, (1, 1): -c_xy,
+                       (2, 0): zero, (2, 1): zero,
+                       (0, 2): -pth2 * jx[k], (1, 2): -pth2 * jy[k], (2, 2): zero - pth2}
+            for (a, b), value in entries.items():
+                band[3 + a - b, 3 * (k - 1) + b] = value
+        self._factor = cholesky_banded(band, lower=True)
+        self.n = n
+
+    def whiten(self, raw: FloatArray, jac: FloatArray | None
+               ) -> tuple[FloatArray, FloatArray | None]:
+        """L^-1 of residuals (3, N) and Jacobian rows (3, P, N), in the same layouts: the
+        innovations of segment k are column k."""
+        from scipy.linalg import solve_banded
+
+        n = self.n
+        columns = [raw.T.reshape(3 * n, 1)]
+        if jac is not None:
+            p = jac.shape[1]
+            columns.append(jac.transpose(2, 0, 1).reshape(3 * n, p))
+        rhs = np.concatenate(columns, axis=1)
+        out = solve_banded((_BAND, 0), self._factor, rhs, check_finite=False)
+        white = out[:, 0].reshape(n, 3).T
+        if jac is None:
+            return white, None
+        return white, out[:, 1:].reshape(n, 3, -1).transpose(1, 2, 0)
+
+
+def estimate_noise(segments: Segments, residual: FloatArray, n_parameters: int,
+                   floor: FloatArray) -> NoiseLevels:
+    """The five noise levels from residuals (3, N) of a fit (predicted - measured), by moments:
+    lag-1 products over chained pairs give the pose-sample levels (E r_th,k-1 r_th,k =
+    -sth^2; E r_xy,k-1^T R(Delta_k-1) r_xy,k = -2 sxy^2), the lag-0 moments the rest; the
+    lag-0 moments are scaled by 3N / (3N - P) for the fitted parameters. Levels are >= 0;
+    segment levels at least ``floor`` (3,)."""
+    n = residual.shape[1]
+    inflate = 3 * n / max(3 * n - n_parameters, 1)
+    chained = np.flatnonzero(_chained(segments))
+    pxy2 = pth2 = 0.0
+    if chained.size:
+        prev, cur = chained - 1, chained
+        pth2 = max(0.0, -float(np.mean(residual[2, prev] * residual[2, cur])))
+        c, s = np.cos(segments.dtheta[prev]), np.sin(segments.dtheta[prev])
+        ax, ay = residual[0, prev], residual[1, prev]
+        bx, by = residual[0, cur], residual[1, cur]
+        rotated = ax * (c * bx - s * by) + ay * (s * bx + c * by)  # a^T R(Delta) b
+        pxy2 = max(0.0, -0.5 * float(np.mean(rotated)))
+    jx, jy = _perpendicular(segments)
+    lag0 = inflate * np.mean(residual**2, axis=1)
+    seg2 = lag0 - np.array([2 * pxy2 + pth2 * np.mean(jx * jx),
+                            2 * pxy2 + pth2 * np.mean(jy * jy), 2 * pth2])
+    sigma = np.maximum(np.sqrt(np.maximum(seg2, 0.0)), floor)
+    return NoiseLevels(sigma, np.sqrt(np.array([pxy2, pth2])))
