@@ -16,7 +16,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from excite import __version__
-from excite.commands import calibrate, compare, simulate, train, validate
+from excite.commands import calibrate, compare, segment, simulate, train, validate
 from excite.commands.args import UsageError
 from excite.errors import ExciteError
 
@@ -24,7 +24,7 @@ __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE",
            "EXIT_UNIDENTIFIABLE", "EXIT_MISFIT"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_UNIDENTIFIABLE, EXIT_MISFIT = 0, 1, 2, 3, 4
-COMMANDS = (calibrate, validate, simulate, compare, train)
+COMMANDS = (calibrate, segment, validate, simulate, compare, train)
 
 #: The optional extra that provides each third-party module a subcommand may import.
 EXTRA_OF_MODULE = {"rosbags": "ros", "gymnasium": "sim", "pymunk": "sim", "matplotlib": "sim",

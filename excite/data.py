@@ -41,6 +41,8 @@ __all__ = [
 ]
 
 COLUMNS = ("dphi_L", "dphi_R", "dx_gt", "dy_gt", "dtheta_gt")
+#: Optional trailing columns of a segment CSV cut from a log: each segment's time span (s).
+TIME_COLUMNS = ("t_start", "t_end")
 MIN_SEGMENTS = 3
 _FIELDS = ("dphi_L", "dphi_R", "dx", "dy", "dtheta")
 TUPLE_SUFFIX = ".tuple"
@@ -160,15 +162,22 @@ _OPTIONAL = (("t_start", float, 1), ("t_end", float, 1), ("chained", bool, 1),
              ("sub_dphi_L", float, 2), ("sub_dphi_R", float, 2))
 
 
-def _is_header(fields: list[str]) -> bool:
-    return [f.strip().lower() for f in fields] == [c.lower() for c in COLUMNS]
+def _header_columns(fields: list[str]) -> tuple[str, ...] | None:
+    """The columns a header line names (the lesson's five, optionally with the two time
+    columns), or None when the line is not a header."""
+    names = [f.strip().lower() for f in fields]
+    for columns in (COLUMNS, COLUMNS + TIME_COLUMNS):
+        if names == [c.lower() for c in columns]:
+            return columns
+    return None
 
 
-def _parse_line(fields: list[str], where: str) -> list[float]:
-    if len(fields) != len(COLUMNS):
-        raise DataError(f"{where}: expected {len(COLUMNS)} columns, found {len(fields)}")
+def _parse_line(fields: list[str], where: str, columns: tuple[str, ...] = COLUMNS
+                ) -> list[float]:
+    if len(fields) != len(columns):
+        raise DataError(f"{where}: expected {len(columns)} columns, found {len(fields)}")
     values = []
-    for column, text in zip(COLUMNS, fields, strict=True):
+    for column, text in zip(columns, fields, strict=True):
         try:
             value = float(text)
         except ValueError:
@@ -210,20 +219,33 @@ def _looks_like_tuples(text: str) -> bool:
 
 
 def _csv_rows(name: str, text: str) -> list[list[float]]:
-    """Rows of a segment CSV in column order; DataError naming file and line if malformed."""
+    """Rows of a segment CSV in column order (5 values, or 7 with the time columns the header
+    names); DataError naming file and line if malformed."""
     rows: list[list[float]] = []
     seen_content = False
+    columns = COLUMNS
     for number, line in enumerate(text.splitlines(), start=1):
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
             continue
         fields = stripped.split(",")
-        if not seen_content and _is_header(fields):
-            seen_content = True
+        if not seen_content and (named := _header_columns(fields)) is not None:
+            seen_content, columns = True, named
             continue
         seen_content = True
-        rows.append(_parse_line(fields, f"{name}:{number}"))
+        rows.append(_parse_line(fields, f"{name}:{number}", columns))
     return rows
+
+
+def _segments(rows: list[list[float]]) -> Segments:
+    """Segments from parsed rows; with time columns, segment k is chained to k - 1 when it
+    starts exactly when k - 1 ends (the files excite segment writes: one pose sample)."""
+    a = np.array(rows, dtype=float)
+    if a.shape[1] == len(COLUMNS):
+        return Segments.from_array(a)
+    t_start, t_end = a[:, 5], a[:, 6]
+    chained = np.concatenate(([False], t_start[1:] == t_end[:-1]))
+    return Segments(*a[:, :5].T, t_start=t_start, t_end=t_end, chained=chained)
 
 
 def _show(value: object, limit: int = 40) -> str:
@@ -351,7 +373,7 @@ def load_segments(path: str | os.PathLike[str]) -> Segments:
     name, rows = _load_rows(path)
     if len(rows) < MIN_SEGMENTS:
         raise _too_few(name, len(rows))
-    return Segments.from_array(np.array(rows))
+    return _segments(rows)
 
 
 def load_segment_files(paths: Sequence[str | os.PathLike[str]]) -> Segments:
@@ -365,23 +387,30 @@ def load_segment_files(paths: Sequence[str | os.PathLike[str]]) -> Segments:
     if not paths:
         raise DataError("no segment files given")
     names: list[str] = []
-    rows: list[list[float]] = []
+    parts: list[Segments] = []
     for path in paths:
         name, file_rows = _load_rows(path)
         names.append(name)
-        rows.extend(file_rows)
-    if len(rows) < MIN_SEGMENTS:
-        raise _too_few(", ".join(names), len(rows), " in total" if len(names) > 1 else "")
-    return Segments.from_array(np.array(rows))
+        parts.append(_segments(file_rows))
+    total = sum(len(p) for p in parts)
+    if total < MIN_SEGMENTS:
+        raise _too_few(", ".join(names), total, " in total" if len(names) > 1 else "")
+    return Segments.concatenate(parts)
 
 
 def save_segments(path: str | os.PathLike[str], segments: Segments) -> None:
-    """Write segments as CSV with a header, at full float64 precision."""
+    """Write segments as CSV with a header, at full float64 precision; with the time columns
+    t_start, t_end when the segments have times (sub-steps are not written: each row is the
+    segment's totals)."""
+    timed = segments.t_start is not None and segments.t_end is not None
+    rows = segments.as_array()
+    if timed:
+        rows = np.column_stack([rows, segments.t_start, segments.t_end])
     np.savetxt(
         os.fspath(path),
-        segments.as_array(),
+        rows,
         delimiter=",",
-        header=",".join(COLUMNS),
+        header=",".join(COLUMNS + (TIME_COLUMNS if timed else ())),
         comments="",
         fmt="%.17g",
     )

@@ -53,6 +53,7 @@ __all__ = [
     "SensorPoseModel",
     "body_to_sensor",
     "compose_substeps",
+    "single_arc_error",
     "increment_jacobian",
     "sensor_to_body",
 ]
@@ -369,3 +370,15 @@ def sensor_to_body(measured: ArrayLike, pose: SensorPose) -> FloatArray:
     x = l_x + c * s[:, 0] - si * s[:, 1] - (np.cos(th) * l_x - np.sin(th) * l_y)
     y = l_y + si * s[:, 0] + c * s[:, 1] - (np.sin(th) * l_x + np.cos(th) * l_y)
     return np.column_stack([x, y, th])
+
+
+def single_arc_error(sub_dphi_L: ArrayLike, sub_dphi_R: ArrayLike,
+                     params: Params) -> FloatArray:
+    """How far one arc per segment (the segment's total wheel increments) misses the
+    composition of its sub-steps (N, K): the position difference of the body's end pose (m,
+    (N,)) at ``params``; 0 for segments of constant curvature."""
+    theta = params.as_array()
+    whole, _ = AXLE.evaluate(np.sum(sub_dphi_L, axis=-1), np.sum(sub_dphi_R, axis=-1), theta,
+                             jacobian=False)
+    composed, _ = AXLE.evaluate(sub_dphi_L, sub_dphi_R, theta, jacobian=False, substeps=True)
+    return np.hypot(whole[0] - composed[0], whole[1] - composed[1])

@@ -46,21 +46,22 @@ def params_arg(text: str, what: str = "--init"):
     return Params(*floats(text, ("RL", "RR", "B"), what))
 
 
-def sensor_pose_arg(text: str):
-    """--sensor-pose: auto, axle, estimate, or X,Y,THETA (m, m, rad) in the body frame."""
+def sensor_pose_arg(text: str, option: str = "--sensor-pose"):
+    """A sensor pose X,Y,THETA (m, m, rad) in the body frame; for ``--sensor-pose`` also the
+    words auto, axle, estimate."""
     from excite.models import SensorPose
 
-    if text in ("auto", "axle", "estimate"):
+    words = option == "--sensor-pose"
+    if words and text in ("auto", "axle", "estimate"):
         return text
+    expected = "auto, axle, estimate or X,Y,THETA" if words else "X,Y,THETA"
     parts = text.split(",")
     if len(parts) != 3:
-        raise UsageError(f"--sensor-pose must be auto, axle, estimate or X,Y,THETA "
-                         f"(m, m, rad), got {text!r}")
+        raise UsageError(f"{option} must be {expected} (m, m, rad), got {text!r}")
     try:
         return SensorPose(*map(float, parts))
     except ValueError:
-        raise UsageError(f"--sensor-pose: X,Y,THETA must be finite numbers, got {text!r}"
-                         ) from None
+        raise UsageError(f"{option}: X,Y,THETA must be finite numbers, got {text!r}") from None
 
 
 def fraction_arg(text: str) -> float:

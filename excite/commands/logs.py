@@ -19,8 +19,8 @@ from excite.commands.args import UsageError
 from excite.data import Segments
 from excite.timeseries import SegmentedLog, TimeSeries
 
-__all__ = ["Log", "Input", "add_log_options", "group_inputs", "read_log", "segment_log",
-           "segment_inputs"]
+__all__ = ["Log", "Input", "Part", "add_log_options", "group_inputs", "read_log",
+           "segment_log", "segment_inputs"]
 
 
 @dataclass(frozen=True)
@@ -77,26 +77,29 @@ def _frame_pair(text: str) -> tuple[str, str]:
     return parent, child
 
 
-def add_log_options(parser: argparse.ArgumentParser) -> None:
-    """The time-series and bag options (DESIGN.md, "Time-series logs")."""
+def add_log_options(parser: argparse.ArgumentParser, segmentation: bool = True) -> None:
+    """The time-series and bag options (DESIGN.md, "Time-series logs"); with
+    ``segmentation`` also the options that cut logs into segments."""
     group = parser.add_argument_group(
         "time-series logs and ROS bags",
         "a CSV with header t,phi_L,phi_R,x,y,theta (or two CSVs, one per stream, given one "
         "after the other), or a ROS bag (.bag, .db3, .mcap, or a rosbag2 directory)")
-    group.add_argument("--window", type=_positive, default=1.0, metavar="S",
-                       help="segment duration in s (default 1)")
-    group.add_argument("--min-distance", type=_positive, metavar="M",
-                       help="keyframes instead of windows: a new segment after M meters ...")
-    group.add_argument("--min-angle", type=_positive, metavar="RAD",
-                       help="... or after turning RAD radians")
+    if segmentation:
+        group.add_argument("--window", type=_positive, default=1.0, metavar="S",
+                           help="segment duration in s (default 1)")
+        group.add_argument("--min-distance", type=_positive, metavar="M",
+                           help="keyframes instead of windows: a new segment after M meters "
+                           "...")
+        group.add_argument("--min-angle", type=_positive, metavar="RAD",
+                           help="... or after turning RAD radians")
+        group.add_argument("--split-at-gaps", action="store_true",
+                           help="cut the log at gaps longer than the window instead of "
+                           "refusing it")
     group.add_argument("--ticks-per-rev", type=_positive, metavar="N",
                        help="encoder resolution, when the CSV has ticks_L,ticks_R columns")
     group.add_argument("--time-offset", type=_offset, default=0.0, metavar="S|estimate",
                        help="pose time + S = encoder time (s, default 0), or 'estimate' "
                        "it from the data")
-    group.add_argument("--split-at-gaps", action="store_true",
-                       help="cut the log at gaps longer than the window instead of refusing "
-                       "it")
     group.add_argument("--joint-states", default="/joint_states", metavar="TOPIC",
                        help="bag topic of sensor_msgs/msg/JointState (default /joint_states)")
     group.add_argument("--left-wheel", metavar="NAME", help="left wheel joint name (bags)")
@@ -179,18 +182,37 @@ def segment_log(args: argparse.Namespace, log: Log) -> SegmentedLog:
                               on_gap="split" if args.split_at_gaps else "error")
 
 
-def segment_inputs(args: argparse.Namespace, inputs: Sequence[Input]
-                   ) -> list[tuple[Input, Segments, Log | None, SegmentedLog | None]]:
-    """Every input as segments: segment files are read, logs read and cut. Returns, per input,
-    (input, its segments, the log or None, the segmented log or None)."""
+@dataclass(frozen=True)
+class Part:
+    """One command-line input as segments: the input, its segments, and for a log the log
+    and its segmentation (None for a segment file)."""
+
+    source: Input
+    segments: Segments
+    log: Log | None = None
+    cut: SegmentedLog | None = None
+
+    def describe(self) -> str:
+        """What was read, in one line (a log: segments kept, dropped and why, time offset)."""
+        if self.cut is None or self.log is None:
+            return f"{self.source.name}: {len(self.segments)} segments"
+        report = self.cut.report
+        offset = (f"; time offset {self.log.time_offset:+.4f} s "
+                  f"({'estimated' if self.log.offset_estimated else 'given'})")
+        return (f"{self.source.name}: {report.n_segments} segments; dropped: "
+                f"{report.counts_text()}{offset}")
+
+
+def segment_inputs(args: argparse.Namespace, inputs: Sequence[Input]) -> list[Part]:
+    """Every input as segments: segment files are read, logs read and cut."""
     from excite.data import load_segments
 
     parts = []
     for source in inputs:
         if source.kind == "segments":
-            parts.append((source, load_segments(source.paths[0]), None, None))
+            parts.append(Part(source, load_segments(source.paths[0])))
         else:
             log = read_log(args, source)
             cut = segment_log(args, log)
-            parts.append((source, cut.segments, log, cut))
+            parts.append(Part(source, cut.segments, log, cut))
     return parts

@@ -6,27 +6,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 
-from excite.commands.args import UsageError, params_arg
+from excite.commands.args import UsageError, params_arg, sensor_pose_arg
 from excite.commands.logs import add_log_options
 
 EXIT_OK = 0
-
-
-def _sensor_pose(text: str):
-    """--nominal-sensor-pose X,Y,THETA (m, m, rad, in the body frame) as a SensorPose."""
-    from excite.models import SensorPose
-
-    parts = text.split(",")
-    try:
-        values = [float(part) for part in parts]
-    except ValueError:
-        values = []
-    if len(values) != 3 or not all(map(math.isfinite, values)):
-        raise UsageError(f"--nominal-sensor-pose must be X,Y,THETA (three finite numbers: m, m, "
-                         f"rad), got {text!r}")
-    return SensorPose(*values)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -38,8 +22,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "and report per log and overall (mean over logs, ratio of the means): end-point "
         "position error (m), end-point heading error (rad), RMS path error (m) and the ratio "
         "calibrated / nominal; UMBmark's E_max,syst (m) when a log is a bidirectional square. "
-        "The segmentation options (--window, --min-distance, --min-angle, --split-at-gaps) do "
-        "not apply: validation uses every pose sample.")
+        "Validation uses every pose sample (no segmentation).")
     val.add_argument("logs", nargs="+", metavar="LOG",
                      help="time-series CSV (or a pair of stream CSVs) or ROS bag, not used "
                      "for the calibration")
@@ -57,7 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="write an overlay of the measured, nominal and calibrated paths "
                      "(needs the sim extra: matplotlib)")
     val.add_argument("--json", action="store_true", help="print one JSON object")
-    add_log_options(val)
+    add_log_options(val, segmentation=False)
     val.set_defaults(handler=run)
 
 
@@ -71,8 +54,9 @@ def run(args: argparse.Namespace) -> int:
     if nominal_params is None:
         raise UsageError(f"{args.params}: no \"nominal\" parameters; give --nominal RL,RR,B "
                          "(m)")
-    nominal_pose = (_sensor_pose(args.nominal_sensor_pose) if args.nominal_sensor_pose
-                    else result_file.sensor_pose)
+    nominal_pose = result_file.sensor_pose
+    if args.nominal_sensor_pose:
+        nominal_pose = sensor_pose_arg(args.nominal_sensor_pose, "--nominal-sensor-pose")
     calibrated = (result_file.params, result_file.sensor_pose)
     validations = []
     for source in group_inputs(args.logs):
