@@ -13,6 +13,7 @@ import numpy as np
 from gymnasium import spaces
 
 from envs.physics import DEFAULT_CHASSIS
+from envs.recording import Recorder, Recording, RecordingConfig
 from envs.robot import RobotSpec, robot_distribution
 from envs.simulation import Simulation, SimulationConfig
 from excite.data import Segments
@@ -205,6 +206,13 @@ class DiffDriveCalibEnv(gym.Env):
             # None: the pose sensor sits on the axle. Else the ranges the hidden mounting is
             # drawn from: {"x": (lo, hi) m, "y": (lo, hi) m, "theta": (lo, hi) rad}.
             "sensor_pose": None,
+            # Time-series recording (env.unwrapped.recording), off by default: encoder ticks at
+            # every physics tick and the sensor's world pose at record_pose_hz, each recorded
+            # pose with its own noise (motion-capture-like levels), the truth beside them.
+            "record": False,
+            "record_pose_hz": 100.0,  # Hz
+            "record_sigma_xy": 1e-3,  # m, noise of each recorded pose
+            "record_sigma_theta": 2e-3,  # rad
         }
 
     def __init__(
@@ -246,6 +254,10 @@ class DiffDriveCalibEnv(gym.Env):
         self.segment_duration = float(cfg["segment_duration"])
         self.budget = int(cfg["budget"])
         self.estimator_factory = estimator_factory or default_estimator
+        self.recording_config = RecordingConfig(
+            cfg["record_pose_hz"], cfg["record_sigma_xy"], cfg["record_sigma_theta"]
+        ) if cfg["record"] else None
+        self._recorder: Recorder | None = None
 
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         p = self.model.size
@@ -268,6 +280,11 @@ class DiffDriveCalibEnv(gym.Env):
             *self.np_random.uniform(self.sensor_ranges[:, 0], self.sensor_ranges[:, 1]))
         self.estimator = self.estimator_factory(
             self.nominal if self.model is AXLE else self.nominal_theta.copy(), self.sigma.copy())
+        if self.recording_config is not None:  # its own noise stream, spawned: no draw taken
+            self._recorder = Recorder(
+                self.recording_config, self.sim.encoders, self.sim.config.physics_hz,
+                np.zeros(3) if self._mount is None else self._mount.as_array(),
+                sim_rng.spawn(1)[0], self.sim.pose, self.sim.wheel_angles)
         self._log = np.empty((self.budget, 5))  # calibration rows; grows if stepped past budget
         self._n = 0
         self._paths: list[np.ndarray] = [self.sim.pose[None, :]]
@@ -304,6 +321,8 @@ class DiffDriveCalibEnv(gym.Env):
         self._log[self._n] = row
         self._n += 1
         self._paths.append(outcome.path[1:])
+        if self._recorder is not None:
+            self._recorder.add(outcome.path, outcome.wheel_path)
         self._last_action = (left, right)
         previous, previous_error = self._sigma_min, self._error
         self._estimate, self._theta = self._read_estimate()
@@ -437,6 +456,12 @@ class DiffDriveCalibEnv(gym.Env):
         """All hidden model parameters (wheels, then the sensor pose); evaluation only."""
         theta = self.true_params.as_array()
         return theta if self._mount is None else np.append(theta, self._mount.as_array())
+
+    @property
+    def recording(self) -> Recording | None:
+        """The time series recorded this episode, with its truth (config ``record``; None when
+        recording is off). RuntimeError before the first step."""
+        return None if self._recorder is None else self._recorder.recording()
 
     @property
     def robot(self) -> RobotSpec:

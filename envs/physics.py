@@ -99,11 +99,13 @@ class Drive(Protocol):
         """Current absolute wheel angles (phi_L, phi_R) in rad, unquantized."""
         ...
 
-    def run(self, cmd_L: float, cmd_R: float, n_ticks: int) -> tuple[np.ndarray, bool]:
+    def run(self, cmd_L: float, cmd_R: float,
+            n_ticks: int) -> tuple[np.ndarray, np.ndarray, bool]:
         """Hold wheel-speed commands (rad/s) for `n_ticks` ticks.
 
         Returns the world poses at every tick, shape (n_ticks + 1, 3) starting with the
-        current pose, and whether the chassis touched a wall.
+        current pose, the absolute wheel angles (phi_L, phi_R) (rad, unquantized) at the same
+        ticks, shape (n_ticks + 1, 2), and whether the chassis touched a wall.
         """
         ...
 
@@ -136,7 +138,8 @@ class IdealDrive:
     def wheel_angles(self) -> np.ndarray:
         return self._phi.copy()
 
-    def run(self, cmd_L: float, cmd_R: float, n_ticks: int) -> tuple[np.ndarray, bool]:
+    def run(self, cmd_L: float, cmd_R: float,
+            n_ticks: int) -> tuple[np.ndarray, np.ndarray, bool]:
         robot = self._robot
         limit = robot.max_wheel_speed
         omega = np.clip([cmd_L, cmd_R], -limit, limit)
@@ -158,8 +161,10 @@ class IdealDrive:
         ticks_done = int(np.argmin(inside)) if not inside.all() else n_ticks
         path[ticks_done + 1 :] = path[ticks_done]
         self._pose = path[ticks_done].copy()
-        self._phi = self._phi + omega * (ticks_done * self.dt)
-        return path, ticks_done < n_ticks
+        turned = np.minimum(np.arange(n_ticks + 1), ticks_done) * self.dt  # s of rolling
+        wheels = self._phi + omega * turned[:, None]
+        self._phi = wheels[-1].copy()
+        return path, wheels, ticks_done < n_ticks
 
 
 class _ContactFlag:
@@ -279,7 +284,8 @@ class PymunkDrive:
     def wheel_angles(self) -> np.ndarray:
         return np.array(self._phi)
 
-    def run(self, cmd_L: float, cmd_R: float, n_ticks: int) -> tuple[np.ndarray, bool]:
+    def run(self, cmd_L: float, cmd_R: float,
+            n_ticks: int) -> tuple[np.ndarray, np.ndarray, bool]:
         if self._touched:
             # pymunk keeps contact state that it does not pickle (warm-start impulses, the
             # position-correction velocity), so a run after a wall contact starts in a fresh
@@ -301,6 +307,7 @@ class PymunkDrive:
         th = body.angle
         c, s = math.cos(th), math.sin(th)
         path = [(x - d * c, y - d * s, th)]
+        wheels = [(phi_L, phi_R)]
         collided = False
         step = space.step
         for _ in range(n_ticks):
@@ -341,12 +348,13 @@ class PymunkDrive:
             th = body.angle
             c, s = math.cos(th), math.sin(th)
             path.append((x - d * c, y - d * s, th))
+            wheels.append((phi_L, phi_R))
         self._omega = [w_L, w_R]
         self._phi = [phi_L, phi_R]
         self._velocity = (vel_x, vel_y)
         self._omega_body = w
         self._touched = collided
-        return np.array(path), collided
+        return np.array(path), np.array(wheels), collided
 
     def _slip(
         self, vx: float, vy: float, w: float, t_L: float, t_R: float

@@ -79,10 +79,12 @@ class RelativePoseSensor:
         return _add_noise(true_increment, self._sigma, rng)
 
     def absolute(self, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Noisy world pose (x, y, theta); theta stays continuous (not wrapped)."""
+        """Noisy world pose(s) (..., 3) (x, y, theta), an independent draw per reading; theta
+        stays continuous (not wrapped)."""
         return _add_noise(pose, self._sigma, rng)
 
 
 def _add_noise(values: np.ndarray, sigma: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """values + sigma * standard normal draws (3 of them, in order)."""
-    return np.asarray(values, dtype=float) + sigma * rng.standard_normal(3)
+    """values (..., 3) + sigma * standard normal draws (3 per reading, in order)."""
+    values = np.asarray(values, dtype=float)
+    return values + sigma * rng.standard_normal(values.shape)

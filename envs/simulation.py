@@ -75,6 +75,8 @@ class SegmentOutcome:
         collision: whether the chassis touched a wall during the segment.
         pose_start, pose_end: (3,) world poses (x, y, theta), theta continuous.
         path: (M, 3) world poses at every physics tick, pose_start first and pose_end last.
+        wheel_path: (M, 2) absolute wheel angles (phi_L, phi_R) (rad, unquantized) at the
+            same ticks.
     """
 
     measurement: np.ndarray
@@ -84,6 +86,7 @@ class SegmentOutcome:
     pose_start: np.ndarray
     pose_end: np.ndarray
     path: np.ndarray
+    wheel_path: np.ndarray
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -170,10 +173,11 @@ class Simulation:
         n_ticks = self._ticks(duration, "duration", minimum=1)
         n_settle = self._ticks(settle, "settle", minimum=0)
         phi_start = self.drive.wheel_angles
-        path, collision = self.drive.run(float(cmd_L), float(cmd_R), n_ticks)
+        path, wheels, collision = self.drive.run(float(cmd_L), float(cmd_R), n_ticks)
         if n_settle:
-            stop_path, stop_collision = self.drive.run(0.0, 0.0, n_settle)
+            stop_path, stop_wheels, stop_collision = self.drive.run(0.0, 0.0, n_settle)
             path = np.concatenate([path, stop_path[1:]])
+            wheels = np.concatenate([wheels, stop_wheels[1:]])
             collision = collision or stop_collision
         phi_end = self.drive.wheel_angles
         true_increment = relative_pose(path[0], path[-1])
@@ -191,6 +195,7 @@ class Simulation:
             pose_start=_read_only(path[0].copy()),
             pose_end=_read_only(path[-1].copy()),
             path=_read_only(path),
+            wheel_path=_read_only(wheels),
         )
 
     def _ticks(self, seconds: float, name: str, minimum: int) -> int:

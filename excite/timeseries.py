@@ -76,6 +76,7 @@ __all__ = [
     "is_timeseries_csv",
     "timeseries_streams",
     "read_timeseries",
+    "write_timeseries",
     "segment_timeseries",
 ]
 
@@ -456,6 +457,71 @@ def read_timeseries(paths: PathArg | Sequence[PathArg],
     (t_pose, x, y, theta), pose_lines = poses.stream(POSE_COLUMNS)
     return TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,
                       source=(encoders.name, poses.name), lines=(enc_lines, pose_lines))
+
+
+# --------------------------------------------------------------------------- CSV writing
+
+#: Angles further than this from a whole number of ticks (in ticks) are not encoder readings.
+WHOLE_TICK_TOLERANCE = 1e-6
+
+
+def _float_cells(values: FloatArray) -> list[str]:
+    """The shortest text of each float that reads back the same float."""
+    return list(map(repr, values.tolist()))
+
+
+def _encoder_cells(series: TimeSeries, ticks_per_rev: float | None
+                   ) -> tuple[tuple[str, str], list[list[str]]]:
+    """The encoder column names and cells: angles (rad) in full precision, or whole ticks."""
+    angles = (series.phi_L, series.phi_R)
+    if ticks_per_rev is None:
+        return ANGLE_COLUMNS, [_float_cells(a) for a in angles]
+    if not 0 < ticks_per_rev < math.inf:
+        raise DataError(f"ticks_per_rev must be positive and finite, got {ticks_per_rev}")
+    scale = 2.0 * math.pi / ticks_per_rev
+    cells = []
+    for name, angle in zip(ANGLE_COLUMNS, angles, strict=True):
+        ticks = angle / scale
+        whole = np.rint(ticks)
+        off = np.flatnonzero(np.abs(ticks - whole) > WHOLE_TICK_TOLERANCE)
+        if off.size:
+            i = int(off[0])
+            raise DataError(f"{series.location('encoder', i)}: {name} = {angle[i]!r} rad is "
+                            f"not a whole number of ticks of 2 pi / {ticks_per_rev} rad")
+        cells.append(list(map(str, whole.astype(np.int64).tolist())))
+    return TICK_COLUMNS, cells
+
+
+def write_timeseries(path: PathArg, series: TimeSeries,
+                     ticks_per_rev: float | None = None) -> None:
+    """Write a time-series log as one CSV that :func:`read_timeseries` reads back equal.
+
+    Header ``t,phi_L,phi_R,x,y,theta``, or ``t,ticks_L,ticks_R,x,y,theta`` with
+    ``ticks_per_rev`` (the angles divided by 2 pi / ticks_per_rev, written as whole numbers:
+    read them back with the same ticks_per_rev). One row per time of either stream, in
+    ascending order; a stream's cells are empty in the rows where it has no sample. Times as
+    held (s, each stream on its own clock, no offset applied), angles in rad, x, y in m, theta
+    in rad (unwrapped), all at full float precision (the shortest text that reads back the
+    same float).
+
+    Raises DataError when ticks_per_rev is not positive and finite, or an angle is not a whole
+    number of ticks (naming the sample).
+    """
+    names, encoder = _encoder_cells(series, ticks_per_rev)
+    t = np.union1d(series.t_enc, series.t_pose)
+    enc_rows = np.searchsorted(t, series.t_enc).tolist()
+    pose_rows = np.searchsorted(t, series.t_pose).tolist()
+    pose = [_float_cells(a) for a in (series.x, series.y, series.theta)]
+    columns = [_float_cells(t)]
+    for rows, cells in [(enc_rows, c) for c in encoder] + [(pose_rows, c) for c in pose]:
+        column = [""] * t.size
+        for row, cell in zip(rows, cells, strict=True):
+            column[row] = cell
+        columns.append(column)
+    rows = (",".join(row) for row in zip(*columns, strict=True))
+    lines = [",".join(("t", *names, *POSE_COLUMNS)), *rows]
+    with open(path, "w", encoding="utf-8", newline="\n") as file:
+        file.write("\n".join(lines) + "\n")
 
 
 # --------------------------------------------------------------------------- time offset

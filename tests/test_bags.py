@@ -1,9 +1,8 @@
-"""ROS bags: real bags written with rosbags' writers (rosbag2 sqlite3 and mcap, ROS 1) from the
-simulated log of the time-series tests, read back with read_bag."""
+"""ROS bags: real bags written with the library's writer (rosbags' writers: rosbag2 sqlite3 and
+mcap, ROS 1) from the simulated log of the time-series tests, read back with read_bag."""
 
 from __future__ import annotations
 
-import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -13,24 +12,25 @@ import pytest
 
 pytest.importorskip("rosbags")
 
-from rosbags.rosbag1 import Writer as Writer1  # noqa: E402
-from rosbags.rosbag2 import StoragePlugin  # noqa: E402
-from rosbags.rosbag2 import Writer as Writer2  # noqa: E402
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
+from rosbags.typesys import get_types_from_msg  # noqa: E402
 
 from excite import DataError  # noqa: E402
-from excite.bags import MISSING_EXTRA, is_bag_path, read_bag  # noqa: E402
+from excite.bags import (  # noqa: E402
+    MISSING_EXTRA,
+    MISSING_WRITE_EXTRA,
+    STORAGES,
+    BagWriter,
+    is_bag_path,
+    read_bag,
+    write_bag,
+)
 from excite.timeseries import TimeSeries, segment_timeseries  # noqa: E402
 from tests.test_timeseries import assert_same, make_log, simulate  # noqa: E402
 
 LEFT, RIGHT = "wheel_left_joint", "wheel_right_joint"
-POSE_TYPE = {
-    "pose": "geometry_msgs/msg/PoseStamped",
-    "pose_cov": "geometry_msgs/msg/PoseWithCovarianceStamped",
-    "odom": "nav_msgs/msg/Odometry",
-}
-STORAGES = ["sqlite3", "sqlite3-file", "mcap", "mcap-file", "ros1"]
+BAG_STORAGES = ["sqlite3", "sqlite3-file", "mcap", "mcap-file", "ros1"]
 TF_MSG = "geometry_msgs/TransformStamped[] transforms\n"
+Messages = Callable[[BagWriter], list[tuple[str, float, object]]]
 
 
 @pytest.fixture(scope="module")
@@ -43,89 +43,56 @@ def log() -> TimeSeries:
     return TimeSeries(ts.t_enc, ts.phi_L, ts.phi_R, ts.t_pose, ts.x, ts.y, theta)
 
 
-class Messages:
-    """Builds messages of one typestore (ROS 2 or ROS 1: the ROS 1 Header has a seq)."""
-
-    def __init__(self, ros1: bool) -> None:
-        self.store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.LATEST)
-        if ros1:  # the noetic store lacks tf2_msgs: register its definition
-            self.store.register(get_types_from_msg(TF_MSG, "tf2_msgs/msg/TFMessage"))
-        self.ros1 = ros1
-        self.types = self.store.types
-
-    def serialize(self, msg) -> bytes:
-        if self.ros1:
-            return self.store.serialize_ros1(msg, msg.__msgtype__)
-        return self.store.serialize_cdr(msg, msg.__msgtype__)
-
-    def header(self, t: float, frame: str):
-        ns = int(round(t * 1e9))
-        stamp = self.types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
-        extra = {"seq": 0} if self.ros1 else {}
-        return self.types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame, **extra)
-
-    def joints(self, t: float, names: list[str], positions: list[float]):
-        empty = np.zeros(0)
-        return self.types["sensor_msgs/msg/JointState"](
-            header=self.header(t, ""), name=names, position=np.array(positions),
-            velocity=empty, effort=empty)
-
-    def pose(self, x: float, y: float, theta: float):
-        T = self.types
-        return T["geometry_msgs/msg/Pose"](
-            position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.1),
-            orientation=T["geometry_msgs/msg/Quaternion"](
-                x=0.0, y=0.0, z=math.sin(theta / 2), w=math.cos(theta / 2)))
-
-    def pose_message(self, kind: str, t: float, x: float, y: float, theta: float):
-        T, header, pose = self.types, self.header(t, "map"), self.pose(x, y, theta)
-        covariant = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose,
-                                                              covariance=np.zeros(36))
-        if kind == "pose":
-            return T["geometry_msgs/msg/PoseStamped"](header=header, pose=pose)
-        if kind == "pose_cov":
-            return T["geometry_msgs/msg/PoseWithCovarianceStamped"](header=header,
-                                                                    pose=covariant)
-        vector = T["geometry_msgs/msg/Vector3"]
-        twist = T["geometry_msgs/msg/Twist"](linear=vector(x=0.0, y=0.0, z=0.0),
-                                             angular=vector(x=0.0, y=0.0, z=0.0))
-        return T["nav_msgs/msg/Odometry"](
-            header=header, child_frame_id="lidar", pose=covariant,
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist,
-                                                             covariance=np.zeros(36)))
-
-    def transforms(self, entries: list[tuple[float, str, str, float, float, float]]):
-        T = self.types
-        out = []
-        for t, parent, child, x, y, theta in entries:
-            q = self.pose(x, y, theta).orientation
-            out.append(T["geometry_msgs/msg/TransformStamped"](
-                header=self.header(t, parent), child_frame_id=child,
-                transform=T["geometry_msgs/msg/Transform"](
-                    translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.1), rotation=q)))
-        return T["tf2_msgs/msg/TFMessage"](transforms=out)
+def pose_message(bag: BagWriter, kind: str, t: float, x: float, y: float, theta: float):
+    """A pose message of one supported kind (pose, pose_cov, odom) in the map frame."""
+    if kind == "pose":
+        return bag.pose_stamped(t, x, y, theta)
+    T, header, pose = bag.types, bag.header(t, "map"), bag.pose(x, y, theta)
+    covariant = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36))
+    if kind == "pose_cov":
+        return T["geometry_msgs/msg/PoseWithCovarianceStamped"](header=header, pose=covariant)
+    vector = T["geometry_msgs/msg/Vector3"]
+    twist = T["geometry_msgs/msg/Twist"](linear=vector(x=0.0, y=0.0, z=0.0),
+                                         angular=vector(x=0.0, y=0.0, z=0.0))
+    return T["nav_msgs/msg/Odometry"](
+        header=header, child_frame_id="lidar", pose=covariant,
+        twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)))
 
 
-def log_messages(m: Messages, ts: TimeSeries, pose_kind: str) -> list[tuple[str, float, object]]:
+def transforms(bag: BagWriter, entries: list[tuple[float, str, str, float, float, float]]):
+    """A TFMessage of (stamp, parent, child, x, y, yaw) transforms."""
+    T = bag.types
+    out = []
+    for t, parent, child, x, y, theta in entries:
+        out.append(T["geometry_msgs/msg/TransformStamped"](
+            header=bag.header(t, parent), child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.1),
+                rotation=bag.pose(x, y, theta).orientation)))
+    return T["tf2_msgs/msg/TFMessage"](transforms=out)
+
+
+def log_messages(bag: BagWriter, ts: TimeSeries,
+                 pose_kind: str) -> list[tuple[str, float, object]]:
     """(topic, receive time, message) in receive order: receive times lag the header stamps by
     4-7 ms; joints in varying order, with extra joints and messages lacking a wheel."""
     out: list[tuple[str, float, object]] = []
     for i, (t, left, right) in enumerate(zip(ts.t_enc, ts.phi_L, ts.phi_R, strict=True)):
         names, positions = ([LEFT, "caster", RIGHT], [left, 0.5, right]) if i % 2 else (
             [RIGHT, LEFT], [right, left])
-        out.append(("/joint_states", t + 0.004 + 0.003 * (i % 3 == 0), m.joints(t, names,
-                                                                                  positions)))
+        out.append(("/joint_states", t + 0.004 + 0.003 * (i % 3 == 0),
+                    bag.joint_state(t, names, positions)))
         if i % 25 == 0:
-            out.append(("/joint_states", t + 0.001, m.joints(t + 0.001, ["arm"], [1.0])))
-    frame = "/" if m.ros1 else ""
+            out.append(("/joint_states", t + 0.001, bag.joint_state(t + 0.001, ["arm"], [1.0])))
+    frame = "/" if bag.ros1 else ""
     for t, x, y, theta in zip(ts.t_pose, ts.x, ts.y, ts.theta, strict=True):
         if pose_kind == "tf":
-            message = m.transforms([(t, f"{frame}map", f"{frame}odom", 0.0, 0.0, 0.0),
-                                    (t, f"{frame}odom", f"{frame}lidar", x, y, theta)])
+            message = transforms(bag, [(t, f"{frame}map", f"{frame}odom", 0.0, 0.0, 0.0),
+                                       (t, f"{frame}odom", f"{frame}lidar", x, y, theta)])
             out.append(("/tf", t + 0.006, message))
         else:
-            out.append(("/sensor_pose", t + 0.005, m.pose_message(pose_kind, t, x, y, theta)))
-    out.append(("/imu_like", ts.t_enc[0], m.joints(ts.t_enc[0], ["unrelated"], [0.0])))
+            out.append(("/sensor_pose", t + 0.005, pose_message(bag, pose_kind, t, x, y, theta)))
+    out.append(("/imu_like", ts.t_enc[0], bag.joint_state(ts.t_enc[0], ["unrelated"], [0.0])))
     return sorted(out, key=lambda item: item[1])
 
 
@@ -139,30 +106,21 @@ def bag_path(directory: Path, storage: str) -> Path:
     return bag
 
 
-def write_bag(directory: Path, storage: str,
-              messages: Callable[[Messages], list[tuple[str, float, object]]],
-              topics: dict[str, str] | None = None) -> Path:
+def make_bag(directory: Path, storage: str, messages: Messages,
+             topics: dict[str, str] | None = None) -> Path:
     """A real bag of ``storage`` holding ``messages`` (and connections for ``topics``, topic:
     type, even without messages); returns the path to read."""
     ros1 = storage == "ros1"
-    m = Messages(ros1)
-    items = messages(m)
     if ros1:
         directory.mkdir(parents=True, exist_ok=True)
-        writer = Writer1(bag_path(directory, storage))
-    else:
-        plugin = StoragePlugin.MCAP if storage.startswith("mcap") else StoragePlugin.SQLITE3
-        writer = Writer2(directory / f"log_{storage.split('-')[0]}", version=9,
-                         storage_plugin=plugin)
-    with writer:
-        connections = {topic: writer.add_connection(topic, msgtype, typestore=m.store)
-                       for topic, msgtype in (topics or {}).items()}
-        for topic, _, msg in items:
-            if topic not in connections:
-                connections[topic] = writer.add_connection(topic, msg.__msgtype__,
-                                                           typestore=m.store)
-        for topic, received, msg in items:
-            writer.write(connections[topic], int(round(received * 1e9)), m.serialize(msg))
+    with BagWriter(directory / ("log.bag" if ros1 else f"log_{storage.split('-')[0]}"),
+                   storage.split("-")[0]) as bag:
+        if ros1:  # the noetic store lacks tf2_msgs: register its definition
+            bag.store.register(get_types_from_msg(TF_MSG, "tf2_msgs/msg/TFMessage"))
+        for topic, msgtype in (topics or {}).items():
+            bag.add_topic(topic, msgtype)
+        for topic, received, msg in messages(bag):
+            bag.write(topic, received, msg)
     return bag_path(directory, storage)
 
 
@@ -175,10 +133,10 @@ def assert_same_log(ts: TimeSeries, expected: TimeSeries) -> None:
     np.testing.assert_allclose(ts.theta, expected.theta, rtol=0, atol=1e-13)
 
 
-@pytest.mark.parametrize("storage", STORAGES)
+@pytest.mark.parametrize("storage", BAG_STORAGES)
 @pytest.mark.parametrize("pose_kind", ["pose", "pose_cov", "odom", "tf"])
 def test_bags_read_back_the_simulated_log(tmp_path, log, storage, pose_kind):
-    path = write_bag(tmp_path, storage, lambda m: log_messages(m, log, pose_kind))
+    path = make_bag(tmp_path, storage, lambda bag: log_messages(bag, log, pose_kind))
     if pose_kind == "tf":
         ts = read_bag(path, LEFT, RIGHT, tf=("odom", "lidar"))
         assert ts.source == (f"{path} /joint_states", f"{path} /tf odom->lidar")
@@ -190,7 +148,7 @@ def test_bags_read_back_the_simulated_log(tmp_path, log, storage, pose_kind):
 
 
 def test_a_bag_segments_like_its_csv(tmp_path, log):
-    path = write_bag(tmp_path, "mcap", lambda m: log_messages(m, log, "odom"))
+    path = make_bag(tmp_path, "mcap", lambda bag: log_messages(bag, log, "odom"))
     from_bag = segment_timeseries(read_bag(path, LEFT, RIGHT, pose_topic="/sensor_pose"))
     from_memory = segment_timeseries(log)
     np.testing.assert_allclose(from_bag.segments.as_array(), from_memory.segments.as_array(),
@@ -199,10 +157,10 @@ def test_a_bag_segments_like_its_csv(tmp_path, log):
 
 def test_stamps_not_receive_times_order_the_streams(tmp_path, log):
     """Messages received out of stamp order are put in stamp order."""
-    def shuffled(m: Messages):
-        items = log_messages(m, log, "pose")
+    def shuffled(bag: BagWriter):
+        items = log_messages(bag, log, "pose")
         return [(topic, 5000.0 - received, msg) for topic, received, msg in items]
-    ts = read_bag(write_bag(tmp_path, "sqlite3", shuffled), LEFT, RIGHT,
+    ts = read_bag(make_bag(tmp_path, "sqlite3", shuffled), LEFT, RIGHT,
                   pose_topic="/sensor_pose")
     assert_same(ts, log, atol=1e-9)
 
@@ -213,7 +171,7 @@ def test_stamps_not_receive_times_order_the_streams(tmp_path, log):
 @pytest.fixture(scope="module")
 def good_bag(tmp_path_factory, log) -> Path:
     directory = tmp_path_factory.mktemp("bags")
-    return write_bag(directory, "sqlite3", lambda m: log_messages(m, log, "tf"))
+    return make_bag(directory, "sqlite3", lambda bag: log_messages(bag, log, "tf"))
 
 
 def one_line(error: pytest.ExceptionInfo) -> str:
@@ -276,9 +234,9 @@ def test_missing_path(tmp_path):
 @pytest.mark.parametrize("storage", ["sqlite3", "mcap", "ros1"])
 @pytest.mark.parametrize("with_topic", [False, True])
 def test_empty_bag(tmp_path, storage, with_topic):
-    def nothing(m: Messages):
+    def nothing(bag: BagWriter):
         return []
-    path = write_bag(tmp_path, storage, nothing,
+    path = make_bag(tmp_path, storage, nothing,
                      topics={"/joint_states": "sensor_msgs/msg/JointState"} if with_topic else {})
     with pytest.raises(DataError) as info:
         read_bag(path, LEFT, RIGHT, pose_topic="/pose")
@@ -286,25 +244,25 @@ def test_empty_bag(tmp_path, storage, with_topic):
 
 
 def test_stream_errors(tmp_path, log):
-    def short(m: Messages):
-        return [item for item in log_messages(m, log, "pose")
+    def short(bag: BagWriter):
+        return [item for item in log_messages(bag, log, "pose")
                 if item[0] != "/sensor_pose" or item[1] < log.t_pose[0] + 0.01]
     with pytest.raises(DataError, match=r"/sensor_pose: 1 pose sample\(s\); at least 2"):
-        read_bag(write_bag(tmp_path / "a", "mcap", short), LEFT, RIGHT,
+        read_bag(make_bag(tmp_path / "a", "mcap", short), LEFT, RIGHT,
                  pose_topic="/sensor_pose")
 
-    def repeated(m: Messages):
-        items = log_messages(m, log, "pose")
-        return items + [("/sensor_pose", 9999.0, m.pose_message("pose", log.t_pose[3], 0, 0, 0))]
+    def repeated(bag: BagWriter):
+        items = log_messages(bag, log, "pose")
+        return items + [("/sensor_pose", 9999.0, bag.pose_stamped(log.t_pose[3], 0, 0, 0))]
     with pytest.raises(DataError, match=r"/sensor_pose at t = .* time does not increase"):
-        read_bag(write_bag(tmp_path / "b", "mcap", repeated), LEFT, RIGHT,
+        read_bag(make_bag(tmp_path / "b", "mcap", repeated), LEFT, RIGHT,
                  pose_topic="/sensor_pose")
 
-    def unstamped(m: Messages):
-        return log_messages(m, log, "pose") + [
-            ("/joint_states", 9999.0, m.joints(0.0, [LEFT, RIGHT], [0.0, 0.0]))]
+    def unstamped(bag: BagWriter):
+        return log_messages(bag, log, "pose") + [
+            ("/joint_states", 9999.0, bag.joint_state(0.0, [LEFT, RIGHT], [0.0, 0.0]))]
     with pytest.raises(DataError, match="/joint_states: header stamps of zero"):
-        read_bag(write_bag(tmp_path / "c", "ros1", unstamped), LEFT, RIGHT,
+        read_bag(make_bag(tmp_path / "c", "ros1", unstamped), LEFT, RIGHT,
                  pose_topic="/sensor_pose")
 
 
@@ -320,3 +278,37 @@ def test_is_bag_path(tmp_path, good_bag):
     assert is_bag_path(good_bag) and is_bag_path(tmp_path / "x.bag")
     assert is_bag_path(tmp_path / "x.MCAP") and is_bag_path(tmp_path / "x.db3")
     assert not is_bag_path(tmp_path / "log.csv") and not is_bag_path(tmp_path)
+
+
+# --------------------------------------------------------------------------- write_bag
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_write_bag_reads_back(tmp_path, log, storage):
+    """JointState and PoseStamped with header stamps: the same log, theta to float precision
+    (it goes through a quaternion)."""
+    path = write_bag(tmp_path / ("log.bag" if storage == "ros1" else "log"), log,
+                     storage=storage, joint_states="/wheels", left_wheel=LEFT,
+                     right_wheel=RIGHT, pose_topic="/mocap")
+    assert is_bag_path(path)
+    assert_same_log(read_bag(path, LEFT, RIGHT, pose_topic="/mocap", joint_states="/wheels"),
+                    log)
+
+
+def test_write_bag_errors_are_one_line(tmp_path, log, monkeypatch):
+    with pytest.raises(DataError, match="unknown bag storage 'zip'; use one of sqlite3, mcap"):
+        write_bag(tmp_path / "a", log, storage="zip")
+    (tmp_path / "b").mkdir()
+    with pytest.raises(DataError) as info:
+        write_bag(tmp_path / "b", log)
+    assert one_line(info).startswith(f"{tmp_path / 'b'}: cannot write the bag (")
+    early = TimeSeries(log.t_enc - log.t_enc[0], log.phi_L, log.phi_R, log.t_pose, log.x,
+                       log.y, log.theta)
+    with pytest.raises(DataError, match="a ROS header stamp must be positive"):
+        write_bag(tmp_path / "c", early)
+    monkeypatch.setitem(sys.modules, "rosbags.rosbag2", None)
+    with pytest.raises(DataError) as info:
+        write_bag(tmp_path / "d", log)
+    assert one_line(info) == MISSING_WRITE_EXTRA == (
+        "writing bags needs the ros extra: pip install 'excite[ros]'")
+    assert not (tmp_path / "c").exists() and not (tmp_path / "d").exists()

@@ -1,14 +1,34 @@
 """``excite simulate``: drive a simulated robot with a protocol and write its log, with the
-hidden truth beside it."""
+hidden truth beside it.
+
+Formats: ``segments`` (the segment CSV of the env's segments), ``timeseries`` (one time-series
+CSV: encoder ticks at every physics tick, the sensor's noisy world pose at the recording's
+pose rate) or ``bag`` (the same streams as JointState and PoseStamped messages in a ROS bag).
+The truth JSON (``FILE.truth.json``, or ``OUT.truth.json`` for other names) holds the hidden
+robot and sensor mounting, the noise levels, the encoder resolution and ``calibrate_args``:
+the options ``excite calibrate`` needs to read the log.
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
+from typing import Any
 
+from excite.bags import (
+    BAG_SUFFIXES,
+    JOINT_STATES,
+    LEFT_WHEEL,
+    POSE_TOPIC,
+    RIGHT_WHEEL,
+    STORAGES,
+)
 from excite.commands.args import UsageError, env_id, positive_int, robot_preset
 from excite.registration import DEFAULT_ENV_ID
+
+FORMATS = ("segments", "timeseries", "bag")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -20,36 +40,127 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     sim.add_argument("--policy", metavar="PATH", help="policy file for --protocol learned")
     sim.add_argument("--robot", default="default", metavar="PRESET",
                      help="robot preset: default, turtlebot3, jackal, husky")
-    sim.add_argument("--out", required=True, metavar="FILE.csv",
-                     help="segment CSV; the hidden truth goes to FILE.truth.json")
+    sim.add_argument("--format", choices=FORMATS, default="segments",
+                     help="segments (default): the segment CSV; timeseries: a time-series "
+                     "CSV (encoder ticks, sensor poses); bag: a ROS bag of the same streams")
+    sim.add_argument("--storage", choices=STORAGES,
+                     help="bag storage (with --format bag): sqlite3 (default) or mcap "
+                     "(rosbag2, OUT is a directory), ros1 (OUT is a .bag file)")
+    sim.add_argument("--pose-noise", type=_pose_noise, metavar="SXY,STH",
+                     help="noise std of each recorded pose (m, rad; with --format timeseries "
+                     "or bag; default: the env's record_sigma_xy, record_sigma_theta)")
+    sim.add_argument("--out", required=True, metavar="FILE",
+                     help="the log (segment CSV, time-series CSV or bag); the hidden truth "
+                     "goes to FILE.truth.json")
     sim.set_defaults(handler=run)
 
 
+def _pose_noise(text: str) -> tuple[float, float]:
+    """--pose-noise SXY,STH: two finite numbers >= 0 (m, rad); 0 turns that noise off."""
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 2 or not all(0 <= v < math.inf for v in values):
+        raise argparse.ArgumentTypeError(f"must be SXY,STH: two finite numbers >= 0 (m, rad), "
+                                         f"got {text!r}")
+    return values[0], values[1]
+
+
+def _check_output(args: argparse.Namespace, out: Path) -> None:
+    """One-line UsageError for options that do not fit the format, or an output that cannot
+    be written."""
+    if not out.parent.is_dir():
+        raise UsageError(f"cannot write {out}: no such directory {out.parent}")
+    if args.storage is not None and args.format != "bag":
+        raise UsageError("--storage applies to --format bag")
+    if args.pose_noise is not None and args.format == "segments":
+        raise UsageError("--pose-noise applies to --format timeseries or bag (a segment log's "
+                         "noise is the env's sigma_xy, sigma_theta)")
+    if args.format != "bag":
+        return
+    if out.exists():
+        raise UsageError(f"{out} exists; a bag is never overwritten: remove it or choose "
+                         "another --out")
+    if args.storage == "ros1" and out.suffix.lower() != ".bag":
+        raise UsageError(f"--storage ros1 writes a .bag file: give --out NAME.bag, got {out}")
+    if args.storage != "ros1" and out.suffix.lower() in BAG_SUFFIXES:
+        raise UsageError(f"--storage {args.storage or STORAGES[0]} writes a rosbag2 directory: "
+                         f"give --out without the {out.suffix} suffix")
+
+
+def _truth_path(out: Path) -> Path:
+    return out.with_name(out.stem + ".truth.json") if out.suffix == ".csv" else Path(
+        f"{out}.truth.json")
+
+
+def _write_log(args: argparse.Namespace, out: Path, base: Any) -> tuple[dict[str, Any], str]:
+    """Write the log of the finished episode; returns the truth keys of the format and what
+    was written, in words."""
+    if args.format == "segments":
+        from excite.data import save_segments
+
+        save_segments(out, base.segments)
+        return {"calibrate_args": []}, f"{len(base.segments)} segments"
+    recording = base.recording
+    series = recording.series
+    truth = {"pose_noise": {"xy": float(recording.sigma[0]), "theta": float(recording.sigma[2])},
+             "pose_rate": base.recording_config.pose_hz}
+    if args.format == "timeseries":
+        from excite.timeseries import write_timeseries
+
+        write_timeseries(out, series, ticks_per_rev=recording.ticks_per_rev)
+        calibrate_args = ["--ticks-per-rev", str(recording.ticks_per_rev)]
+    else:
+        from excite.bags import write_bag
+
+        storage = args.storage or STORAGES[0]
+        write_bag(out, series, storage=storage)
+        truth["storage"] = storage
+        calibrate_args = ["--joint-states", JOINT_STATES, "--left-wheel", LEFT_WHEEL,
+                          "--right-wheel", RIGHT_WHEEL, "--pose-topic", POSE_TOPIC]
+    duration = series.t_enc[-1] - series.t_enc[0]
+    what = (f"a {duration:.6g} s log ({series.t_enc.size} encoder samples, {series.t_pose.size} "
+            f"sensor poses)")
+    return {**truth, "calibrate_args": calibrate_args}, what
+
+
 def run(args: argparse.Namespace) -> int:
+    import gymnasium as gym
     import numpy as np
 
     from agents.catalog import make_protocol
-    from agents.compare import make_env, run_protocol_episode
-    from excite.data import save_segments
+    from agents.compare import run_protocol_episode
 
     env = env_id(args.env)
     robot = robot_preset(args.robot)
     protocol = make_protocol(args.protocol, args.policy)
     out = Path(args.out)
-    if not out.parent.is_dir():
-        raise UsageError(f"cannot write {out}: no such directory {out.parent}")
-    env_ = make_env(env, args.segments, robot)
+    _check_output(args, out)
+    recording: dict[str, Any] = {}
+    if args.format != "segments":
+        recording["record"] = True
+        if args.pose_noise is not None:
+            recording["record_sigma_xy"], recording["record_sigma_theta"] = args.pose_noise
+    env_ = gym.make(env, budget=args.segments, max_episode_steps=args.segments, robot=robot,
+                    **recording)
     records = run_protocol_episode(env_, protocol, args.seed)
     base = env_.unwrapped
-    save_segments(out, base.segments)
+    written, what = _write_log(args, out, base)
+    mount = base.true_sensor_pose
     truth = {**dict(zip(("r_L", "r_R", "b"), base.true_params.as_array().tolist(), strict=True)),
              "robot": {k: float(v) for k, v in vars(base.robot).items()},
              "sigma": dict(zip(("x", "y", "theta"), base.sigma.tolist(), strict=True)),
              "env": env, "protocol": args.protocol, "seed": args.seed,
              "segments": len(records),
-             "collisions": int(np.sum([r["collision"] for r in records]))}
-    truth_path = out.with_name(out.stem + ".truth.json") if out.suffix == ".csv" else Path(
-        f"{out}.truth.json")
+             "collisions": int(np.sum([r["collision"] for r in records])),
+             "format": args.format,
+             "sensor_pose": dict(zip(("x", "y", "theta"), [0.0, 0.0, 0.0] if mount is None
+                                     else mount.as_array().tolist(), strict=True)),
+             "ticks_per_rev": base.sim.encoders.ticks_per_rev,
+             **written}
+    truth_path = _truth_path(out)
     truth_path.write_text(json.dumps(truth, indent=2) + "\n")
-    print(f"wrote {len(records)} segments to {out} and the hidden truth to {truth_path}")
+    print(f"wrote {what} to {out} and the hidden truth to {truth_path}")
     return 0

@@ -1,0 +1,94 @@
+"""excite calibrate / segment on time-series logs through the command line: real files on
+disk, synthetic logs with a known robot and an off-axle sensor."""
+
+import json
+
+import numpy as np
+import pytest
+
+from excite.cli import main
+from excite.data import load_segments
+from excite.kinematics import Params
+from excite.models import SensorPose
+from excite.synthetic import synthetic_log
+from excite.timeseries import write_timeseries
+
+TRUTH = Params(0.050, 0.051, 0.300)
+SENSOR = SensorPose(0.1, -0.03, 0.4)
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("logs")
+    paths = []
+    for seed in range(3):
+        log = synthetic_log(np.random.default_rng(seed), 90, TRUTH, SENSOR,
+                            pose_noise=(0.002, 0.002), slip=0.005)
+        path = directory / f"log{seed}.csv"
+        write_timeseries(path, log.series)
+        paths.append(str(path))
+    return paths
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_calibrate_a_log_recovers_the_robot_and_the_sensor(capsys, logs):
+    code, out, _ = run(capsys, "calibrate", logs[0], "--json")
+    assert code == 0
+    report = json.loads(out)
+    assert report["model"] == "sensor_pose"
+    values = [report["params"][k] for k in ("r_L", "r_R", "b")]
+    std = [report["std"][k] for k in ("r_L", "r_R", "b")]
+    assert np.all(np.abs(np.array(values) - TRUTH.as_array()) < 5 * np.array(std))
+    pose = report["sensor_pose"]
+    assert abs(pose["x"] - SENSOR.x) < 0.01 and abs(pose["theta"] - SENSOR.theta) < 0.01
+    assert report["pose_sigma"] is not None  # the shared pose samples are modelled
+    assert report["inputs"][0].startswith(logs[0])
+
+
+def test_segment_writes_times_and_calibrate_reads_them_back(capsys, logs, tmp_path):
+    out_csv = tmp_path / "segments.csv"
+    code, out, err = run(capsys, "segment", logs[0], "--out", str(out_csv))
+    assert code == 0 and "segments" in out and "one arc" in err
+    segments = load_segments(out_csv)
+    assert segments.t_start is not None and segments.chained[1:].all()
+    code, out, _ = run(capsys, "calibrate", str(out_csv), "--json")
+    assert json.loads(out)["pose_sigma"] is not None
+
+
+def test_holdout_validates_on_the_logs_kept_back(capsys, logs):
+    code, out, _ = run(capsys, "calibrate", *logs, "--holdout", "0.3", "--init",
+                       "0.0525,0.0485,0.31", "--json")
+    assert code == 0
+    report = json.loads(out)
+    assert len(report["inputs"]) == 2 and len(report["holdout"]["logs"]) == 1
+    assert report["holdout"]["overall"]["ratio"]["end_position_error"] < 0.3
+    assert report["nominal"] == {"r_L": 0.0525, "r_R": 0.0485, "b": 0.31}
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--holdout", "0.3"], "--init"),
+    (["--holdout", "0.3", "--init", "0.05,0.05,0.3", "--window", "0"], "--window"),
+    (["--time-offset", "soon"], "--time-offset"),
+    (["--tf", "map"], "--tf"),
+])
+def test_bad_options_are_one_line_errors(capsys, logs, extra, message):
+    code, _, err = run(capsys, "calibrate", logs[0], *extra)
+    assert code == 2 and message in err and err.count("\n") == 1
+
+
+def test_a_lone_stream_file_names_what_is_missing(capsys, tmp_path):
+    encoders = tmp_path / "enc.csv"
+    encoders.write_text("t,phi_L,phi_R\n0,0,0\n1,1,1\n")
+    code, _, err = run(capsys, "calibrate", str(encoders))
+    assert code == 2 and "only the encoder stream" in err
+
+
+def test_holdout_needs_two_logs(capsys, logs):
+    code, _, err = run(capsys, "calibrate", logs[0], "--holdout", "0.3", "--init",
+                       "0.05,0.05,0.3")
+    assert code == 2 and "at least 2" in err
