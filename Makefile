@@ -4,7 +4,7 @@ PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
-.PHONY: install demo test bench lint clean
+.PHONY: install demo test test-core bench lint clean
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -18,9 +18,17 @@ demo: $(STAMP)
 	$(VENV)/bin/excite compare --episodes 100 --out demo_out
 	@echo "plots and tables: demo_out/ (summary.json, segments.csv, *.png)"
 
-test: $(STAMP)
+test: $(STAMP) test-core
 	$(VENV)/bin/ruff check excite envs agents tests benchmarks
 	$(PY) -m pytest -n 2 tests
+
+# A core-only install (numpy, scipy; no extras) in its own venv runs calibrate/segment/validate.
+CORE_VENV := .venv-core
+test-core:
+	$(PYTHON) -m venv $(CORE_VENV)
+	$(CORE_VENV)/bin/python -m pip install -q --upgrade pip
+	$(CORE_VENV)/bin/python -m pip install -q -c constraints.txt .
+	$(CORE_VENV)/bin/python tests/core_only.py
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
@@ -29,4 +37,4 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check excite envs agents tests benchmarks
 
 clean:
-	rm -rf $(VENV) demo_out .pytest_cache .hypothesis
+	rm -rf $(VENV) $(CORE_VENV) demo_out .pytest_cache .hypothesis

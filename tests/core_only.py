@@ -1,0 +1,68 @@
+"""A core-only install (numpy, scipy) runs excite calibrate, segment and validate on CSVs.
+
+Run by ``make test-core`` in its own virtual environment with ``pip install .`` (no extras);
+not collected by pytest. Exits non-zero on the first failure.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+import tempfile
+from contextlib import redirect_stdout
+from io import StringIO
+from pathlib import Path
+
+import numpy as np
+
+from excite.cli import main
+from excite.kinematics import Params
+from excite.models import SensorPose
+from excite.synthetic import synthetic_log
+from excite.timeseries import write_timeseries
+
+
+def check(condition: bool, what: str) -> None:
+    if not condition:
+        sys.exit(f"core-only check failed: {what}")
+    print(f"ok: {what}")
+
+
+def run(*argv: str) -> tuple[int, str]:
+    out = StringIO()
+    with redirect_stdout(out):
+        code = main(list(argv))
+    return code, out.getvalue()
+
+
+def core_only() -> None:
+    for extra in ("gymnasium", "pymunk", "matplotlib", "rosbags", "stable_baselines3"):
+        check(importlib.util.find_spec(extra) is None, f"{extra} is not installed")
+    with tempfile.TemporaryDirectory() as tmp:
+        directory = Path(tmp)
+        truth = Params(0.050, 0.051, 0.300)
+        for seed in range(2):
+            log = synthetic_log(np.random.default_rng(seed), 60, truth, SensorPose(0.1, 0, 0.3),
+                                pose_noise=(0.002, 0.002))
+            write_timeseries(directory / f"log{seed}.csv", log.series)
+        code, out = run("calibrate", str(directory / "log0.csv"), "--json")
+        check(code == 0, "excite calibrate on a time-series CSV")
+        (directory / "result.json").write_text(out)
+        code, _ = run("segment", str(directory / "log0.csv"), "--out",
+                      str(directory / "segments.csv"))
+        check(code == 0, "excite segment")
+        code, _ = run("calibrate", str(directory / "segments.csv"))
+        check(code == 0, "excite calibrate on a segment CSV")
+        code, out = run("validate", str(directory / "log1.csv"), "--params",
+                        str(directory / "result.json"), "--nominal", "0.052,0.049,0.31",
+                        "--json")
+        check(code == 0 and json.loads(out)["overall"]["ratio"]["end_position_error"] < 1,
+              "excite validate")
+        code, _ = run("simulate", "--protocol", "spin", "--segments", "3", "--out",
+                      str(directory / "sim.csv"))
+        check(code == 2, "excite simulate says which extra it needs (exit 2)")
+
+
+if __name__ == "__main__":
+    core_only()
