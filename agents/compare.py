@@ -55,8 +55,10 @@ def episode_seed(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
 
 
-def make_env(env_id: str, segments: int, robot: str = "default") -> gym.Env:
-    return gym.make(env_id, budget=segments, max_episode_steps=segments, robot=robot)
+def make_env(env_id: str, segments: int, robot: str = "default", **config) -> gym.Env:
+    """The env ``env_id`` with a budget of ``segments``, the robot preset and further config
+    overrides."""
+    return gym.make(env_id, budget=segments, max_episode_steps=segments, robot=robot, **config)
 
 
 def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[dict]:

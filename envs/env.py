@@ -16,6 +16,7 @@ from envs.physics import DEFAULT_CHASSIS
 from envs.recording import Recorder, Recording, RecordingConfig
 from envs.robot import RobotSpec, robot_distribution
 from envs.simulation import Simulation, SimulationConfig
+from excite import se2
 from excite.data import Segments
 from excite.information import eigen_3x3, information_matrix
 from excite.kinematics import Params
@@ -376,9 +377,9 @@ class DiffDriveCalibEnv(gym.Env):
         back to the body with the estimated mounting."""
         if self._mount is None:
             return self.sim.pose_sensor.absolute(body_pose, self._sensor_rng)
-        sensor = _compose(body_pose, self._mount.as_array())
+        sensor = se2.compose(body_pose, self._mount.as_array())
         reading = self.sim.pose_sensor.absolute(sensor, self._sensor_rng)
-        return _compose(reading, _inverse(self._theta[3:6]))
+        return se2.compose(reading, se2.inverse(self._theta[3:6]))
 
     @property
     def estimate(self) -> Params:
@@ -535,14 +536,3 @@ def _eigen(information: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...
     lam, vec = np.linalg.eigh(information)
     return tuple(lam.tolist()), tuple(vec[:, 0].tolist())
 
-
-def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """SE(2) composition a (+) b of (x, y, theta) poses."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
-
-
-def _inverse(a: np.ndarray) -> np.ndarray:
-    """SE(2) inverse of an (x, y, theta) pose."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])

@@ -529,8 +529,8 @@ def calibrate(
     data = seg[keep] if trim else seg
     levels, whitener = None, None
     if given is None and data.chained is not None and data.chained.any():
-        levels, whitener = _correlated_noise(primary, data, start, loss, max_iterations, tol,
-                                             max_relative_std)
+        levels, whitener, start = _correlated_noise(primary, data, start, loss,
+                                                    max_iterations, tol, max_relative_std)
     fit_sigma = _UNIT_SIGMA if whitener is not None else given
 
     def fit(model: SegmentModel, theta0: FloatArray) -> _ModelFit:
@@ -583,10 +583,12 @@ def calibrate(
 
 def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, loss: Loss,
                       max_iterations: int, tol: float, max_relative_std: float
-                      ) -> tuple[NoiseLevels, ChainWhitener]:
+                      ) -> tuple[NoiseLevels, ChainWhitener, FloatArray]:
     """Noise levels of segments that share pose samples (:mod:`excite.noise`), estimated with
     the parameters: a fit with independent per-channel noise, then rounds of (estimate the
-    five levels from the residuals' moments, refit whitened) until the levels settle."""
+    five levels from the residuals' moments, refit whitened) until the levels settle.
+    Returns the levels, their whitener and the last fit's parameters (the start of the final
+    fit)."""
     settings = (loss, max_iterations, tol, max_relative_std)
     mf = _fit_model(model, data, start, None, *settings)
     floor = mf.problem.sigma_floor
@@ -599,7 +601,7 @@ def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, lo
         levels = new
         if settled:
             break
-    return levels, ChainWhitener(data, levels)
+    return levels, ChainWhitener(data, levels), mf.theta
 
 
 def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,

@@ -49,6 +49,8 @@ class NoiseLevels:
     pose: FloatArray
 
     def close_to(self, other: NoiseLevels, rtol: float) -> bool:
+        """Whether every level is within ``rtol`` of ``other``'s, or within 1e-3 of the
+        largest level (levels near 0 need not settle relatively)."""
         a = np.concatenate([self.sigma, self.pose])
         b = np.concatenate([other.sigma, other.pose])
         return bool(np.all(np.abs(a - b) <= rtol * np.maximum(np.abs(b), 1e-300)

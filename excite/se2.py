@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["compose", "between", "inverse"]
+__all__ = ["compose", "between", "inverse", "accumulate"]
 
 FloatArray = NDArray[np.float64]
 
@@ -38,3 +38,15 @@ def inverse(a: ArrayLike) -> FloatArray:
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     return np.stack([-c * a[..., 0] - s * a[..., 1], s * a[..., 0] - c * a[..., 1], -a[..., 2]],
                     axis=-1)
+
+
+def accumulate(dx: ArrayLike, dy: ArrayLike, dtheta: ArrayLike) -> FloatArray:
+    """0 (+) d_1 (+) d_2 (+) ... of increments d_k = (dx, dy, dtheta) (n,), each in the frame
+    of the pose before it: the n + 1 poses (n + 1, 3), the first the origin, theta continuous
+    (the cumulative heading, not wrapped)."""
+    dx, dy, dtheta = (np.asarray(a, dtype=float) for a in (dx, dy, dtheta))
+    theta = np.concatenate(([0.0], np.cumsum(dtheta)))
+    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
+    x = np.concatenate(([0.0], np.cumsum(c * dx - s * dy)))
+    y = np.concatenate(([0.0], np.cumsum(s * dx + c * dy)))
+    return np.column_stack([x, y, theta])

@@ -67,7 +67,6 @@ class Problem:
     def __init__(self, model: SegmentModel, segments: Segments,
                  whitener: ChainWhitener | None = None):
         self.model = model
-        self.segments = segments
         self.whitener = whitener
         self.substeps = segments.sub_dphi_L is not None
         if self.substeps:  # a segment of a log: the composition of its sub-steps

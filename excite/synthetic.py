@@ -12,7 +12,7 @@ from excite.data import Segments
 from excite.information import DEFAULT_SIGMA, as_sigma
 from excite.kinematics import Params, predict_increment
 from excite.models import SensorPose
-from excite.timeseries import TimeSeries
+from excite.timeseries import TimeSeries, tick_angle
 
 __all__ = ["LESSON_TRUTH", "lesson_dataset", "SyntheticLog", "synthetic_log"]
 
@@ -103,16 +103,12 @@ def synthetic_log(
     enc_L, enc_R = rate_L * step, rate_R * step
     ground_L = enc_L + slip * np.sqrt(step) * rng.normal(size=n)
     ground_R = enc_R + slip * np.sqrt(step) * rng.normal(size=n)
-    dx, dy, dth = predict_increment(ground_L, ground_R, params)
-    theta = rng.uniform(-np.pi, np.pi) + np.concatenate(([0.0], np.cumsum(dth)))
-    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
-    x = np.concatenate(([0.0], np.cumsum(c * dx - s * dy)))
-    y = np.concatenate(([0.0], np.cumsum(s * dx + c * dy)))
-    body = np.column_stack([x, y, theta])
+    start = np.array([0.0, 0.0, rng.uniform(-np.pi, np.pi)])
+    body = se2.compose(start, se2.accumulate(*predict_increment(ground_L, ground_R, params)))
     phi_L = rng.uniform(-10, 10) + np.concatenate(([0.0], np.cumsum(enc_L)))
     phi_R = rng.uniform(-10, 10) + np.concatenate(([0.0], np.cumsum(enc_R)))
     if ticks_per_rev is not None:
-        tick = 2.0 * np.pi / ticks_per_rev
+        tick = tick_angle(ticks_per_rev)
         phi_L, phi_R = np.floor(phi_L / tick) * tick, np.floor(phi_R / tick) * tick
     e = slice(0, None, max(1, int(round(1.0 / (encoder_rate * step)))))
     p = slice(0, None, max(1, int(round(1.0 / (pose_rate * step)))))

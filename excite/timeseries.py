@@ -74,6 +74,7 @@ __all__ = [
     "TimeSeries",
     "estimate_time_offset",
     "is_timeseries_csv",
+    "tick_angle",
     "timeseries_streams",
     "read_timeseries",
     "write_timeseries",
@@ -410,6 +411,14 @@ def _pick_streams(tables: list[_Table]) -> tuple[_Table, _Table]:
     return encoders[0], poses[0]
 
 
+def tick_angle(ticks_per_rev: float) -> float:
+    """The angle of one encoder tick, 2 pi / ticks_per_rev (rad); DataError unless
+    ticks_per_rev is positive and finite."""
+    if not 0 < ticks_per_rev < math.inf:
+        raise DataError(f"ticks_per_rev must be positive and finite, got {ticks_per_rev}")
+    return 2.0 * math.pi / ticks_per_rev
+
+
 def _encoder_angles(table: _Table, ticks_per_rev: float | None
                     ) -> tuple[list[FloatArray], IntArray]:
     """[t, phi_L, phi_R] (s, rad, rad) and lines; ticks become angles."""
@@ -421,7 +430,7 @@ def _encoder_angles(table: _Table, ticks_per_rev: float | None
             raise DataError(f"{table.name}:{table.header_line}: encoder ticks (ticks_L, "
                             "ticks_R) need the encoder resolution, ticks_per_rev "
                             "(--ticks-per-rev)")
-        scale = 2.0 * math.pi / ticks_per_rev
+        scale = tick_angle(ticks_per_rev)
         return [t, left * scale, right * scale], lines
     if ticks_per_rev is not None:
         raise DataError(f"{table.name}:{table.header_line}: ticks_per_rev given, but the "
@@ -446,8 +455,8 @@ def read_timeseries(paths: PathArg | Sequence[PathArg],
     cell count; text in a number; NaN or inf; time not strictly increasing in a stream; fewer
     than 2 samples in a stream.
     """
-    if ticks_per_rev is not None and not (0 < ticks_per_rev < math.inf):
-        raise DataError(f"ticks_per_rev must be positive and finite, got {ticks_per_rev}")
+    if ticks_per_rev is not None:
+        tick_angle(ticks_per_rev)  # checked before any file is read
     files = _path_list(paths)
     if not 1 <= len(files) <= 2:
         raise DataError(f"a time-series log is one CSV file or two (encoders and poses), "
@@ -476,9 +485,7 @@ def _encoder_cells(series: TimeSeries, ticks_per_rev: float | None
     angles = (series.phi_L, series.phi_R)
     if ticks_per_rev is None:
         return ANGLE_COLUMNS, [_float_cells(a) for a in angles]
-    if not 0 < ticks_per_rev < math.inf:
-        raise DataError(f"ticks_per_rev must be positive and finite, got {ticks_per_rev}")
-    scale = 2.0 * math.pi / ticks_per_rev
+    scale = tick_angle(ticks_per_rev)
     cells = []
     for name, angle in zip(ANGLE_COLUMNS, angles, strict=True):
         ticks = angle / scale

@@ -110,16 +110,6 @@ def _ratio(calibrated: float, nominal: float) -> float | None:
 # --------------------------------------------------------------------------- dead reckoning
 
 
-def _accumulate(dx: FloatArray, dy: FloatArray, dtheta: FloatArray) -> FloatArray:
-    """0 (+) d_1 (+) d_2 (+) ... for body-frame increments d_k = (dx, dy, dtheta) (m, m, rad):
-    the n + 1 poses (n + 1, 3), the first the origin, theta continuous."""
-    theta = np.concatenate(([0.0], np.cumsum(dtheta)))
-    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
-    x = np.concatenate(([0.0], np.cumsum(c * dx - s * dy)))
-    y = np.concatenate(([0.0], np.cumsum(s * dx + c * dy)))
-    return np.column_stack([x, y, theta])
-
-
 def _used_samples(series: TimeSeries, time_offset: float, name: str) -> IntArray:
     """Indices of the pose samples inside the encoder time range (contiguous, at least 2)."""
     t_pose = series.t_pose + time_offset
@@ -148,7 +138,7 @@ def dead_reckon(series: TimeSeries, time_offset: float, params: Params,
     grid = np.union1d(t_eval, inner)
     phi_L = np.interp(grid, t_enc, series.phi_L)
     phi_R = np.interp(grid, t_enc, series.phi_R)
-    path = _accumulate(*predict_increment(np.diff(phi_L), np.diff(phi_R), params))
+    path = se2.accumulate(*predict_increment(np.diff(phi_L), np.diff(phi_R), params))
     return path[np.searchsorted(grid, t_eval)]
 
 

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from excite import Params, Segments, predict_increment
+from excite.cli import main
 
 TRUTH = Params(0.050, 0.051, 0.300)
 
@@ -30,3 +31,17 @@ def spin_segments(rng, n=30, params=TRUTH, sigma=(2e-3, 2e-3, 1e-3)) -> Segments
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def run_cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_one_line_error(code, err, *fragments):
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("excite: error: "), err
+    for fragment in fragments:
+        assert fragment in lines[0]

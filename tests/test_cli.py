@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 
 from excite import save_segments
-from excite.cli import main
 from excite.synthetic import lesson_dataset
 
-from .conftest import TRUTH, spin_segments, straight_segments
+from .conftest import TRUTH, assert_one_line_error, run_cli, spin_segments, straight_segments
 
 
 @pytest.fixture
@@ -19,18 +18,6 @@ def good_csv(tmp_path, rng):
     return path
 
 
-def run_cli(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def assert_one_line_error(code, err, *fragments):
-    assert code == 2
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("excite: error: "), err
-    for fragment in fragments:
-        assert fragment in lines[0]
 
 
 def test_report_and_exit_zero(capsys, good_csv):

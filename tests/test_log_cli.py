@@ -6,12 +6,13 @@ import json
 import numpy as np
 import pytest
 
-from excite.cli import main
 from excite.data import load_segments
 from excite.kinematics import Params
 from excite.models import SensorPose
 from excite.synthetic import synthetic_log
 from excite.timeseries import write_timeseries
+
+from .conftest import run_cli
 
 TRUTH = Params(0.050, 0.051, 0.300)
 SENSOR = SensorPose(0.1, -0.03, 0.4)
@@ -30,14 +31,8 @@ def logs(tmp_path_factory):
     return paths
 
 
-def run(capsys, *argv):
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 def test_calibrate_a_log_recovers_the_robot_and_the_sensor(capsys, logs):
-    code, out, _ = run(capsys, "calibrate", logs[0], "--json")
+    code, out, _ = run_cli(capsys, "calibrate", logs[0], "--json")
     assert code == 0
     report = json.loads(out)
     assert report["model"] == "sensor_pose"
@@ -52,16 +47,16 @@ def test_calibrate_a_log_recovers_the_robot_and_the_sensor(capsys, logs):
 
 def test_segment_writes_times_and_calibrate_reads_them_back(capsys, logs, tmp_path):
     out_csv = tmp_path / "segments.csv"
-    code, out, err = run(capsys, "segment", logs[0], "--out", str(out_csv))
+    code, out, err = run_cli(capsys, "segment", logs[0], "--out", str(out_csv))
     assert code == 0 and "segments" in out and "one arc" in err
     segments = load_segments(out_csv)
     assert segments.t_start is not None and segments.chained[1:].all()
-    code, out, _ = run(capsys, "calibrate", str(out_csv), "--json")
+    code, out, _ = run_cli(capsys, "calibrate", str(out_csv), "--json")
     assert json.loads(out)["pose_sigma"] is not None
 
 
 def test_holdout_validates_on_the_logs_kept_back(capsys, logs):
-    code, out, _ = run(capsys, "calibrate", *logs, "--holdout", "0.3", "--init",
+    code, out, _ = run_cli(capsys, "calibrate", *logs, "--holdout", "0.3", "--init",
                        "0.0525,0.0485,0.31", "--json")
     assert code == 0
     report = json.loads(out)
@@ -77,18 +72,18 @@ def test_holdout_validates_on_the_logs_kept_back(capsys, logs):
     (["--tf", "map"], "--tf"),
 ])
 def test_bad_options_are_one_line_errors(capsys, logs, extra, message):
-    code, _, err = run(capsys, "calibrate", logs[0], *extra)
+    code, _, err = run_cli(capsys, "calibrate", logs[0], *extra)
     assert code == 2 and message in err and err.count("\n") == 1
 
 
 def test_a_lone_stream_file_names_what_is_missing(capsys, tmp_path):
     encoders = tmp_path / "enc.csv"
     encoders.write_text("t,phi_L,phi_R\n0,0,0\n1,1,1\n")
-    code, _, err = run(capsys, "calibrate", str(encoders))
+    code, _, err = run_cli(capsys, "calibrate", str(encoders))
     assert code == 2 and "only the encoder stream" in err
 
 
 def test_holdout_needs_two_logs(capsys, logs):
-    code, _, err = run(capsys, "calibrate", logs[0], "--holdout", "0.3", "--init",
+    code, _, err = run_cli(capsys, "calibrate", logs[0], "--holdout", "0.3", "--init",
                        "0.05,0.05,0.3")
     assert code == 2 and "at least 2" in err

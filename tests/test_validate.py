@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from excite import save_segments
-from excite.cli import main
 from excite.kinematics import Params
 from excite.models import SensorPose
 from excite.synthetic import synthetic_log
@@ -23,6 +22,8 @@ from excite.validation import (
     validate_log,
 )
 
+from .conftest import assert_one_line_error, run_cli
+
 NOMINAL = Params(0.050, 0.050, 0.300)
 #: The hidden robot: 5% off nominal on every parameter.
 TRUTH = Params(0.050 * 1.05, 0.050 * 0.95, 0.300 * 1.05)
@@ -30,18 +31,6 @@ SENSOR = SensorPose(0.12, -0.04, 0.3)
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
-def run_cli(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def assert_one_line_error(code, err, *fragments):
-    assert code == 2
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("excite: error: "), err
-    for fragment in fragments:
-        assert fragment in lines[0]
 
 
 def write_log(directory, name: str, series: TimeSeries) -> list[str]:

@@ -123,6 +123,12 @@ def _kind(path: str) -> tuple[str, frozenset[str]]:
     return ("timeseries" if streams else "segments"), streams
 
 
+def _lone_stream(path: str, streams: frozenset[str]) -> UsageError:
+    (only,) = streams
+    return UsageError(f"{path}: has only the {only} stream; give the file with the other "
+                      "stream right after it")
+
+
 def group_inputs(paths: Sequence[str]) -> list[Input]:
     """The data sets of the command line, in order (see the module docstring)."""
     inputs: list[Input] = []
@@ -132,9 +138,7 @@ def group_inputs(paths: Sequence[str]) -> list[Input]:
         if pending is not None:
             first, first_streams = pending
             if kind != "timeseries" or len(streams) != 1 or streams == first_streams:
-                (only,) = first_streams
-                raise UsageError(f"{first}: has only the {only} stream; give the file with "
-                                 "the other stream right after it")
+                raise _lone_stream(first, first_streams)
             inputs.append(Input("timeseries", (first, path)))
             pending = None
         elif kind == "timeseries" and len(streams) == 1:
@@ -142,9 +146,7 @@ def group_inputs(paths: Sequence[str]) -> list[Input]:
         else:
             inputs.append(Input(kind, (path,)))
     if pending is not None:
-        (only,) = pending[1]
-        raise UsageError(f"{pending[0]}: has only the {only} stream; give the file with the "
-                         "other stream right after it")
+        raise _lone_stream(*pending)
     return inputs
 
 

@@ -127,11 +127,10 @@ def _write_log(args: argparse.Namespace, out: Path, base: Any) -> tuple[dict[str
 
 
 def run(args: argparse.Namespace) -> int:
-    import gymnasium as gym
     import numpy as np
 
     from agents.catalog import make_protocol
-    from agents.compare import run_protocol_episode
+    from agents.compare import make_env, run_protocol_episode
 
     env = env_id(args.env)
     robot = robot_preset(args.robot)
@@ -143,8 +142,7 @@ def run(args: argparse.Namespace) -> int:
         recording["record"] = True
         if args.pose_noise is not None:
             recording["record_sigma_xy"], recording["record_sigma_theta"] = args.pose_noise
-    env_ = gym.make(env, budget=args.segments, max_episode_steps=args.segments, robot=robot,
-                    **recording)
+    env_ = make_env(env, args.segments, robot, **recording)
     records = run_protocol_episode(env_, protocol, args.seed)
     base = env_.unwrapped
     written, what = _write_log(args, out, base)
