@@ -24,8 +24,8 @@ from excite.errors import DataError
 from excite.information import as_sigma, inverse_information
 from excite.kinematics import Params
 from excite.models import AXLE, SENSOR_POSE, FixedSensorPoseModel, SegmentModel, SensorPose
-from excite.noise import ChainWhitener, NoiseLevels, estimate_noise
-from excite.solver import Fit, Loss, Problem, levenberg_marquardt, normal_system
+from excite.noise import ChainWhitener, NoiseLevels, moment_noise, reml_noise
+from excite.solver import Fit, Loss, Problem, complement, levenberg_marquardt, normal_system
 from excite.starts import (
     DEFAULT_NOMINAL,
     body_frame_estimate,
@@ -585,20 +585,23 @@ def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, lo
                       max_iterations: int, tol: float, max_relative_std: float
                       ) -> tuple[NoiseLevels, ChainWhitener, FloatArray]:
     """Noise levels of segments that share pose samples (:mod:`excite.noise`), estimated with
-    the parameters: a fit with independent per-channel noise, then rounds of (estimate the
-    five levels from the residuals' moments, refit whitened) until the levels settle.
-    Returns the levels, their whitener and the last fit's parameters (the start of the final
-    fit)."""
+    the parameters: a fit with independent per-channel noise gives the moment estimates, then
+    rounds of (restricted maximum likelihood of the levels at the fit, linearised; refit
+    whitened) until the levels settle. Returns the levels, their whitener and the last fit's
+    parameters (the start of the final fit)."""
     settings = (loss, max_iterations, tol, max_relative_std)
     mf = _fit_model(model, data, start, None, *settings)
     floor = mf.problem.sigma_floor
-    levels = estimate_noise(data, mf.fit.ev.residual, model.size, floor)
+    levels = moment_noise(data, mf.fit.ev.residual, model.size, floor)
+    plain = Problem(model, data)
     for _ in range(NOISE_ROUNDS):
-        whitener = ChainWhitener(data, levels)
-        mf = _fit_model(model, data, mf.theta, _UNIT_SIGMA, *settings, whitener)
-        new = estimate_noise(data, mf.fit.ev.residual, model.size, floor)
+        ev = plain.evaluate(mf.theta)
+        free = complement(mf.weak)
+        new = reml_noise(data, ev.raw, np.einsum("cpn,pm->cmn", ev.jac, free), levels, floor)
         settled = new.close_to(levels, NOISE_RTOL)
         levels = new
+        mf = _fit_model(model, data, mf.theta, _UNIT_SIGMA, *settings,
+                        ChainWhitener(data, levels))
         if settled:
             break
     return levels, ChainWhitener(data, levels), mf.theta

@@ -21,8 +21,10 @@ block tridiagonal over chains of segments that share their end and start samples
 
 :class:`ChainWhitener` factors C (banded Cholesky, bandwidth 5, O(N)) and whitens residuals
 and Jacobians, so that the weighted least-squares fit is the (linearised) maximum-likelihood
-fit under this model. :func:`estimate_noise` estimates the five noise levels from residuals by
-their lag-0 and lag-1 moments.
+fit under this model. :func:`reml_noise` estimates the five noise levels by restricted maximum
+likelihood (REML: the likelihood of the residuals with the fitted parameters integrated out, so
+the levels are not biased low by the fit), with the log-determinant of C from the same factor;
+:func:`moment_noise` gives its starting point from the residuals' lag-0 and lag-1 moments.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from numpy.typing import NDArray
 
 from excite.data import Segments
 
-__all__ = ["NoiseLevels", "ChainWhitener", "estimate_noise"]
+__all__ = ["NoiseLevels", "ChainWhitener", "moment_noise", "reml_noise"]
 
 FloatArray = NDArray[np.float64]
 _BAND = 5  # lower bandwidth of C in segment-major order (x, y, theta per segment)
@@ -104,6 +106,11 @@ class ChainWhitener:
         self._factor = cholesky_banded(band, lower=True)
         self.n = n
 
+    @property
+    def log_det(self) -> float:
+        """log det C (C in the units of the increments: m^2, rad^2)."""
+        return 2.0 * float(np.sum(np.log(self._factor[0])))
+
     def whiten(self, raw: FloatArray, jac: FloatArray | None
                ) -> tuple[FloatArray, FloatArray | None]:
         """L^-1 of residuals (3, N) and Jacobian rows (3, P, N), in the same layouts: the
@@ -123,8 +130,8 @@ class ChainWhitener:
         return white, out[:, 1:].reshape(n, 3, -1).transpose(1, 2, 0)
 
 
-def estimate_noise(segments: Segments, residual: FloatArray, n_parameters: int,
-                   floor: FloatArray) -> NoiseLevels:
+def moment_noise(segments: Segments, residual: FloatArray, n_parameters: int,
+                 floor: FloatArray) -> NoiseLevels:
     """The five noise levels from residuals (3, N) of a fit (predicted - measured), by moments:
     lag-1 products over chained pairs give the pose-sample levels (E r_th,k-1 r_th,k =
     -sth^2; E r_xy,k-1^T R(Delta_k-1) r_xy,k = -2 sxy^2), the lag-0 moments the rest; the
@@ -148,3 +155,49 @@ def estimate_noise(segments: Segments, residual: FloatArray, n_parameters: int,
                             2 * pxy2 + pth2 * np.mean(jy * jy), 2 * pth2])
     sigma = np.maximum(np.sqrt(np.maximum(seg2, 0.0)), floor)
     return NoiseLevels(sigma, np.sqrt(np.array([pxy2, pth2])))
+
+
+def _restricted_deviance(segments: Segments, levels: NoiseLevels, residual: FloatArray,
+                         jac: FloatArray) -> float:
+    """-2 log restricted likelihood (up to a constant) of residuals (3, N) with Jacobian rows
+    (3, P, N) of the linearised model: log det C + log det(J^T C^-1 J) + e^T C^-1 e, with e
+    the generalised least-squares residual (the parameters profiled out)."""
+    whitener = ChainWhitener(segments, levels)
+    white, white_jac = whitener.whiten(residual, jac)
+    w = white.T.reshape(-1)
+    a = white_jac.transpose(2, 0, 1).reshape(w.size, -1)
+    factor = np.linalg.cholesky(a.T @ a)  # J^T C^-1 J = G G^T
+    projected = np.linalg.solve(factor, a.T @ w)  # |G^-1 J^T C^-1 r|^2: the fitted part
+    return (whitener.log_det + 2.0 * float(np.sum(np.log(np.diag(factor))))
+            + float(w @ w - projected @ projected))
+
+
+def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
+               start: NoiseLevels, floor: FloatArray) -> NoiseLevels:
+    """The five noise levels maximising the restricted likelihood of the residuals (3, N)
+    (predicted - measured) of a fit whose Jacobian rows (3, P, N) span the fitted directions
+    (only the directions the data determine). Optimised over the logs of the levels from
+    ``start`` (L-BFGS-B); each level at least its floor: ``floor`` (3,) is (position,
+    position, heading) and floors the segment levels and (position, heading) the pose levels.
+    """
+    from scipy.optimize import minimize
+
+    lower = np.log(np.concatenate([floor, floor[[0, 2]]]))
+    u0 = np.maximum(np.log(np.maximum(np.concatenate([start.sigma, start.pose]), 1e-300)),
+                    lower)
+    spread = float(np.max(np.abs(residual))) if residual.size else 1.0
+    upper = np.full(5, np.log(max(10.0 * spread, 1e-300)))
+    u0 = np.minimum(u0, upper)
+
+    def levels_of(u: FloatArray) -> NoiseLevels:
+        sigma = np.exp(u)
+        return NoiseLevels(sigma[:3], sigma[3:])
+
+    def deviance(u: FloatArray) -> float:
+        try:
+            return _restricted_deviance(segments, levels_of(u), residual, jac)
+        except np.linalg.LinAlgError:  # C numerically not positive definite at the bounds
+            return 1e300  # finite: the optimiser's difference quotients stay numbers
+
+    result = minimize(deviance, u0, method="L-BFGS-B", bounds=list(zip(lower, upper, strict=True)))
+    return levels_of(result.x if result.fun <= deviance(u0) else u0)

@@ -21,7 +21,7 @@ from excite.models import SegmentModel
 from excite.noise import ChainWhitener
 
 __all__ = ["Loss", "HUBER_K", "Problem", "Evaluation", "System", "Fit", "solve_psd",
-           "damped_step", "levenberg_marquardt", "normal_system", "estimate_sigma"]
+           "complement", "damped_step", "levenberg_marquardt", "normal_system", "estimate_sigma"]
 
 FloatArray = NDArray[np.float64]
 Loss = Literal["linear", "huber"]
@@ -153,6 +153,14 @@ def normal_system(ev: Evaluation, sigma: FloatArray, loss: Loss) -> System:
     return System(info, gradient, huber_cost(z))
 
 
+def complement(directions: FloatArray) -> FloatArray:
+    """An orthonormal basis (P, P - k) of the complement of orthonormal directions (P, k)."""
+    p, k = directions.shape
+    if k == 0:
+        return np.eye(p)
+    return np.linalg.svd(np.eye(p) - directions @ directions.T)[0][:, :p - k]
+
+
 def solve_psd(a: FloatArray, rhs: FloatArray) -> FloatArray:
     """Solve a x = rhs for symmetric PSD a, ignoring numerically null directions."""
     lam, vec = np.linalg.eigh(a)
@@ -220,10 +228,8 @@ def levenberg_marquardt(
     system = normal_system(ev, sigma, loss)
     lam = 1e-3
 
-    free = None  # the directions the steps may take: the complement of ``frozen``
-    if frozen is not None:
-        free = np.linalg.svd(np.eye(frozen.shape[0]) - frozen @ frozen.T)[0][
-            :, :frozen.shape[0] - frozen.shape[1]]
+    # the directions the steps may take: the complement of ``frozen``
+    free = None if frozen is None else complement(frozen)
 
     def step_now(damping: float) -> FloatArray:
         return damped_step(ev, sigma, loss, damping, np.diag(system.information), free)

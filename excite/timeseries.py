@@ -104,9 +104,11 @@ OUTSIDE_ENCODERS, INSIDE_ENCODER_GAP = "outside the encoder time range", "inside
 DROPOUT_RATIO = 1.5
 #: Default max_gap, in median periods of the stream.
 GAP_RATIO = 3.0
-#: Target duration of a segment's sub-steps (s), and their most per segment (_substeps).
-SUBSTEP = 0.05
-MAX_SUBSTEPS = 64
+#: The most sub-steps per segment (_substeps); sub-steps are one encoder period long up to this.
+#: One arc per encoder period is dead reckoning at the encoder rate: coarser sub-steps (50 ms)
+#: left a systematic model error of ~1e-5 m per 1 s segment on curving paths, which biased the
+#: wheel radii by 1.7 standard deviations at 0.5 mm pose noise (benchmarks/bench_logs.py).
+MAX_SUBSTEPS = 256
 
 
 # --------------------------------------------------------------------------- the streams
@@ -911,12 +913,12 @@ def _increments(ts: TimeSeries, t_pose: FloatArray, start: IntArray, end: IntArr
 
 def _substeps(ts: TimeSeries, t_a: FloatArray, t_b: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Each segment's encoder sub-increments (N, K) over K equal sub-intervals of [t_a, t_b]
-    (s, encoder clock), zero-padded to the largest K: sub-intervals of about SUBSTEP s, never
-    shorter than the encoder period (within one the interpolated rates are constant), at most
-    MAX_SUBSTEPS. They sum to the segment's increments exactly."""
+    (s, encoder clock), zero-padded to the largest K: sub-intervals of about the (median)
+    encoder period (within one the interpolated rates are constant), at most MAX_SUBSTEPS.
+    They sum to the segment's increments exactly."""
     period = float(np.median(np.diff(ts.t_enc)))
     duration = t_b - t_a
-    count = np.clip(np.ceil(duration / max(SUBSTEP, period) - 1e-9), 1, MAX_SUBSTEPS)
+    count = np.clip(np.ceil(duration / period - 1e-9), 1, MAX_SUBSTEPS)
     count = count.astype(np.int64)
     j = np.arange(int(count.max()) + 1)
     times = t_a[:, None] + duration[:, None] * np.minimum(j / count[:, None], 1.0)
