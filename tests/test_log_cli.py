@@ -1,6 +1,7 @@
 """excite calibrate / segment on time-series logs through the command line: real files on
 disk, synthetic logs with a known robot and an off-axle sensor."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -87,3 +88,73 @@ def test_holdout_needs_two_logs(capsys, logs):
     code, _, err = run_cli(capsys, "calibrate", logs[0], "--holdout", "0.3", "--init",
                        "0.05,0.05,0.3")
     assert code == 2 and "at least 2" in err
+
+
+# -- acceptance: every bad input through the command line is one line naming file:line or topic
+
+GOOD_ROWS = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,5,5,0.25,0,0\n1.0,10,10,0.5,0,0\n"
+
+
+@pytest.mark.parametrize("text, extra, fragment", [
+    (GOOD_ROWS + "0.9,11,11,0.55,0,0\n", [], "log.csv:5: time does not increase"),
+    ("t,phi_L,phi_R,x,theta\n0,0,0,0,0\n", [], "log.csv:1: missing column y"),
+    (GOOD_ROWS + "1.5,nan,15,0.75,0,0\n", [], "log.csv:5: phi_L is not finite"),
+    ("t,ticks_L,ticks_R,x,y,theta\n0,0,0,0,0,0\n", [],
+     "log.csv:1: encoder ticks (ticks_L, ticks_R) need the encoder resolution"),
+])
+def test_bad_log_files_through_the_cli(capsys, tmp_path, text, extra, fragment):
+    path = tmp_path / "log.csv"
+    path.write_text(text)
+    code, out, err = run_cli(capsys, "calibrate", path, *extra)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert fragment in err and "Traceback" not in err
+
+
+def test_a_gap_longer_than_the_window_is_named(capsys, tmp_path):
+    rows = [f"{0.1 * i:.1f},{i},{i},{0.005 * i},0,0" for i in range(60) if not 20 < i < 40]
+    path = tmp_path / "log.csv"
+    path.write_text("t,phi_L,phi_R,x,y,theta\n" + "\n".join(rows) + "\n")
+    code, _, err = run_cli(capsys, "calibrate", path)
+    assert code == 2 and err.count("\n") == 1
+    assert f"{path}:23: gap of 2.000 s" in err and "longer than the window (1 s)" in err
+
+
+@pytest.fixture(scope="module")
+def bag_log():
+    series = synthetic_log(np.random.default_rng(7), 20, TRUTH, SENSOR,
+                           pose_noise=(0.001, 0.001)).series
+    # a ROS header stamp of 0 means "not set": the log starts at 1 s
+    return dataclasses.replace(series, t_enc=series.t_enc + 1.0, t_pose=series.t_pose + 1.0)
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap", "ros1"])
+@pytest.mark.parametrize("extra, fragment", [
+    (["--left-wheel", "front_left"], "/joint_states: no joint 'front_left'; joints present: "
+                                     "left_wheel_joint, right_wheel_joint"),
+    (["--pose-topic", "/joint_states"], "topic /joint_states has type "
+                                        "sensor_msgs/msg/JointState, not supported for poses"),
+    (["--pose-topic", "/odom"], "no topic /odom (poses); the bag has: /joint_states"),
+])
+def test_bad_bag_options_through_the_cli(capsys, tmp_path, bag_log, storage, extra, fragment):
+    from excite.bags import write_bag
+
+    path = tmp_path / ("log.bag" if storage == "ros1" else "log")
+    write_bag(path, bag_log, storage=storage)
+    options = {"--left-wheel": "left_wheel_joint", "--right-wheel": "right_wheel_joint",
+               "--pose-topic": "/pose"}
+    options.update(dict(zip(extra[::2], extra[1::2], strict=True)))
+    code, out, err = run_cli(capsys, "calibrate", path,
+                             *[item for pair in options.items() for item in pair])
+    assert code == 2 and out == "" and err.count("\n") == 1 and fragment in err
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap", "ros1"])
+def test_an_empty_bag_through_the_cli(capsys, tmp_path, storage):
+    from excite.bags import BagWriter
+
+    path = tmp_path / ("log.bag" if storage == "ros1" else "log")
+    with BagWriter(path, storage):
+        pass
+    code, _, err = run_cli(capsys, "calibrate", path, "--left-wheel", "l", "--right-wheel", "r",
+                           "--pose-topic", "/pose")
+    assert code == 2 and err.count("\n") == 1 and "empty bag (no messages)" in err
