@@ -2,6 +2,8 @@
 
 import pickle
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -310,3 +312,12 @@ def test_model_for_nominal_sizes():
     assert model_for(np.zeros(6)) is SENSOR_POSE
     with pytest.raises(EstimatorError, match="3 .axle. or 6"):
         model_for(np.zeros(4))
+
+
+def test_the_registry_is_light():
+    """A real robot's planner can pick an estimator without the simulator or scipy."""
+    code = ("import sys, excite.estimators; print(sorted(m.split('.')[0] for m in sys.modules "
+            "if m.split('.')[0] in {'gymnasium', 'pymunk', 'torch', 'scipy'}))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    assert proc.stdout.strip() == "[]"

@@ -1,9 +1,10 @@
 """Online estimators by name, for the environment's loop and the comparison (numpy/scipy
 only: no gymnasium or pymunk).
 
-Every estimator follows one protocol (:class:`Estimator`): ``update(dphi_L, dphi_R, dx, dy,
-dtheta)`` after each segment, then ``params`` (Params) and ``covariance``; an estimator of the
-sensor pose adds ``theta`` (all P parameters). The built-ins:
+Every estimator follows one protocol (:class:`excite.contracts.Estimator`):
+``update(dphi_L, dphi_R, dx, dy, dtheta)`` after each segment, then ``params`` (Params) and
+``covariance``; an estimator of the sensor pose adds ``theta`` (all P parameters). The
+built-ins:
 
 * ``online``: :class:`excite.OnlineEstimator`, the iterated information filter on
   log-parameters (the environment's default);
@@ -14,10 +15,10 @@ sensor pose adds ``theta`` (all P parameters). The built-ins:
 
 A spec names one: a built-in with optional ``:key=value`` settings (``window:size=20``,
 ``ekf:prior_std=0.01``; the keys are those of :data:`OPTIONS`), or ``module:factory``, a
-callable ``factory(nominal, sigma) -> estimator`` importable from ``module`` (the
-environment's ``estimator_factory`` signature: nominal is Params on the axle model and the
-six sensor-pose parameters when the sensor pose is estimated; sigma (sigma_x [m], sigma_y
-[m], sigma_theta [rad])).
+callable ``factory(nominal, sigma) -> estimator`` importable from ``module``
+(:data:`excite.contracts.EstimatorFactory`, the environment's ``estimator_factory``:
+nominal is Params on the axle model and the six sensor-pose parameters when the sensor pose
+is estimated; sigma (sigma_x [m], sigma_y [m], sigma_theta [rad])).
 """
 
 from __future__ import annotations
@@ -25,11 +26,11 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from excite.contracts import Estimator
 from excite.errors import EstimatorError
 from excite.estimators.ekf import ExtendedKalmanFilter
 from excite.estimators.window import SlidingWindowSmoother
@@ -40,8 +41,6 @@ from excite.online import OnlineEstimator
 __all__ = [
     "ESTIMATORS",
     "OPTIONS",
-    "Estimator",
-    "EstimatorFactory",
     "EstimatorSpec",
     "ExtendedKalmanFilter",
     "SlidingWindowSmoother",
@@ -50,22 +49,6 @@ __all__ = [
     "model_for",
 ]
 
-
-class Estimator(Protocol):
-    """What the environment and the comparison need of an online estimator."""
-
-    def update(self, dphi_L: float, dphi_R: float, dx: float, dy: float,
-               dtheta: float) -> None: ...
-
-    @property
-    def params(self) -> Params: ...
-
-    @property
-    def covariance(self) -> NDArray[np.float64]: ...
-
-
-#: factory(nominal, sigma) -> a fresh estimator (see the module doc).
-EstimatorFactory = Callable[[Params | NDArray[np.float64], NDArray[np.float64]], Estimator]
 
 #: The built-in estimators by name; each is constructed as cls(nominal, sigma=..., model=...).
 ESTIMATORS: dict[str, type] = {
