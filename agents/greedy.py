@@ -21,7 +21,7 @@ from agents.motion import (
     wheel_increments,
 )
 from agents.protocols import Protocol
-from envs.env import RobotKnowledge
+from excite.contracts import RobotKnowledge
 from excite.information import segment_information
 
 #: Relative score difference below which two commands count as equally informative.

@@ -14,7 +14,7 @@ import numpy as np
 
 from agents.catalog import ProtocolError
 from agents.protocols import Protocol
-from envs.env import RobotKnowledge
+from excite.contracts import RobotKnowledge
 
 
 class LearnedPolicy(Protocol):

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from envs.env import RobotKnowledge
-from envs.physics import DEFAULT_CHASSIS, Arena
+from excite.arena import DEFAULT_CHASSIS, Arena
+from excite.contracts import RobotKnowledge
 from excite.kinematics import Params, predict_increment
 
 #: Fractions of the segment at which the predicted footprint is checked.

@@ -16,7 +16,7 @@ from typing import ClassVar
 import numpy as np
 
 from agents.motion import SPEED_MARGIN, safe_actions, turn_to_center
-from envs.env import RobotKnowledge
+from excite.contracts import RobotKnowledge
 
 
 class Protocol(ABC):

@@ -4,44 +4,23 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from envs.physics import DEFAULT_CHASSIS
 from envs.recording import Recorder, Recording, RecordingConfig
 from envs.robot import RobotSpec, robot_distribution
 from envs.simulation import Simulation, SimulationConfig
 from excite import se2
+from excite.contracts import EstimatorFactory, RobotKnowledge
 from excite.data import Segments
 from excite.information import eigen_3x3, information_matrix
 from excite.kinematics import Params
 from excite.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose, body_to_sensor
 from excite.online import OnlineEstimator
 from excite.registration import DEFAULT_BUDGET
-
-
-class Estimator(Protocol):
-    """What the environment needs of an online estimator (OnlineEstimator implements it)."""
-
-    def update(self, dphi_L: float, dphi_R: float, dx: float, dy: float,
-               dtheta: float) -> None: ...
-
-    @property
-    def params(self) -> Params: ...
-
-    @property
-    def covariance(self) -> np.ndarray: ...
-
-
-#: estimator_factory(nominal, sensor sigma (sx, sy, sth)) -> a fresh estimator. nominal is
-#: the nominal robot's Params on the axle model, and the nominal parameter array
-#: (r_L, r_R, b, l_x, l_y, l_theta) when the env estimates the sensor pose.
-EstimatorFactory = Callable[[Params | np.ndarray, np.ndarray], Estimator]
 
 
 def default_estimator(nominal: Params | np.ndarray, sigma: np.ndarray) -> OnlineEstimator:
@@ -59,46 +38,6 @@ def observation_size(model: SegmentModel) -> int:
 
 #: The observation length on the axle model.
 OBS_SIZE = observation_size(AXLE)
-
-
-@dataclass(frozen=True)
-class RobotKnowledge:
-    """What the robot knows after n segments: everything a planner may use, never the truth.
-
-    observation: the env's observation vector. estimate: current estimate (m). information:
-    relative Fisher information of the log at the estimate (P x P). log: (n, 5) calibration
-    rows. pose: the body's measured world pose (x, y, theta). nominal: the nominal robot.
-    sigma: sensor noise (m, m, rad). max_wheel_speed: motor limit (rad/s); segment_duration
-    (s); arena_size (m); budget (segments); chassis: the nominal footprint (length, width, m).
-    model: the segment model; theta / nominal_theta:
-    the current estimate and the nominal values of all its P parameters.
-    """
-
-    observation: np.ndarray
-    estimate: Params
-    information: np.ndarray
-    log: np.ndarray
-    pose: np.ndarray
-    nominal: Params
-    sigma: np.ndarray
-    max_wheel_speed: float
-    segment_duration: float
-    arena_size: float
-    budget: int
-    model: SegmentModel = AXLE
-    chassis: tuple[float, float] = DEFAULT_CHASSIS
-    theta: np.ndarray | None = None
-    nominal_theta: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        if self.theta is None:
-            object.__setattr__(self, "theta", self.estimate.as_array())
-        if self.nominal_theta is None:
-            object.__setattr__(self, "nominal_theta", self.nominal.as_array())
-
-    @property
-    def n_segments(self) -> int:
-        return int(self.log.shape[0])
 
 
 class DiffDriveCalibEnv(gym.Env):

@@ -20,64 +20,19 @@ overlap, small against any chassis).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 import pymunk
 
-from envs.robot import DEFAULT_CHASSIS_SIZE, RobotSpec
+from envs.robot import RobotSpec
+from excite.arena import Arena
 from excite.kinematics import sinc_cosc_scalar, sinc_family
 
 GRAVITY = 9.81  # m/s^2
-#: m, (length, width) of the default robot's footprint: contains_footprint's default chassis.
-DEFAULT_CHASSIS = (DEFAULT_CHASSIS_SIZE, DEFAULT_CHASSIS_SIZE)
 WALL_RADIUS = 0.05  # m, half-thickness of the arena's wall segments
 SLIP_ITERATIONS = 6  # Gauss-Seidel sweeps over the two wheels when a friction cap binds
 _CHASSIS_TYPE, _WALL_TYPE = 1, 2  # pymunk collision types
-
-
-@dataclass(frozen=True)
-class Arena:
-    """Rectangular arena centred at the world origin; walls on its boundary.
-
-    The arena knows nothing of the robot: whether a robot fits is checked against its own
-    chassis (`contains_footprint`, `Simulation.reset`).
-
-    Attributes:
-        width: extent along world x (m).
-        height: extent along world y (m).
-    """
-
-    width: float = 4.0
-    height: float = 4.0
-
-    def __post_init__(self) -> None:
-        for name in ("width", "height"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"Arena.{name} must be finite and > 0, got {value}")
-
-    def contains_footprint(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray,
-                           margin: float | np.ndarray = 0.0,
-                           chassis: tuple[float, float] = DEFAULT_CHASSIS) -> np.ndarray:
-        """Whether the chassis footprint at poses (x, y, theta) is inside the walls, at least
-        ``margin`` (m, broadcast with the poses) away from them.
-
-        chassis: (length along body x, width along body y) of the rectangular footprint (m),
-        centred on the axle midpoint; the default robot's 0.36 m square by default (use
-        ``RobotSpec.chassis`` for another robot).
-        """
-        length, width = chassis
-        c, s = np.abs(np.cos(theta)), np.abs(np.sin(theta))
-        # Corner extent of the rectangle rotated by theta, along each world axis.
-        if length == width:  # a square: one product, as before presets existed
-            reach_x = reach_y = 0.5 * length * (c + s) + margin
-        else:
-            reach_x = 0.5 * (length * c + width * s) + margin
-            reach_y = 0.5 * (length * s + width * c) + margin
-        return (np.abs(x) + reach_x <= 0.5 * self.width) & (
-            np.abs(y) + reach_y <= 0.5 * self.height)
 
 
 class Drive(Protocol):

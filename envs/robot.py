@@ -14,8 +14,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-#: m, side of the default robot's square chassis footprint.
-DEFAULT_CHASSIS_SIZE = 0.36
+from excite.arena import DEFAULT_CHASSIS_SIZE
 
 
 def _require(condition: bool, message: str) -> None:

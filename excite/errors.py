@@ -3,7 +3,7 @@ purpose (bad data, bad settings) apart from programming errors."""
 
 from __future__ import annotations
 
-__all__ = ["ExciteError", "DataError"]
+__all__ = ["ExciteError", "DataError", "EstimatorError"]
 
 
 class ExciteError(Exception):
@@ -13,3 +13,8 @@ class ExciteError(Exception):
 class DataError(ExciteError, ValueError):
     """Malformed or insufficient data; the message names the file and line (or topic) where
     known."""
+
+
+class EstimatorError(ExciteError, ValueError):
+    """Bad estimator settings: an unknown estimator name, a ``module:factory`` that does not
+    import, or an invalid option (prior, window size, ...)."""

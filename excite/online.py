@@ -19,6 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from excite.errors import EstimatorError
 from excite.information import (
     DEFAULT_SIGMA,
     as_sigma,
@@ -29,18 +30,44 @@ from excite.information import (
 from excite.kinematics import Params, sinc_cosc_scalar
 from excite.models import AXLE, SegmentModel, SensorPose
 
-__all__ = ["OnlineEstimator"]
+__all__ = ["DEFAULT_PRIOR", "MAX_CHART_STEP", "OnlineEstimator", "as_prior_std", "initial_theta"]
 
 _TWO_PI = 2.0 * math.pi
 #: Trust region: one segment may change no parameter by more than a factor exp(0.5) (or an
 #: offset by 0.5 b, an angle by 0.5 rad).
-_MAX_LOG_STEP = 0.5
+MAX_CHART_STEP = 0.5
 #: A second Gauss–Newton iteration is taken only after a first step larger than this (in the
 #: chart's units): smaller steps change the linearization by far less than the posterior std.
 _RELINEARIZE = 1e-3
 #: Default prior std, relative to the chart (module doc of excite.models): 10% of a length,
 #: 0.1 b for an offset, 0.5 rad for an angle.
 DEFAULT_PRIOR = {"log": 0.1, "identity": 0.1, "angle": 0.5}
+
+
+def initial_theta(initial: Params | ArrayLike, model: SegmentModel) -> NDArray[np.float64]:
+    """An estimator's starting point as the model's P parameters (a flat float array):
+    Params gives (r_L, r_R, b) in m, then l_x, l_y [m], l_theta [rad] for the sensor-pose
+    model."""
+    theta = as_theta(initial).astype(float).reshape(-1)
+    if theta.size != model.size:
+        raise EstimatorError(f"initial must have the {model.size} parameters "
+                             f"{', '.join(model.names)}, got {theta.size} values")
+    return theta
+
+
+def as_prior_std(model: SegmentModel, initial: NDArray[np.float64],
+                 std: float | ArrayLike | None = None) -> NDArray[np.float64]:
+    """The prior standard deviation (P,) of each parameter in its own units (m, rad) around
+    ``initial`` (the P parameters): ``std`` a scalar for all or P values; None means
+    :data:`DEFAULT_PRIOR` in the chart's units (10% of each length, 0.1 b for offsets,
+    0.5 rad for angles)."""
+    if std is None:
+        out = np.array([DEFAULT_PRIOR[t] for t in model.transforms]) * model.column_scale(initial)
+    else:
+        out = np.broadcast_to(np.asarray(std, dtype=float), (model.size,))
+    if not np.all(np.isfinite(out)) or np.any(out <= 0):
+        raise EstimatorError(f"prior_std must be positive and finite, got {std}")
+    return out
 
 
 def _wrap(a: float) -> float:
@@ -94,10 +121,7 @@ class OnlineEstimator:
         iterations: int = 2,
         model: SegmentModel = AXLE,
     ):
-        theta = as_theta(initial).astype(float).reshape(-1)
-        if theta.size != model.size:
-            raise ValueError(f"initial must have the {model.size} parameters "
-                             f"{', '.join(model.names)}, got {theta.size} values")
+        theta = initial_theta(initial, model)
         self.model = model
         self.nominal = Params(*theta[:3])
         self._nominal_theta = theta
@@ -105,14 +129,9 @@ class OnlineEstimator:
         self._units = model.column_scale(theta).tolist()
         self._log = [t == "log" for t in model.transforms]
         chart_units = self._chart_derivative(theta.tolist())
-        if prior_std is None:
-            std = np.array([DEFAULT_PRIOR[t] for t in model.transforms]) * chart_units
-        else:
-            std = np.broadcast_to(np.asarray(prior_std, dtype=float), (model.size,))
-        if not np.all(np.isfinite(std)) or np.any(std <= 0):
-            raise ValueError(f"prior_std must be positive and finite, got {prior_std}")
+        std = as_prior_std(model, theta, prior_std)
         if iterations < 1:
-            raise ValueError("iterations must be at least 1")
+            raise EstimatorError("iterations must be at least 1")
         self.sigma = as_sigma(sigma)
         self._w = [float(x) for x in 1.0 / self.sigma**2]
         self._iterations = int(iterations)
@@ -155,8 +174,8 @@ class OnlineEstimator:
             except np.linalg.LinAlgError:
                 return
             largest = max(map(abs, step.tolist()))
-            if largest > _MAX_LOG_STEP:  # trust region
-                step *= _MAX_LOG_STEP / largest
+            if largest > MAX_CHART_STEP:  # trust region
+                step *= MAX_CHART_STEP / largest
             previous, x = x, q + step
             change = largest if iteration == 0 else max(map(abs, (x - previous).tolist()))
             if change < _RELINEARIZE:
@@ -199,8 +218,8 @@ class OnlineEstimator:
                                  x_1 * rx + y_1 * ry + t1 * rt,
                                  x_2 * rx + y_2 * ry + t2 * rt)
             largest = max(abs(s0), abs(s1), abs(s2))
-            if largest > _MAX_LOG_STEP:  # trust region
-                shrink = _MAX_LOG_STEP / largest
+            if largest > MAX_CHART_STEP:  # trust region
+                shrink = MAX_CHART_STEP / largest
                 s0, s1, s2 = s0 * shrink, s1 * shrink, s2 * shrink
             previous = (x0, x1, x2)
             x0, x1, x2 = q0 + s0, q1 + s1, q2 + s2

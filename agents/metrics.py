@@ -1,0 +1,240 @@
+"""The metrics a comparison is decided by, as pure functions over arrays (no I/O).
+
+Inputs are per-segment records: index k along the last axis is the state after segment
+k + 1 of an episode (K segments); episodes, when there are several, run along the first axis.
+
+* consistency: :func:`nees` and :func:`anees` (the normalised estimation error squared and
+  its average over episodes) with :func:`anees_bounds`, the two-sided chi-square interval a
+  consistent estimator's ANEES lies in;
+* :func:`time_to_accuracy`: segments, seconds and metres of driving until the max relative
+  error stays below a threshold, censored (inf, flagged) when it never does;
+* :func:`error_time_area`: the area under the max relative error over time;
+* :func:`paired_ratio`: one policy's median over another's on the same episodes, with a
+  paired percentile bootstrap 95% interval.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.integrate import trapezoid
+from scipy.stats import chi2
+
+from excite.errors import ExciteError
+
+__all__ = [
+    "CONFIDENCE",
+    "N_BOOT",
+    "MetricError",
+    "PairedRatio",
+    "TimeToAccuracy",
+    "anees",
+    "anees_bounds",
+    "error_time_area",
+    "nees",
+    "paired_ratio",
+    "time_to_accuracy",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Two-sided confidence of the ANEES bounds and the bootstrap intervals.
+CONFIDENCE = 0.95
+#: Bootstrap resamples of the episodes.
+N_BOOT = 2000
+
+
+class MetricError(ExciteError, ValueError):
+    """Arrays a metric cannot be computed from (shapes, thresholds, confidence levels)."""
+
+
+def _confidence(confidence: float) -> float:
+    if not 0.0 < confidence < 1.0:
+        raise MetricError(f"confidence must lie strictly between 0 and 1, got {confidence}")
+    return confidence
+
+
+def nees(errors: ArrayLike, covariances: ArrayLike) -> FloatArray:
+    """Normalised estimation error squared e^T C^-1 e of each estimate.
+
+    errors: (..., P) estimate minus truth, in the parameters' units (m, rad);
+    covariances: (..., P, P) the estimator's reported covariance of the same estimates.
+    Returns (...). A singular or non-finite covariance gives nan there (never a guess).
+    """
+    e = np.asarray(errors, dtype=float)
+    c = np.asarray(covariances, dtype=float)
+    if c.shape != e.shape + e.shape[-1:]:
+        raise MetricError(f"covariances must be shaped {e.shape + e.shape[-1:]} for errors "
+                          f"shaped {e.shape}, got {c.shape}")
+    out = np.full(e.shape[:-1], np.nan)
+    finite = np.all(np.isfinite(c), axis=(-2, -1)) & np.all(np.isfinite(e), axis=-1)
+    if np.any(finite):
+        ok_c, ok_e = c[finite], e[finite]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            full_rank = np.linalg.matrix_rank(ok_c, hermitian=True) == e.shape[-1]
+        values = np.full(ok_e.shape[0], np.nan)
+        if np.any(full_rank):
+            solved = np.linalg.solve(ok_c[full_rank], ok_e[full_rank][..., None])[..., 0]
+            values[full_rank] = np.einsum("np,np->n", ok_e[full_rank], solved)
+        out[finite] = values
+    return out
+
+
+def anees(errors: ArrayLike, covariances: ArrayLike) -> FloatArray:
+    """Average NEES over episodes, per segment.
+
+    errors: (M, K, P) estimate minus truth of M episodes after each of K segments;
+    covariances: (M, K, P, P). Returns (K,): nan where any episode's NEES is nan. A
+    consistent estimator's ANEES lies inside :func:`anees_bounds` (M, P); above means
+    over-confident, below under-confident.
+    """
+    values = nees(errors, covariances)
+    if values.ndim != 2:
+        raise MetricError(f"errors must be shaped (episodes, segments, parameters), got "
+                          f"{np.shape(errors)}")
+    return values.mean(axis=0)
+
+
+def anees_bounds(episodes: int, parameters: int,
+                 confidence: float = CONFIDENCE) -> tuple[float, float]:
+    """Two-sided chi-square interval of the ANEES of a consistent estimator: M times the
+    ANEES of M independent episodes is chi-square with M P degrees of freedom, so with
+    alpha = 1 - confidence the bounds are chi2.ppf(alpha / 2, M P) / M and
+    chi2.ppf(1 - alpha / 2, M P) / M (dimensionless)."""
+    if episodes < 1 or parameters < 1:
+        raise MetricError(f"need at least one episode and one parameter, got {episodes} "
+                          f"and {parameters}")
+    alpha = 1.0 - _confidence(confidence)
+    dof = episodes * parameters
+    return (float(chi2.ppf(0.5 * alpha, dof) / episodes),
+            float(chi2.ppf(1.0 - 0.5 * alpha, dof) / episodes))
+
+
+@dataclass(frozen=True)
+class TimeToAccuracy:
+    """How long until the error stays below a threshold, per episode (arrays shaped like the
+    inputs without their last axis).
+
+    segments: segments driven (k + 1 for the first index k after which the error stays
+        below), float; seconds, metres: the cumulative time (s) and distance (m) at that
+        segment's end (None when not asked for); censored: True where the error is not below
+        the threshold at the last segment (then every value is inf: not reached within the
+        record, which says nothing about later).
+    """
+
+    segments: FloatArray
+    seconds: FloatArray | None
+    metres: FloatArray | None
+    censored: NDArray[np.bool_]
+
+
+def _per_segment(name: str, values: ArrayLike | None, shape: tuple[int, ...]
+                 ) -> FloatArray | None:
+    if values is None:
+        return None
+    out = np.asarray(values, dtype=float)
+    if out.shape != shape:
+        raise MetricError(f"{name} must be shaped like the errors {shape}, got {out.shape}")
+    return out
+
+
+def time_to_accuracy(max_error: ArrayLike, threshold: float, time: ArrayLike | None = None,
+                     distance: ArrayLike | None = None) -> TimeToAccuracy:
+    """The first segment after which ``max_error`` stays strictly below ``threshold``.
+
+    max_error: (..., K) the max relative error over the parameters after each segment
+    (dimensionless; nan counts as not below); threshold: relative (0.005 for 0.5%); time,
+    distance: (..., K) cumulative seconds and metres driven at each segment's end.
+    Episodes whose last error is not below are censored: inf, flagged.
+
+    "Stays below" is judged on the record: an episode that ends below the threshold is
+    counted as reached. With one horizon for all episodes, every censored time exceeds
+    every reached one, so medians over episodes with inf for censored are exact as long as
+    fewer than half are censored (and inf otherwise: "not reached").
+    """
+    error = np.asarray(max_error, dtype=float)
+    if error.ndim < 1 or error.shape[-1] < 1:
+        raise MetricError("max_error needs at least one segment on its last axis")
+    if not threshold > 0.0:
+        raise MetricError(f"threshold must be positive, got {threshold}")
+    time_ = _per_segment("time", time, error.shape)
+    distance_ = _per_segment("distance", distance, error.shape)
+    below = error < threshold
+    # stays[..., k]: below at k and at every later segment.
+    stays = np.flip(np.logical_and.accumulate(np.flip(below, axis=-1), axis=-1), axis=-1)
+    censored = ~stays[..., -1]
+    first = np.argmax(stays, axis=-1)[..., None]
+
+    def at_first(values: FloatArray) -> FloatArray:
+        return np.where(censored, np.inf, np.take_along_axis(values, first, axis=-1)[..., 0])
+
+    return TimeToAccuracy(
+        segments=np.where(censored, np.inf, first[..., 0] + 1.0),
+        seconds=None if time_ is None else at_first(time_),
+        metres=None if distance_ is None else at_first(distance_),
+        censored=censored,
+    )
+
+
+def error_time_area(max_error: ArrayLike, time: ArrayLike) -> FloatArray:
+    """The area under the max relative error over time, by the trapezoid rule over the
+    samples given (relative error x s): (..., K) errors and cumulative times -> (...).
+
+    Prepend the start (time 0, the nominal robot's error) to count the first segment; compare
+    areas over one common horizon only (same segment budget and duration)."""
+    error = np.asarray(max_error, dtype=float)
+    t = _per_segment("time", time, error.shape)
+    return np.asarray(trapezoid(error, t, axis=-1), dtype=float)
+
+
+@dataclass(frozen=True)
+class PairedRatio:
+    """ratio = median(numerator) / median(denominator) over the same episodes, with its
+    percentile bootstrap interval ci = (low, high) at ``confidence``."""
+
+    ratio: float
+    ci: tuple[float, float]
+    confidence: float
+    n_boot: int
+
+
+def _ratio_of_medians(numerator: FloatArray, denominator: FloatArray) -> FloatArray:
+    """median / median along the last axis; inf / inf (both mostly censored) is nan."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.median(numerator, axis=-1) / np.median(denominator, axis=-1)
+
+
+def paired_ratio(numerator: ArrayLike, denominator: ArrayLike, rng: np.random.Generator,
+                 n_boot: int = N_BOOT, confidence: float = CONFIDENCE) -> PairedRatio:
+    """How one policy (numerator, e.g. learned) compares with a baseline (denominator) on the
+    same M episodes: the ratio of their medians, with a percentile bootstrap interval that
+    resamples the episodes in pairs (one index draw for both, so the robots they share cancel).
+
+    numerator, denominator: (M,) per-episode values of one metric (final error, time to
+    accuracy with inf for censored, error-time area, ...), episode i of both on the same
+    robot. rng: draws the resamples.
+
+    The ratio of medians rather than the median of per-episode ratios: a per-episode ratio
+    explodes when one baseline episode happens to land near zero error, is undefined for an
+    episode censored in both (inf / inf), and its median answers "how much better on a
+    typical robot" only for near-proportional metrics; the medians are robust, use censored
+    episodes correctly (an inf median means "not reached for most robots": ratio 0 or inf),
+    and the pairing is kept by the joint resampling. inf / inf is nan (undefined), and so
+    is an interval when any resample is undefined.
+    """
+    num = np.asarray(numerator, dtype=float)
+    den = np.asarray(denominator, dtype=float)
+    if num.ndim != 1 or num.shape != den.shape or num.size < 1:
+        raise MetricError(f"numerator and denominator must be two equal-length 1-D arrays of "
+                          f"paired episodes, got shapes {num.shape} and {den.shape}")
+    if int(n_boot) != n_boot or n_boot < 1:
+        raise MetricError(f"n_boot must be a whole number >= 1, got {n_boot}")
+    alpha = 1.0 - _confidence(confidence)
+    draws = rng.integers(0, num.size, size=(int(n_boot), num.size))
+    boot = _ratio_of_medians(num[draws], den[draws])
+    # Order statistics (no interpolation: between two inf resamples it would give nan).
+    low, high = np.quantile(boot, [0.5 * alpha, 1.0 - 0.5 * alpha], method="inverted_cdf")
+    return PairedRatio(float(_ratio_of_medians(num, den)), (float(low), float(high)),
+                       confidence, int(n_boot))

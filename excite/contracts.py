@@ -1,0 +1,84 @@
+"""The contracts between a robot (simulated or real) and the planners that drive it.
+
+A light module (numpy only), so a planner can drive a real robot without the simulator:
+
+- :class:`RobotKnowledge`: everything a planner may use after n segments, never the truth;
+- :class:`Estimator`: what an online estimator offers (``OnlineEstimator`` implements it);
+- :data:`EstimatorFactory`: how a fresh estimator is made at the start of an episode.
+
+The arena's geometry is in :mod:`excite.arena`, the kinematic prediction in
+:mod:`excite.kinematics` and :mod:`excite.models`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from excite.arena import DEFAULT_CHASSIS
+from excite.kinematics import Params
+from excite.models import AXLE, SegmentModel
+
+__all__ = ["Estimator", "EstimatorFactory", "RobotKnowledge"]
+
+
+class Estimator(Protocol):
+    """What the environment needs of an online estimator (OnlineEstimator implements it)."""
+
+    def update(self, dphi_L: float, dphi_R: float, dx: float, dy: float,
+               dtheta: float) -> None: ...
+
+    @property
+    def params(self) -> Params: ...
+
+    @property
+    def covariance(self) -> np.ndarray: ...
+
+
+#: estimator_factory(nominal, sensor sigma (sx, sy, sth)) -> a fresh estimator. nominal is
+#: the nominal robot's Params on the axle model, and the nominal parameter array
+#: (r_L, r_R, b, l_x, l_y, l_theta) when the env estimates the sensor pose.
+EstimatorFactory = Callable[[Params | np.ndarray, np.ndarray], Estimator]
+
+
+@dataclass(frozen=True)
+class RobotKnowledge:
+    """What the robot knows after n segments: everything a planner may use, never the truth.
+
+    observation: the env's observation vector. estimate: current estimate (m). information:
+    relative Fisher information of the log at the estimate (P x P). log: (n, 5) calibration
+    rows. pose: the body's measured world pose (x, y, theta). nominal: the nominal robot.
+    sigma: sensor noise (m, m, rad). max_wheel_speed: motor limit (rad/s); segment_duration
+    (s); arena_size (m); budget (segments); chassis: the nominal footprint (length, width, m).
+    model: the segment model; theta / nominal_theta:
+    the current estimate and the nominal values of all its P parameters.
+    """
+
+    observation: np.ndarray
+    estimate: Params
+    information: np.ndarray
+    log: np.ndarray
+    pose: np.ndarray
+    nominal: Params
+    sigma: np.ndarray
+    max_wheel_speed: float
+    segment_duration: float
+    arena_size: float
+    budget: int
+    model: SegmentModel = AXLE
+    chassis: tuple[float, float] = DEFAULT_CHASSIS
+    theta: np.ndarray | None = None
+    nominal_theta: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.theta is None:
+            object.__setattr__(self, "theta", self.estimate.as_array())
+        if self.nominal_theta is None:
+            object.__setattr__(self, "nominal_theta", self.nominal.as_array())
+
+    @property
+    def n_segments(self) -> int:
+        return int(self.log.shape[0])

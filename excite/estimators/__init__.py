@@ -1,0 +1,154 @@
+"""Online estimators by name, for the environment's loop and the comparison (numpy/scipy
+only: no gymnasium or pymunk).
+
+Every estimator follows one protocol (:class:`excite.contracts.Estimator`):
+``update(dphi_L, dphi_R, dx, dy, dtheta)`` after each segment, then ``params`` (Params) and
+``covariance``; an estimator of the sensor pose adds ``theta`` (all P parameters). The
+built-ins:
+
+* ``online``: :class:`excite.OnlineEstimator`, the iterated information filter on
+  log-parameters (the environment's default);
+* ``ekf``: :class:`~excite.estimators.ekf.ExtendedKalmanFilter`, the textbook EKF on the
+  parameters themselves;
+* ``window``: :class:`~excite.estimators.window.SlidingWindowSmoother`, Gauss–Newton over
+  the last W segments with the older ones marginalised into the prior.
+
+A spec names one: a built-in with optional ``:key=value`` settings (``window:size=20``,
+``ekf:prior_std=0.01``; the keys are those of :data:`OPTIONS`), or ``module:factory``, a
+callable ``factory(nominal, sigma) -> estimator`` importable from ``module``
+(:data:`excite.contracts.EstimatorFactory`, the environment's ``estimator_factory``:
+nominal is Params on the axle model and the six sensor-pose parameters when the sensor pose
+is estimated; sigma (sigma_x [m], sigma_y [m], sigma_theta [rad])).
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from excite.contracts import Estimator
+from excite.errors import EstimatorError
+from excite.estimators.ekf import ExtendedKalmanFilter
+from excite.estimators.window import SlidingWindowSmoother
+from excite.kinematics import Params
+from excite.models import AXLE, SENSOR_POSE, SegmentModel
+from excite.online import OnlineEstimator
+
+__all__ = [
+    "ESTIMATORS",
+    "OPTIONS",
+    "EstimatorSpec",
+    "ExtendedKalmanFilter",
+    "SlidingWindowSmoother",
+    "estimator_factory",
+    "make_estimator",
+    "model_for",
+]
+
+
+#: The built-in estimators by name; each is constructed as cls(nominal, sigma=..., model=...).
+ESTIMATORS: dict[str, type] = {
+    "online": OnlineEstimator,
+    "ekf": ExtendedKalmanFilter,
+    "window": SlidingWindowSmoother,
+}
+#: The settings a built-in takes in its spec (``name:key=value``): keyword arguments of its
+#: constructor.
+OPTIONS: dict[str, tuple[str, ...]] = {
+    "online": ("prior_std", "iterations"),
+    "ekf": ("prior_std",),
+    "window": ("prior_std", "size", "iterations"),
+}
+
+
+def model_for(nominal: Params | ArrayLike) -> SegmentModel:
+    """The segment model of a nominal parameter set: the axle model for Params or 3 values,
+    the sensor-pose model for 6."""
+    size = 3 if isinstance(nominal, Params) else np.size(nominal)
+    for model in (AXLE, SENSOR_POSE):
+        if size == model.size:
+            return model
+    raise EstimatorError(f"nominal must have 3 (axle) or 6 (sensor pose) parameters, "
+                         f"got {size}")
+
+
+def _number(text: str) -> int | float:
+    """A setting's value: an int when it reads as one, else a float."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    raise EstimatorError(f"estimator setting value {text!r} is not a number")
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """A parsed estimator spec, callable as ``factory(nominal, sigma)`` (picklable: a
+    ``module:factory`` is re-imported where it is called). Make one with
+    :func:`estimator_factory`.
+
+    name: the built-in's name, or ``module:factory``; settings: the built-in's keyword
+    arguments as (key, value) pairs.
+    """
+
+    name: str
+    settings: tuple[tuple[str, int | float], ...] = ()
+
+    def __call__(self, nominal: Params | ArrayLike, sigma: ArrayLike) -> Estimator:
+        if self.name in ESTIMATORS:
+            return ESTIMATORS[self.name](nominal, sigma=sigma, model=model_for(nominal),
+                                         **dict(self.settings))
+        return _import_factory(self.name)(nominal, sigma)
+
+
+def _import_factory(spec: str) -> Callable[..., Estimator]:
+    """The callable ``factory`` of ``module:factory`` (attribute paths may be dotted)."""
+    module_name, _, path = spec.partition(":")
+    try:
+        target = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise EstimatorError(f"estimator {spec!r}: cannot import module {module_name!r} "
+                             f"({exc})") from exc
+    for attribute in path.split("."):
+        if not hasattr(target, attribute):
+            raise EstimatorError(f"estimator {spec!r}: module {module_name!r} has no "
+                                 f"{path!r}")
+        target = getattr(target, attribute)
+    if not callable(target):
+        raise EstimatorError(f"estimator {spec!r}: {path!r} is not callable")
+    return target
+
+
+def estimator_factory(spec: str) -> EstimatorSpec:
+    """The factory(nominal, sigma) of a spec (module doc): ``online``, ``ekf``, ``window``,
+    a built-in with settings (``window:size=20:iterations=5``) or ``module:factory``.
+    Raises EstimatorError (one line) for an unknown name or setting or a factory that does
+    not import."""
+    name, _, rest = spec.strip().partition(":")
+    if name in ESTIMATORS:
+        settings = []
+        for item in filter(None, rest.split(":")):
+            key, equals, value = item.partition("=")
+            if not equals or key not in OPTIONS[name]:
+                raise EstimatorError(f"estimator {spec!r}: {item!r} is not a setting of "
+                                     f"{name!r} (known: {', '.join(OPTIONS[name])}, as "
+                                     f"key=value)")
+            settings.append((key, _number(value)))
+        return EstimatorSpec(name, tuple(settings))
+    if not rest:
+        raise EstimatorError(f"unknown estimator {spec!r}; known: {', '.join(ESTIMATORS)}, "
+                             "or module:factory")
+    _import_factory(spec.strip())
+    return EstimatorSpec(spec.strip())
+
+
+def make_estimator(spec: str, nominal: Params | ArrayLike, sigma: ArrayLike) -> Estimator:
+    """A fresh estimator of a spec (see :func:`estimator_factory`) started at ``nominal``
+    (Params, or the model's parameters) with measurement noise ``sigma`` (sigma_x [m],
+    sigma_y [m], sigma_theta [rad])."""
+    return estimator_factory(spec)(nominal, sigma)
