@@ -1,43 +1,182 @@
-"""Protocol names and how to build them: the one lookup `compare` and `simulate` use."""
+"""The protocol registry and the protocol syntax: the one lookup ``compare``, ``tune`` and
+``simulate`` use.
+
+The registry maps a name to an entry point ``"module:Class"`` (like gymnasium's), imported only
+when the protocol is used. A protocol is written ``NAME[:KEY=VALUE[:KEY=VALUE...]]`` where NAME
+is a registered name or any ``module:Class`` entry point of a :class:`~agents.protocols.Protocol`
+subclass, so a user's protocol plugs in without editing excite::
+
+    umbmark:speed=0.2        mypkg.protocols:MyProtocol:gain=3        learned
+
+A new protocol (e.g. a slip-aware planner) is one more registry entry, or a call of
+:func:`register`. Like the protocols themselves, this module is light (numpy only).
+"""
 
 from __future__ import annotations
 
-from pathlib import Path
+import importlib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 
-from agents.protocols import SCRIPTED, Protocol
-from excite.errors import ExciteError
+from agents.protocols import Protocol, ProtocolError, Value, resolve_settings
 
-#: The policy file shipped with excite (the default of the `learned` protocol).
-SHIPPED_POLICY = Path(__file__).parent / "policies" / "excite_ppo.zip"
-PROTOCOL_NAMES = (*SCRIPTED, "greedy", "learned")
+__all__ = ["PROTOCOLS", "ProtocolError", "ProtocolSpec", "register", "protocol_class",
+           "parse_protocol", "parse_protocols", "check_distinct", "make_protocol", "with_policy",
+           "default_protocols"]
 
-
-class ProtocolError(ExciteError, ValueError):
-    """An unknown protocol, or a learned policy that cannot be loaded."""
-
-
-def make_protocol(name: str, policy_path: str | Path | None = None) -> Protocol:
-    """Build protocol ``name``; ``learned`` loads ``policy_path`` or the shipped policy."""
-    if name in SCRIPTED:
-        return SCRIPTED[name]()
-    if name == "greedy":
-        from agents.greedy import GreedyPlanner
-
-        return GreedyPlanner()
-    if name == "learned":
-        path = Path(policy_path) if policy_path else SHIPPED_POLICY
-        if not path.exists():
-            where = "" if policy_path else " (no policy is shipped; train one with excite train)"
-            raise ProtocolError(f"learned policy file not found: {path}{where}")
-        from agents.learned import LearnedPolicy
-
-        return LearnedPolicy(path)
-    raise ProtocolError(f"unknown protocol {name!r}; choose from {', '.join(PROTOCOL_NAMES)}")
+#: Registered protocol names and their entry points, in the order they are listed and run.
+PROTOCOLS: dict[str, str] = {
+    "straight": "agents.protocols:Straight",
+    "spin": "agents.protocols:Spin",
+    "straight_spin": "agents.protocols:StraightSpin",
+    "umbmark": "agents.protocols:UMBmark",
+    "random": "agents.protocols:RandomCommands",
+    "arcs": "agents.protocols:Arcs",
+    "greedy": "agents.greedy:GreedyPlanner",
+    "learned": "agents.learned:LearnedPolicy",
+}
 
 
-def default_protocols(policy_path: str | Path | None = None) -> list[str]:
-    """Every protocol that can run here: the learned one only if a policy is available."""
-    names = [*SCRIPTED, "greedy"]
-    if policy_path or SHIPPED_POLICY.exists():
-        names.append("learned")
-    return names
+def register(name: str, entry_point: str) -> None:
+    """Register protocol ``name`` (letters, digits, ``_``) as ``"module:Class"``; loaded on
+    first use. Registering a taken name replaces it."""
+    if not name.replace("_", "").isalnum():
+        raise ProtocolError(f"protocol names are letters, digits and _, got {name!r}")
+    if entry_point.count(":") != 1:
+        raise ProtocolError(f"an entry point is module:Class, got {entry_point!r}")
+    PROTOCOLS[name] = entry_point
+
+
+def protocol_class(name: str) -> type[Protocol]:
+    """The class of a registered name or of a ``module:Class`` entry point."""
+    entry_point = PROTOCOLS.get(name, name)
+    if ":" not in entry_point:
+        raise ProtocolError(f"unknown protocol {name!r}; choose from {', '.join(PROTOCOLS)} "
+                            "or give module:Class")
+    module_name, _, attribute = entry_point.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name is None or not module_name.startswith(exc.name):
+            raise  # the module exists but needs another one (cli names a missing extra)
+        raise ProtocolError(f"protocol {name!r}: no module named {exc.name!r}") from None
+    cls = getattr(module, attribute, None)
+    if not (isinstance(cls, type) and issubclass(cls, Protocol)):
+        raise ProtocolError(f"protocol {name!r}: {module_name} has no Protocol subclass "
+                            f"named {attribute!r}")
+    return cls
+
+
+@dataclass(frozen=True)
+class ProtocolSpec:
+    """A protocol with settings: ``name`` (registered, or ``module:Class``) and the settings
+    given explicitly, in the order the class declares them (the others keep their defaults).
+    ``label`` writes it back in the command-line syntax; it names the protocol in results."""
+
+    name: str
+    settings: tuple[tuple[str, Value], ...] = ()
+
+    @classmethod
+    def of(cls, name: str, settings: Mapping[str, object] | None = None) -> ProtocolSpec:
+        """The spec of ``name`` with ``settings`` checked against its declared parameters."""
+        protocol = protocol_class(name)
+        given = dict(settings or {})
+        checked = resolve_settings(protocol, given)
+        return cls(name, tuple((p.name, checked[p.name]) for p in protocol.parameters
+                               if p.name in given))
+
+    @property
+    def protocol(self) -> type[Protocol]:
+        return protocol_class(self.name)
+
+    @property
+    def label(self) -> str:
+        formats = {p.name: p.format for p in self.protocol.parameters}
+        return ":".join([self.name, *(f"{k}={formats[k](v)}" for k, v in self.settings)])
+
+    def resolved(self) -> dict[str, Value]:
+        """Every declared parameter with the value this spec runs with."""
+        return resolve_settings(self.protocol, dict(self.settings))
+
+    def under(self, defaults: Mapping[str, object]) -> ProtocolSpec:
+        """This spec with ``defaults`` added for the keys it does not set (its own settings
+        win); keys the protocol does not declare are errors."""
+        return ProtocolSpec.of(self.name, {**defaults, **dict(self.settings)})
+
+    def declares(self, key: str) -> bool:
+        return any(p.name == key for p in self.protocol.parameters)
+
+
+def parse_protocol(text: str) -> ProtocolSpec:
+    """``NAME[:KEY=VALUE...]`` as a checked spec; NAME is a registered name, else
+    ``module:Class``."""
+    parts = [part.strip() for part in text.strip().split(":")]
+    entry_point = parts[0] not in PROTOCOLS and len(parts) > 1 and "=" not in parts[1]
+    first_setting = 2 if entry_point else 1
+    name = ":".join(parts[:first_setting])
+    if not name:
+        raise ProtocolError(f"a protocol needs a name before its settings, got {text!r}")
+    protocol = protocol_class(name)
+    declared = {p.name: p for p in protocol.parameters}
+    settings: dict[str, Value] = {}
+    for part in parts[first_setting:]:
+        key, equals, value = part.partition("=")
+        key = key.strip()
+        if not equals:
+            raise ProtocolError(f"{name}: settings are KEY=VALUE, got {part!r}")
+        if key not in declared:
+            known = ", ".join(declared) or "none"
+            raise ProtocolError(f"{name} has no parameter {key!r} (its parameters: {known}; "
+                                "see excite protocols)")
+        if key in settings:
+            raise ProtocolError(f"{name}: {key} is set twice in {text!r}")
+        try:
+            settings[key] = declared[key].parse(value.strip())
+        except ProtocolError as exc:
+            raise ProtocolError(f"{name}: {exc}") from None
+    return ProtocolSpec.of(name, settings)
+
+
+def check_distinct(specs: Iterable[ProtocolSpec]) -> list[ProtocolSpec]:
+    """``specs`` as a list, or ProtocolError if two of them run the same protocol with the
+    same settings (e.g. ``umbmark`` and ``umbmark:speed=0.5``, its default)."""
+    specs = list(specs)
+    seen: dict[tuple, str] = {}
+    for spec in specs:
+        key = (spec.protocol, tuple(spec.resolved().items()))
+        if key in seen:
+            raise ProtocolError(f"protocols must be distinct: {seen[key]} and {spec.label} "
+                                "are the same protocol with the same settings")
+        seen[key] = spec.label
+    return specs
+
+
+def parse_protocols(text: str) -> list[ProtocolSpec]:
+    """Comma-separated protocols (``a,b:key=value,...``), each distinct."""
+    parts = [part for part in text.split(",") if part.strip()]
+    if not parts:
+        raise ProtocolError(f"--protocols needs comma-separated protocols, got {text!r}")
+    return check_distinct(parse_protocol(part) for part in parts)
+
+
+def make_protocol(spec: str | ProtocolSpec) -> Protocol:
+    """Build a protocol from its spec (or its text, ``NAME[:KEY=VALUE...]``)."""
+    spec = parse_protocol(spec) if isinstance(spec, str) else spec
+    settings = spec.resolved()
+    if reason := spec.protocol.unavailable(settings):
+        raise ProtocolError(reason)
+    return spec.protocol(**settings)
+
+
+def with_policy(specs: Iterable[ProtocolSpec], policy: str | None) -> list[ProtocolSpec]:
+    """``specs`` with ``policy`` (``--policy PATH``) as the ``policy`` setting of each that
+    declares one and does not set it; unchanged when ``policy`` is None."""
+    return [spec.under({"policy": policy}) if policy and spec.declares("policy") else spec
+            for spec in specs]
+
+
+def default_protocols(policy: str | None = None) -> list[ProtocolSpec]:
+    """Every registered protocol that can be built here (``learned`` only if a policy is
+    shipped or given), with ``policy`` as in :func:`with_policy`."""
+    specs = with_policy((ProtocolSpec(name) for name in PROTOCOLS), policy)
+    return [spec for spec in specs if spec.protocol.unavailable(spec.resolved()) is None]

@@ -10,6 +10,8 @@ end nearest the arena centre, not to the last bit of rounding.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from agents.motion import (
@@ -20,7 +22,7 @@ from agents.motion import (
     turn_to_center,
     wheel_increments,
 )
-from agents.protocols import Protocol
+from agents.protocols import MAX_SPEED, WALL_MARGIN, Parameter, Protocol, Value
 from excite.contracts import RobotKnowledge
 from excite.information import segment_information
 
@@ -51,18 +53,28 @@ class GreedyPlanner(Protocol):
     """E-optimal greedy planner over a grid of commands (``grid`` x ``grid`` in
     [-max_speed, max_speed]^2); ``lookahead`` adds a second step for the ``beam`` best."""
 
-    name = "greedy"
+    parameters = (
+        MAX_SPEED,
+        Parameter("grid", int, 21, "candidate commands per wheel (grid x grid in all)", 3, 101),
+        Parameter("lookahead", bool, False, "score each of the beam best moves by its best "
+                  "second move"),
+        Parameter("beam", int, 12, "first moves scored two steps ahead (with lookahead)",
+                  1, 1000),
+        replace(WALL_MARGIN, grid=3),  # it drives to the walls' limits, unlike the scripts
+    )
+    max_speed: float
+    grid: int
+    lookahead: bool
+    beam: int
 
-    def __init__(self, grid: int = 21, max_speed: float = 1.0, lookahead: bool = False,
-                 beam: int = 12):
-        self.candidates = command_grid(grid, max_speed)
-        self.lookahead = lookahead
-        self.beam = beam
+    def __init__(self, **settings: Value) -> None:
+        super().__init__(**settings)
+        self.candidates = command_grid(self.grid, self.max_speed)
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         gains = command_information(self.candidates, knowledge)
         score = smallest_eigenvalue(knowledge.information + gains)
-        ok = safe_actions(self.candidates, knowledge)
+        ok = safe_actions(self.candidates, knowledge, self.speed_margin)
         if not ok.any():
             return turn_to_center(knowledge)
         score = np.where(ok, score, -np.inf)
@@ -92,7 +104,8 @@ class GreedyPlanner(Protocol):
         two_step = np.full(score.shape, -np.inf)
         for index, end in zip(best, ends, strict=True):
             safe = is_safe(predicted_poses(end, second_dphi, knowledge.estimate),
-                           knowledge.arena_size, action_margin(self.candidates),
+                           knowledge.arena_size,
+                           action_margin(self.candidates, self.speed_margin),
                            knowledge.chassis)
             if not safe.any():
                 continue

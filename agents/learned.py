@@ -8,25 +8,50 @@ files you trust.
 from __future__ import annotations
 
 import pickle
+from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from agents.catalog import ProtocolError
-from agents.protocols import Protocol
+from agents.protocols import WALL_MARGIN, Parameter, Protocol, ProtocolError, Value
 from excite.contracts import RobotKnowledge
+
+#: The policy file shipped with excite (the default of the ``policy`` setting).
+SHIPPED_POLICY = Path(__file__).parent / "policies" / "excite_ppo.zip"
 
 
 class LearnedPolicy(Protocol):
     """Acts with a trained SB3 policy (deterministic) on the env's observation, through the
     wall guard of every protocol (a safety shield). The policy drives smoothly (steady
-    commands, little lag or slip to allow for), so the guard asks for less clearance per unit
-    of speed than for the abrupt scripted maneuvers."""
+    commands, little lag or slip to allow for), so its guard asks by default for less
+    clearance per unit of speed than that of the abrupt scripted maneuvers."""
 
-    name = "learned"
-    speed_margin = 0.1
+    parameters = (
+        Parameter("policy", str, "", "stable-baselines3 policy file (empty: the shipped "
+                  "policy); its NAME.vecnormalize.pkl beside it"),
+        replace(WALL_MARGIN, default=0.1, high=0.5, grid=6),
+    )
+    policy: str
 
-    def __init__(self, path: str | Path):
+    @classmethod
+    def policy_path(cls, settings: Mapping[str, Value]) -> Path:
+        """The policy file these settings name (the shipped one when empty)."""
+        return Path(settings["policy"]) if settings["policy"] else SHIPPED_POLICY
+
+    @classmethod
+    def unavailable(cls, settings: Mapping[str, Value]) -> str | None:
+        path = cls.policy_path(settings)
+        if path.exists():
+            return None
+        where = "" if settings["policy"] else " (no policy is shipped; train one with excite train)"
+        return f"learned policy file not found: {path}{where}"
+
+    def __init__(self, **settings: Value):
+        super().__init__(**settings)
+        path = self.policy_path(self.settings)
+        if reason := self.unavailable(self.settings):
+            raise ProtocolError(reason)
         import torch
         from stable_baselines3 import PPO, SAC
         from stable_baselines3.common.vec_env import VecNormalize
@@ -34,8 +59,6 @@ class LearnedPolicy(Protocol):
         from agents.train import normalization_path
 
         torch.set_num_threads(1)  # one small forward pass per segment
-
-        path = Path(path)
         errors = []
         for algo in (PPO, SAC):
             try:

@@ -1,30 +1,147 @@
-"""Calibration protocols: scripted maneuvers, and the one interface every policy implements.
+"""Calibration protocols: the one interface every policy implements, their declared
+parameters, and the scripted maneuvers.
 
 A protocol is reset with a random generator at the start of each episode and then asked for
-one action per segment from what the robot knows (:class:`envs.env.RobotKnowledge`), never the
-hidden truth. Actions are wheel-speed commands in [-1, 1]^2 (fractions of the motor limit).
-Every scripted protocol passes its plan through a wall guard: a command predicted (kinematic
+one action per segment from what the robot knows (:class:`excite.contracts.RobotKnowledge`),
+never the hidden truth. Actions are wheel-speed commands in [-1, 1]^2 (fractions of the motor
+limit). Every protocol passes its plan through a wall guard: a command predicted (kinematic
 model at the current estimate) to bring the chassis near a wall is replaced by a safe one.
+
+Each protocol class declares its settings as :class:`Parameter` s (name, type, default, range,
+meaning); ``Protocol(**settings)`` checks them and sets each as an attribute. This module is
+light (numpy only): a planner can drive a real robot without the simulator.
 """
 
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
-from agents.motion import SPEED_MARGIN, safe_actions, turn_to_center
+from agents.motion import MARGIN, SPEED_MARGIN, safe_actions, turn_to_center
 from excite.contracts import RobotKnowledge
+from excite.errors import ExciteError
+
+#: A parameter's value.
+Value = float | int | bool | str
+_BOOLS = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
+
+
+class ProtocolError(ExciteError, ValueError):
+    """An unknown protocol or parameter, a bad value, or a protocol that cannot be built
+    (e.g. a learned policy that cannot be loaded)."""
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One declared setting of a protocol (``NAME:KEY=VALUE`` on the command line).
+
+    kind: float, int, bool or str. default: the value when not set. meaning: one line, with
+    units. low, high: the allowed range, inclusive (numbers only). grid: how many values of
+    [low, high] ``excite tune`` tries (0: not tuned, the default is kept), evenly spaced, or
+    evenly spaced in log (``log``: for a scale such as a speed, where 0.1 to 0.2 matters as
+    much as 0.5 to 1).
+    """
+
+    name: str
+    kind: type
+    default: Value
+    meaning: str
+    low: float | None = None
+    high: float | None = None
+    grid: int = 0
+    log: bool = False
+
+    def check(self, value: object) -> Value:
+        """``value`` as this parameter's kind, or ProtocolError if of another kind or out of
+        range (a whole number is accepted for a float)."""
+        if self.kind is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if type(value) is not self.kind:
+            raise ProtocolError(f"{self.name} must be {self.kind_name}, got {value!r}")
+        if self.kind in (int, float) and not (
+                math.isfinite(value) and self.low <= value <= self.high):
+            raise ProtocolError(f"{self.name} must be in [{self.format(self.low)}, "
+                                    f"{self.format(self.high)}], got {self.format(value)}")
+        return value
+
+    def parse(self, text: str) -> Value:
+        """The value written ``text`` on the command line, checked."""
+        if self.kind is bool:
+            if text.lower() not in _BOOLS:
+                raise ProtocolError(f"{self.name} must be true or false, got {text!r}")
+            return _BOOLS[text.lower()]
+        if self.kind is str:
+            return text
+        try:
+            value = self.kind(text)
+        except ValueError:
+            raise ProtocolError(f"{self.name} must be {self.kind_name}, got {text!r}") from None
+        return self.check(value)
+
+    def format(self, value: Value) -> str:
+        """``value`` as written on the command line (the shortest round-trip form)."""
+        if isinstance(value, bool):
+            return "true" if value else "false"
+        if isinstance(value, float):
+            return repr(value)
+        return str(value)
+
+    @property
+    def kind_name(self) -> str:
+        return {float: "a number", int: "a whole number", bool: "true or false",
+                str: "text"}[self.kind]
+
+    def tuning_values(self) -> tuple[Value, ...]:
+        """The values ``excite tune`` tries: ``grid`` spaced over [low, high] (rounded to 2
+        significant digits, as short labels), both booleans, or only the default when not
+        tuned."""
+        if self.grid == 0:
+            return (self.default,)
+        if self.kind is bool:
+            return (False, True)
+        spaced = np.geomspace if self.log else np.linspace
+        values = (float(f"{v:.2g}") for v in spaced(self.low, self.high, self.grid))
+        return tuple(dict.fromkeys(self.kind(round(v) if self.kind is int else v)
+                                   for v in values))
+
+
+#: The wall guard's clearance per unit of commanded speed, a setting of every protocol.
+WALL_MARGIN = Parameter(
+    "speed_margin", float, SPEED_MARGIN, "wall clearance the guard adds per unit of commanded "
+    f"speed (m), beyond a fixed {MARGIN} m", 0.0, 0.7)
+#: The commanded speed of a scripted maneuver.
+SPEED = Parameter("speed", float, 0.5, "commanded wheel speed, fraction of the motor limit",
+                  0.1, 1.0, grid=11, log=True)
+#: The speed limit of a protocol that chooses its own commands.
+MAX_SPEED = Parameter("max_speed", float, 1.0, "largest commanded wheel speed, fraction of "
+                      "the motor limit", 0.1, 1.0, grid=11, log=True)
 
 
 class Protocol(ABC):
-    """One calibration protocol. Subclasses set ``name`` and implement ``plan``."""
+    """One calibration protocol. Subclasses declare ``parameters`` and implement ``plan``;
+    ``Protocol(**settings)`` sets every declared parameter as an attribute (settings not given
+    take their defaults)."""
 
-    name: ClassVar[str]
-    #: Wall clearance per unit of commanded speed (m) the guard demands (agents.motion).
-    speed_margin: ClassVar[float] = SPEED_MARGIN
+    parameters: ClassVar[tuple[Parameter, ...]] = (WALL_MARGIN,)
+    #: The guard's clearance per unit of speed (m); a protocol that does not declare
+    #: WALL_MARGIN keeps this default.
+    speed_margin: float = SPEED_MARGIN
+
+    def __init__(self, **settings: Value) -> None:
+        self.settings = resolve_settings(type(self), settings)
+        for name, value in self.settings.items():
+            setattr(self, name, value)
+
+    @classmethod
+    def unavailable(cls, settings: Mapping[str, Value]) -> str | None:
+        """Why this protocol cannot be built here with these (resolved) settings, in words,
+        without building it; None when it can (e.g. a policy file is missing)."""
+        return None
 
     def reset(self, rng: np.random.Generator) -> None:
         """Start a new episode (``rng``: the episode's generator for any randomness)."""
@@ -54,17 +171,28 @@ class Protocol(ABC):
         return variants[int(np.argmax(ok))] if ok.any() else turn_to_center(knowledge)
 
 
-class _AtSpeed(Protocol):
-    """A scripted maneuver at one commanded speed (fraction of the motor limit)."""
+def resolve_settings(cls: type[Protocol], settings: Mapping[str, object]) -> dict[str, Value]:
+    """Every declared parameter of ``cls`` with its value: the checked setting if given, else
+    the default. ProtocolError names an undeclared key."""
+    declared = {p.name: p for p in cls.parameters}
+    for key in settings:
+        if key not in declared:
+            known = ", ".join(declared) or "none"
+            raise ProtocolError(f"{cls.__name__} has no parameter {key!r} (its parameters: "
+                                f"{known})")
+    return {name: p.check(settings[name]) if name in settings else p.default
+            for name, p in declared.items()}
 
-    def __init__(self, speed: float = 0.5):
-        self.speed = speed
+
+class _AtSpeed(Protocol):
+    """A scripted maneuver at one commanded speed (``speed``, fraction of the motor limit)."""
+
+    parameters = (SPEED, WALL_MARGIN)
+    speed: float
 
 
 class Straight(_AtSpeed):
     """Back-and-forth straight runs (identifies r_L/r_R and the scale, never b)."""
-
-    name = "straight"
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         direction = 1.0 if self.step_index % 2 == 0 else -1.0
@@ -74,8 +202,6 @@ class Straight(_AtSpeed):
 class Spin(_AtSpeed):
     """In-place rotations alternating direction (identifies r/b, never the scale)."""
 
-    name = "spin"
-
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         direction = 1.0 if self.step_index % 2 == 0 else -1.0
         return np.array([-direction * self.speed, direction * self.speed])
@@ -83,8 +209,6 @@ class Spin(_AtSpeed):
 
 class StraightSpin(_AtSpeed):
     """The lesson's minimal pair alternated: straight run, spin, back, spin back, ..."""
-
-    name = "straight_spin"
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         phase = self.step_index % 4
@@ -103,8 +227,6 @@ class UMBmark(_AtSpeed):
     nominal robot.
     """
 
-    name = "umbmark"
-
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         phase = self.step_index % 16  # 8 segments a square: 4 sides, 4 corners
         turn_sign = -1.0 if phase < 8 else 1.0  # clockwise first
@@ -119,18 +241,17 @@ class UMBmark(_AtSpeed):
 class RandomCommands(Protocol):
     """Uniform random commands, redrawn (up to 20 times) until predicted clear of the walls."""
 
-    name = "random"
+    parameters = (MAX_SPEED, WALL_MARGIN)
+    max_speed: float
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
-        candidates = self.rng.uniform(-1.0, 1.0, size=(20, 2))
-        ok = safe_actions(candidates, knowledge)
+        candidates = self.rng.uniform(-self.max_speed, self.max_speed, size=(20, 2))
+        ok = safe_actions(candidates, knowledge, self.speed_margin)
         return candidates[int(np.argmax(ok))] if ok.any() else candidates[0]
 
 
 class Arcs(_AtSpeed):
     """Arcs of varying curvature, alternating turn direction (figure-eights), both ways."""
-
-    name = "arcs"
     CURVATURES = (0.3, -0.3, 0.7, -0.7, 1.0, -1.0, 0.5, -0.5)
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
@@ -138,7 +259,3 @@ class Arcs(_AtSpeed):
         direction = 1.0 if (self.step_index // len(self.CURVATURES)) % 2 == 0 else -1.0
         return direction * self.speed * np.array([1.0 - k, 1.0 + k])
 
-
-SCRIPTED: dict[str, type[Protocol]] = {
-    cls.name: cls for cls in (Straight, Spin, StraightSpin, UMBmark, RandomCommands, Arcs)
-}

@@ -62,6 +62,12 @@ def _max_abs_error(columns: dict[str, np.ndarray]) -> np.ndarray:
     return np.max(np.abs(errors), axis=1)
 
 
+def final_max_errors(columns: dict[str, np.ndarray], protocol: str) -> np.ndarray:
+    """One protocol's final max relative error (the last segment's max of |r_L_err|,
+    |r_R_err|, |b_err|) per episode, ordered by episode."""
+    return _max_abs_error(columns)[_last_rows(columns, protocol)]
+
+
 def _median_ci(values: np.ndarray, resample: np.ndarray) -> dict[str, float | list | None]:
     """Median of `values` and the 95% percentile bootstrap interval of the median.
 
@@ -92,7 +98,7 @@ def _summarize_protocol(
     return {
         "episodes": int(n),
         "segments": int(np.max(np.asarray(columns["segment"])[rows])),
-        "final_max_error": _median_ci(_max_abs_error(columns)[last], resample),
+        "final_max_error": _median_ci(final_max_errors(columns, protocol), resample),
         "final_error": {
             p: _json_float(np.median(np.abs(np.asarray(columns[f"{p}_err"], float)[last])))
             for p in PARAMETERS
@@ -196,6 +202,28 @@ def format_table(summary: dict) -> str:
     body.append("errors: median |relative error| of the final estimate over episodes; "
                 "95% CI: bootstrap of maxerr%")
     return "\n".join(body)
+
+
+def format_tuning(document: dict) -> str:
+    """Text table of a tuned-settings document (``excite tune``): per protocol the winning
+    settings (the protocol written with them), its median final max error (%) over the tuning
+    episodes and that at the declared defaults."""
+    headers = ["protocol", "tuned", "maxerr%", "at defaults", "candidates"]
+    rows = [[label, entry["label"],
+             _pct(entry["final_max_error"]), _pct(entry["default_final_max_error"]),
+             str(len(entry["candidates"]))]
+            for label, entry in document["protocols"].items()]
+    widths = [max(len(r[i]) for r in [headers, *rows]) for i in range(len(headers))]
+
+    def line(cells: list[str]) -> str:
+        return "  ".join(c.ljust(w) if i < 2 else c.rjust(w)
+                         for i, (c, w) in enumerate(zip(cells, widths, strict=True))).rstrip()
+
+    return "\n".join([
+        line(headers), "-" * len(line(headers)), *(line(r) for r in rows),
+        f"{document['episodes']} tuning episodes of {document['segments']} segments on "
+        f"{document['env_id']} ({document['robot']} robot); maxerr%: {document['criterion']}",
+    ])
 
 
 def _by_segment(

@@ -16,7 +16,16 @@ import sys
 from collections.abc import Callable, Sequence
 
 from excite import __version__
-from excite.commands import calibrate, compare, segment, simulate, train, validate
+from excite.commands import (
+    calibrate,
+    compare,
+    protocols,
+    segment,
+    simulate,
+    train,
+    tune,
+    validate,
+)
 from excite.commands.args import UsageError
 from excite.errors import ExciteError
 
@@ -24,7 +33,7 @@ __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE",
            "EXIT_UNIDENTIFIABLE", "EXIT_MISFIT"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_UNIDENTIFIABLE, EXIT_MISFIT = 0, 1, 2, 3, 4
-COMMANDS = (calibrate, segment, validate, simulate, compare, train)
+COMMANDS = (calibrate, segment, validate, simulate, protocols, compare, tune, train)
 
 #: The optional extra that provides each third-party module a subcommand may import.
 EXTRA_OF_MODULE = {"rosbags": "ros", "gymnasium": "sim", "pymunk": "sim", "matplotlib": "sim",
@@ -72,8 +81,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
         return EXIT_OK
     except KeyboardInterrupt:
-        print("excite: interrupted (compare keeps finished episodes: re-run the same command "
-              "to continue)", file=sys.stderr)
+        print("excite: interrupted (compare and tune keep finished episodes: re-run the same "
+              "command to continue)", file=sys.stderr)
         return 130
     except Exception as exc:  # never a traceback for users; EXCITE_DEBUG=1 shows it
         if isinstance(exc, ModuleNotFoundError) and (

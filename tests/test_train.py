@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.catalog import ProtocolError, make_protocol
+from agents.catalog import ProtocolError, ProtocolSpec, make_protocol
 from agents.compare import make_env
 from agents.train import CONFIG_DIR, TrainingError, normalization_path, train
 from excite.cli import main
@@ -35,7 +35,7 @@ def test_smoke_train_save_load_evaluate_and_resume(tmp_path, small_config, capsy
     assert normalization_path(out / "best_model.zip").exists()
     assert list((out / "checkpoints").glob("ckpt_*_steps.zip"))
 
-    policy = make_protocol("learned", out / "best_model.zip")
+    policy = make_protocol(ProtocolSpec.of("learned", {"policy": str(out / "best_model.zip")}))
     env = make_env("excite/DiffDriveCalib-v0", 10)
     env.reset(seed=0)
     policy.reset(np.random.default_rng(0))
@@ -71,7 +71,7 @@ def test_bad_policy_files_are_one_line_errors(tmp_path, capsys):
     junk = tmp_path / "junk.zip"
     junk.write_bytes(b"not a zip at all")
     with pytest.raises(ProtocolError, match="not a stable-baselines3 policy"):
-        make_protocol("learned", junk)
+        make_protocol(f"learned:policy={junk}")
     code = main(["compare", "--protocols", "learned", "--policy", str(junk), "--episodes", "1",
                  "--out", str(tmp_path / "c")])
     err = capsys.readouterr().err.strip().splitlines()

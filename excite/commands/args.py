@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from excite.errors import ExciteError
 
 __all__ = ["UsageError", "floats", "sigma_arg", "params_arg", "sensor_pose_arg",
-           "fraction_arg", "positive_int", "env_id", "robot_preset"]
+           "fraction_arg", "positive_int", "nonnegative_int", "env_id", "robot_preset"]
 
 
 class UsageError(ExciteError):
@@ -75,15 +75,25 @@ def fraction_arg(text: str) -> float:
     return value
 
 
-def positive_int(text: str) -> int:
-    """A whole number >= 1 (argparse type)."""
+def _whole_number(text: str, minimum: int) -> int:
+    """A whole number >= minimum (for argparse types)."""
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    if value < minimum:
+        raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
     return value
+
+
+def positive_int(text: str) -> int:
+    """A whole number >= 1 (argparse type)."""
+    return _whole_number(text, 1)
+
+
+def nonnegative_int(text: str) -> int:
+    """A whole number >= 0 (argparse type)."""
+    return _whole_number(text, 0)
 
 
 def env_id(text: str) -> str:

@@ -1,4 +1,10 @@
-"""``excite compare``: run calibration protocols on the same hidden robots and report."""
+"""``excite compare``: run calibration protocols on the same hidden robots and report.
+
+Protocols are written ``NAME[:KEY=VALUE...]`` (``excite protocols`` lists names and
+parameters; a user's protocol is ``module:Class``). Settings tuned by ``excite tune`` apply to
+the protocols written as they were tuned (``--tuned``); by default the settings the package
+ships for ``--env`` (when tuned for the same segments and robot).
+"""
 
 from __future__ import annotations
 
@@ -6,83 +12,144 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-from excite.commands.args import UsageError, env_id, positive_int, robot_preset
+from excite.commands.args import (
+    UsageError,
+    env_id,
+    nonnegative_int,
+    positive_int,
+    robot_preset,
+)
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
+
+if TYPE_CHECKING:  # the heavy layers are imported inside the functions that run them
+    from agents.catalog import ProtocolSpec
+    from agents.compare import CompareSettings
+
+#: --tuned values that are not files.
+TUNED_AUTO, TUNED_NONE = "auto", "none"
+
+
+def add_episode_options(parser: argparse.ArgumentParser, episodes: int) -> None:
+    """The options ``compare`` and ``tune`` share: which protocols, on which episodes."""
+    parser.add_argument("--protocols", metavar="A,B:KEY=VALUE,...",
+                        help="protocols, each NAME[:KEY=VALUE...] or module:Class[:KEY=VALUE"
+                        "...] (see excite protocols); default: every protocol available "
+                        "(learned if a policy exists)")
+    parser.add_argument("--episodes", type=positive_int, default=episodes, metavar="N")
+    parser.add_argument("--segments", type=positive_int, default=DEFAULT_BUDGET, metavar="K")
+    parser.add_argument("--seed", type=nonnegative_int, default=0, metavar="S")
+    parser.add_argument("--env", default=DEFAULT_ENV_ID, metavar="ID")
+    parser.add_argument("--workers", type=positive_int, default=None, metavar="W",
+                        help="worker processes (default: all cores)")
+    parser.add_argument("--policy", metavar="PATH",
+                        help="policy file of the learned protocol (its policy setting)")
+    parser.add_argument("--robot", default="default", metavar="PRESET",
+                        help="robot preset: default, turtlebot3, jackal, husky")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     cmp_ = sub.add_parser("compare", help="compare calibration protocols on the same robots")
-    cmp_.add_argument("--protocols", metavar="A,B,...",
-                      help="default: every protocol available (learned if a policy exists)")
-    cmp_.add_argument("--episodes", type=positive_int, default=20, metavar="N")
-    cmp_.add_argument("--segments", type=positive_int, default=DEFAULT_BUDGET, metavar="K")
-    cmp_.add_argument("--seed", type=int, default=0, metavar="S")
-    cmp_.add_argument("--env", default=DEFAULT_ENV_ID, metavar="ID")
-    cmp_.add_argument("--workers", type=positive_int, default=None, metavar="W",
-                      help="worker processes (default: all cores)")
+    add_episode_options(cmp_, episodes=20)
+    cmp_.add_argument("--tuned", default=TUNED_AUTO, metavar="TUNED.json",
+                      help="settings from excite tune for the protocols written as tuned; "
+                      "auto (default): those shipped for --env if tuned for these segments "
+                      "and robot; none: the declared defaults")
     cmp_.add_argument("--out", default="excite_compare", metavar="DIR")
-    cmp_.add_argument("--policy", metavar="PATH", help="policy file for the learned protocol")
-    cmp_.add_argument("--robot", default="default", metavar="PRESET",
-                      help="robot preset: default, turtlebot3, jackal, husky")
     cmp_.set_defaults(handler=run)
 
 
-def _protocol_names(text: str | None, policy: str | None) -> list[str]:
-    from agents.catalog import PROTOCOL_NAMES, default_protocols
+def episode_settings(args: argparse.Namespace) -> CompareSettings:
+    """The CompareSettings of the command line (env, segments, seed, robot), checked."""
+    from agents.compare import CompareSettings
 
-    if text is None:
-        return default_protocols(policy)
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    for name in names:
-        if name not in PROTOCOL_NAMES:
-            raise UsageError(f"unknown protocol {name!r}; choose from {', '.join(PROTOCOL_NAMES)}")
-    if not names or len(set(names)) != len(names):
-        raise UsageError(f"--protocols needs distinct comma-separated names, got {text!r}")
-    return names
+    return CompareSettings(env_id=env_id(args.env), segments=args.segments, seed=args.seed,
+                           robot=robot_preset(args.robot))
+
+
+def protocol_specs(args: argparse.Namespace) -> list[ProtocolSpec]:
+    """The protocols of ``--protocols`` (or every available one), with ``--policy``."""
+    from agents.catalog import default_protocols, parse_protocols, with_policy
+
+    if args.policy and not Path(args.policy).is_file():
+        raise UsageError(f"--policy: no such file {args.policy}")
+    if args.protocols is None:
+        return default_protocols(args.policy)
+    return with_policy(parse_protocols(args.protocols), args.policy)
+
+
+def runnable(specs: list[ProtocolSpec],
+             settings: CompareSettings) -> tuple[list[ProtocolSpec], float]:
+    """The protocols that can run on the env (the others skipped, each with a one-line note
+    on stderr) and the env's arena size (m)."""
+    from agents.compare import incompatible_protocols, make_env
+
+    probe = make_env(settings.env_id, settings.segments, settings.robot)
+    shape, arena_size = probe.observation_space.shape, float(probe.unwrapped.config["arena_size"])
+    probe.close()
+    skipped = incompatible_protocols(specs, shape)
+    for label, reason in skipped.items():
+        print(f"excite: skipping {label}: {reason}", file=sys.stderr)
+    specs = [spec for spec in specs if spec.label not in skipped]
+    if not specs:
+        raise UsageError("no protocol can run on this environment")
+    return specs, arena_size
+
+
+def tuned_specs(specs: list[ProtocolSpec], tuned: str, settings: CompareSettings,
+                episodes: int) -> tuple[list[ProtocolSpec], dict[str, Any]]:
+    """The protocols with the settings ``--tuned`` gives them, and what was applied (the
+    summary's ``tuned`` entry: file, tuning episodes, protocols left at their defaults)."""
+    from agents.catalog import check_distinct
+    from agents.tuning import apply_tuned, check_disjoint, load_tuned, mismatch, shipped_path
+
+    def defaults(why: str) -> tuple[list[ProtocolSpec], dict[str, Any]]:
+        return specs, {"file": None, "note": f"declared defaults ({why})", "untuned": []}
+
+    if tuned == TUNED_NONE:
+        return defaults("--tuned none")
+    path = shipped_path(settings.env_id) if tuned == TUNED_AUTO else Path(tuned)
+    if tuned == TUNED_AUTO and not path.exists():
+        return defaults(f"no tuned settings are shipped for {settings.env_id}")
+    document = load_tuned(path)
+    if reason := mismatch(document, settings):
+        if tuned != TUNED_AUTO:
+            raise UsageError(f"--tuned {path}: {reason}; run excite tune for these settings "
+                             "or give --tuned none")
+        return defaults(f"the shipped settings were {reason}")
+    check_disjoint(document, settings, episodes)
+    specs, untuned = apply_tuned(specs, document, str(path))
+    note = (f"tuned by excite tune on {len(document['tuning_seeds'])} tuning episodes "
+            f"(seeds disjoint from these): {path}")
+    if untuned:
+        note += f"; not tuned there, at their defaults: {', '.join(untuned)}"
+    return check_distinct(specs), {"file": str(path), "note": note, "untuned": untuned}
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from agents.compare import (
-        COLUMNS,
-        CompareSettings,
-        incompatible_protocols,
-        make_env,
-        run_comparison,
-    )
+    from agents.compare import columns_of, run_comparison
     from agents.report import format_table, plot_comparison, summarize
 
-    env = env_id(args.env)
-    if args.policy and not Path(args.policy).is_file():
-        raise UsageError(f"--policy: no such file {args.policy}")
-    protocols = _protocol_names(args.protocols, args.policy)
-    settings = CompareSettings(env_id=env, segments=args.segments, seed=args.seed,
-                               robot=robot_preset(args.robot))
-    probe = make_env(env, args.segments, settings.robot)
-    shape, arena_size = probe.observation_space.shape, float(probe.unwrapped.config["arena_size"])
-    probe.close()
-    skipped = incompatible_protocols(protocols, shape, args.policy)
-    for name, reason in skipped.items():
-        print(f"excite: skipping {name}: {reason}", file=sys.stderr)
-    protocols = [name for name in protocols if name not in skipped]
-    if not protocols:
-        raise UsageError("no protocol can run on this environment")
+    settings = episode_settings(args)
+    specs, tuned = tuned_specs(protocol_specs(args), args.tuned, settings, args.episodes)
+    specs, arena_size = runnable(specs, settings)
     try:
-        rows = run_comparison(args.out, protocols, args.episodes, settings, args.workers,
-                              args.policy)
+        rows = run_comparison(args.out, specs, args.episodes, settings, args.workers)
     except OSError as exc:
         raise UsageError(f"cannot write to {args.out}: {exc.strerror}") from None
-    columns = {k: np.array([r[k] for r in rows]) for k in COLUMNS}
+    columns = columns_of(rows)
     summary = summarize(columns, seed=args.seed)
-    summary["settings"] = {"env": env, "segments": args.segments, "seed": args.seed,
-                           "episodes": args.episodes, "protocols": protocols,
-                           "robot": settings.robot}
+    summary["settings"] = {"env": settings.env_id, "segments": args.segments, "seed": args.seed,
+                           "episodes": args.episodes,
+                           "protocols": [spec.label for spec in specs],
+                           "robot": settings.robot, "tuned": tuned}
+    summary["protocol_settings"] = {spec.label: spec.resolved() for spec in specs}
     out = Path(args.out)
     (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
     plots = plot_comparison(columns, out, arena_size=arena_size)
     print(format_table(summary))
+    print(f"settings: {tuned['note']}")
     print(f"\nresults: {out / 'segments.csv'}, {out / 'summary.json'}")
     print("plots:   " + ", ".join(str(p) for p in plots))
     return 0

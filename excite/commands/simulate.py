@@ -33,11 +33,13 @@ FORMATS = ("segments", "timeseries", "bag")
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     sim = sub.add_parser("simulate", help="drive a simulated robot with a protocol, write its log")
-    sim.add_argument("--protocol", required=True, metavar="NAME")
+    sim.add_argument("--protocol", required=True, metavar="NAME[:KEY=VALUE...]",
+                     help="a protocol with optional settings (see excite protocols)")
     sim.add_argument("--segments", type=positive_int, required=True, metavar="N")
     sim.add_argument("--seed", type=int, default=0, metavar="S")
     sim.add_argument("--env", default=DEFAULT_ENV_ID, metavar="ID")
-    sim.add_argument("--policy", metavar="PATH", help="policy file for --protocol learned")
+    sim.add_argument("--policy", metavar="PATH",
+                     help="policy file of --protocol learned (its policy setting)")
     sim.add_argument("--robot", default="default", metavar="PRESET",
                      help="robot preset: default, turtlebot3, jackal, husky")
     sim.add_argument("--format", choices=FORMATS, default="segments",
@@ -129,12 +131,13 @@ def _write_log(args: argparse.Namespace, out: Path, base: Any) -> tuple[dict[str
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from agents.catalog import make_protocol
+    from agents.catalog import make_protocol, parse_protocol, with_policy
     from agents.compare import make_env, run_protocol_episode
 
     env = env_id(args.env)
     robot = robot_preset(args.robot)
-    protocol = make_protocol(args.protocol, args.policy)
+    [spec] = with_policy([parse_protocol(args.protocol)], args.policy)
+    protocol = make_protocol(spec)
     out = Path(args.out)
     _check_output(args, out)
     recording: dict[str, Any] = {}
@@ -150,7 +153,8 @@ def run(args: argparse.Namespace) -> int:
     truth = {**dict(zip(("r_L", "r_R", "b"), base.true_params.as_array().tolist(), strict=True)),
              "robot": {k: float(v) for k, v in vars(base.robot).items()},
              "sigma": dict(zip(("x", "y", "theta"), base.sigma.tolist(), strict=True)),
-             "env": env, "protocol": args.protocol, "seed": args.seed,
+             "env": env, "protocol": spec.label, "protocol_settings": spec.resolved(),
+             "seed": args.seed,
              "segments": len(records),
              "collisions": int(np.sum([r["collision"] for r in records])),
              "format": args.format,
