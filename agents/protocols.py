@@ -15,6 +15,7 @@ light (numpy only): a planner can drive a real robot without the simulator.
 from __future__ import annotations
 
 import math
+import numbers
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -57,16 +58,18 @@ class Parameter:
     log: bool = False
 
     def check(self, value: object) -> Value:
-        """``value`` as this parameter's kind, or ProtocolError if of another kind or out of
-        range (a whole number is accepted for a float)."""
-        if self.kind is float and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
+        """``value`` as this parameter's kind (any real number for a float, any integer for
+        an int, numpy's too), or ProtocolError if of another kind or out of range."""
+        numeric = {float: numbers.Real, int: numbers.Integral}.get(self.kind)
+        if numeric and isinstance(value, numeric) and not isinstance(value, bool | np.bool_):
+            value = self.kind(value)
+        elif self.kind is bool and isinstance(value, np.bool_):
+            value = bool(value)
         if type(value) is not self.kind:
             raise ProtocolError(f"{self.name} must be {self.kind_name}, got {value!r}")
-        if self.kind in (int, float) and not (
-                math.isfinite(value) and self.low <= value <= self.high):
+        if numeric and not (math.isfinite(value) and self.low <= value <= self.high):
             raise ProtocolError(f"{self.name} must be in [{self.format(self.low)}, "
-                                    f"{self.format(self.high)}], got {self.format(value)}")
+                                f"{self.format(self.high)}], got {self.format(value)}")
         return value
 
     def parse(self, text: str) -> Value:

@@ -165,7 +165,8 @@ def format_table(summary: dict) -> str:
     that of the median max error. smin is the median sigma_min (dimensionless), /oracle the
     median ratio to the per-episode oracle, dist the median path length (m), coll the total
     number of segments ending in a collision. Lines fit in 100 columns for realistic values
-    (columns are separated by one space instead of two when needed).
+    and labels up to about 16 characters (columns are separated by one space instead of two
+    when needed); longer labels (protocols with settings) widen the table.
     """
     headers = ["protocol", "maxerr%", "95% CI", "r_L%", "r_R%", "b%", "smin", "/oracle",
                "dist m", "coll", "undetermined"]

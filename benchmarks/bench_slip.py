@@ -11,14 +11,6 @@ from agents.protocols import RandomCommands, StraightSpin
 from excite import calibrate
 
 
-class _Scaled(RandomCommands):
-    def __init__(self, limit: float):
-        self.limit = limit
-
-    def plan(self, knowledge):
-        return self.limit * super().plan(knowledge)
-
-
 def bias(protocol, robots: int = 40, segments: int = 100, env_id="excite/DiffDriveCalib-v0"):
     env = make_env(env_id, segments)
     errors = []
@@ -37,15 +29,15 @@ def bias(protocol, robots: int = 40, segments: int = 100, env_id="excite/DiffDri
 
 def main() -> dict:
     cases = {
-        "random <= 30% (gentle)": _Scaled(0.3),
-        "random <= 100%": _Scaled(1.0),
+        "random <= 30% (gentle)": RandomCommands(max_speed=0.3),
+        "random <= 100%": RandomCommands(),
         "full-speed straight+spin": StraightSpin(speed=1.0),
         "ideal env, random <= 100%": None,
     }
     out = {}
     for name, protocol in cases.items():
         if protocol is None:
-            out[name] = bias(_Scaled(1.0), env_id="excite/DiffDriveCalibIdeal-v0")
+            out[name] = bias(RandomCommands(), env_id="excite/DiffDriveCalibIdeal-v0")
         else:
             out[name] = bias(protocol)
         r = out[name]

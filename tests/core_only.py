@@ -1,4 +1,5 @@
-"""A core-only install (numpy, scipy) runs excite calibrate, segment and validate on CSVs.
+"""A core-only install (numpy, scipy) runs excite calibrate, segment and validate on CSVs,
+lists the protocols and plans with them (no simulator: a planner can drive a real robot).
 
 Run by ``make test-core`` in its own virtual environment with ``pip install .`` (no extras);
 not collected by pytest. Exits non-zero on the first failure.
@@ -62,6 +63,29 @@ def core_only() -> None:
         code, _ = run("simulate", "--protocol", "spin", "--segments", "3", "--out",
                       str(directory / "sim.csv"))
         check(code == 2, "excite simulate says which extra it needs (exit 2)")
+    code, out = run("protocols")
+    check(code == 0 and "umbmark" in out and "speed" in out, "excite protocols")
+    check(plans_without_simulator(), "every registered protocol but learned plans from "
+          "RobotKnowledge alone")
+
+
+def plans_without_simulator() -> bool:
+    """Every protocol that needs no policy builds and acts on a hand-made RobotKnowledge."""
+    from agents.catalog import PROTOCOLS, make_protocol
+    from excite.contracts import RobotKnowledge
+
+    nominal = Params(0.05, 0.05, 0.3)
+    knowledge = RobotKnowledge(
+        observation=np.zeros(16), estimate=nominal, information=np.eye(3), log=np.zeros((1, 5)),
+        pose=np.zeros(3), nominal=nominal, sigma=np.array([2e-3, 2e-3, 1e-3]),
+        max_wheel_speed=10.0, segment_duration=1.0, arena_size=4.0, budget=30)
+    actions = []
+    for name in PROTOCOLS:
+        if name != "learned":
+            protocol = make_protocol(name)
+            protocol.reset(np.random.default_rng(0))
+            actions.append(protocol.act(knowledge))
+    return all(a.shape == (2,) and np.all(np.abs(a) <= 1) for a in actions)
 
 
 if __name__ == "__main__":

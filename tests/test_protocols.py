@@ -16,6 +16,7 @@ from agents.catalog import (
     ProtocolSpec,
     default_protocols,
     make_protocol,
+    parse_protocol,
     parse_protocols,
     register,
 )
@@ -23,7 +24,7 @@ from agents.compare import STREAM_SPAN, CompareSettings, episode_seed, episode_s
 from agents.protocols import Parameter, Protocol
 from agents.tuning import TunedError, candidates, check_disjoint, load_tuned, shipped_path
 from excite.contracts import RobotKnowledge
-from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
+from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID, ENV_IDS
 from tests.conftest import assert_one_line_error, run_cli
 
 IDEAL = "excite/DiffDriveCalibIdeal-v0"
@@ -215,18 +216,23 @@ def test_compare_refuses_tuned_settings_chosen_on_its_own_episodes(tmp_path, cap
     assert_one_line_error(code, err, "--out must name a .json file")
 
 
-def test_shipped_tuned_settings_cover_the_default_env_on_tuning_seeds_only():
-    path = shipped_path(DEFAULT_ENV_ID)
+@pytest.mark.parametrize("env", list(ENV_IDS))
+def test_shipped_tuned_settings_were_tuned_on_tuning_seeds_only(env):
+    path = shipped_path(env)
+    if not path.exists():
+        assert env != DEFAULT_ENV_ID, "the default env ships its tuned settings"
+        pytest.skip(f"no tuned settings shipped for {env}")
     document = load_tuned(path)
-    assert document["env_id"] == DEFAULT_ENV_ID and document["segments"] == DEFAULT_BUDGET
+    assert document["env_id"] == env and document["segments"] == DEFAULT_BUDGET
     assert document["stream"] == "tuning" and document["episodes"] >= 100
     assert min(document["tuning_seeds"]) >= STREAM_SPAN
     assert document["tuning_seeds"] == episode_seeds(
-        CompareSettings(DEFAULT_ENV_ID, DEFAULT_BUDGET, document["seed"], stream="tuning"),
+        CompareSettings(env, DEFAULT_BUDGET, document["seed"], stream="tuning"),
         document["episodes"])
-    assert {spec.label for spec in default_protocols()} <= set(document["protocols"])
+    scripted = {spec.label for spec in default_protocols()} - {"learned"}
+    assert scripted <= set(document["protocols"])
     for label, entry in document["protocols"].items():
-        ProtocolSpec(label).under(entry["settings"])  # every setting valid today
+        parse_protocol(label).under(entry["settings"])  # every setting valid today
 
 
 def test_default_compare_runs_the_shipped_settings(tmp_path, capsys):

@@ -37,9 +37,13 @@ def add_episode_options(parser: argparse.ArgumentParser, episodes: int) -> None:
                         help="protocols, each NAME[:KEY=VALUE...] or module:Class[:KEY=VALUE"
                         "...] (see excite protocols); default: every protocol available "
                         "(learned if a policy exists)")
-    parser.add_argument("--episodes", type=positive_int, default=episodes, metavar="N")
-    parser.add_argument("--segments", type=positive_int, default=DEFAULT_BUDGET, metavar="K")
-    parser.add_argument("--seed", type=nonnegative_int, default=0, metavar="S")
+    parser.add_argument("--episodes", type=positive_int, default=episodes, metavar="N",
+                        help=f"episodes (hidden robots) per protocol (default {episodes})")
+    parser.add_argument("--segments", type=positive_int, default=DEFAULT_BUDGET, metavar="K",
+                        help=f"segments per episode (default {DEFAULT_BUDGET})")
+    parser.add_argument("--seed", type=nonnegative_int, default=0, metavar="S",
+                        help="seed of the episodes' seeds (compare draws evaluation seeds, "
+                        "tune tuning seeds: the two never meet)")
     parser.add_argument("--env", default=DEFAULT_ENV_ID, metavar="ID")
     parser.add_argument("--workers", type=positive_int, default=None, metavar="W",
                         help="worker processes (default: all cores)")
