@@ -20,54 +20,17 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from excite.errors import EstimatorError
-from excite.information import (
-    DEFAULT_SIGMA,
-    as_sigma,
-    as_theta,
-    inverse_information,
-    sigma_min,
-)
+from excite.information import DEFAULT_SIGMA, inverse_information
 from excite.kinematics import Params, sinc_cosc_scalar
-from excite.models import AXLE, SegmentModel, SensorPose
+from excite.models import AXLE, SegmentModel
+from excite.segment_estimator import MAX_CHART_STEP, SegmentEstimator
 
-__all__ = ["DEFAULT_PRIOR", "MAX_CHART_STEP", "OnlineEstimator", "as_prior_std", "initial_theta"]
+__all__ = ["OnlineEstimator"]
 
 _TWO_PI = 2.0 * math.pi
-#: Trust region: one segment may change no parameter by more than a factor exp(0.5) (or an
-#: offset by 0.5 b, an angle by 0.5 rad).
-MAX_CHART_STEP = 0.5
 #: A second Gauss–Newton iteration is taken only after a first step larger than this (in the
 #: chart's units): smaller steps change the linearization by far less than the posterior std.
 _RELINEARIZE = 1e-3
-#: Default prior std, relative to the chart (module doc of excite.models): 10% of a length,
-#: 0.1 b for an offset, 0.5 rad for an angle.
-DEFAULT_PRIOR = {"log": 0.1, "identity": 0.1, "angle": 0.5}
-
-
-def initial_theta(initial: Params | ArrayLike, model: SegmentModel) -> NDArray[np.float64]:
-    """An estimator's starting point as the model's P parameters (a flat float array):
-    Params gives (r_L, r_R, b) in m, then l_x, l_y [m], l_theta [rad] for the sensor-pose
-    model."""
-    theta = as_theta(initial).astype(float).reshape(-1)
-    if theta.size != model.size:
-        raise EstimatorError(f"initial must have the {model.size} parameters "
-                             f"{', '.join(model.names)}, got {theta.size} values")
-    return theta
-
-
-def as_prior_std(model: SegmentModel, initial: NDArray[np.float64],
-                 std: float | ArrayLike | None = None) -> NDArray[np.float64]:
-    """The prior standard deviation (P,) of each parameter in its own units (m, rad) around
-    ``initial`` (the P parameters): ``std`` a scalar for all or P values; None means
-    :data:`DEFAULT_PRIOR` in the chart's units (10% of each length, 0.1 b for offsets,
-    0.5 rad for angles)."""
-    if std is None:
-        out = np.array([DEFAULT_PRIOR[t] for t in model.transforms]) * model.column_scale(initial)
-    else:
-        out = np.broadcast_to(np.asarray(std, dtype=float), (model.size,))
-    if not np.all(np.isfinite(out)) or np.any(out <= 0):
-        raise EstimatorError(f"prior_std must be positive and finite, got {std}")
-    return out
 
 
 def _wrap(a: float) -> float:
@@ -86,7 +49,7 @@ def _solve3(m00: float, m01: float, m02: float, m11: float, m12: float, m22: flo
             (c02 * v0 + c12 * v1 + c22 * v2) / det)
 
 
-class OnlineEstimator:
+class OnlineEstimator(SegmentEstimator):
     """Recursive estimate of a segment model's parameters (default: the axle model's
     p = (r_L, r_R, b)) from one segment at a time.
 
@@ -121,40 +84,27 @@ class OnlineEstimator:
         iterations: int = 2,
         model: SegmentModel = AXLE,
     ):
-        theta = initial_theta(initial, model)
-        self.model = model
-        self.nominal = Params(*theta[:3])
-        self._nominal_theta = theta
+        super().__init__(initial, prior_std, sigma, model)
+        if iterations < 1:
+            raise EstimatorError("iterations must be at least 1")
+        theta = self._nominal_theta
         # The chart's unit of each non-log parameter (offsets: the nominal b; angles: 1 rad).
         self._units = model.column_scale(theta).tolist()
         self._log = [t == "log" for t in model.transforms]
         chart_units = self._chart_derivative(theta.tolist())
-        std = as_prior_std(model, theta, prior_std)
-        if iterations < 1:
-            raise EstimatorError("iterations must be at least 1")
-        self.sigma = as_sigma(sigma)
         self._w = [float(x) for x in 1.0 / self.sigma**2]
         self._iterations = int(iterations)
-        self._prior = np.diag((chart_units / std) ** 2)  # information in the chart
+        self._prior = np.diag((chart_units / self.prior_std) ** 2)  # information in the chart
         self._q = [math.log(x) if log else x / c
                    for x, log, c in zip(theta.tolist(), self._log, self._units, strict=True)]
         self._info = [[float(x) for x in row] for row in self._prior]
-        self.n_segments = 0
-        self._update = self._update_axle if model is AXLE else self._update_general
+        if model is AXLE:  # the unrolled specialisation of _update_general
+            self._update = self._update_axle
         self._w_array = np.array(self._w)[:, None]
 
     def _to_theta(self, q: list[float]) -> tuple[float, ...]:
         return tuple(math.exp(x) if log else x * c
                      for x, log, c in zip(q, self._log, self._units, strict=True))
-
-    def update(self, dphi_L: float, dphi_R: float, dx: float, dy: float, dtheta: float) -> None:
-        """Fold in one segment: wheel increments (rad) and the measured increment (the
-        sensor's motion in its frame at the segment's start; m, m, rad)."""
-        values = (float(dphi_L), float(dphi_R), float(dx), float(dy), float(dtheta))
-        if not all(map(math.isfinite, values)):
-            raise ValueError("segment values must be finite")
-        self._update(*values)
-        self.n_segments += 1
 
     def _update_general(self, phi_L: float, phi_R: float, zx: float, zy: float,
                         zt: float) -> None:
@@ -231,6 +181,8 @@ class OnlineEstimator:
             self._q = [x0, x1, x2]
             self._info = [[m00, m01, m02], [m01, m11, m12], [m02, m12, m22]]
 
+    _update = _update_general  # any model; the axle model's instances use _update_axle
+
     @property
     def theta(self) -> NDArray[np.float64]:
         """All P parameters of the model (angles wrapped to (-pi, pi])."""
@@ -243,10 +195,6 @@ class OnlineEstimator:
     @property
     def params(self) -> Params:
         return Params(*self._to_theta(self._q)[:3])
-
-    @property
-    def sensor_pose(self) -> SensorPose | None:
-        return self.model.split(self.theta)[1]
 
     def _chart_derivative(self, theta: Sequence[float]) -> NDArray[np.float64]:
         """d theta / d q at theta: the value for log parameters, else the chart's unit."""
@@ -267,7 +215,3 @@ class OnlineEstimator:
         ratio = (self.model.column_scale(self._nominal_theta)
                  / self._chart_derivative(self._to_theta(self._q)))
         return (np.array(self._info) - self._prior) * np.outer(ratio, ratio)
-
-    @property
-    def sigma_min(self) -> float:
-        return sigma_min(self.information)

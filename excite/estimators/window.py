@@ -32,11 +32,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from excite.errors import EstimatorError
-from excite.estimators.base import SegmentEstimator
 from excite.information import DEFAULT_SIGMA
 from excite.kinematics import Params, wrap_angle
 from excite.models import AXLE, SegmentModel
-from excite.online import MAX_CHART_STEP
+from excite.segment_estimator import MAX_CHART_STEP, SegmentEstimator
 
 __all__ = ["DEFAULT_WINDOW", "DEFAULT_WINDOW_ITERATIONS", "SlidingWindowSmoother"]
 
@@ -56,7 +55,7 @@ _TOLERANCE = 1e-3
 class SlidingWindowSmoother(SegmentEstimator):
     """Sliding-window maximum a posteriori estimator with a marginalised prior (module doc).
 
-    Arguments as :class:`excite.estimators.base.SegmentEstimator`: ``initial`` (the prior
+    Arguments as :class:`excite.segment_estimator.SegmentEstimator`: ``initial`` (the prior
     mean, Params or P parameters), ``prior_std`` (parameter units; None: 10% of lengths,
     0.1 b for offsets, 0.5 rad for angles), ``sigma`` (sigma_x [m], sigma_y [m],
     sigma_theta [rad]) and ``model``; plus ``size``, the window length W in segments, and

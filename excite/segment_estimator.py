@@ -1,6 +1,7 @@
-"""What the reference estimators share: the estimator protocol's attributes around one
-abstract update (the environment and the comparison read ``params``, ``covariance`` and,
-when present, ``theta``)."""
+"""What every segment estimator shares (:class:`excite.OnlineEstimator` and the reference
+estimators of :mod:`excite.estimators`): the start and prior checks, the chart's trust region,
+and the estimator protocol's attributes around one abstract update (the environment and the
+comparison read ``params``, ``covariance`` and, when present, ``theta``)."""
 
 from __future__ import annotations
 
@@ -10,14 +11,48 @@ from abc import ABC, abstractmethod
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from excite.information import as_sigma, sigma_min
+from excite.errors import EstimatorError
+from excite.information import as_sigma, as_theta, sigma_min
 from excite.kinematics import Params
 from excite.models import SegmentModel, SensorPose
-from excite.online import as_prior_std, initial_theta
 
-__all__ = ["SegmentEstimator"]
+__all__ = ["DEFAULT_PRIOR", "MAX_CHART_STEP", "SegmentEstimator", "as_prior_std",
+           "initial_theta"]
 
 FloatArray = NDArray[np.float64]
+
+#: Trust region: one segment may change no parameter by more than a factor exp(0.5) (or an
+#: offset by 0.5 b, an angle by 0.5 rad).
+MAX_CHART_STEP = 0.5
+#: Default prior std, relative to the chart (module doc of excite.models): 10% of a length,
+#: 0.1 b for an offset, 0.5 rad for an angle.
+DEFAULT_PRIOR = {"log": 0.1, "identity": 0.1, "angle": 0.5}
+
+
+def initial_theta(initial: Params | ArrayLike, model: SegmentModel) -> NDArray[np.float64]:
+    """An estimator's starting point as the model's P parameters (a flat float array):
+    Params gives (r_L, r_R, b) in m, then l_x, l_y [m], l_theta [rad] for the sensor-pose
+    model."""
+    theta = as_theta(initial).astype(float).reshape(-1)
+    if theta.size != model.size:
+        raise EstimatorError(f"initial must have the {model.size} parameters "
+                             f"{', '.join(model.names)}, got {theta.size} values")
+    return theta
+
+
+def as_prior_std(model: SegmentModel, initial: NDArray[np.float64],
+                 std: float | ArrayLike | None = None) -> NDArray[np.float64]:
+    """The prior standard deviation (P,) of each parameter in its own units (m, rad) around
+    ``initial`` (the P parameters): ``std`` a scalar for all or P values; None means
+    :data:`DEFAULT_PRIOR` in the chart's units (10% of each length, 0.1 b for offsets,
+    0.5 rad for angles)."""
+    if std is None:
+        out = np.array([DEFAULT_PRIOR[t] for t in model.transforms]) * model.column_scale(initial)
+    else:
+        out = np.broadcast_to(np.asarray(std, dtype=float), (model.size,))
+    if not np.all(np.isfinite(out)) or np.any(out <= 0):
+        raise EstimatorError(f"prior_std must be positive and finite, got {std}")
+    return out
 
 
 class SegmentEstimator(ABC):
