@@ -39,6 +39,7 @@ from excite.models import AXLE, SENSOR_POSE, SegmentModel
 from excite.online import OnlineEstimator
 
 __all__ = [
+    "DEFAULT_ESTIMATOR",
     "ESTIMATORS",
     "OPTIONS",
     "EstimatorSpec",
@@ -47,6 +48,7 @@ __all__ = [
     "estimator_factory",
     "make_estimator",
     "model_for",
+    "parse_estimators",
 ]
 
 
@@ -56,6 +58,8 @@ ESTIMATORS: dict[str, type] = {
     "ekf": ExtendedKalmanFilter,
     "window": SlidingWindowSmoother,
 }
+#: The estimator of a comparison given none (the environment's default).
+DEFAULT_ESTIMATOR = "online"
 #: The settings a built-in takes in its spec (``name:key=value``): keyword arguments of its
 #: constructor.
 OPTIONS: dict[str, tuple[str, ...]] = {
@@ -98,6 +102,12 @@ class EstimatorSpec:
 
     name: str
     settings: tuple[tuple[str, int | float], ...] = ()
+
+    @property
+    def label(self) -> str:
+        """The spec written back (``window:size=20``, ``mypkg.est:factory``); it names the
+        estimator in results."""
+        return self.name + "".join(f":{key}={value}" for key, value in self.settings)
 
     def __call__(self, nominal: Params | ArrayLike, sigma: ArrayLike) -> Estimator:
         if self.name in ESTIMATORS:
@@ -152,3 +162,18 @@ def make_estimator(spec: str, nominal: Params | ArrayLike, sigma: ArrayLike) -> 
     (Params, or the model's parameters) with measurement noise ``sigma`` (sigma_x [m],
     sigma_y [m], sigma_theta [rad])."""
     return estimator_factory(spec)(nominal, sigma)
+
+
+def parse_estimators(text: str) -> list[EstimatorSpec]:
+    """The specs of a comma-separated list (``online,ekf,window:size=20,mypkg.est:factory``),
+    each checked by :func:`estimator_factory`; EstimatorError (one line) for an empty item or
+    a spec given twice."""
+    specs: dict[str, EstimatorSpec] = {}
+    for item in text.split(","):
+        if not item.strip():
+            raise EstimatorError(f"estimators {text!r}: empty name in the list")
+        spec = estimator_factory(item)
+        if spec.label in specs:
+            raise EstimatorError(f"estimators must be distinct: {spec.label} is given twice")
+        specs[spec.label] = spec
+    return list(specs.values())
