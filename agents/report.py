@@ -235,8 +235,8 @@ def _paired(reference: dict[str, np.ndarray], baseline: dict[str, np.ndarray],
         num, den = reference[key][ours], baseline[key][theirs]
         result = paired_ratio(num, den, rng, n_boot)
         bound = _censored_bound(num, den, segments) if key == RATIO_THRESHOLD else {}
-        out[name] = {"ratio": None if bound else _json_float(result.ratio),
-                     "ci95": [_json_float(result.ci[0]), _json_float(result.ci[1])], **bound}
+        ci = [None, None] if bound else [_json_float(result.ci[0]), _json_float(result.ci[1])]
+        out[name] = {"ratio": None if bound else _json_float(result.ratio), "ci95": ci, **bound}
     return out
 
 
@@ -281,8 +281,8 @@ def summarize(columns: dict[str, np.ndarray], seed: int = 0, n_boot: int = N_BOO
           ``{"ratio", "ci95"}``: the reference's median over the baseline's (below 1: the
           reference is better), with a paired percentile bootstrap interval over episodes
           (:func:`agents.metrics.paired_ratio`; None where undefined). When only one median
-          time is censored (beyond K segments) the ratio is None and the entry says what
-          is known: ``at_most`` (reference median / K, the baseline's censored) or
+          time is censored (beyond K segments) the ratio and its interval are None and the
+          entry says what is known: ``at_most`` (reference median / K, the baseline's censored) or
           ``at_least`` (K / baseline median, the reference's censored).
 
         The ci95 of medians are percentile bootstrap intervals over episodes (resampled
