@@ -35,6 +35,7 @@ from agents.protocols import Protocol
 from excite.consistency import estimate_error, nees
 from excite.errors import ExciteError
 from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
+from excite.estimators import check_distinct as check_distinct_estimators
 from excite.information import crlb_relative_std
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
 
@@ -135,11 +136,8 @@ def as_specs(protocols: Iterable[str | ProtocolSpec]) -> list[ProtocolSpec]:
 
 def as_estimator_specs(estimators: Iterable[str | EstimatorSpec]) -> list[EstimatorSpec]:
     """Estimators given as specs or as their text, as distinct specs."""
-    specs = [estimator_factory(e) if isinstance(e, str) else e for e in estimators]
-    labels = [spec.label for spec in specs]
-    if len(set(labels)) < len(labels) or not labels:
-        raise CompareError(f"estimators must be distinct and at least one, got {labels}")
-    return specs
+    return check_distinct_estimators(
+        [estimator_factory(e) if isinstance(e, str) else e for e in estimators])
 
 
 def incompatible_protocols(protocols: Iterable[ProtocolSpec],

@@ -240,6 +240,7 @@ def test_compare_runs_on_the_sensor_env_and_skips_a_policy_of_another_layout(tmp
         (["compare", "--estimators", "kalman"], "unknown estimator 'kalman'"),
         (["compare", "--estimators", "online,ekf,online"], "distinct"),
         (["compare", "--estimators", "online,,ekf"], "empty name"),
+        (["compare", "--estimators", ""], "empty name"),
         (["compare", "--estimators", "window:width=3"], "'width=3' is not a setting"),
         (["compare", "--estimators", "tests.test_compare:missing"], "has no 'missing'"),
         (["compare", "--estimators", "no_such_module_x:f"], "cannot import module"),
@@ -383,3 +384,16 @@ def test_an_old_results_folder_is_a_clear_error(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "older excite" in err[0]
     assert (tmp_path / "segments.csv").read_text() == old
+
+
+def test_run_comparison_rejects_no_or_repeated_estimators(tmp_path):
+    from excite.errors import EstimatorError
+    from excite.estimators import estimator_factory
+
+    settings = CompareSettings(IDEAL, 2, 0)
+    with pytest.raises(EstimatorError, match="no estimator"):
+        run_comparison(tmp_path, ["spin"], 1, settings, progress=False, estimators=[])
+    with pytest.raises(EstimatorError, match="given twice"):
+        run_comparison(tmp_path, ["spin"], 1, settings, progress=False,
+                       estimators=["ekf:prior_std=0.1", estimator_factory("ekf:prior_std=1e-1")])
+    assert not (tmp_path / "segments.csv").exists()

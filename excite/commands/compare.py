@@ -95,7 +95,7 @@ def estimator_specs(args: argparse.Namespace) -> list[EstimatorSpec]:
     """The estimators of ``--estimators`` (default: the env's default, ``online``)."""
     from excite.estimators import DEFAULT_ESTIMATOR, parse_estimators
 
-    return parse_estimators(args.estimators or DEFAULT_ESTIMATOR)
+    return parse_estimators(DEFAULT_ESTIMATOR if args.estimators is None else args.estimators)
 
 
 def check_estimators(estimators: list[EstimatorSpec], settings: CompareSettings) -> None:

@@ -43,6 +43,7 @@ __all__ = [
     "ESTIMATORS",
     "OPTIONS",
     "EstimatorSpec",
+    "check_distinct",
     "ExtendedKalmanFilter",
     "SlidingWindowSmoother",
     "estimator_factory",
@@ -168,12 +169,19 @@ def parse_estimators(text: str) -> list[EstimatorSpec]:
     """The specs of a comma-separated list (``online,ekf,window:size=20,mypkg.est:factory``),
     each checked by :func:`estimator_factory`; EstimatorError (one line) for an empty item or
     a spec given twice."""
-    specs: dict[str, EstimatorSpec] = {}
-    for item in text.split(","):
-        if not item.strip():
-            raise EstimatorError(f"estimators {text!r}: empty name in the list")
-        spec = estimator_factory(item)
-        if spec.label in specs:
+    items = text.split(",")
+    if not all(item.strip() for item in items):
+        raise EstimatorError(f"estimators {text!r}: empty name in the list")
+    return check_distinct([estimator_factory(item) for item in items])
+
+
+def check_distinct(specs: list[EstimatorSpec]) -> list[EstimatorSpec]:
+    """``specs`` if there is at least one and no label appears twice, else EstimatorError."""
+    if not specs:
+        raise EstimatorError("no estimator given")
+    seen: set[str] = set()
+    for spec in specs:
+        if spec.label in seen:
             raise EstimatorError(f"estimators must be distinct: {spec.label} is given twice")
-        specs[spec.label] = spec
-    return list(specs.values())
+        seen.add(spec.label)
+    return specs
