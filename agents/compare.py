@@ -1,13 +1,15 @@
 """Paired comparison of calibration protocols on the same hidden robots (``excite compare``).
 
-Episode i gives every protocol the same hidden robot, start pose and sensor-noise streams
-(the env is reset with the same seed), so differences are protocol effects, not luck.
-Protocols are specs (``umbmark:speed=0.2``, see :mod:`agents.catalog`); their labels name
+Episode i gives every (protocol, estimator) pair the same hidden robot, start pose and
+sensor-noise streams (the env is reset with the same seed), so differences are protocol and
+estimator effects, not luck. Protocols are specs (``umbmark:speed=0.2``, see
+:mod:`agents.catalog`), estimators too (``window:size=20``, ``mypkg.est:factory``, see
+:mod:`excite.estimators`; plugged in as the env's ``estimator_factory``); their labels name
 them in the results. Episode seeds come from one of two disjoint streams: ``evaluation``
 (``excite compare``) and ``tuning`` (``excite tune``), see :func:`episode_seed`.
 Episodes run in parallel worker processes; each finished episode's rows are appended to
 ``DIR/segments.csv`` at once, so an interrupted run re-run with the same ``DIR`` continues
-where it stopped, losing and duplicating nothing.
+where it stopped (per protocol, estimator and episode), losing and duplicating nothing.
 """
 
 from __future__ import annotations
@@ -30,13 +32,21 @@ import excite  # noqa: F401  (registers the environment ids in worker processes)
 from agents.catalog import ProtocolSpec, check_distinct, make_protocol, parse_protocol
 from agents.oracle import oracle_design
 from agents.protocols import Protocol
+from excite.consistency import estimate_error, nees
 from excite.errors import ExciteError
+from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
+from excite.estimators import check_distinct as check_distinct_estimators
 from excite.information import crlb_relative_std
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
 
-COLUMNS = ("protocol", "episode", "segment", "r_L_err", "r_R_err", "b_err", "sigma_min",
-           "oracle_sigma_min", "rel_std_r_L", "rel_std_r_R", "rel_std_b", "collision",
-           "x", "y", "theta", "distance")
+#: The columns of DIR/segments.csv (see :mod:`agents.report` for their meaning and units).
+COLUMNS = ("protocol", "estimator", "episode", "segment", "r_L_err", "r_R_err", "b_err",
+           "sigma_min", "oracle_sigma_min", "rel_std_r_L", "rel_std_r_R", "rel_std_b",
+           "nees", "nees_dof", "collision", "x", "y", "theta", "distance", "time")
+#: The text columns and the integer columns; every other column is a float.
+_TEXT, _INTEGER = ("protocol", "estimator"), ("episode", "segment", "nees_dof", "collision")
+#: One run of an episode: a protocol driving, an estimator estimating.
+Pair = tuple[ProtocolSpec, EstimatorSpec]
 #: The seed streams of episodes; stream i's env seeds lie in [i 2**32, (i + 1) 2**32).
 EVALUATION_STREAM, TUNING_STREAM = STREAMS = ("evaluation", "tuning")
 STREAM_SPAN = 2**32
@@ -75,17 +85,21 @@ def episode_seeds(settings: CompareSettings, episodes: int) -> list[int]:
 
 
 def make_env(env_id: str, segments: int, robot: str = "default", **config) -> gym.Env:
-    """The env ``env_id`` with a budget of ``segments``, the robot preset and further config
-    overrides."""
+    """The env ``env_id`` with a budget of ``segments``, the robot preset and further
+    keyword arguments of the env (config overrides, ``estimator_factory``)."""
     return gym.make(env_id, budget=segments, max_episode_steps=segments, robot=robot, **config)
 
 
 def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[dict]:
-    """Run one episode of ``protocol``; one record per segment (see COLUMNS)."""
+    """Run one episode of ``protocol`` with the env's estimator; one record per segment (see
+    COLUMNS): ``nees`` is the estimator's NEES against the hidden truth over the ``nees_dof``
+    parameters it reports a covariance for (:func:`excite.consistency.estimate_error`),
+    ``time`` the seconds driven since the start."""
     env.reset(seed=seed)
     base = env.unwrapped
     protocol.reset(np.random.default_rng([seed, 1]))
-    truth = base.true_params.as_array()
+    truth, true_theta = base.true_params.as_array(), base.true_theta
+    seconds_per_segment = base.segment_duration + float(base.config["settle_time"])
     records, distance, done = [], 0.0, False
     knowledge = base.knowledge()
     while not done:
@@ -95,13 +109,15 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[di
         distance += base.last_segment_distance
         err = knowledge.estimate.as_array() / truth - 1.0
         rel_std = crlb_relative_std(knowledge.information)
+        error, covariance = estimate_error(base.estimator, true_theta)
         x, y, theta = base.sim.pose
         records.append({
             "segment": info["n_segments"], "r_L_err": err[0], "r_R_err": err[1],
             "b_err": err[2], "sigma_min": info["sigma_min"],
             "rel_std_r_L": rel_std[0], "rel_std_r_R": rel_std[1], "rel_std_b": rel_std[2],
+            "nees": float(nees(error, covariance)), "nees_dof": error.size,
             "collision": int(info["collision"]), "x": x, "y": y, "theta": theta,
-            "distance": distance,
+            "distance": distance, "time": info["n_segments"] * seconds_per_segment,
         })
     return records
 
@@ -118,6 +134,12 @@ def as_specs(protocols: Iterable[str | ProtocolSpec]) -> list[ProtocolSpec]:
     return check_distinct(parse_protocol(p) if isinstance(p, str) else p for p in protocols)
 
 
+def as_estimator_specs(estimators: Iterable[str | EstimatorSpec]) -> list[EstimatorSpec]:
+    """Estimators given as specs or as their text, as distinct specs."""
+    return check_distinct_estimators(
+        [estimator_factory(e) if isinstance(e, str) else e for e in estimators])
+
+
 def incompatible_protocols(protocols: Iterable[ProtocolSpec],
                            observation_shape: tuple[int, ...]) -> dict[str, str]:
     """Labels of the protocols that cannot run on an env with this observation shape (e.g. a
@@ -127,51 +149,65 @@ def incompatible_protocols(protocols: Iterable[ProtocolSpec],
     return {label: reason for label, reason in reasons.items() if reason}
 
 
-def run_episode(settings: CompareSettings, protocols: list[ProtocolSpec],
-                episode: int) -> list[dict]:
-    """All requested protocols on episode ``episode`` (runs in a worker process)."""
-    env = make_env(settings.env_id, settings.segments, settings.robot)
+def run_episode(settings: CompareSettings, pairs: list[Pair], episode: int) -> list[dict]:
+    """All requested (protocol, estimator) pairs on episode ``episode`` (runs in a worker
+    process): one env per estimator (its ``estimator_factory``), each reset with the
+    episode's seed, so every pair meets the same hidden robot."""
     seed = episode_seed(settings.seed, episode, settings.stream)
-    env.reset(seed=seed)
-    base = env.unwrapped
-    oracle = oracle_design(base.true_theta, base.sigma, base.nominal_theta, settings.segments,
-                           base.max_wheel_speed, base.segment_duration,
-                           model=base.model).sigma_min
-    rows = []
-    for spec in protocols:
-        records = run_protocol_episode(env, _worker_protocol(spec), seed)
+    envs: dict[str, gym.Env] = {}
+    rows, oracle = [], None
+    for protocol, estimator in pairs:
+        if estimator.label not in envs:
+            envs[estimator.label] = make_env(settings.env_id, settings.segments,
+                                             settings.robot, estimator_factory=estimator)
+        env = envs[estimator.label]
+        if oracle is None:  # the robot's design bound: the same for every pair
+            env.reset(seed=seed)
+            base = env.unwrapped
+            oracle = oracle_design(base.true_theta, base.sigma, base.nominal_theta,
+                                   settings.segments, base.max_wheel_speed,
+                                   base.segment_duration, model=base.model).sigma_min
+        records = run_protocol_episode(env, _worker_protocol(protocol), seed)
         for record in records[-1:] if settings.final_only else records:
-            rows.append({"protocol": spec.label, "episode": episode,
-                         "oracle_sigma_min": oracle, **record})
-    env.close()
+            rows.append({"protocol": protocol.label, "estimator": estimator.label,
+                         "episode": episode, "oracle_sigma_min": oracle, **record})
+    for env in envs.values():
+        env.close()
     return rows
 
 
 # -- the results file -----------------------------------------------------------------------
 def _parse(row: dict[str, str]) -> dict | None:
     try:
-        out = {"protocol": row["protocol"], "episode": int(row["episode"]),
-               "segment": int(row["segment"]), "collision": int(row["collision"])}
-        for key in COLUMNS[3:]:
-            if key != "collision":
-                out[key] = float(row[key])
+        out = {}
+        for key in COLUMNS:
+            kind = str if key in _TEXT else int if key in _INTEGER else float
+            out[key] = kind(row[key])
     except (KeyError, TypeError, ValueError):
         return None
     return out
 
 
 def read_complete_rows(path: Path, segments: int, final_only: bool = False) -> list[dict]:
-    """Rows of every (protocol, episode) present with all segments exactly once (or only the
-    last, ``final_only``); partial episodes (an interrupted write) and malformed lines are
-    dropped."""
+    """Rows of every (protocol, estimator, episode) present with all segments exactly once
+    (or only the last, ``final_only``); partial episodes (an interrupted write) and malformed
+    lines are dropped. CompareError for a file with other columns (written by an older excite,
+    before estimators were an axis)."""
     if not path.exists():
         return []
-    groups: dict[tuple[str, int], dict[int, dict]] = {}
+    groups: dict[tuple[str, str, int], dict[int, dict]] = {}
     with open(path, newline="") as handle:
-        for raw in csv.DictReader(handle):
+        reader = csv.DictReader(handle)
+        if reader.fieldnames is not None and tuple(reader.fieldnames) != COLUMNS:
+            raise CompareError(
+                f"{path}: columns {','.join(reader.fieldnames)} are not those of this excite "
+                f"version ({','.join(COLUMNS)}); it was written by an older excite: re-run "
+                "it into another --out")
+        for raw in reader:
             row = _parse(raw)
             if row is not None:
-                groups.setdefault((row["protocol"], row["episode"]), {})[row["segment"]] = row
+                key = (row["protocol"], row["estimator"], row["episode"])
+                groups.setdefault(key, {})[row["segment"]] = row
     expected = [segments] if final_only else list(range(1, segments + 1))
     complete = [g for g in groups.values() if sorted(g) == expected]
     return [row for g in complete for _, row in sorted(g.items())]
@@ -224,12 +260,15 @@ def run_comparison(
     settings: CompareSettings | None = None,
     workers: int | None = None,
     progress: bool = True,
+    estimators: Sequence[str | EstimatorSpec] = (DEFAULT_ESTIMATOR,),
 ) -> list[dict]:
-    """Run (or finish) a comparison in ``out_dir``; returns the rows of the requested
-    protocols (specs or their text; rows name them by label) and episodes. Every protocol is
-    built once before any work starts, so bad names or settings fail at once."""
+    """Run (or finish) a comparison in ``out_dir``; returns the rows of every requested
+    (protocol, estimator) pair (specs or their text; rows name them by label) and episode.
+    Every protocol is built once before any work starts, so bad names or settings fail at
+    once."""
     settings = settings or CompareSettings()
     specs = as_specs(protocols)
+    estimator_specs = as_estimator_specs(estimators)
     for spec in specs:
         make_protocol(spec)
     out = Path(out_dir)
@@ -238,8 +277,9 @@ def run_comparison(
     csv_path = out / "segments.csv"
     rows = read_complete_rows(csv_path, settings.segments, settings.final_only)
     _write_rows(csv_path, rows, "w")  # rewrite without partial episodes or duplicates
-    done = {(r["protocol"], r["episode"]) for r in rows}
-    todo = {e: [s for s in specs if (s.label, e) not in done] for e in range(episodes)}
+    done = {(r["protocol"], r["estimator"], r["episode"]) for r in rows}
+    todo = {e: [(p, m) for p in specs for m in estimator_specs
+                if (p.label, m.label, e) not in done] for e in range(episodes)}
     todo = {e: s for e, s in todo.items() if s}
 
     bar = tqdm(total=len(todo), desc="episodes", unit="ep", disable=not progress)
@@ -259,8 +299,9 @@ def run_comparison(
             raise
         finally:
             bar.close()
-    wanted = {spec.label for spec in specs}
-    return [r for r in rows if r["protocol"] in wanted and r["episode"] < episodes]
+    wanted = {(p.label, m.label) for p in specs for m in estimator_specs}
+    return [r for r in rows
+            if (r["protocol"], r["estimator"]) in wanted and r["episode"] < episodes]
 
 
 def columns_of(rows: Sequence[dict]) -> dict[str, np.ndarray]:

@@ -2,10 +2,9 @@
 
 Inputs are per-segment records: index k along the last axis is the state after segment
 k + 1 of an episode (K segments); episodes, when there are several, run along the first axis.
+Consistency (NEES, ANEES and its chi-square bounds) is in :mod:`excite.consistency`, shared
+with the environment's estimator check.
 
-* consistency: :func:`nees` and :func:`anees` (the normalised estimation error squared and
-  its average over episodes) with :func:`anees_bounds`, the two-sided chi-square interval a
-  consistent estimator's ANEES lies in;
 * :func:`time_to_accuracy`: segments, seconds and metres of driving until the max relative
   error stays below a threshold, censored (inf, flagged) when it never does;
 * :func:`error_time_area`: the area under the max relative error over time;
@@ -20,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import trapezoid
-from scipy.stats import chi2
 
-from excite.errors import ExciteError
+from excite.consistency import CONFIDENCE, check_confidence
+from excite.errors import MetricError
 
 __all__ = [
     "CONFIDENCE",
@@ -30,86 +29,15 @@ __all__ = [
     "MetricError",
     "PairedRatio",
     "TimeToAccuracy",
-    "anees",
-    "anees_bounds",
     "error_time_area",
-    "nees",
     "paired_ratio",
     "time_to_accuracy",
 ]
 
 FloatArray = NDArray[np.float64]
 
-#: Two-sided confidence of the ANEES bounds and the bootstrap intervals.
-CONFIDENCE = 0.95
 #: Bootstrap resamples of the episodes.
 N_BOOT = 2000
-
-
-class MetricError(ExciteError, ValueError):
-    """Arrays a metric cannot be computed from (shapes, thresholds, confidence levels)."""
-
-
-def _confidence(confidence: float) -> float:
-    if not 0.0 < confidence < 1.0:
-        raise MetricError(f"confidence must lie strictly between 0 and 1, got {confidence}")
-    return confidence
-
-
-def nees(errors: ArrayLike, covariances: ArrayLike) -> FloatArray:
-    """Normalised estimation error squared e^T C^-1 e of each estimate.
-
-    errors: (..., P) estimate minus truth, in the parameters' units (m, rad);
-    covariances: (..., P, P) the estimator's reported covariance of the same estimates.
-    Returns (...). A singular or non-finite covariance gives nan there (never a guess).
-    """
-    e = np.asarray(errors, dtype=float)
-    c = np.asarray(covariances, dtype=float)
-    if c.shape != e.shape + e.shape[-1:]:
-        raise MetricError(f"covariances must be shaped {e.shape + e.shape[-1:]} for errors "
-                          f"shaped {e.shape}, got {c.shape}")
-    out = np.full(e.shape[:-1], np.nan)
-    finite = np.all(np.isfinite(c), axis=(-2, -1)) & np.all(np.isfinite(e), axis=-1)
-    if np.any(finite):
-        ok_c, ok_e = c[finite], e[finite]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            full_rank = np.linalg.matrix_rank(ok_c, hermitian=True) == e.shape[-1]
-        values = np.full(ok_e.shape[0], np.nan)
-        if np.any(full_rank):
-            solved = np.linalg.solve(ok_c[full_rank], ok_e[full_rank][..., None])[..., 0]
-            values[full_rank] = np.einsum("np,np->n", ok_e[full_rank], solved)
-        out[finite] = values
-    return out
-
-
-def anees(errors: ArrayLike, covariances: ArrayLike) -> FloatArray:
-    """Average NEES over episodes, per segment.
-
-    errors: (M, K, P) estimate minus truth of M episodes after each of K segments;
-    covariances: (M, K, P, P). Returns (K,): nan where any episode's NEES is nan. A
-    consistent estimator's ANEES lies inside :func:`anees_bounds` (M, P); above means
-    over-confident, below under-confident.
-    """
-    values = nees(errors, covariances)
-    if values.ndim != 2:
-        raise MetricError(f"errors must be shaped (episodes, segments, parameters), got "
-                          f"{np.shape(errors)}")
-    return values.mean(axis=0)
-
-
-def anees_bounds(episodes: int, parameters: int,
-                 confidence: float = CONFIDENCE) -> tuple[float, float]:
-    """Two-sided chi-square interval of the ANEES of a consistent estimator: M times the
-    ANEES of M independent episodes is chi-square with M P degrees of freedom, so with
-    alpha = 1 - confidence the bounds are chi2.ppf(alpha / 2, M P) / M and
-    chi2.ppf(1 - alpha / 2, M P) / M (dimensionless)."""
-    if episodes < 1 or parameters < 1:
-        raise MetricError(f"need at least one episode and one parameter, got {episodes} "
-                          f"and {parameters}")
-    alpha = 1.0 - _confidence(confidence)
-    dof = episodes * parameters
-    return (float(chi2.ppf(0.5 * alpha, dof) / episodes),
-            float(chi2.ppf(1.0 - 0.5 * alpha, dof) / episodes))
 
 
 @dataclass(frozen=True)
@@ -231,7 +159,7 @@ def paired_ratio(numerator: ArrayLike, denominator: ArrayLike, rng: np.random.Ge
                           f"paired episodes, got shapes {num.shape} and {den.shape}")
     if int(n_boot) != n_boot or n_boot < 1:
         raise MetricError(f"n_boot must be a whole number >= 1, got {n_boot}")
-    alpha = 1.0 - _confidence(confidence)
+    alpha = 1.0 - check_confidence(confidence)
     draws = rng.integers(0, num.size, size=(int(n_boot), num.size))
     boot = _ratio_of_medians(num[draws], den[draws])
     # Order statistics (no interpolation: between two inf resamples it would give nan).

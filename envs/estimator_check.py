@@ -3,7 +3,10 @@
 Runs an estimator factory through N episodes of an environment under a policy and reports,
 per segment, the RMSE of each parameter against the hidden truth and the average normalized
 estimation error squared (ANEES) with its two-sided 95% chi-square bounds. A consistent
-estimator's ANEES lies inside the bounds; one that is overconfident lies above them.
+estimator's ANEES lies inside the bounds; one that is overconfident lies above them. The
+parameters judged are those the estimator reports a covariance for (see
+:func:`excite.consistency.estimate_error`): the wheels (r_L, r_R, b) on the axle model, and
+the sensor pose too on ``excite/DiffDriveCalibSensor-v0`` with a sensor-pose estimator.
 """
 
 from __future__ import annotations
@@ -13,9 +16,10 @@ from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
-from scipy.stats import chi2
 
 from envs.env import EstimatorFactory, default_estimator
+from excite.calibration import chi2_quantile
+from excite.consistency import CONFIDENCE, anees, anees_bounds, estimate_error, nees, verdict
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
@@ -24,9 +28,10 @@ Policy = Callable[[np.ndarray], np.ndarray]
 class EstimatorReport:
     """Per-segment accuracy and consistency of an estimator over ``episodes`` episodes.
 
-    rmse: (K, 3) RMSE of (r_L, r_R, b) in meters after each of K segments.
+    rmse: (K, P) RMSE of the P judged parameters (r_L, r_R, b in m, then l_x, l_y in m and
+    l_theta in rad when the sensor pose is estimated) after each of K segments.
     anees: (K,) average NEES; anees_bounds: (low, high) two-sided 95% chi-square bounds of the
-    ANEES of consistent estimates (3 parameters, ``episodes`` samples).
+    ANEES of consistent estimates (P parameters, ``episodes`` samples).
     nees_final: (episodes,) NEES after the last segment of each episode.
     """
 
@@ -38,23 +43,35 @@ class EstimatorReport:
     nees_final: np.ndarray
 
     @property
+    def parameters(self) -> int:
+        """P, the number of parameters judged."""
+        return int(self.rmse.shape[-1])
+
+    @property
+    def verdict(self) -> str:
+        """The final ANEES against its bounds (:func:`excite.consistency.verdict`)."""
+        return verdict(float(self.anees[-1]), self.anees_bounds)
+
+    @property
     def consistent(self) -> bool:
         """ANEES after the last segment inside its 95% bounds."""
-        low, high = self.anees_bounds
-        return bool(low <= self.anees[-1] <= high)
+        return self.verdict == "consistent"
 
     @property
     def fraction_inside_95(self) -> float:
         """Share of episodes whose final estimate lies inside its 95% ellipse."""
-        return float(np.mean(self.nees_final <= chi2.ppf(0.95, 3)))
+        return float(np.mean(self.nees_final <= chi2_quantile(CONFIDENCE, self.parameters)))
 
     def summary(self) -> str:
         low, high = self.anees_bounds
-        rel = self.rmse[-1]
+        names = ("r_L", "r_R", "b", "l_x", "l_y", "l_theta")[:self.parameters]
+        units = ("m", "m", "m", "m", "m", "rad")
+        rmse = ", ".join(f"{n} {v:.2e} {u}" for n, v, u in zip(names, self.rmse[-1], units,
+                                                                strict=False))
         return (f"{self.env_id}: {self.episodes} episodes x {len(self.anees)} segments; "
-                f"final RMSE r_L {rel[0]:.2e} m, r_R {rel[1]:.2e} m, b {rel[2]:.2e} m; "
+                f"final RMSE {rmse}; "
                 f"ANEES {self.anees[-1]:.2f} (95% bounds {low:.2f}-{high:.2f}, "
-                f"{'consistent' if self.consistent else 'INCONSISTENT'}); "
+                f"{'consistent' if self.consistent else 'INCONSISTENT: ' + self.verdict}); "
                 f"{100 * self.fraction_inside_95:.0f}% of final estimates inside their 95% "
                 "ellipse")
 
@@ -80,33 +97,31 @@ def check_estimator(
         env_id = env.spec.id if env.spec else type(env.unwrapped).__name__
         env.unwrapped.estimator_factory = estimator_factory
     env.action_space.seed(seed)
-    errors, nees = [], []
+    errors, covariances = [], []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)
-        truth = env.unwrapped.true_params.as_array()
-        ep_err, ep_nees = [], []
+        truth = env.unwrapped.true_theta
+        ep_err, ep_cov = [], []
         done = False
         while not done:
             action = env.action_space.sample() if policy is None else policy(obs)
             obs, _, terminated, truncated, _ = env.step(action)
             done = terminated or truncated
-            est = env.unwrapped.estimator
-            error = np.asarray(est.params.as_array()) - truth
+            error, covariance = estimate_error(env.unwrapped.estimator, truth)
             ep_err.append(error)
-            ep_nees.append(float(error @ np.linalg.solve(est.covariance, error)))
+            ep_cov.append(covariance)
         errors.append(ep_err)
-        nees.append(ep_nees)
+        covariances.append(ep_cov)
     length = min(len(e) for e in errors)
     err = np.array([e[:length] for e in errors])
-    nees_arr = np.array([n[:length] for n in nees])
-    bounds = (chi2.ppf(0.025, 3 * episodes) / episodes, chi2.ppf(0.975, 3 * episodes) / episodes)
+    cov = np.array([c[:length] for c in covariances])
     return EstimatorReport(
         env_id=env_id,
         episodes=episodes,
         rmse=np.sqrt(np.mean(err**2, axis=0)),
-        anees=nees_arr.mean(axis=0),
-        anees_bounds=(float(bounds[0]), float(bounds[1])),
-        nees_final=nees_arr[:, -1],
+        anees=anees(err, cov),
+        anees_bounds=anees_bounds(episodes, err.shape[-1]),
+        nees_final=nees(err[:, -1], cov[:, -1]),
     )
 
 

@@ -3,7 +3,7 @@ purpose (bad data, bad settings) apart from programming errors."""
 
 from __future__ import annotations
 
-__all__ = ["ExciteError", "DataError", "EstimatorError"]
+__all__ = ["ExciteError", "DataError", "EstimatorError", "MetricError"]
 
 
 class ExciteError(Exception):
@@ -18,3 +18,7 @@ class DataError(ExciteError, ValueError):
 class EstimatorError(ExciteError, ValueError):
     """Bad estimator settings: an unknown estimator name, a ``module:factory`` that does not
     import, or an invalid option (prior, window size, ...)."""
+
+
+class MetricError(ExciteError, ValueError):
+    """Arrays a metric cannot be computed from (shapes, thresholds, confidence levels)."""

@@ -20,8 +20,9 @@ from agents.compare import (
 )
 from agents.greedy import GreedyPlanner
 from agents.oracle import oracle_design
-from excite import Params, calibrate, load_segments
+from excite import OnlineEstimator, Params, calibrate, load_segments
 from excite.cli import main
+from excite.consistency import estimate_error, nees
 
 IDEAL = "excite/DiffDriveCalibIdeal-v0"
 SCRIPTED = [name for name in PROTOCOLS if PROTOCOLS[name].startswith("agents.protocols:")]
@@ -145,7 +146,8 @@ def test_rerun_adds_only_what_is_missing_and_rejects_other_settings(tmp_path):
     run_comparison(tmp_path, ["spin"], 2, settings, workers=1, progress=False)
     # Simulate an interrupted write: a partial episode and a truncated line at the end.
     with open(tmp_path / "segments.csv", "a") as handle:
-        handle.write("arcs,1,1,0.1,0.1,0.1,5,9,1,1,1,0,0,0,0,0\narcs,1,2,0.1,0.")
+        handle.write("arcs,online,1,1,0.1,0.1,0.1,5,9,1,1,1,3,3,0,0,0,0,0,1\n"
+                     "arcs,online,1,2,0.1,0.")
     rows = run_comparison(tmp_path, ["spin", "arcs"], 3, settings, workers=2, progress=False)
     keys = [(r["protocol"], r["episode"], r["segment"]) for r in _rows_parsed(tmp_path, 4)]
     assert len(keys) == len(set(keys)) == 2 * 3 * 4 == len(rows)
@@ -197,7 +199,8 @@ def test_compare_cli_writes_summary_and_plots(tmp_path, capsys):
     assert code == 0 and "greedy" in out and "oracle" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert set(summary["protocols"]) == {"umbmark", "greedy", "straight"}
-    assert "b" in summary["protocols"]["straight"]["undetermined"]
+    assert "b" in summary["protocols"]["straight"]["online"]["undetermined"]
+    assert summary["settings"]["estimators"] == ["online"]
     for name in ("errors_vs_segment.png", "sigma_min_vs_segment.png", "trajectories.png"):
         image = imread(tmp_path / name)
         assert image.shape[0] > 100 and image.std() > 0.01
@@ -215,7 +218,9 @@ def test_compare_runs_on_the_sensor_env_and_skips_a_policy_of_another_layout(tmp
     assert len(skipped) == 1 and "another observation layout" in skipped[0]
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert set(summary["protocols"]) == {"greedy", "umbmark"}
-    assert summary["protocols"]["greedy"]["sigma_min"]["median"] > 0
+    assert summary["protocols"]["greedy"]["online"]["sigma_min"]["median"] > 0
+    anees = summary["protocols"]["greedy"]["online"]["anees"]
+    assert anees["parameters"] == 6 and anees["final"] > 0  # wheels and sensor pose
 
 
 @pytest.mark.parametrize(
@@ -232,6 +237,15 @@ def test_compare_runs_on_the_sensor_env_and_skips_a_policy_of_another_layout(tmp
         (["simulate", "--protocol", "spin", "--segments", "3", "--robot", "x", "--out", "x.csv"],
          "unknown robot preset 'x'"),
         (["compare", "--policy", "/nonexistent.zip"], "--policy: no such file"),
+        (["compare", "--estimators", "kalman"], "unknown estimator 'kalman'"),
+        (["compare", "--estimators", "online,ekf,online"], "distinct"),
+        (["compare", "--estimators", "online,,ekf"], "empty name"),
+        (["compare", "--estimators", ""], "empty name"),
+        (["compare", "--estimators", "window:width=3"], "'width=3' is not a setting"),
+        (["compare", "--estimators", "tests.test_compare:missing"], "has no 'missing'"),
+        (["compare", "--estimators", "no_such_module_x:f"], "cannot import module"),
+        (["compare", "--estimators", "tests.test_compare:two_arguments_too_few",
+          "--episodes", "1", "--segments", "2"], "cannot be made"),
         (["compare", "--protocols", "learned", "--episodes", "1"], "learned policy"),
         (["simulate", "--protocol", "zigzag", "--segments", "3", "--out", "x.csv"],
          "unknown protocol"),
@@ -265,3 +279,121 @@ def test_simulate_every_protocol_and_calibrate_against_the_truth(tmp_path, capsy
         truth_p = np.array([truth["r_L"], truth["r_R"], truth["b"]])
         z = (result.params.as_array() - truth_p) / result.std
         assert np.all(np.abs(z) < 5)
+
+
+class InflatedOnline:
+    """A user's estimator for the tests: the online estimator reporting 4x its covariance
+    (the same estimates, so the same run; the NEES exactly a quarter)."""
+
+    def __init__(self, nominal, sigma):
+        self.inner = OnlineEstimator(nominal, sigma=sigma)
+
+    def update(self, *row):
+        self.inner.update(*row)
+
+    @property
+    def params(self):
+        return self.inner.params
+
+    @property
+    def covariance(self):
+        return 4.0 * self.inner.covariance
+
+
+def inflated_online(nominal, sigma):
+    """module:factory entry point of InflatedOnline."""
+    return InflatedOnline(nominal, sigma)
+
+
+def two_arguments_too_few():
+    """A factory with the wrong signature (a usage error, before any episode runs)."""
+
+
+def test_estimators_run_on_the_same_episodes_and_resume_per_estimator(tmp_path):
+    """Every (protocol, estimator) pair meets the same robots; a user's estimator plugs in
+    as module:factory; adding an estimator to a finished run computes only its rows."""
+    settings = CompareSettings(IDEAL, 5, 2)
+    first = run_comparison(tmp_path, ["greedy", "arcs"], 2, settings, workers=1,
+                           progress=False, estimators=["online"])
+    assert {r["estimator"] for r in first} == {"online"} and len(first) == 2 * 2 * 5
+    before = _rows(tmp_path / "segments.csv")
+    user = "tests.test_compare:inflated_online"
+    rows = run_comparison(tmp_path, ["greedy", "arcs"], 2, settings, workers=1,
+                          progress=False, estimators=["online", user])
+    assert len(rows) == 2 * 2 * 2 * 5
+    after = _rows(tmp_path / "segments.csv")
+    assert after[:len(before)] == before  # the first run's rows kept as they were
+    by_key = {(r["protocol"], r["estimator"], r["episode"], r["segment"]): r for r in rows}
+    env = make_env(IDEAL, 5)
+    seconds = env.unwrapped.segment_duration + env.unwrapped.config["settle_time"]
+    for (protocol, estimator, episode, segment), row in by_key.items():
+        if estimator != user:
+            continue
+        online = by_key[protocol, "online", episode, segment]
+        # same robot, same estimates (greedy plans on them: same path), NEES / 4
+        for key in ("oracle_sigma_min", "r_L_err", "b_err", "sigma_min", "x", "distance"):
+            assert row[key] == online[key], key
+        assert row["nees"] == pytest.approx(online["nees"] / 4.0, rel=1e-9)
+        assert row["nees_dof"] == 3
+        assert row["time"] == online["time"] == pytest.approx(segment * seconds)
+    # the NEES is the estimator's against the hidden truth: recompute one episode by hand
+    env.reset(seed=_episode_seed(settings, 1))
+    protocol = make_protocol("arcs")
+    protocol.reset(np.random.default_rng([_episode_seed(settings, 1), 1]))
+    for _ in range(5):
+        env.step(protocol.act(env.unwrapped.knowledge()))
+    error, covariance = estimate_error(env.unwrapped.estimator, env.unwrapped.true_theta)
+    assert by_key["arcs", "online", 1, 5]["nees"] == pytest.approx(nees(error, covariance))
+
+
+def _episode_seed(settings, episode):
+    from agents.compare import episode_seed
+
+    return episode_seed(settings.seed, episode, settings.stream)
+
+
+def test_compare_cli_estimators_axis(tmp_path, capsys):
+    code = main(["compare", "--protocols", "umbmark,greedy", "--estimators",
+                 "online,ekf,tests.test_compare:inflated_online", "--episodes", "2",
+                 "--segments", "5", "--env", IDEAL, "--workers", "1", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert code == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    estimators = ["online", "ekf", "tests.test_compare:inflated_online"]
+    assert summary["settings"]["estimators"] == estimators
+    for protocol in ("umbmark", "greedy"):
+        assert list(summary["protocols"][protocol]) == estimators
+        entry = summary["protocols"][protocol]
+        assert entry[estimators[2]]["anees"]["final"] == pytest.approx(
+            entry["online"]["anees"]["final"] / 4.0)
+    assert out.splitlines()[0].split()[:2] == ["protocol", "estimator"]
+    assert (tmp_path / "anees_vs_segment.png").stat().st_size > 5000
+
+
+def test_an_old_results_folder_is_a_clear_error(tmp_path, capsys):
+    """A segments.csv of an older excite (no estimator axis) is neither read as something
+    else nor overwritten: a one-line error, exit 2."""
+    old = ("protocol,episode,segment,r_L_err,r_R_err,b_err,sigma_min,oracle_sigma_min,"
+           "rel_std_r_L,rel_std_r_R,rel_std_b,collision,x,y,theta,distance\n"
+           "spin,0,1,0.1,0.1,0.1,5,9,1,1,1,0,0,0,0,0\n")
+    (tmp_path / "segments.csv").write_text(old)
+    with pytest.raises(CompareError, match="older excite"):
+        run_comparison(tmp_path, ["spin"], 1, CompareSettings(IDEAL, 1, 0), progress=False)
+    code = main(["compare", "--protocols", "spin", "--episodes", "1", "--segments", "1",
+                 "--env", IDEAL, "--workers", "1", "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "older excite" in err[0]
+    assert (tmp_path / "segments.csv").read_text() == old
+
+
+def test_run_comparison_rejects_no_or_repeated_estimators(tmp_path):
+    from excite.errors import EstimatorError
+    from excite.estimators import estimator_factory
+
+    settings = CompareSettings(IDEAL, 2, 0)
+    with pytest.raises(EstimatorError, match="no estimator"):
+        run_comparison(tmp_path, ["spin"], 1, settings, progress=False, estimators=[])
+    with pytest.raises(EstimatorError, match="given twice"):
+        run_comparison(tmp_path, ["spin"], 1, settings, progress=False,
+                       estimators=["ekf:prior_std=0.1", estimator_factory("ekf:prior_std=1e-1")])
+    assert not (tmp_path / "segments.csv").exists()

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.metrics import anees, anees_bounds
 from excite import ExciteError, OnlineEstimator, Params, Segments, calibrate
+from excite.consistency import anees, anees_bounds
 from excite.errors import EstimatorError
 from excite.estimators import (
     ESTIMATORS,

@@ -5,16 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.metrics import (
-    MetricError,
-    anees,
-    anees_bounds,
-    error_time_area,
-    nees,
-    paired_ratio,
-    time_to_accuracy,
-)
+from agents.metrics import MetricError, error_time_area, paired_ratio, time_to_accuracy
 from excite import ExciteError
+from excite.consistency import anees, anees_bounds, nees
 
 # -- consistency ----------------------------------------------------------------------------
 

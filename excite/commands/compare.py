@@ -1,9 +1,12 @@
 """``excite compare``: run calibration protocols on the same hidden robots and report.
 
 Protocols are written ``NAME[:KEY=VALUE...]`` (``excite protocols`` lists names and
-parameters; a user's protocol is ``module:Class``). Settings tuned by ``excite tune`` apply to
-the protocols written as they were tuned (``--tuned``); by default the settings the package
-ships for ``--env`` (when tuned for the same segments and robot).
+parameters; a user's protocol is ``module:Class``). ``--estimators`` adds a second axis:
+every protocol runs with every estimator (``online``, ``ekf``, ``window``, with
+``:KEY=VALUE`` settings, or a user's ``module:factory``) on the same episodes. Settings
+tuned by ``excite tune`` apply to the protocols written as they were tuned (``--tuned``); by
+default the settings the package ships for ``--env`` (when tuned for the same segments and
+robot).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
 if TYPE_CHECKING:  # the heavy layers are imported inside the functions that run them
     from agents.catalog import ProtocolSpec
     from agents.compare import CompareSettings
+    from excite.estimators import EstimatorSpec
 
 #: --tuned values that are not files.
 TUNED_AUTO, TUNED_NONE = "auto", "none"
@@ -56,6 +60,10 @@ def add_episode_options(parser: argparse.ArgumentParser, episodes: int) -> None:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     cmp_ = sub.add_parser("compare", help="compare calibration protocols on the same robots")
     add_episode_options(cmp_, episodes=20)
+    cmp_.add_argument("--estimators", default=None, metavar="E,F:KEY=VALUE,...",
+                      help="estimators, each online, ekf, window (with :KEY=VALUE settings) "
+                      "or module:factory; every protocol runs with each on the same "
+                      "episodes (default: online)")
     cmp_.add_argument("--tuned", default=TUNED_AUTO, metavar="TUNED.json",
                       help="settings from excite tune for the protocols written as tuned; "
                       "auto (default): those shipped for --env if tuned for these segments "
@@ -81,6 +89,34 @@ def protocol_specs(args: argparse.Namespace) -> list[ProtocolSpec]:
     if args.protocols is None:
         return default_protocols(args.policy)
     return with_policy(parse_protocols(args.protocols), args.policy)
+
+
+def estimator_specs(args: argparse.Namespace) -> list[EstimatorSpec]:
+    """The estimators of ``--estimators`` (default: the env's default, ``online``)."""
+    from excite.estimators import DEFAULT_ESTIMATOR, parse_estimators
+
+    return parse_estimators(DEFAULT_ESTIMATOR if args.estimators is None else args.estimators)
+
+
+def check_estimators(estimators: list[EstimatorSpec], settings: CompareSettings) -> None:
+    """Make each estimator once in the env (a reset): a factory that fails there (a user's
+    ``module:factory`` with another signature, ...) is a one-line usage error before any
+    episode runs."""
+    from agents.compare import make_env
+    from excite.errors import ExciteError
+
+    for spec in estimators:
+        probe = make_env(settings.env_id, settings.segments, settings.robot,
+                         estimator_factory=spec)
+        try:
+            probe.reset(seed=0)
+        except ExciteError:
+            raise
+        except Exception as exc:  # a user's factory: any failure is bad input
+            raise UsageError(f"estimator {spec.label}: cannot be made for {settings.env_id}: "
+                             f"{type(exc).__name__}: {exc}") from None
+        finally:
+            probe.close()
 
 
 def runnable(specs: list[ProtocolSpec],
@@ -136,10 +172,13 @@ def run(args: argparse.Namespace) -> int:
     from agents.report import format_table, plot_comparison, summarize
 
     settings = episode_settings(args)
+    estimators = estimator_specs(args)
     specs, tuned = tuned_specs(protocol_specs(args), args.tuned, settings, args.episodes)
     specs, arena_size = runnable(specs, settings)
+    check_estimators(estimators, settings)
     try:
-        rows = run_comparison(args.out, specs, args.episodes, settings, args.workers)
+        rows = run_comparison(args.out, specs, args.episodes, settings, args.workers,
+                              estimators=estimators)
     except OSError as exc:
         raise UsageError(f"cannot write to {args.out}: {exc.strerror}") from None
     columns = columns_of(rows)
@@ -147,6 +186,7 @@ def run(args: argparse.Namespace) -> int:
     summary["settings"] = {"env": settings.env_id, "segments": args.segments, "seed": args.seed,
                            "episodes": args.episodes,
                            "protocols": [spec.label for spec in specs],
+                           "estimators": [spec.label for spec in estimators],
                            "robot": settings.robot, "tuned": tuned}
     summary["protocol_settings"] = {spec.label: spec.resolved() for spec in specs}
     out = Path(args.out)

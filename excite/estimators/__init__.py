@@ -39,14 +39,17 @@ from excite.models import AXLE, SENSOR_POSE, SegmentModel
 from excite.online import OnlineEstimator
 
 __all__ = [
+    "DEFAULT_ESTIMATOR",
     "ESTIMATORS",
     "OPTIONS",
     "EstimatorSpec",
+    "check_distinct",
     "ExtendedKalmanFilter",
     "SlidingWindowSmoother",
     "estimator_factory",
     "make_estimator",
     "model_for",
+    "parse_estimators",
 ]
 
 
@@ -56,6 +59,8 @@ ESTIMATORS: dict[str, type] = {
     "ekf": ExtendedKalmanFilter,
     "window": SlidingWindowSmoother,
 }
+#: The estimator of a comparison given none (the environment's default).
+DEFAULT_ESTIMATOR = "online"
 #: The settings a built-in takes in its spec (``name:key=value``): keyword arguments of its
 #: constructor.
 OPTIONS: dict[str, tuple[str, ...]] = {
@@ -98,6 +103,12 @@ class EstimatorSpec:
 
     name: str
     settings: tuple[tuple[str, int | float], ...] = ()
+
+    @property
+    def label(self) -> str:
+        """The spec written back (``window:size=20``, ``mypkg.est:factory``); it names the
+        estimator in results."""
+        return self.name + "".join(f":{key}={value}" for key, value in self.settings)
 
     def __call__(self, nominal: Params | ArrayLike, sigma: ArrayLike) -> Estimator:
         if self.name in ESTIMATORS:
@@ -152,3 +163,25 @@ def make_estimator(spec: str, nominal: Params | ArrayLike, sigma: ArrayLike) -> 
     (Params, or the model's parameters) with measurement noise ``sigma`` (sigma_x [m],
     sigma_y [m], sigma_theta [rad])."""
     return estimator_factory(spec)(nominal, sigma)
+
+
+def parse_estimators(text: str) -> list[EstimatorSpec]:
+    """The specs of a comma-separated list (``online,ekf,window:size=20,mypkg.est:factory``),
+    each checked by :func:`estimator_factory`; EstimatorError (one line) for an empty item or
+    a spec given twice."""
+    items = text.split(",")
+    if not all(item.strip() for item in items):
+        raise EstimatorError(f"estimators {text!r}: empty name in the list")
+    return check_distinct([estimator_factory(item) for item in items])
+
+
+def check_distinct(specs: list[EstimatorSpec]) -> list[EstimatorSpec]:
+    """``specs`` if there is at least one and no label appears twice, else EstimatorError."""
+    if not specs:
+        raise EstimatorError("no estimator given")
+    seen: set[str] = set()
+    for spec in specs:
+        if spec.label in seen:
+            raise EstimatorError(f"estimators must be distinct: {spec.label} is given twice")
+        seen.add(spec.label)
+    return specs
