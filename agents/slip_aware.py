@@ -12,8 +12,9 @@ Each segment this planner scores candidate commands near the previous one (at mo
 (:class:`excite.contracts.Traction`: motor lag and grip, never the hidden truth):
 
 1. the nominal wheel dynamics, integrated at ``SUBSTEP_HZ``: each motor approaches the command
-   with its lag, and each wheel's contact follows its wheel's surface speed only as fast as
-   the grip allows (less the lateral acceleration of the turn); the encoders see the motor.
+   with its lag, and the wheels' contacts follow their surface speeds only as fast as the grip
+   allows (less the lateral acceleration of the turn; turning needs spin_inertia times the
+   push of a straight acceleration); the encoders see the motor.
    The segment's motion is the composition of the contacts' sub-arcs (excite.models'
    sub-steps), so the model predicts the measured increment's error against the single arc
    the estimator fits: from the lag bending the arc and from slip;
@@ -34,6 +35,8 @@ Light: numpy and excite's contracts only, no simulator (a planner can drive a re
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from agents.greedy import best_index
@@ -47,10 +50,13 @@ from agents.motion import (
 from agents.protocols import MAX_SPEED, WALL_MARGIN, Parameter, Protocol, ProtocolError, Value
 from excite.contracts import RobotKnowledge
 from excite.information import scaled_jacobian
+from excite.kinematics import Params
 from excite.segment_estimator import DEFAULT_PRIOR
 
 #: Hz, the rate at which the nominal wheel dynamics are integrated (the simulator's tick).
 SUBSTEP_HZ = 50.0
+#: Gauss-Seidel sweeps over the two wheels when a wheel slips (as the simulator).
+SLIP_SWEEPS = 6
 #: Fraction of the speed limit the continuation's spins turn at.
 SPIN_FRACTION = 0.5
 
@@ -93,16 +99,40 @@ def nominal_segment(previous: np.ndarray, actions: np.ndarray, knowledge: RobotK
     encoder = np.zeros_like(command)
     ground = np.empty((n_sub,) + command.shape)
     grip_dt = traction.grip * dt
+    # A wheel's push f (its force over half the mass, m/s per tick) changes its own contact's
+    # speed by own * f and the other's by cross * f.
+    own = 0.5 * (1.0 + 1.0 / traction.spin_inertia)
+    cross = 0.5 * (1.0 - 1.0 / traction.spin_inertia)
     for k in range(n_sub):
         motor += (command - motor) * alpha
         encoder += motor * dt
         speed = contact.mean(axis=1)
         turn = (contact[:, 1] - contact[:, 0]) * inv_b
         lateral = speed * turn
-        room = np.sqrt(np.maximum(grip_dt**2 - (lateral * dt) ** 2, 0.0))[:, None]
-        contact += np.clip(motor * radius - contact, -room, room)
+        room = np.sqrt(np.maximum(grip_dt**2 - (lateral * dt) ** 2, 0.0))
+        contact += _traction_step(motor * radius - contact, room, own, cross)
         ground[k] = contact * dt / radius
     return encoder, np.moveaxis(ground, 0, 1)
+
+
+def _traction_step(want: np.ndarray, room: np.ndarray, own: float, cross: float
+                   ) -> np.ndarray:
+    """The contacts' speed changes (n, 2) (m/s) in one tick: ``want`` (n, 2), the change that
+    would make them roll, when both wheels' pushes fit in ``room`` (n,); else the pushes
+    capped at ``room`` by projected Gauss-Seidel sweeps over the two wheels, as the
+    simulator's solver does."""
+    determinant = own * own - cross * cross
+    push = (want * own - want[:, ::-1] * cross) / determinant
+    slipping = np.abs(push).max(axis=1) > room
+    if slipping.any():
+        wanted, cap = want[slipping], room[slipping]
+        capped = np.zeros_like(wanted)
+        for _ in range(SLIP_SWEEPS):
+            for i in (0, 1):
+                moved = own * capped[:, i] + cross * capped[:, 1 - i]
+                capped[:, i] = np.clip(capped[:, i] + (wanted[:, i] - moved) / own, -cap, cap)
+        push[slipping] = capped
+    return push * own + push[:, ::-1] * cross
 
 
 def predicted_bias(previous: np.ndarray, actions: np.ndarray, knowledge: RobotKnowledge
@@ -132,7 +162,8 @@ class SlipAwarePlanner(Protocol):
     keeping a smooth way out of every wall for ``horizon`` segments."""
 
     parameters = (
-        MAX_SPEED, MAX_STEP, BIAS_WEIGHT, HORIZON, GRID, WALL_MARGIN,
+        replace(MAX_SPEED, grid=4),  # 0.1 to 1 (4 x 3 x 3 candidates to tune)
+        MAX_STEP, BIAS_WEIGHT, HORIZON, GRID, WALL_MARGIN,
     )
     max_speed: float
     max_step: float
@@ -170,8 +201,11 @@ class SlipAwarePlanner(Protocol):
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
         candidates = self.candidates()
-        safe = self.safe(candidates, knowledge)
-        if not safe.any():  # slow down as much as smoothness allows; the guard does the rest
+        clear = safe_actions(candidates, knowledge, self.speed_margin)
+        safe = clear & self.escapes(candidates, knowledge)
+        if not safe.any():  # cornered: any candidate clear now, else slow down (the guard
+            safe = clear    # does the rest)
+        if not safe.any():
             return self.previous - np.clip(self.previous, -self.max_step, self.max_step)
         candidates = candidates[safe]
         score = -self.cost(candidates, knowledge)
@@ -188,32 +222,32 @@ class SlipAwarePlanner(Protocol):
         variance = 1.0 / np.linalg.eigvalsh(information)[:, 0]
         return variance + self.bias_weight * np.max(bias**2, axis=1)
 
-    def safe(self, candidates: np.ndarray, knowledge: RobotKnowledge) -> np.ndarray:
-        """Whether each candidate clears the walls (as the guard checks it) and leaves a smooth
-        continuation (stop, spin left or spin right) that clears them for ``horizon``
-        segments."""
-        ok = safe_actions(candidates, knowledge, self.speed_margin)
-        if not ok.any():
-            return ok
-        ends = predicted_poses(knowledge.pose, wheel_increments(candidates, knowledge),
-                               knowledge.estimate)[:, -1]
+    def escapes(self, candidates: np.ndarray, knowledge: RobotKnowledge) -> np.ndarray:
+        """Whether each candidate leaves a smooth continuation (stop, spin left or spin right)
+        that clears the walls for ``horizon`` segments, predicted (like the guard) with both
+        the estimate and the nominal robot."""
         spin = SPIN_FRACTION * self.max_speed
-        escape = np.zeros(len(candidates), dtype=bool)
-        for target in ((0.0, 0.0), (-spin, spin), (spin, -spin)):
-            escape |= self._continuation_clear(candidates, ends, np.array(target), knowledge)
-        return ok & escape
+        targets = np.repeat([[0.0, 0.0], [-spin, spin], [spin, -spin]], len(candidates), axis=0)
+        commands = np.tile(candidates, (3, 1))
+        dphi = wheel_increments(candidates, knowledge)
+        clear = np.logical_and.reduce([
+            self._continuation_clear(
+                commands, np.tile(predicted_poses(knowledge.pose, dphi, params)[:, -1], (3, 1)),
+                targets, params, knowledge)
+            for params in (knowledge.estimate, knowledge.nominal)])
+        return clear.reshape(3, -1).any(axis=0)
 
-    def _continuation_clear(self, commands: np.ndarray, poses: np.ndarray,
-                            target: np.ndarray, knowledge: RobotKnowledge) -> np.ndarray:
-        """Whether ramping each command towards ``target`` by at most ``max_step`` per segment,
-        from each pose (n, 3), stays clear of the walls for up to ``horizon`` segments."""
+    def _continuation_clear(self, commands: np.ndarray, poses: np.ndarray, targets: np.ndarray,
+                            params: Params, knowledge: RobotKnowledge) -> np.ndarray:
+        """Whether ramping each command (n, 2) towards its target (n, 2) by at most
+        ``max_step`` per segment, from its pose (n, 3), stays clear of the walls for up to
+        ``horizon`` segments (kinematic prediction with ``params``)."""
         clear = np.ones(len(commands), dtype=bool)
         for _ in range(self.horizon):
-            if np.all(commands == target):
+            if np.array_equal(commands, targets):
                 break
-            commands = commands + np.clip(target - commands, -self.max_step, self.max_step)
-            path = predicted_poses(poses, wheel_increments(commands, knowledge),
-                                   knowledge.estimate)
+            commands = commands + np.clip(targets - commands, -self.max_step, self.max_step)
+            path = predicted_poses(poses, wheel_increments(commands, knowledge), params)
             clear &= is_safe(path, knowledge.arena_size,
                              action_margin(commands, self.speed_margin), knowledge.chassis)
             poses = path[:, -1]

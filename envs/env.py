@@ -187,7 +187,8 @@ class DiffDriveCalibEnv(gym.Env):
         self.max_wheel_speed = nominal.max_wheel_speed
         self.chassis = nominal.chassis
         self.traction = Traction(nominal.motor_tau,
-                                 nominal.mu * GRAVITY * nominal.wheel_load_fraction)
+                                 nominal.mu * GRAVITY * nominal.wheel_load_fraction,
+                                 nominal.inertia / (nominal.mass * (0.5 * nominal.b) ** 2))
         self.sim = Simulation(SimulationConfig(
             arena_width=cfg["arena_size"], arena_height=cfg["arena_size"],
             physics_hz=cfg["physics_hz"], ideal=bool(cfg["ideal"]),

@@ -52,14 +52,17 @@ class Traction:
     motor_tau: time constant (s) of the wheel motors' first-order lag (the wheel speed
     approaches a new command as 1 - exp(-t / motor_tau)). grip: the largest acceleration (m/s^2)
     the floor can give a wheel's contact before it slides, mu * g * (share of the weight on the
-    two drive wheels); a wheel whose command asks for more slips.
+    two drive wheels); a wheel whose command asks for more slips. spin_inertia: the chassis'
+    yaw inertia over mass * (b / 2)^2 (dimensionless): below 1 the grip turns the chassis
+    more easily than it pushes it (a spin's contacts may accelerate grip / spin_inertia).
     """
 
     motor_tau: float
     grip: float
+    spin_inertia: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("motor_tau", "grip"):
+        for name in ("motor_tau", "grip", "spin_inertia"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"Traction.{name} must be finite and > 0, got {value}")
