@@ -148,7 +148,7 @@ def test_parameters_are_declared_checked_and_tunable():
         with pytest.raises(ProtocolError, match=fragment.replace("[", r"\[")):
             parse_protocols(text)
     tried = candidates(ProtocolSpec("slip_aware"))
-    assert len(tried) == 4 * 3 * 3  # max_speed x max_step x bias_weight
+    assert len(tried) == 2 * 3  # max_speed x max_step
     assert len({c.label for c in tried}) == len(tried)
 
 
