@@ -33,6 +33,7 @@ PROTOCOLS: dict[str, str] = {
     "random": "agents.protocols:RandomCommands",
     "arcs": "agents.protocols:Arcs",
     "greedy": "agents.greedy:GreedyPlanner",
+    "slip_aware": "agents.slip_aware:SlipAwarePlanner",
     "learned": "agents.learned:LearnedPolicy",
 }
 

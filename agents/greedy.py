@@ -49,6 +49,18 @@ def smallest_eigenvalue(information: np.ndarray) -> np.ndarray:
     return np.linalg.eigvalsh(information)[..., 0]
 
 
+def best_index(score: np.ndarray, candidates: np.ndarray, knowledge: RobotKnowledge) -> int:
+    """Index of the best (highest) score of the candidate commands (n, 2); ties (within 1e-9)
+    go to the command predicted to end nearest the arena centre."""
+    top = float(np.max(score))
+    tied = np.flatnonzero(score >= top - TIE_TOLERANCE * abs(top))
+    if tied.size <= 1:  # one best, or no comparable score (nan)
+        return int(tied[0]) if tied.size else int(np.argmax(score))
+    dphi = wheel_increments(candidates[tied], knowledge)
+    ends = predicted_poses(knowledge.pose, dphi, knowledge.estimate)[:, -1, :2]
+    return int(tied[np.argmin(np.hypot(ends[:, 0], ends[:, 1]))])
+
+
 class GreedyPlanner(Protocol):
     """E-optimal greedy planner over a grid of commands (``grid`` x ``grid`` in
     [-max_speed, max_speed]^2); ``lookahead`` adds a second step for the ``beam`` best."""
@@ -83,14 +95,7 @@ class GreedyPlanner(Protocol):
         return self.candidates[self._best(score, knowledge)]
 
     def _best(self, score: np.ndarray, knowledge: RobotKnowledge) -> int:
-        """Index of the best score; ties (within 1e-9) go to the most central end pose."""
-        top = float(np.max(score))
-        tied = np.flatnonzero(score >= top - TIE_TOLERANCE * abs(top))
-        if tied.size <= 1:  # one best, or no comparable score (nan)
-            return int(tied[0]) if tied.size else int(np.argmax(score))
-        dphi = wheel_increments(self.candidates[tied], knowledge)
-        ends = predicted_poses(knowledge.pose, dphi, knowledge.estimate)[:, -1, :2]
-        return int(tied[np.argmin(np.hypot(ends[:, 0], ends[:, 1]))])
+        return best_index(score, self.candidates, knowledge)
 
     def _two_step_scores(self, knowledge: RobotKnowledge, gains: np.ndarray,
                          score: np.ndarray) -> np.ndarray:

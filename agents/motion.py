@@ -31,12 +31,13 @@ def predicted_poses(pose: np.ndarray, dphi: np.ndarray, params: Params,
                     fractions: np.ndarray = CHECK_POINTS) -> np.ndarray:
     """World poses (n, len(fractions), 3) after each fraction of each candidate segment.
 
-    pose: start world pose (x, y, theta); dphi: (n, 2) wheel increments (rad).
+    pose: start world pose (x, y, theta), or one per candidate (n, 3); dphi: (n, 2) wheel
+    increments (rad).
     """
     dphi = np.atleast_2d(dphi)
     frac = fractions[None, :]
     dx, dy, dth = predict_increment(dphi[:, :1] * frac, dphi[:, 1:] * frac, params)
-    x, y, th = pose
+    x, y, th = np.moveaxis(np.asarray(pose, dtype=float), -1, 0)[..., None]
     c, s = np.cos(th), np.sin(th)
     return np.stack([x + c * dx - s * dy, y + s * dx + c * dy, th + dth], axis=-1)
 

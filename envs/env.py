@@ -10,11 +10,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from envs.physics import GRAVITY
 from envs.recording import Recorder, Recording, RecordingConfig
 from envs.robot import RobotSpec, robot_distribution
 from envs.simulation import Simulation, SimulationConfig
 from excite import se2
-from excite.contracts import EstimatorFactory, RobotKnowledge
+from excite.contracts import EstimatorFactory, RobotKnowledge, Traction
 from excite.data import Segments
 from excite.information import eigen_3x3, information_matrix
 from excite.kinematics import Params
@@ -185,6 +186,9 @@ class DiffDriveCalibEnv(gym.Env):
             self.nominal_theta = np.append(self.nominal_theta, self.sensor_ranges.mean(axis=1))
         self.max_wheel_speed = nominal.max_wheel_speed
         self.chassis = nominal.chassis
+        self.traction = Traction(nominal.motor_tau,
+                                 nominal.mu * GRAVITY * nominal.wheel_load_fraction,
+                                 nominal.inertia / (nominal.mass * (0.5 * nominal.b) ** 2))
         self.sim = Simulation(SimulationConfig(
             arena_width=cfg["arena_size"], arena_height=cfg["arena_size"],
             physics_hz=cfg["physics_hz"], ideal=bool(cfg["ideal"]),
@@ -351,8 +355,8 @@ class DiffDriveCalibEnv(gym.Env):
             pose=self._measured_pose.copy(), nominal=self.nominal, sigma=self.sigma.copy(),
             max_wheel_speed=self.max_wheel_speed, segment_duration=self.segment_duration,
             arena_size=float(self.config["arena_size"]), budget=self.budget, model=self.model,
-            chassis=self.chassis,
-            theta=self._theta.copy(), nominal_theta=self.nominal_theta.copy())
+            chassis=self.chassis, theta=self._theta.copy(),
+            nominal_theta=self.nominal_theta.copy(), traction=self.traction)
 
     def _observation(self) -> np.ndarray:
         eigenvalues, weakest = self._eigen

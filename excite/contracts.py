@@ -4,7 +4,8 @@ A light module (numpy only), so a planner can drive a real robot without the sim
 
 - :class:`RobotKnowledge`: everything a planner may use after n segments, never the truth;
 - :class:`Estimator`: what an online estimator offers (``OnlineEstimator`` implements it);
-- :data:`EstimatorFactory`: how a fresh estimator is made at the start of an episode.
+- :data:`EstimatorFactory`: how a fresh estimator is made at the start of an episode;
+- :class:`Traction`: the nominal robot's limits that decide when its wheels slip.
 
 The arena's geometry is in :mod:`excite.arena`, the kinematic prediction in
 :mod:`excite.kinematics` and :mod:`excite.models`.
@@ -22,7 +23,7 @@ from excite.arena import DEFAULT_CHASSIS
 from excite.kinematics import Params
 from excite.models import AXLE, SegmentModel
 
-__all__ = ["Estimator", "EstimatorFactory", "RobotKnowledge"]
+__all__ = ["Estimator", "EstimatorFactory", "RobotKnowledge", "Traction"]
 
 
 class Estimator(Protocol):
@@ -45,6 +46,29 @@ EstimatorFactory = Callable[[Params | np.ndarray, np.ndarray], Estimator]
 
 
 @dataclass(frozen=True)
+class Traction:
+    """What the nominal robot's spec says about slip (a real robot's user can give it).
+
+    motor_tau: time constant (s) of the wheel motors' first-order lag (the wheel speed
+    approaches a new command as 1 - exp(-t / motor_tau)). grip: the largest acceleration (m/s^2)
+    the floor can give a wheel's contact before it slides, mu * g * (share of the weight on the
+    two drive wheels); a wheel whose command asks for more slips. spin_inertia: the chassis'
+    yaw inertia over mass * (b / 2)^2 (dimensionless): below 1 the grip turns the chassis
+    more easily than it pushes it (a spin's contacts may accelerate grip / spin_inertia).
+    """
+
+    motor_tau: float
+    grip: float
+    spin_inertia: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("motor_tau", "grip", "spin_inertia"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"Traction.{name} must be finite and > 0, got {value}")
+
+
+@dataclass(frozen=True)
 class RobotKnowledge:
     """What the robot knows after n segments: everything a planner may use, never the truth.
 
@@ -54,7 +78,8 @@ class RobotKnowledge:
     sigma: sensor noise (m, m, rad). max_wheel_speed: motor limit (rad/s); segment_duration
     (s); arena_size (m); budget (segments); chassis: the nominal footprint (length, width, m).
     model: the segment model; theta / nominal_theta:
-    the current estimate and the nominal values of all its P parameters.
+    the current estimate and the nominal values of all its P parameters. traction: the
+    nominal robot's motor lag and grip (None when unknown; the simulator always gives it).
     """
 
     observation: np.ndarray
@@ -72,6 +97,7 @@ class RobotKnowledge:
     chassis: tuple[float, float] = DEFAULT_CHASSIS
     theta: np.ndarray | None = None
     nominal_theta: np.ndarray | None = None
+    traction: Traction | None = None
 
     def __post_init__(self) -> None:
         if self.theta is None:

@@ -72,13 +72,14 @@ def core_only() -> None:
 def plans_without_simulator() -> bool:
     """Every protocol that needs no policy builds and acts on a hand-made RobotKnowledge."""
     from agents.catalog import PROTOCOLS, make_protocol
-    from excite.contracts import RobotKnowledge
+    from excite.contracts import RobotKnowledge, Traction
 
     nominal = Params(0.05, 0.05, 0.3)
     knowledge = RobotKnowledge(
         observation=np.zeros(16), estimate=nominal, information=np.eye(3), log=np.zeros((1, 5)),
         pose=np.zeros(3), nominal=nominal, sigma=np.array([2e-3, 2e-3, 1e-3]),
-        max_wheel_speed=10.0, segment_duration=1.0, arena_size=4.0, budget=30)
+        max_wheel_speed=10.0, segment_duration=1.0, arena_size=4.0, budget=30,
+        traction=Traction(motor_tau=0.05, grip=6.3, spin_inertia=0.56))
     actions = []
     for name in PROTOCOLS:
         if name != "learned":

@@ -129,7 +129,8 @@ def test_a_user_protocol_plugs_in_by_module_and_class(tmp_path, capsys, monkeypa
 
 
 def test_protocol_modules_import_neither_pymunk_nor_gymnasium():
-    code = ("import sys, agents.protocols, agents.catalog, agents.greedy, agents.motion, "
+    code = ("import sys, agents.protocols, agents.catalog, agents.greedy, agents.slip_aware, "
+            "agents.motion, "
             "agents.learned, excite.contracts, excite.arena\n"
             "heavy = sorted(m for m in ('pymunk', 'gymnasium', 'torch', 'stable_baselines3') "
             "if m in sys.modules)\n"
