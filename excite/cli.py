@@ -37,7 +37,8 @@ COMMANDS = (calibrate, segment, validate, simulate, protocols, compare, tune, tr
 
 #: The optional extra that provides each third-party module a subcommand may import.
 EXTRA_OF_MODULE = {"rosbags": "ros", "gymnasium": "sim", "pymunk": "sim", "matplotlib": "sim",
-                   "tqdm": "sim", "yaml": "sim", "stable_baselines3": "rl", "torch": "rl"}
+                   "tqdm": "sim", "yaml": "sim", "stable_baselines3": "rl", "torch": "rl",
+                   "ray": "ray"}
 
 
 class _Parser(argparse.ArgumentParser):

@@ -45,3 +45,17 @@ def assert_one_line_error(code, err, *fragments):
     assert len(lines) == 1 and lines[0].startswith("excite: error: "), err
     for fragment in fragments:
         assert fragment in lines[0]
+
+
+@pytest.fixture(scope="session")
+def ray_cluster():
+    """One local Ray for the whole session (2 CPUs), shut down at the end; its address lets a
+    subprocess (``excite ... --address``) join it. Tests that use it are marked
+    ``xdist_group("ray")`` so that ``pytest -n 2 --dist loadgroup`` runs them in one worker."""
+    import logging
+
+    import ray
+
+    ray.init(num_cpus=2, include_dashboard=False, logging_level=logging.ERROR)
+    yield ray.get_runtime_context().gcs_address
+    ray.shutdown()
