@@ -22,6 +22,7 @@ from excite.commands import (
     protocols,
     segment,
     simulate,
+    sweep,
     train,
     tune,
     validate,
@@ -33,7 +34,7 @@ __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE",
            "EXIT_UNIDENTIFIABLE", "EXIT_MISFIT"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_UNIDENTIFIABLE, EXIT_MISFIT = 0, 1, 2, 3, 4
-COMMANDS = (calibrate, segment, validate, simulate, protocols, compare, tune, train)
+COMMANDS = (calibrate, segment, validate, simulate, protocols, compare, tune, train, sweep)
 
 #: The optional extra that provides each third-party module a subcommand may import.
 EXTRA_OF_MODULE = {"rosbags": "ros", "gymnasium": "sim", "pymunk": "sim", "matplotlib": "sim",

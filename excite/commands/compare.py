@@ -54,11 +54,12 @@ def add_episode_options(parser: argparse.ArgumentParser, episodes: int) -> None:
                         help="robot preset: default, turtlebot3, jackal, husky")
 
 
-def add_backend_options(parser: argparse.ArgumentParser) -> None:
-    """--backend local|ray and --address (where the episodes or trials run)."""
+def add_backend_options(parser: argparse.ArgumentParser,
+                        local: str = "worker processes on this machine") -> None:
+    """--backend local|ray and --address (where the episodes or trials run); ``local`` says
+    what the local backend is."""
     parser.add_argument("--backend", choices=("local", "ray"), default="local",
-                        help="local: worker processes on this machine (default); ray: Ray "
-                        "tasks on the cluster of --address")
+                        help=f"local: {local} (default); ray: the Ray cluster of --address")
     parser.add_argument("--address", metavar="ADDR",
                         help="the Ray cluster (HOST:PORT of its head, or auto); default: "
                         "RAY_ADDRESS, else the latest `ray start` cluster of this machine, "
