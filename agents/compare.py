@@ -109,8 +109,8 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[di
 
 @functools.cache
 def _worker_protocol(spec: ProtocolSpec) -> Protocol:
-    """One instance per protocol and worker process (a learned policy is loaded once, not
-    every episode); run_protocol_episode resets it at the start of each episode."""
+    """One instance per protocol and process (a learned policy is loaded once, not every
+    episode); run_protocol_episode resets it at the start of each episode."""
     return make_protocol(spec)
 
 

@@ -83,8 +83,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
         return EXIT_OK
     except KeyboardInterrupt:
-        print("excite: interrupted (compare and tune keep finished episodes: re-run the same "
-              "command to continue)", file=sys.stderr)
+        print("excite: interrupted (compare, tune and sweep keep finished work: re-run the "
+              "same command to continue)", file=sys.stderr)
         return 130
     except Exception as exc:  # never a traceback for users; EXCITE_DEBUG=1 shows it
         if isinstance(exc, ModuleNotFoundError) and (

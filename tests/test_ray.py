@@ -26,7 +26,7 @@ PROTOCOLS = ["spin", "umbmark", "random"]
 EPISODES = 24
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def local_reference(tmp_path_factory):
     """The comparison run on the local backend (2 processes): the file Ray must reproduce."""
     out = tmp_path_factory.mktemp("local")
@@ -41,15 +41,24 @@ def test_chunk_size_gives_tasks_of_at_least_the_target():
     assert chunk_size(0.0, 0.2) == 1
 
 
-def test_ray_tasks_yield_results_as_they_finish(ray_cluster):
+def test_ray_tasks_yield_results_as_they_finish(ray_cluster, tmp_path):
+    """The first task submitted waits for a file the driver writes only after it received
+    the second task's result: results come in completion order, not submission order."""
+    gate = tmp_path / "gate"
     with open_backend("ray") as executor:
-        results = executor.imap_unordered(_sleep_and_return, [(2.0, "slow"), (0.05, "fast")])
-        assert next(results) == "fast"
-        assert next(results) == "slow"
+        results = executor.imap_unordered(_wait_for, [(str(gate), "first submitted"),
+                                                      (None, "second submitted")])
+        assert next(results) == "second submitted"
+        gate.touch()
+        assert next(results) == "first submitted"
 
 
-def _sleep_and_return(seconds: float, value: str) -> str:
-    time.sleep(seconds)
+def _wait_for(path: str | None, value: str, timeout: float = 60.0) -> str:
+    deadline = time.time() + timeout
+    while path is not None and not os.path.exists(path):
+        if time.time() > deadline:
+            return "timed out"
+        time.sleep(0.02)
     return value
 
 
@@ -137,5 +146,8 @@ def test_unreachable_ray_address_is_a_one_line_error_at_once(tmp_path):
 
 def test_connect_ray_uses_the_ray_already_initialised(ray_cluster):
     assert connect_ray("127.0.0.1:1") is False  # already connected: no new connection
+
+
+def test_open_backend_rejects_unknown_names():
     with pytest.raises(BackendError, match="unknown backend"), open_backend("dask"):
         pass

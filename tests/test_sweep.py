@@ -77,10 +77,13 @@ def test_killed_sweep_resumes_its_trials(ray_cluster, tmp_path):
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True, env=env)
     deadline, finished = time.time() + 150, []
-    while time.time() < deadline and not finished:
-        finished = [p for p in (out / "trials").glob("*/checkpoints/ckpt_512_steps.zip")]
+    while time.time() < deadline and not finished:  # a trial ended, and Tune saved after
+        ended = [p.stat().st_mtime for p in (out / "trials").glob("*/checkpoints/"
+                                                                   "ckpt_512_steps.zip")]
+        saved = [p.stat().st_mtime for p in (out / "tune").glob("experiment_state-*.json")]
+        if ended and saved and max(saved) > min(ended):
+            finished = list((out / "trials").glob("*/checkpoints/ckpt_512_steps.zip"))
         time.sleep(0.2)
-    time.sleep(3)  # let Tune save its experiment state after the trial ended
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     assert finished, "no trial finished within the deadline"

@@ -67,7 +67,8 @@ def add_backend_options(parser: argparse.ArgumentParser,
 
 
 def check_backend_options(args: argparse.Namespace) -> None:
-    """UsageError-like BackendError at once when --backend and --address do not fit."""
+    """A one-line error (BackendError) before any work when --backend and --address do not
+    fit together."""
     from agents.backends import check_backend
 
     check_backend(args.backend, args.address)
