@@ -57,7 +57,7 @@ import json
 import math
 import shutil
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -96,20 +96,20 @@ class SweepError(ExciteError, ValueError):
 
 @dataclass(frozen=True)
 class SweepConfig:
-    """A checked CONFIG.yaml (see the module docstring)."""
+    """A checked CONFIG.yaml (see the module docstring; :func:`load_sweep_config` fills in
+    the defaults)."""
 
-    source: str  # the file, for messages
     base: dict  # the base training config, with ``set`` applied
-    algo: str = "ppo"
-    timesteps: int = 0
-    seeds: tuple[int, ...] = (0,)
-    samples: int = 1
-    search_seed: int = 0
-    cpus_per_trial: float = 1.0
-    space: dict[str, dict[str, list]] = field(default_factory=dict)
-    grace_period: int = 0
-    reduction_factor: int = 3
-    document: dict = field(default_factory=dict)  # the file's content, as read
+    algo: str
+    timesteps: int
+    seeds: tuple[int, ...]
+    samples: int
+    search_seed: int
+    cpus_per_trial: float
+    space: dict[str, dict[str, list]]  # dotted key -> {distribution: arguments}
+    grace_period: int
+    reduction_factor: int
+    document: dict  # the file's content, as read
 
 
 def _fail(path: Path, key: str, message: str) -> SweepError:
@@ -230,7 +230,7 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
     if isinstance(cpus, bool) or not isinstance(cpus, int | float) or not cpus > 0:
         raise _fail(path, "cpus_per_trial", f"must be a positive number, got {cpus!r}")
     return SweepConfig(
-        source=str(path), base=base, algo=algo, timesteps=timesteps, seeds=tuple(seeds),
+        base=base, algo=algo, timesteps=timesteps, seeds=tuple(seeds),
         samples=_whole(path, "samples", document.get("samples", 1), 1),
         search_seed=_whole(path, "search_seed", document.get("search_seed", 0), 0),
         cpus_per_trial=float(cpus), space=space, grace_period=grace,

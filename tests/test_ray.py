@@ -151,3 +151,14 @@ def test_connect_ray_uses_the_ray_already_initialised(ray_cluster):
 def test_open_backend_rejects_unknown_names():
     with pytest.raises(BackendError, match="unknown backend"), open_backend("dask"):
         pass
+
+
+def test_tune_on_ray_writes_the_same_settings_as_local(ray_cluster, tmp_path, capsys):
+    common = ["tune", "--protocols", "umbmark,spin", "--episodes", "6", "--segments", "5",
+              "--env", IDEAL]
+    local, on_ray = tmp_path / "local.json", tmp_path / "ray.json"
+    assert run_cli(capsys, *common, "--workers", "2", "--out", local)[0] == 0
+    assert run_cli(capsys, *common, "--backend", "ray", "--out", on_ray)[0] == 0
+    assert on_ray.read_bytes() == local.read_bytes()
+    assert (tmp_path / "ray.tuning" / "segments.csv").read_bytes() == (
+        tmp_path / "local.tuning" / "segments.csv").read_bytes()
