@@ -162,3 +162,11 @@ def test_tune_on_ray_writes_the_same_settings_as_local(ray_cluster, tmp_path, ca
     assert on_ray.read_bytes() == local.read_bytes()
     assert (tmp_path / "ray.tuning" / "segments.csv").read_bytes() == (
         tmp_path / "local.tuning" / "segments.csv").read_bytes()
+
+
+def test_without_ray_the_error_names_the_extra(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` fails as if not installed
+    code, _, err = run_cli(capsys, "compare", "--protocols", "spin", "--episodes", "1",
+                           "--segments", "3", "--env", IDEAL, "--backend", "ray", "--out",
+                           tmp_path / "o")
+    assert_one_line_error(code, err, "needs the ray extra", "pip install 'excite[ray]'")
