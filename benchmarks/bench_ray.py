@@ -1,7 +1,8 @@
 """Ray backend of compare (issue 12), side by side in one run on this machine: the same
 comparison (7 protocols x EPISODES episodes x 30 segments, slip env) on the local backend
 (2 worker processes) and on a local Ray (2 CPUs), with Ray's tasks chunked to >= 1 s (the
-default) and with one episode per task, then local again (the machine's drift). Prints the
+default) and with one episode per task, then local again (the machine's drift), after an
+untimed warm-up. Prints the
 wall times, the ratio to local, the chunk size chosen and whether the result files are
 byte-identical."""
 
@@ -33,6 +34,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--episodes", type=int, default=60)
     args = parser.parse_args(argv)
     tmp = Path(tempfile.mkdtemp())
+    timed(tmp / "warm-up", 2, workers=2)  # first-use costs (imports, file cache) not timed
     walls = {"local (2 processes)": timed(tmp / "local", args.episodes, workers=2)}
     start = time.perf_counter()
     ray.init(num_cpus=2, include_dashboard=False, logging_level=logging.ERROR)
