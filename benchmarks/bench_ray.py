@@ -2,9 +2,8 @@
 comparison (7 protocols x EPISODES episodes x 30 segments, slip env) on the local backend
 (2 worker processes) and on a local Ray (2 CPUs), with Ray's tasks chunked to >= 1 s (the
 default) and with one episode per task, then local again (the machine's drift), after an
-untimed warm-up. Prints the
-wall times, the ratio to local, the chunk size chosen and whether the result files are
-byte-identical."""
+untimed warm-up. Prints the wall times, the ratio to local, the chunk size chosen and
+whether the result files are byte-identical."""
 
 from __future__ import annotations
 
