@@ -20,7 +20,7 @@ demo: $(STAMP)
 
 test: $(STAMP) test-core
 	$(VENV)/bin/ruff check excite envs agents tests benchmarks
-	$(PY) -m pytest -n 2 tests
+	$(PY) -m pytest -n 2 --dist loadgroup tests
 
 # A core-only install (numpy, scipy; no extras) in its own venv runs calibrate/segment/validate.
 CORE_VENV := .venv-core

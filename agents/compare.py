@@ -7,9 +7,10 @@ estimator effects, not luck. Protocols are specs (``umbmark:speed=0.2``, see
 :mod:`excite.estimators`; plugged in as the env's ``estimator_factory``); their labels name
 them in the results. Episode seeds come from one of two disjoint streams: ``evaluation``
 (``excite compare``) and ``tuning`` (``excite tune``), see :func:`episode_seed`.
-Episodes run in parallel worker processes; each finished episode's rows are appended to
-``DIR/segments.csv`` at once, so an interrupted run re-run with the same ``DIR`` continues
-where it stopped (per protocol, estimator and episode), losing and duplicating nothing.
+Episodes run in parallel worker processes or Ray tasks (:mod:`agents.backends`); each
+finished task's rows are appended to ``DIR/segments.csv`` at once, so an interrupted run
+re-run with the same ``DIR`` continues where it stopped (per protocol, estimator and
+episode), losing and duplicating nothing.
 """
 
 from __future__ import annotations
@@ -19,8 +20,8 @@ import functools
 import json
 import math
 import os
+import time
 from collections.abc import Iterable, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -29,6 +30,7 @@ import numpy as np
 from tqdm import tqdm
 
 import excite  # noqa: F401  (registers the environment ids in worker processes)
+from agents.backends import LOCAL, chunk_size, open_backend
 from agents.catalog import ProtocolSpec, check_distinct, make_protocol, parse_protocol
 from agents.oracle import oracle_design
 from agents.protocols import Protocol
@@ -124,8 +126,8 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[di
 
 @functools.cache
 def _worker_protocol(spec: ProtocolSpec) -> Protocol:
-    """One instance per protocol and worker process (a learned policy is loaded once, not
-    every episode); run_protocol_episode resets it at the start of each episode."""
+    """One instance per protocol and process (a learned policy is loaded once, not every
+    episode); run_protocol_episode resets it at the start of each episode."""
     return make_protocol(spec)
 
 
@@ -147,6 +149,13 @@ def incompatible_protocols(protocols: Iterable[ProtocolSpec],
     shape = tuple(observation_shape)
     reasons = {spec.label: make_protocol(spec).incompatibility(shape) for spec in protocols}
     return {label: reason for label, reason in reasons.items() if reason}
+
+
+def run_episodes(settings: CompareSettings,
+                 work: Sequence[tuple[int, list[Pair]]]) -> list[list[dict]]:
+    """The rows of :func:`run_episode` of each (episode, pairs) of ``work``: one task of an
+    execution backend (:mod:`agents.backends`)."""
+    return [run_episode(settings, pairs, episode) for episode, pairs in work]
 
 
 def run_episode(settings: CompareSettings, pairs: list[Pair], episode: int) -> list[dict]:
@@ -214,13 +223,18 @@ def read_complete_rows(path: Path, segments: int, final_only: bool = False) -> l
 
 
 def _write_rows(path: Path, rows: Iterable[dict], mode: str) -> None:
-    with open(path, mode, newline="") as handle:
+    """Append rows (mode "a"), or replace the file by a header and rows (mode "w", atomic: a
+    kill while writing leaves the old file)."""
+    target = path.with_name(path.name + ".partial") if mode == "w" else path
+    with open(target, mode, newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=COLUMNS)
         if mode == "w":
             writer.writeheader()
         writer.writerows({k: _format(row[k]) for k in COLUMNS} for row in rows)
         handle.flush()
         os.fsync(handle.fileno())
+    if mode == "w":
+        os.replace(target, path)
 
 
 def _format(value):
@@ -261,16 +275,26 @@ def run_comparison(
     workers: int | None = None,
     progress: bool = True,
     estimators: Sequence[str | EstimatorSpec] = (DEFAULT_ESTIMATOR,),
+    backend: str = LOCAL,
+    address: str | None = None,
 ) -> list[dict]:
     """Run (or finish) a comparison in ``out_dir``; returns the rows of every requested
     (protocol, estimator) pair (specs or their text; rows name them by label) and episode.
     Every protocol is built once before any work starts, so bad names or settings fail at
-    once."""
+    once.
+
+    Episodes run on ``backend`` (:mod:`agents.backends`: ``local`` worker processes, at most
+    ``workers``; ``ray`` at ``address``). On a backend whose tasks must carry at least
+    ``task_seconds`` of work (Ray), the first episode runs here and is timed, and the others
+    are grouped into tasks of ``ceil(task_seconds / that time)`` episodes; locally each
+    episode is a task. Each finished task's rows are appended to ``segments.csv`` at once;
+    at the end the file is rewritten in episode order, so it does not depend on the backend
+    or on which task finished first."""
     settings = settings or CompareSettings()
     specs = as_specs(protocols)
     estimator_specs = as_estimator_specs(estimators)
     for spec in specs:
-        make_protocol(spec)
+        _worker_protocol(spec)  # built (and kept for the episodes run here) or an error now
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     _check_settings(out, settings)
@@ -282,23 +306,36 @@ def run_comparison(
                 if (p.label, m.label, e) not in done] for e in range(episodes)}
     todo = {e: s for e, s in todo.items() if s}
 
-    bar = tqdm(total=len(todo), desc="episodes", unit="ep", disable=not progress)
-    with ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
-        pending = {pool.submit(run_episode, settings, names, e) for e, names in todo.items()}
+    with open_backend(backend, address, workers) as executor:
+        bar = tqdm(total=len(todo), desc="episodes", unit="ep", disable=not progress)
+
+        def record(episode_rows: list[list[dict]]) -> None:
+            new_rows = [row for rows_of_one in episode_rows for row in rows_of_one]
+            _write_rows(csv_path, new_rows, "a")
+            rows.extend(new_rows)
+            bar.update(len(episode_rows))
+
         try:
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    new_rows = future.result()
-                    _write_rows(csv_path, new_rows, "a")
-                    rows.extend(new_rows)
-                    bar.update(1)
-        except BaseException:
-            for future in pending:
-                future.cancel()
-            raise
+            work = list(todo.items())
+            size = 1
+            if executor.task_seconds > 0 and work:  # measure an episode to size the tasks
+                started = time.perf_counter()
+                first = run_episodes(settings, work[:1])
+                size = chunk_size(executor.task_seconds, time.perf_counter() - started)
+                record(first)
+                work = work[1:]
+            tasks = [(settings, work[i:i + size]) for i in range(0, len(work), size)]
+            for episode_rows in executor.imap_unordered(run_episodes, tasks):
+                record(episode_rows)
         finally:
             bar.close()
+    # One order whatever the backend and the order episodes finished in: by episode, then
+    # protocol and estimator as requested (the file is identical for the same settings).
+    rank = {spec.label: i for i, spec in enumerate(specs)}
+    estimator_rank = {spec.label: i for i, spec in enumerate(estimator_specs)}
+    rows.sort(key=lambda r: (r["episode"], rank.get(r["protocol"], len(rank)),
+                             estimator_rank.get(r["estimator"], len(estimator_rank))))
+    _write_rows(csv_path, rows, "w")
     wanted = {(p.label, m.label) for p in specs for m in estimator_specs}
     return [r for r in rows
             if (r["protocol"], r["estimator"]) in wanted and r["episode"] < episodes]

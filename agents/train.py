@@ -127,8 +127,11 @@ def train(
     resume: bool = False,
     config_path: str | Path | None = None,
     progress: bool = True,
+    after_eval: BaseCallback | None = None,
 ) -> dict:
-    """Train (or resume) a policy; returns the training summary (also in DIR)."""
+    """Train (or resume) a policy; returns the training summary (also in DIR).
+    ``after_eval`` runs after every evaluation (its ``parent`` is the EvalCallback, with
+    ``last_mean_reward``); returning False stops training."""
     out = Path(out)
     if resume:
         stored = out / "config.yaml"
@@ -173,7 +176,8 @@ def train(
         EvalCallback(eval_env, best_model_save_path=str(out), log_path=str(out / "eval"),
                      eval_freq=max(eval_cfg.get("freq", 20_000) // per_env, 1),
                      n_eval_episodes=eval_cfg.get("episodes", 20), deterministic=True,
-                     callback_on_new_best=_SaveNormalizationOnBest(out)),
+                     callback_on_new_best=_SaveNormalizationOnBest(out),
+                     callback_after_eval=after_eval),
     ]
     remaining = max(timesteps - done_steps, 0)
     if progress:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.backends import LOCAL
 from agents.catalog import ProtocolSpec
 from agents.compare import (
     TUNING_STREAM,
@@ -95,14 +96,17 @@ def select(columns: Mapping[str, np.ndarray], spec: ProtocolSpec,
 
 def run_tuning(out: str | Path, specs: Sequence[ProtocolSpec], episodes: int,
                settings: CompareSettings, workers: int | None = None,
-               progress: bool = True) -> dict:
+               progress: bool = True, backend: str = LOCAL,
+               address: str | None = None) -> dict:
     """Tune every protocol of ``specs`` on ``episodes`` tuning episodes of ``settings`` (its
     seed stream is replaced by the tuning stream); writes and returns the tuned document
-    (``out``, JSON). Resumable: the episodes live in :func:`work_dir`."""
+    (``out``, JSON). Resumable: the episodes live in :func:`work_dir`. The episodes run on
+    ``backend`` at ``address`` (see :func:`agents.compare.run_comparison`)."""
     settings = replace(settings, stream=TUNING_STREAM, final_only=True)
     tried = {spec.label: candidates(spec) for spec in specs}
     unique = list(dict.fromkeys(c for group in tried.values() for c in group))
-    rows = run_comparison(work_dir(out), unique, episodes, settings, workers, progress)
+    rows = run_comparison(work_dir(out), unique, episodes, settings, workers, progress,
+                          backend=backend, address=address)
     columns = columns_of(rows)
     document = {
         "excite_tuned": TUNED_FORMAT,

@@ -22,6 +22,7 @@ from excite.commands import (
     protocols,
     segment,
     simulate,
+    sweep,
     train,
     tune,
     validate,
@@ -33,11 +34,12 @@ __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE",
            "EXIT_UNIDENTIFIABLE", "EXIT_MISFIT"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_UNIDENTIFIABLE, EXIT_MISFIT = 0, 1, 2, 3, 4
-COMMANDS = (calibrate, segment, validate, simulate, protocols, compare, tune, train)
+COMMANDS = (calibrate, segment, validate, simulate, protocols, compare, tune, train, sweep)
 
 #: The optional extra that provides each third-party module a subcommand may import.
 EXTRA_OF_MODULE = {"rosbags": "ros", "gymnasium": "sim", "pymunk": "sim", "matplotlib": "sim",
-                   "tqdm": "sim", "yaml": "sim", "stable_baselines3": "rl", "torch": "rl"}
+                   "tqdm": "sim", "yaml": "sim", "stable_baselines3": "rl", "torch": "rl",
+                   "ray": "ray"}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -81,8 +83,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
         return EXIT_OK
     except KeyboardInterrupt:
-        print("excite: interrupted (compare and tune keep finished episodes: re-run the same "
-              "command to continue)", file=sys.stderr)
+        print("excite: interrupted (compare, tune and sweep keep finished work: re-run the "
+              "same command to continue)", file=sys.stderr)
         return 130
     except Exception as exc:  # never a traceback for users; EXCITE_DEBUG=1 shows it
         if isinstance(exc, ModuleNotFoundError) and (

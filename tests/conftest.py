@@ -45,3 +45,20 @@ def assert_one_line_error(code, err, *fragments):
     assert len(lines) == 1 and lines[0].startswith("excite: error: "), err
     for fragment in fragments:
         assert fragment in lines[0]
+
+
+@pytest.fixture(scope="session")
+def ray_cluster():
+    """One local Ray per test process (2 CPUs), shut down at the end; its address lets a
+    subprocess (``excite ... --address``) join it. Tests that use it are marked
+    ``xdist_group("ray")`` so that ``pytest -n 2 --dist loadgroup`` (make test) runs them in
+    one worker, one Ray in all. With pytest 9.2 and pytest-xdist 3.8 loadgroup does not group
+    (pytest-dev/pytest-xdist#1386: the group suffix of node ids is lost), so each of the two
+    workers starts its own Ray; the tests do not depend on which of the two they get."""
+    import logging
+
+    import ray
+
+    ray.init(num_cpus=2, include_dashboard=False, logging_level=logging.ERROR)
+    yield ray.get_runtime_context().gcs_address
+    ray.shutdown()

@@ -50,11 +50,32 @@ def add_episode_options(parser: argparse.ArgumentParser, episodes: int) -> None:
                         "tune tuning seeds: the two never meet)")
     parser.add_argument("--env", default=DEFAULT_ENV_ID, metavar="ID")
     parser.add_argument("--workers", type=positive_int, default=None, metavar="W",
-                        help="worker processes (default: all cores)")
+                        help="worker processes of the local backend (default: all cores)")
+    add_backend_options(parser)
     parser.add_argument("--policy", metavar="PATH",
                         help="policy file of the learned protocol (its policy setting)")
     parser.add_argument("--robot", default="default", metavar="PRESET",
                         help="robot preset: default, turtlebot3, jackal, husky")
+
+
+def add_backend_options(parser: argparse.ArgumentParser,
+                        local: str = "worker processes on this machine") -> None:
+    """--backend local|ray and --address (where the episodes or trials run); ``local`` says
+    what the local backend is."""
+    parser.add_argument("--backend", choices=("local", "ray"), default="local",
+                        help=f"local: {local} (default); ray: the Ray cluster of --address")
+    parser.add_argument("--address", metavar="ADDR",
+                        help="the Ray cluster (HOST:PORT of its head, or auto); default: "
+                        "RAY_ADDRESS, else the latest `ray start` cluster of this machine, "
+                        "else a new local Ray")
+
+
+def check_backend_options(args: argparse.Namespace) -> None:
+    """A one-line error (BackendError) before any work when --backend and --address do not
+    fit together."""
+    from agents.backends import check_backend
+
+    check_backend(args.backend, args.address)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -171,6 +192,7 @@ def run(args: argparse.Namespace) -> int:
     from agents.compare import columns_of, run_comparison
     from agents.report import format_table, plot_comparison, summarize
 
+    check_backend_options(args)
     settings = episode_settings(args)
     estimators = estimator_specs(args)
     specs, tuned = tuned_specs(protocol_specs(args), args.tuned, settings, args.episodes)
@@ -178,7 +200,8 @@ def run(args: argparse.Namespace) -> int:
     check_estimators(estimators, settings)
     try:
         rows = run_comparison(args.out, specs, args.episodes, settings, args.workers,
-                              estimators=estimators)
+                              estimators=estimators, backend=args.backend,
+                              address=args.address)
     except OSError as exc:
         raise UsageError(f"cannot write to {args.out}: {exc.strerror}") from None
     columns = columns_of(rows)

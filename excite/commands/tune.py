@@ -13,7 +13,13 @@ import argparse
 from pathlib import Path
 
 from excite.commands.args import UsageError
-from excite.commands.compare import add_episode_options, episode_settings, protocol_specs, runnable
+from excite.commands.compare import (
+    add_episode_options,
+    check_backend_options,
+    episode_settings,
+    protocol_specs,
+    runnable,
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -33,10 +39,12 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--out must name a .json file, got {out}")
     if not out.parent.is_dir():
         raise UsageError(f"cannot write {out}: no such directory {out.parent}")
+    check_backend_options(args)
     settings = episode_settings(args)
     specs, _ = runnable(protocol_specs(args), settings)
     try:
-        document = run_tuning(out, specs, args.episodes, settings, args.workers)
+        document = run_tuning(out, specs, args.episodes, settings, args.workers,
+                              backend=args.backend, address=args.address)
     except OSError as exc:
         raise UsageError(f"cannot write {out} or {work_dir(out)}: {exc.strerror}") from None
     print(format_tuning(document))
