@@ -28,12 +28,14 @@ the levels are not biased low by the fit), with the log-determinant of C from th
 
 A segment noise that is truly 0 (a log without slip) is visible only at the lowest
 frequencies, where the pose noise telescopes away, so its unconstrained REML levels are often
-well above 0; a spurious segment level then outweighs the pose noise over long stretches and
-costs 20-40% of the efficiency of the radii and b (benchmarks/bench_logs.py). :func:`reml_noise`
-therefore tests the hypothesis "no segment noise" (all three segment levels 0, the pose noise
-alone) by the restricted likelihood ratio; three variance components on the boundary of their
-space have a chi-bar-square null distribution, sum_k binom(3, k) / 8 chi2(k) for k = 0..3
-(Self & Liang 1987). Unless the data reject it, the segment levels are held at their floor.
+well above 0; a spurious segment level then outweighs the pose noise over long stretches (it
+raised the RMSE of r_L, r_R and b by 25-50% on the ideal env's logs, benchmarks/bench_logs.py).
+:func:`reml_noise` therefore tests the hypothesis "no segment noise" (all three segment
+levels 0, the pose noise alone) by the restricted likelihood ratio; three variance components
+on the boundary of their space have a chi-bar-square null distribution, sum_k binom(3, k) / 8
+chi2(k) for k = 0..3 (Self & Liang 1987). Unless the data reject it (at the 5% level), the
+segment levels are held at their floor. In small samples this null is conservative (fewer
+rejections than nominal: 0.5% of the ideal env's logs keep a segment level).
 The test is joint, not per channel: slip enters through the wheels, so when any channel shows
 it, the others carry it too (and a per-channel test drops real but weak x noise of slipping
 logs: coverage 0.77 instead of 0.86 on synthetic slip).
