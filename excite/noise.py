@@ -35,7 +35,7 @@ levels 0, the pose noise alone) by the restricted likelihood ratio; three varian
 on the boundary of their space have a chi-bar-square null distribution, sum_k binom(3, k) / 8
 chi2(k) for k = 0..3 (Self & Liang 1987). Unless the data reject it (at the 5% level), the
 segment levels are held at their floor. In small samples this null is conservative (fewer
-rejections than nominal: 0.5% of the ideal env's logs keep a segment level).
+rejections than nominal: about 1% of the ideal env's logs keep their segment levels).
 The test is joint, not per channel: slip enters through the wheels, so when any channel shows
 it, the others carry it too (and a per-channel test drops real but weak x noise of slipping
 logs: coverage 0.77 instead of 0.86 on synthetic slip).
@@ -71,7 +71,7 @@ def chi2_quantile(q: float, dof: float) -> float:
 
 def chi_bar_square_quantile(q: float, components: int) -> float:
     """The q-quantile (2^-n < q < 1) of the chi-bar-square distribution of the likelihood ratio
-    for ``components`` orthogonal variance components on the boundary: the mixture
+    for n = ``components`` orthogonal variance components on the boundary: the mixture
     sum_k binom(n, k) / 2^n chi2(k), k = 0..n (chi2(0) a point mass at 0)."""
     from scipy.optimize import brentq
     from scipy.special import chdtrc
