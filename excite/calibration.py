@@ -24,7 +24,7 @@ from excite.errors import DataError
 from excite.information import as_sigma, inverse_information
 from excite.kinematics import Params
 from excite.models import AXLE, SENSOR_POSE, FixedSensorPoseModel, SegmentModel, SensorPose
-from excite.noise import ChainWhitener, NoiseLevels, moment_noise, reml_noise
+from excite.noise import ChainWhitener, NoiseLevels, chi2_quantile, moment_noise, reml_noise
 from excite.solver import Fit, Loss, Problem, complement, levenberg_marquardt, normal_system
 from excite.starts import (
     DEFAULT_NOMINAL,
@@ -57,14 +57,6 @@ NOISE_ROUNDS = 8
 #: The noise levels have settled when no level moves by more than this fraction.
 NOISE_RTOL = 0.01
 _UNIT_SIGMA = np.ones(3)
-
-
-def chi2_quantile(q: float, dof: float) -> float:
-    """The q-quantile of the chi-square distribution with ``dof`` degrees of freedom (scipy's
-    special function, imported on first use: scipy.stats is too slow to import)."""
-    from scipy.special import chdtri
-
-    return float(chdtri(dof, 1.0 - q))
 
 
 def _chi2_survival(x: float, dof: float) -> float:

@@ -190,6 +190,20 @@ def test_noise_free_log_segments_into_the_true_sensor_motion(exact):
                                base.true_sensor_pose.as_array(), rtol=0, atol=1e-3)
 
 
+def test_noise_free_log_without_quantization_calibrates_to_the_truth():
+    """No pose noise and (practically) no encoder quantization: the recording and the
+    segmentation have no model error, so calibration returns the hidden robot and sensor
+    mounting to ~1e-6 (the noise-level floors leave ~1e-11 here)."""
+    base = run_episode(segments=40, ideal=True, arena_size=30.0, record=True,
+                       record_sigma_xy=0.0, record_sigma_theta=0.0,
+                       ticks_per_rev=2**30).unwrapped
+    result = calibrate(segment_timeseries(base.recording.series).segments,
+                       sensor_pose="estimate")
+    assert np.abs(result.params.as_array() / base.true_params.as_array() - 1).max() < 1e-6
+    np.testing.assert_allclose(result.sensor_pose.as_array(),
+                               base.true_sensor_pose.as_array(), rtol=0, atol=1e-6)
+
+
 # --------------------------------------------------------------------------- the command line
 
 
