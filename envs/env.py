@@ -12,6 +12,7 @@ from gymnasium import spaces
 
 from envs.recording import Recorder, Recording, RecordingConfig
 from envs.robot import RobotSpec, robot_distribution
+from envs.sensors import RelativePoseSensor
 from envs.simulation import Simulation, SimulationConfig
 from excite import se2
 from excite.contracts import EstimatorFactory, RobotKnowledge
@@ -300,25 +301,11 @@ class DiffDriveCalibEnv(gym.Env):
 
     # -- what the robot knows ------------------------------------------------------------------
     def _read_estimate(self) -> tuple[Params, np.ndarray]:
-        """The estimator's wheel parameters and all model parameters (an estimator without
-        ``theta`` leaves the sensor pose at its nominal value)."""
-        p = self.estimator.params
-        params = p if isinstance(p, Params) else Params.from_array(p)
-        if self.model is AXLE:
-            return params, params.as_array()
-        theta = getattr(self.estimator, "theta", None)
-        if theta is None or len(theta) != self.model.size:
-            theta = np.append(params.as_array(), self.nominal_theta[3:])
-        return params, np.asarray(theta, dtype=float)
+        return read_estimate(self.estimator, self.model, self.nominal_theta)
 
     def _measure_pose(self, body_pose: np.ndarray) -> np.ndarray:
-        """The body's world pose as the robot knows it: the sensor's noisy world pose, taken
-        back to the body with the estimated mounting."""
-        if self._mount is None:
-            return self.sim.pose_sensor.absolute(body_pose, self._sensor_rng)
-        sensor = se2.compose(body_pose, self._mount.as_array())
-        reading = self.sim.pose_sensor.absolute(sensor, self._sensor_rng)
-        return se2.compose(reading, se2.inverse(self._theta[3:6]))
+        return measure_pose(self.sim.pose_sensor, body_pose, self._sensor_rng, self._mount,
+                            self._theta)
 
     @property
     def estimate(self) -> Params:
@@ -356,25 +343,11 @@ class DiffDriveCalibEnv(gym.Env):
 
     def _observation(self) -> np.ndarray:
         eigenvalues, weakest = self._eigen
-        sign = 1.0 if max(weakest, key=abs) >= 0 else -1.0  # a unique sign for the direction
-        estimate, nominal = self._estimate, self.nominal
-        relative = [estimate.r_L / nominal.r_L - 1.0, estimate.r_R / nominal.r_R - 1.0,
-                    estimate.b / nominal.b - 1.0]
-        if self.model is not AXLE:
-            offset = (self._theta[3:] - self.nominal_theta[3:]).tolist()
-            relative += [offset[0] / nominal.b, offset[1] / nominal.b, offset[2]]
-        x, y, theta = self._measured_pose.tolist()
-        to_unit = 2.0 / self.config["arena_size"]
-        obs = np.array([
-            *relative,
-            *[0.1 * math.log1p(max(lam, 0.0)) for lam in eigenvalues],
-            *[sign * v for v in weakest],
-            x * to_unit, y * to_unit, math.cos(theta), math.sin(theta),
-            *self._last_action,
-            self._n / self.budget,
-        ], dtype=np.float32)
-        space = self.observation_space
-        return np.minimum(np.maximum(obs, space.low, out=obs), space.high, out=obs)
+        return observations(
+            self.model, self._theta[None], self.nominal_theta, np.array([eigenvalues]),
+            np.array([weakest]), self._measured_pose[None], np.array([self._last_action]),
+            np.array([self._n / self.budget]), self.config["arena_size"],
+            self.observation_space)[0]
 
     # -- evaluation only -------------------------------------------------------------------------
     @property
@@ -451,6 +424,56 @@ class DiffDriveCalibEnv(gym.Env):
         state = copy.copy(self.__dict__)
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
         return state
+
+
+def read_estimate(estimator, model: SegmentModel,
+                  nominal_theta: np.ndarray) -> tuple[Params, np.ndarray]:
+    """The estimator's wheel parameters and all model parameters (an estimator without
+    ``theta`` leaves the sensor pose at its nominal value)."""
+    p = estimator.params
+    params = p if isinstance(p, Params) else Params.from_array(p)
+    if model is AXLE:
+        return params, params.as_array()
+    theta = getattr(estimator, "theta", None)
+    if theta is None or len(theta) != model.size:
+        theta = np.append(params.as_array(), nominal_theta[3:])
+    return params, np.asarray(theta, dtype=float)
+
+
+def measure_pose(sensor: RelativePoseSensor, body_pose: np.ndarray, rng: np.random.Generator,
+                 mount: SensorPose | None, theta: np.ndarray) -> np.ndarray:
+    """The body's world pose (x, y, theta) as the robot knows it: the sensor's noisy world
+    pose, taken back to the body with the estimated mounting (theta[3:6])."""
+    if mount is None:
+        return sensor.absolute(body_pose, rng)
+    reading = sensor.absolute(se2.compose(body_pose, mount.as_array()), rng)
+    return se2.compose(reading, se2.inverse(theta[3:6]))
+
+
+def observations(model: SegmentModel, theta: np.ndarray, nominal_theta: np.ndarray,
+                 eigenvalues: np.ndarray, weakest: np.ndarray, pose: np.ndarray,
+                 last_action: np.ndarray, used: np.ndarray, arena_size: float,
+                 space: spaces.Box) -> np.ndarray:
+    """The observations (N, 3 P + 7) of N robots (the table in DiffDriveCalibEnv's doc).
+
+    theta (N, P) the estimates, nominal_theta (P,); eigenvalues (N, P) ascending and weakest
+    (N, P) the eigenvector of the smallest (given a unique sign here: its largest entry is
+    positive); pose (N, 3) the measured world pose (m, m, rad); last_action (N, 2); used (N,)
+    the fraction of the budget used; arena_size (m). Clipped to ``space``.
+    """
+    b = nominal_theta[2]
+    relative = theta[:, :3] / nominal_theta[:3] - 1.0
+    if model is not AXLE:
+        offset = theta[:, 3:] - nominal_theta[3:]
+        relative = np.concatenate([relative, offset[:, :2] / b, offset[:, 2:]], axis=1)
+    rows = np.arange(len(weakest))
+    sign = np.where(weakest[rows, np.argmax(np.abs(weakest), axis=1)] >= 0, 1.0, -1.0)
+    to_unit = 2.0 / arena_size
+    obs = np.concatenate([
+        relative, 0.1 * np.log1p(np.maximum(eigenvalues, 0.0)), sign[:, None] * weakest,
+        pose[:, :2] * to_unit, np.cos(pose[:, 2:]), np.sin(pose[:, 2:]), last_action,
+        used[:, None]], axis=1).astype(np.float32)
+    return np.minimum(np.maximum(obs, space.low, out=obs), space.high, out=obs)
 
 
 def _sensor_ranges(config: dict | None) -> np.ndarray | None:

@@ -100,7 +100,7 @@ class IdealDrive:
         paths, wheels, collided = ideal_arcs(
             self.arena, self.dt, self._pose[None], self._phi[None], np.array([[cmd_L, cmd_R]]),
             np.array([robot.max_wheel_speed]), np.array([robot.kinematic_params()]),
-            robot.chassis, n_ticks)
+            [robot.chassis], n_ticks)
         self._pose = paths[0, -1].copy()
         self._phi = wheels[0, -1].copy()
         return paths[0], wheels[0], bool(collided[0])
@@ -108,15 +108,16 @@ class IdealDrive:
 
 def ideal_arcs(arena: Arena, dt: float, poses: np.ndarray, wheel_angles: np.ndarray,
                commands: np.ndarray, limits: np.ndarray, params: np.ndarray,
-               chassis: tuple[float, float], n_ticks: int
+               chassis: list[tuple[float, float]], n_ticks: int
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """N robots rolling exactly along constant-curvature arcs for ``n_ticks`` ticks of ``dt`` s.
 
     poses (N, 3) world (x, y, theta); wheel_angles (N, 2) rad; commands (N, 2) wheel speeds
-    (rad/s), clipped to +-limits (N,); params (N, 3) true (r_L, r_R, b) in m; chassis (length,
-    width) in m. A robot whose footprint would enter a wall stops there for the rest of the
-    call. Returns the poses (N, n_ticks + 1, 3) and wheel angles (N, n_ticks + 1, 2) at every
-    tick, the current ones first, and whether each robot hit a wall (N,).
+    (rad/s), clipped to +-limits (N,); params (N, 3) true (r_L, r_R, b) in m; chassis: each
+    robot's (length, width) in m. A robot whose footprint would enter a wall stops there for
+    the rest of the call. Returns the poses (N, n_ticks + 1, 3) and wheel angles
+    (N, n_ticks + 1, 2) at every tick, the current ones first, and whether each robot hit a
+    wall (N,).
     """
     limit = limits[:, None]
     omega = np.clip(commands, -limit, limit)
@@ -134,8 +135,12 @@ def ideal_arcs(arena: Arena, dt: float, poses: np.ndarray, wheel_angles: np.ndar
     path[:, 1:, 0] = x0 + c * bx - s * by
     path[:, 1:, 1] = y0 + s * bx + c * by
     path[:, 1:, 2] = th0 + dth
-    inside = arena.contains_footprint(path[:, 1:, 0], path[:, 1:, 1], path[:, 1:, 2],
-                                      chassis=chassis)
+    inside = np.empty((len(poses), n_ticks), dtype=bool)
+    for footprint in set(chassis):
+        rows = [i for i, c in enumerate(chassis) if c == footprint]
+        ahead = path[rows, 1:]
+        inside[rows] = arena.contains_footprint(ahead[..., 0], ahead[..., 1], ahead[..., 2],
+                                                chassis=footprint)
     clear = inside.all(axis=1)
     ticks_done = np.where(clear, n_ticks, np.argmin(inside, axis=1))  # (N,)
     held = np.minimum(np.arange(n_ticks + 1), ticks_done[:, None])  # (N, n_ticks + 1)
@@ -235,8 +240,8 @@ class _ArrayOps:
     def capped(x, y, cap):
         norm = np.hypot(x, y)
         over = norm > cap
-        ratio = cap / np.where(over, norm, cap)
-        return np.where(over, x * ratio, x), np.where(over, y * ratio, y)
+        norm = np.where(over, norm, cap)
+        return np.where(over, x * cap / norm, x), np.where(over, y * cap / norm, y)
 
 
 def traction_ticks(ops, k, state: tuple, cmd_L, cmd_R, n_ticks: int, advance, velocity,
@@ -524,15 +529,18 @@ class PymunkBatchDrive:
         self._touched = np.zeros(n, dtype=bool)
         self._state = np.zeros((7, n))  # w_L, w_R, phi_L, phi_R, vel_x, vel_y, w
         self._constants = np.ones((len(TRACTION_FIELDS), n))
-        self._set = pymunk.batch.Buffer()
-        self._velocities = np.zeros((n, 3))  # vx, vy, w per body, in the space's body order
-        self._set.set_float_buf(self._velocities)
-        self._get = pymunk.batch.Buffer()
         order = pymunk.batch.Buffer()
         pymunk.batch.get_space_bodies(self._space, pymunk.batch.BodyFields.BODY_ID, order)
         ids = list(memoryview(order.int_buf()).cast("P"))
-        if ids != [body.id for body in self._bodies]:  # pymunk iterates in insertion order
+        # pymunk lists the dynamic bodies in insertion order, then the walls' static body.
+        if ids[:n] != [body.id for body in self._bodies]:
             raise RuntimeError("pymunk.batch does not list the bodies in insertion order")
+        self._listed = len(ids)
+        self._set = pymunk.batch.Buffer()
+        # vx, vy, w per listed body (the static body's row stays 0)
+        self._velocities = np.zeros((self._listed, 3))
+        self._set.set_float_buf(self._velocities)
+        self._get = pymunk.batch.Buffer()
 
     def _mark(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
         for body in arbiter.bodies:
@@ -566,13 +574,14 @@ class PymunkBatchDrive:
         """(6, N): COM x, y (m), yaw (rad), velocity x, y (m/s), yaw rate (rad/s)."""
         self._get.clear()
         pymunk.batch.get_space_bodies(self._space, self._GET, self._get)
-        return np.frombuffer(self._get.float_buf(), dtype=float).reshape(self.n, 6).T.copy()
+        bodies = np.frombuffer(self._get.float_buf(), dtype=float).reshape(self._listed, 6)
+        return bodies[:self.n].T.copy()
 
     def _advance(self, chord_x: np.ndarray, chord_y: np.ndarray, w: np.ndarray):
         velocities = self._velocities
-        velocities[:, 0] = chord_x
-        velocities[:, 1] = chord_y
-        velocities[:, 2] = w
+        velocities[:self.n, 0] = chord_x
+        velocities[:self.n, 1] = chord_y
+        velocities[:self.n, 2] = w
         pymunk.batch.set_space_bodies(self._space, self._SET, self._set)
         self._space.step(self.dt)
         self._last = self._read()
@@ -616,3 +625,41 @@ class PymunkBatchDrive:
         collided = np.broadcast_to(collided, (self.n,)).copy()
         self._touched = collided
         return self.poses(np.array(state[7:])), collided
+
+
+class IdealBatchDrive:
+    """N robots of :class:`IdealDrive` (the same kernel, :func:`ideal_arcs`), bit for bit."""
+
+    def __init__(self, arena: Arena, physics_hz: float, n: int) -> None:
+        self.arena = arena
+        self.dt = 1.0 / physics_hz
+        self.n = n
+        self._poses = np.zeros((n, 3))
+        self._phi = np.zeros((n, 2))
+        self._limits = np.ones(n)
+        self._params = np.ones((n, 3))
+        self._chassis: list[tuple[float, float]] = [(1.0, 1.0)] * n
+
+    def reset(self, i: int, robot: RobotSpec, pose: np.ndarray,
+              wheel_angles: np.ndarray) -> None:
+        """Place robot ``i`` at rest at world pose (x, y, theta) with wheel angles (rad)."""
+        self._poses[i] = pose
+        self._phi[i] = wheel_angles
+        self._limits[i] = robot.max_wheel_speed
+        self._params[i] = robot.kinematic_params()
+        self._chassis[i] = robot.chassis
+
+    def poses(self) -> np.ndarray:
+        return self._poses.copy()
+
+    @property
+    def wheel_angles(self) -> np.ndarray:
+        return self._phi.copy()
+
+    def run(self, commands: np.ndarray, n_ticks: int) -> tuple[np.ndarray, np.ndarray]:
+        paths, wheels, collided = ideal_arcs(self.arena, self.dt, self._poses, self._phi,
+                                             commands, self._limits, self._params,
+                                             self._chassis, n_ticks)
+        self._poses = paths[:, -1].copy()
+        self._phi = wheels[:, -1].copy()
+        return self._poses.copy(), collided

@@ -14,16 +14,19 @@ import numpy as np
 
 
 def relative_pose(pose_start: np.ndarray, pose_end: np.ndarray) -> np.ndarray:
-    """Body-frame increment (dx, dy, dtheta) from `pose_start` to `pose_end`.
+    """Body-frame increment (dx, dy, dtheta) from `pose_start` to `pose_end` ((3,) or (N, 3)).
 
     dx, dy (m) are the displacement expressed in the body frame at `pose_start` (x forward,
     y left); dtheta (rad) is the continuous heading change theta_end - theta_start.
     """
-    ex = pose_end[0] - pose_start[0]
-    ey = pose_end[1] - pose_start[1]
-    c = math.cos(pose_start[2])
-    s = math.sin(pose_start[2])
-    return np.array([c * ex + s * ey, -s * ex + c * ey, pose_end[2] - pose_start[2]])
+    if np.ndim(pose_start) == 1:  # one pose: the same arithmetic as a batch of one
+        return relative_pose(np.asarray(pose_start)[None], np.asarray(pose_end)[None])[0]
+    ex = pose_end[:, 0] - pose_start[:, 0]
+    ey = pose_end[:, 1] - pose_start[:, 1]
+    c = np.cos(pose_start[:, 2])
+    s = np.sin(pose_start[:, 2])
+    return np.stack([c * ex + s * ey, -s * ex + c * ey, pose_end[:, 2] - pose_start[:, 2]],
+                    axis=1)
 
 
 class WheelEncoders:
