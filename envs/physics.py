@@ -33,6 +33,9 @@ from excite.kinematics import sinc_cosc_scalar, sinc_family
 GRAVITY = 9.81  # m/s^2
 WALL_RADIUS = 0.05  # m, half-thickness of the arena's wall segments
 SLIP_ITERATIONS = 6  # Gauss-Seidel sweeps over the two wheels when a friction cap binds
+#: Slipping robots of a batch solved one by one on Python floats up to this many (each takes a
+#: few microseconds; numpy's per-call overhead makes arrays faster only beyond).
+SCALAR_SLIP_MAX = 24
 _CHASSIS_TYPE, _WALL_TYPE = 1, 2  # pymunk collision types
 
 
@@ -195,8 +198,8 @@ class _FloatOps:
         return q_L >= 0.0 and q_R >= 0.0 and abs(py) <= math.sqrt(q_L) + math.sqrt(q_R)
 
     @staticmethod
-    def merge(rolling, rolled, slipped):
-        return rolled if rolling else slipped
+    def slip(rolling, k, vx, vy, w, t_L, t_R, rolled):
+        return _slip(_FloatOps, k, vx, vy, w, t_L, t_R)
 
     @staticmethod
     def capped(x, y, cap):
@@ -233,8 +236,23 @@ class _ArrayOps:
         return (q_L >= 0.0) & (q_R >= 0.0) & (np.abs(py) <= fits)
 
     @staticmethod
-    def merge(rolling, rolled, slipped):
-        return tuple(np.where(rolling, a, b) for a, b in zip(rolled, slipped, strict=True))
+    def slip(rolling, k, vx, vy, w, t_L, t_R, rolled):
+        """The rolling robots take ``rolled``; the slipping ones run :func:`_slip`, one by one
+        on Python floats (exactly the single robot's arithmetic) when they are few, else on
+        arrays of the slipping robots."""
+        out = tuple(value.copy() for value in rolled)
+        slipping = np.flatnonzero(~rolling)
+        inputs = (vx, vy, w, t_L, t_R)
+        if len(slipping) > SCALAR_SLIP_MAX:
+            result = _slip(_ArrayOps, k.subset(slipping), *(a[slipping] for a in inputs))
+            for target, value in zip(out, result, strict=True):
+                target[slipping] = value
+            return out
+        columns = [a[slipping].tolist() for a in inputs]
+        for j, i in enumerate(slipping.tolist()):
+            result = _slip(_FloatOps, k.robots[i], *(column[j] for column in columns))
+            out[0][i], out[1][i], out[2][i] = result
+        return out
 
     @staticmethod
     def capped(x, y, cap):
@@ -288,7 +306,7 @@ def traction_ticks(ops, k, state: tuple, cmd_L, cmd_R, n_ticks: int, advance, ve
         if all_(rolling):
             vx, vy, w = tx, ty, tw
         else:
-            vx, vy, w = ops.merge(rolling, (tx, ty, tw), _slip(ops, k, vx, vy, w, t_L, t_R))
+            vx, vy, w = ops.slip(rolling, k, vx, vy, w, t_L, t_R, (tx, ty, tw))
         vel_x, vel_y = c * vx - s * vy, s * vx + c * vy
         sinc, cosc = sinc_cosc(w * dt)
         chord_x = sinc * vel_x - cosc * vel_y
@@ -333,12 +351,19 @@ def _slip(ops, k, vx, vy, w, t_L, t_R):
 
 
 class _Traction:
-    """Traction constants as attributes (floats for one robot, arrays over N robots)."""
+    """Traction constants as attributes (floats for one robot, arrays over N robots, then
+    with ``robots``: each robot's float constants)."""
 
-    def __init__(self, dt: float, values) -> None:
+    def __init__(self, dt: float, values, robots: list[_Traction] | None = None) -> None:
         self.dt = dt
+        self.robots = robots
+        self._values = values
         for name, value in zip(TRACTION_FIELDS, values, strict=True):
             setattr(self, name, value)
+
+    def subset(self, rows: np.ndarray) -> _Traction:
+        """The constants of some of the robots (arrays)."""
+        return _Traction(self.dt, self._values[:, rows])
 
 
 class _ContactFlag:
@@ -503,10 +528,11 @@ class PymunkBatchDrive:
     shape-filter group, so robots never touch each other, only the walls. The motors and
     traction of all robots are one :func:`traction_ticks` call on (N,) arrays; body
     velocities go into pymunk and poses come out in bulk (``pymunk.batch``); wall contacts are
-    flagged per robot by the collision callback. Robot i driven alone by a
-    :class:`PymunkDrive` follows the same equations; numpy's elementwise hypot may differ from
-    Python's by one ulp in a slipping tick, so the two agree statistically rather than
-    bit for bit on the slip env.
+    counted per robot by the collision callbacks (begin / separate: they run only when a
+    contact starts or ends). Robot i driven alone by a :class:`PymunkDrive` follows the same
+    equations; pymunk's contact solver in a shared space and numpy's elementwise hypot (when
+    more than SCALAR_SLIP_MAX robots slip at once) may differ in the last bits, so the two agree
+    statistically rather than bit for bit on the slip env after a wall contact.
     """
 
     _GET = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
@@ -520,11 +546,13 @@ class PymunkBatchDrive:
         self._space = _new_space(arena, self.dt)
         self._bodies = [pymunk.Body(1.0, 1.0) for _ in range(n)]
         self._shapes: list[pymunk.Poly | None] = [None] * n
-        self._index = {body.id: i for i, body in enumerate(self._bodies)}
+        self._shape_index: dict[pymunk.Shape, int] = {}
         self._space.add(*self._bodies)
-        self._hit = np.zeros(n, dtype=bool)
-        self._any_hit = False
-        self._space.on_collision(_CHASSIS_TYPE, _WALL_TYPE, pre_solve=self._mark)
+        self._contacts = np.zeros(n, dtype=int)  # wall contacts each chassis is in now
+        self._began = np.zeros(n, dtype=bool)  # a contact began during this tick
+        self._space.on_collision(_CHASSIS_TYPE, _WALL_TYPE, begin=self._begin,
+                                 separate=self._separate)
+        self._robot_traction: list[_Traction | None] = [None] * n
         self._filter = pymunk.ShapeFilter(group=1)  # chassis never collide with each other
         self._touched = np.zeros(n, dtype=bool)
         self._state = np.zeros((7, n))  # w_L, w_R, phi_L, phi_R, vel_x, vel_y, w
@@ -542,12 +570,17 @@ class PymunkBatchDrive:
         self._set.set_float_buf(self._velocities)
         self._get = pymunk.batch.Buffer()
 
-    def _mark(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
-        for body in arbiter.bodies:
-            i = self._index.get(body.id)
-            if i is not None:
-                self._hit[i] = True
-                self._any_hit = True
+    def _robot_of(self, arbiter: pymunk.Arbiter) -> int:
+        a, b = arbiter.shapes  # (bodies are gone when a removed shape separates)
+        return self._shape_index[a] if a in self._shape_index else self._shape_index[b]
+
+    def _begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+        i = self._robot_of(arbiter)
+        self._contacts[i] += 1
+        self._began[i] = True
+
+    def _separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+        self._contacts[self._robot_of(arbiter)] -= 1
 
     def reset(self, i: int, robot: RobotSpec, pose: np.ndarray,
               wheel_angles: np.ndarray) -> None:
@@ -557,17 +590,21 @@ class PymunkBatchDrive:
         body = self._bodies[i]
         if self._shapes[i] is not None:
             self._space.remove(self._shapes[i])
+            del self._shape_index[self._shapes[i]]
         body.mass, body.moment = robot.mass, robot.inertia
         body.angle = theta
         body.position = (x + d * math.cos(theta), y + d * math.sin(theta))
         body.velocity, body.angular_velocity = (0.0, 0.0), 0.0
         shape = _chassis(body, robot)
         shape.filter = self._filter
+        self._shape_index[shape] = i
         self._space.add(shape)
         self._shapes[i] = shape
         self._state[:, i] = (0.0, 0.0, float(wheel_angles[0]), float(wheel_angles[1]),
                              0.0, 0.0, 0.0)
-        self._constants[:, i] = traction_constants(robot, self.dt)
+        constants = traction_constants(robot, self.dt)
+        self._constants[:, i] = constants
+        self._robot_traction[i] = _Traction(self.dt, constants)
         self._touched[i] = False
 
     def _read(self) -> np.ndarray:
@@ -585,11 +622,12 @@ class PymunkBatchDrive:
         pymunk.batch.set_space_bodies(self._space, self._SET, self._set)
         self._space.step(self.dt)
         self._last = self._read()
-        hit = self._hit
-        if self._any_hit:
-            hit = hit.copy()
-            self._hit[:] = False
-            self._any_hit = False
+        # In contact during this tick: pymunk's pre-solve would have run (a contact that began
+        # and ended within the tick counts too).
+        hit = self._contacts > 0
+        if self._began.any():
+            hit |= self._began
+            self._began[:] = False
         return self._last[0], self._last[1], self._last[2], hit
 
     def _body_velocity(self):
@@ -617,7 +655,7 @@ class PymunkBatchDrive:
             self._space.add(self._shapes[i])
         com = self._read()
         state = (*self._state, com[0], com[1], com[2])
-        k = _Traction(self.dt, self._constants)
+        k = _Traction(self.dt, self._constants, self._robot_traction)
         state, collided, _, _ = traction_ticks(
             _ArrayOps, k, state, commands[:, 0], commands[:, 1], n_ticks, self._advance,
             self._body_velocity)
