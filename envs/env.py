@@ -102,14 +102,14 @@ class DiffDriveCalibEnv(gym.Env):
       (final error - nominal's error). The observation never contains the truth.
 
     ## Episode end
-    Truncated after ``budget`` segments (the registered ids also set ``max_episode_steps``;
-    pass ``max_episode_steps`` to ``gymnasium.make`` when you change the budget). Terminated
-    when ``target_sigma_min`` (if set) is reached.
+    Truncated after ``budget`` segments (the env alone owns the budget: the ids register no
+    ``max_episode_steps``). Terminated when ``target_sigma_min`` (if set) is reached.
 
     ## Configuration
     ``DiffDriveCalibEnv.default_config()`` documents every key; override with
     ``config={...}`` or keyword arguments, e.g.
-    ``gymnasium.make("excite/DiffDriveCalib-v0", budget=50, max_episode_steps=50)``.
+    ``gymnasium.make("excite/DiffDriveCalib-v0", budget=50)``. ``gymnasium.make_vec(id,
+    num_envs=N)`` steps N robots in one process (:class:`envs.vector_env.DiffDriveCalibVectorEnv`).
     ``estimator_factory(nominal, sigma)`` plugs in another estimator (default:
     :class:`excite.OnlineEstimator` at the nominal robot).
 
