@@ -1,32 +1,45 @@
-"""Environment benchmarks (issue 3 acceptance 4).
+"""Environment benchmarks (issue 3 acceptance 4, issue 12 acceptance 1).
 
-- throughput of one env on one core (1-s segments, random actions): segments per second
-  (= simulated seconds per wall-clock second);
-- the env's overhead over its own bare physics loop (Simulation.run_segment with the same
-  commands and the same resets): (t_env - t_sim) / t_sim. Env and bare loop run in alternating
-  blocks, and the median over the blocks is reported with its range: a shared 2-core VM moves
-  single timings by +-10%;
-- memory over 100k steps: Python heap traced by tracemalloc at every 20k steps, as found
-  (it includes reference cycles awaiting the garbage collector: every pymunk Space is one, and
-  the simulation builds a fresh space per episode) and after gc.collect() (live memory: flat
-  means no leak); and the process's peak resident set size.
+- throughput of the single env (1-s segments, random actions within 60% of the motor limit):
+  segments per second (= simulated seconds per wall-clock second), and its overhead over its
+  own bare physics loop (Simulation.run_segment with the same commands and resets):
+  (t_env - t_sim) / t_sim;
+- the native vector env (``gymnasium.make_vec(id, num_envs=N)``) at N = 1, 8, 64 beside the
+  single env, in alternating blocks of one run (a shared 2-core VM moves single timings by
+  +-10% or more): median segments/s over the blocks and the ratio to the single env's median;
+- with ``--reference DIR`` (another checkout, e.g. main's code extracted with git archive):
+  that tree's single env and this one's, each block in a fresh subprocess, alternating;
+- memory over 100k steps of the single env, and over ``--vector-memory-segments`` (1M
+  by default) segments of the vector env at N = 64: Python heap traced by tracemalloc at
+  checkpoints, as found (including reference cycles awaiting the garbage collector: every
+  pymunk Space is one) and after gc.collect() (live memory: flat means no leak); and the
+  process's peak resident set size.
+
+Usage: python benchmarks/bench_env.py [--env ID] [--blocks 7] [--reference DIR]
+       [--vector-memory-segments 1000000] [--skip-memory]
 """
 
 from __future__ import annotations
 
+import argparse
 import gc
+import os
 import statistics
+import subprocess
+import sys
 import time
 import tracemalloc
 
 import gymnasium as gym
 import numpy as np
 from bench_simulation import peak_rss_mib
+from tqdm import tqdm
 
 import excite  # noqa: F401
 from excite.registration import DEFAULT_ENV_ID
 
 ENV_ID = DEFAULT_ENV_ID
+VECTOR_SIZES = (1, 8, 64)
 
 
 def _actions(n: int, seed: int = 0) -> np.ndarray:
@@ -54,28 +67,89 @@ def _time_bare_physics(env, actions: np.ndarray) -> float:
     return time.perf_counter() - start
 
 
-def throughput(blocks: int = 9, segments_per_block: int = 1500) -> dict:
-    env = gym.make(ENV_ID).unwrapped
+def _time_vector(venv, steps: int, seed: int = 0) -> float:
+    """Seconds for ``steps`` steps of all robots (autoreset at the budget)."""
+    actions = np.random.default_rng(seed).uniform(-0.6, 0.6, (steps, venv.num_envs, 2))
+    venv.reset(seed=seed)
+    start = time.perf_counter()
+    for a in actions:
+        venv.step(a)
+    return time.perf_counter() - start
+
+
+def throughput(env_id: str = ENV_ID, blocks: int = 7, segments_per_block: int = 1500,
+               sizes: tuple[int, ...] = VECTOR_SIZES) -> dict:
+    """Single env, its bare physics and the vector env at each size, in alternating blocks
+    of about ``segments_per_block`` segments each."""
+    env = gym.make(env_id).unwrapped
+    vectors = {n: gym.make_vec(env_id, num_envs=n) for n in sizes}
     actions = _actions(segments_per_block)
     _time_env(env, actions[:300])  # warm up
+    for n, venv in vectors.items():
+        _time_vector(venv, max(300 // n, 3))
     t_env, t_sim = [], []
-    for _ in range(blocks):
+    rates: dict[int, list[float]] = {n: [] for n in sizes}
+    for _ in tqdm(range(blocks), desc="throughput blocks", leave=False):
         t_env.append(_time_env(env, actions))
         t_sim.append(_time_bare_physics(env, actions))
+        for n, venv in vectors.items():
+            steps = max(segments_per_block // n, 10)
+            rates[n].append(steps * n / _time_vector(venv, steps))
     overheads = [(e - s) / s for e, s in zip(t_env, t_sim, strict=True)]
-    return {"segments_per_s": segments_per_block / statistics.median(t_env),
+    single = segments_per_block / statistics.median(t_env)
+    return {"segments_per_s": single,
             "bare_physics_segments_per_s": segments_per_block / statistics.median(t_sim),
             "overhead": statistics.median(overheads),
-            "overhead_range": (min(overheads), max(overheads))}
+            "overhead_range": (min(overheads), max(overheads)),
+            "vector_segments_per_s": {n: statistics.median(r) for n, r in rates.items()},
+            "vector_range": {n: (min(r), max(r)) for n, r in rates.items()},
+            "vector_ratio": {n: statistics.median(r) / single for n, r in rates.items()}}
 
 
-def memory(steps: int = 100_000, checkpoints: int = 5) -> dict:
-    env = gym.make(ENV_ID).unwrapped
+_SINGLE_BLOCK = """
+import time, numpy as np, gymnasium as gym, excite
+env = gym.make({env_id!r}).unwrapped
+actions = np.random.default_rng(0).uniform(-0.6, 0.6, ({segments}, 2))
+def run(acts):
+    env.reset(seed=0)
+    start = time.perf_counter()
+    for k, a in enumerate(acts):
+        env.step(a)
+        if (k + 1) % env.budget == 0:
+            env.reset()
+    return time.perf_counter() - start
+run(actions[:300])
+print({segments} / run(actions))
+"""
+
+
+def reference_comparison(reference: str, env_id: str = ENV_ID, blocks: int = 7,
+                         segments: int = 1500) -> dict:
+    """The single env of ``reference`` (a source tree) and of this tree, each block in a fresh
+    subprocess (PYTHONPATH set to the tree), alternating; medians and the ratio."""
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    code = _SINGLE_BLOCK.format(env_id=env_id, segments=segments)
+    rates: dict[str, list[float]] = {"reference": [], "this": []}
+    for _ in tqdm(range(blocks), desc="reference blocks", leave=False):
+        for name, tree in (("reference", reference), ("this", here)):
+            out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                 env={**os.environ, "PYTHONPATH": tree}, check=True,
+                                 cwd="/")
+            rates[name].append(float(out.stdout.strip().splitlines()[-1]))
+    ref, this = statistics.median(rates["reference"]), statistics.median(rates["this"])
+    return {"reference_segments_per_s": ref, "this_segments_per_s": this,
+            "ratio": this / ref, "reference_range": (min(rates["reference"]),
+                                                     max(rates["reference"])),
+            "this_range": (min(rates["this"]), max(rates["this"]))}
+
+
+def memory(steps: int = 100_000, checkpoints: int = 5, env_id: str = ENV_ID) -> dict:
+    env = gym.make(env_id).unwrapped
     env.reset(seed=1)
     actions = _actions(steps, 1)
     tracemalloc.start()
     found, live = [], []
-    for k, a in enumerate(actions):
+    for k, a in enumerate(tqdm(actions, desc="single env memory", leave=False)):
         env.step(a)
         if (k + 1) % env.budget == 0:
             env.reset()
@@ -87,19 +161,69 @@ def memory(steps: int = 100_000, checkpoints: int = 5) -> dict:
     return {"found_mib": found, "live_mib": live, "peak_rss_mib": peak_rss_mib()}
 
 
-def main() -> dict:
-    tp = throughput()
+def vector_memory(segments: int = 1_000_000, n: int = 64, checkpoints: int = 5,
+                  env_id: str = ENV_ID) -> dict:
+    """Live traced heap (after gc.collect) of the vector env at ``checkpoints`` points over
+    ``segments`` segments (segments / n steps), and the peak RSS."""
+    venv = gym.make_vec(env_id, num_envs=n)
+    venv.reset(seed=2)
+    steps = segments // n
+    rng = np.random.default_rng(2)
+    tracemalloc.start()
+    live = []
+    for k in tqdm(range(steps), desc=f"vector env memory (N={n})", leave=False):
+        venv.step(rng.uniform(-0.6, 0.6, (n, 2)))
+        if (k + 1) % (steps // checkpoints) == 0:
+            gc.collect()
+            live.append(tracemalloc.get_traced_memory()[0] / 2**20)
+    tracemalloc.stop()
+    return {"vector_live_mib": live, "vector_segments": steps * n,
+            "peak_rss_mib": peak_rss_mib()}
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", default=ENV_ID)
+    parser.add_argument("--blocks", type=int, default=7)
+    parser.add_argument("--reference", help="another source tree to time the single env of")
+    parser.add_argument("--vector-memory-segments", type=int, default=1_000_000)
+    parser.add_argument("--skip-memory", action="store_true")
+    args = parser.parse_args(argv)
+    results: dict = {}
+    if args.reference:
+        ref = reference_comparison(args.reference, args.env, args.blocks)
+        print(f"single env, {args.blocks} alternating subprocess blocks of 1500 segments: "
+              f"reference {ref['reference_segments_per_s']:.0f}/s "
+              f"(range {ref['reference_range'][0]:.0f}-{ref['reference_range'][1]:.0f}), "
+              f"this tree {ref['this_segments_per_s']:.0f}/s (range {ref['this_range'][0]:.0f}-"
+              f"{ref['this_range'][1]:.0f}): ratio {ref['ratio']:.2f}", flush=True)
+        results.update(ref)
+    tp = throughput(args.env, args.blocks)
     low, high = tp["overhead_range"]
-    print(f"env: {tp['segments_per_s']:.0f} segments/s (1-s segments = simulated s per wall s); "
-          f"bare physics {tp['bare_physics_segments_per_s']:.0f}/s; env overhead "
-          f"{100 * tp['overhead']:.1f}% (median of 9 alternating blocks; range "
-          f"{100 * low:.1f}-{100 * high:.1f}%)")
-    mem = memory()
-    print("traced Python heap over 100k steps (MiB at each 20k): as found "
+    print(f"{args.env}: single env {tp['segments_per_s']:.0f} segments/s (1-s segments = "
+          f"simulated s per wall s); bare physics {tp['bare_physics_segments_per_s']:.0f}/s; "
+          f"env overhead {100 * tp['overhead']:.1f}% (median of {args.blocks} alternating "
+          f"blocks; range {100 * low:.1f}-{100 * high:.1f}%)")
+    for n, rate in tp["vector_segments_per_s"].items():
+        lo, hi = tp["vector_range"][n]
+        print(f"  vector env N={n}: {rate:.0f} segments/s (range {lo:.0f}-{hi:.0f}), "
+              f"{tp['vector_ratio'][n]:.2f}x the single env", flush=True)
+    results.update(tp)
+    if args.skip_memory:
+        return results
+    mem = memory(env_id=args.env)
+    print("single env, traced Python heap over 100k steps (MiB at each 20k): as found "
           + ", ".join(f"{m:.2f}" for m in mem["found_mib"]) + "; live (after gc.collect) "
           + ", ".join(f"{m:.3f}" for m in mem["live_mib"])
-          + f"; peak RSS {mem['peak_rss_mib']:.0f} MiB")
-    return {**tp, **mem}
+          + f"; peak RSS {mem['peak_rss_mib']:.0f} MiB", flush=True)
+    results.update(mem)
+    if args.vector_memory_segments:
+        vm = vector_memory(args.vector_memory_segments, env_id=args.env)
+        print(f"vector env N=64, live traced heap over {vm['vector_segments']:,} segments "
+              f"(MiB at each fifth): " + ", ".join(f"{m:.3f}" for m in vm["vector_live_mib"])
+              + f"; peak RSS {vm['peak_rss_mib']:.0f} MiB")
+        results.update(vm)
+    return results
 
 
 if __name__ == "__main__":

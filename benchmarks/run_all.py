@@ -24,4 +24,5 @@ if __name__ == "__main__":
     for module in (bench_import, bench_calibration, bench_sensor_pose, bench_simulation,
                    bench_env, bench_slip, bench_estimator, bench_compare):
         print(f"\n=== {module.__name__} ===", flush=True)
-        module.main([]) if module in (bench_calibration, bench_sensor_pose) else module.main()
+        with_args = (bench_calibration, bench_sensor_pose, bench_env)
+        module.main([]) if module in with_args else module.main()

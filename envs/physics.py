@@ -183,15 +183,12 @@ TRACTION_FIELDS = ("m", "inertia", "d", "r_L", "r_R", "inv_b", "two_over_b", "hb
 class _FloatOps:
     """The traction kernel's operations on one robot's Python floats (the single env)."""
 
-    cos, sin, all, any = math.cos, math.sin, bool, bool
+    cos, sin = math.cos, math.sin
+    sinc_cosc = staticmethod(sinc_cosc_scalar)  # called with derivatives=False (positional)
 
     @staticmethod
     def clip(value, limit):
         return min(max(value, -limit), limit)
-
-    @staticmethod
-    def sinc_cosc(u):
-        return sinc_cosc_scalar(u, derivatives=False)
 
     @staticmethod
     def rolls(q_L, q_R, py):
@@ -213,22 +210,11 @@ class _ArrayOps:
     """The same operations elementwise on arrays over N robots (the vector env)."""
 
     cos, sin = np.cos, np.sin
-
-    @staticmethod
-    def all(mask):
-        return bool(mask.all())
-
-    @staticmethod
-    def any(mask):
-        return bool(mask.any())
+    sinc_cosc = staticmethod(sinc_family)
 
     @staticmethod
     def clip(value, limit):
         return np.clip(value, -limit, limit)
-
-    @staticmethod
-    def sinc_cosc(u):
-        return sinc_family(u, derivatives=False)
 
     @staticmethod
     def rolls(q_L, q_R, py):
@@ -281,7 +267,7 @@ def traction_ticks(ops, k, state: tuple, cmd_L, cmd_R, n_ticks: int, advance, ve
     dt, alpha, cap2 = k.dt, k.alpha, k.cap2
     m, inertia, d, r_L, r_R = k.m, k.inertia, k.d, k.r_L, k.r_R
     inv_b, two_over_b = k.inv_b, k.two_over_b
-    cos, sin, sinc_cosc, rolls, all_ = ops.cos, ops.sin, ops.sinc_cosc, ops.rolls, ops.all
+    cos, sin, sinc_cosc, rolls = ops.cos, ops.sin, ops.sinc_cosc, ops.rolls
     c, s = cos(th), sin(th)
     path = [(x - d * c, y - d * s, th)] if record else None
     wheels = [(phi_L, phi_R)] if record else None
@@ -302,17 +288,17 @@ def traction_ticks(ops, k, state: tuple, cmd_L, cmd_R, n_ticks: int, advance, ve
         diff = -(inertia * (tw - w) + d * py) * two_over_b  # P_Lx - P_Rx
         q_L = cap2 - 0.25 * (px + diff) ** 2
         q_R = cap2 - 0.25 * (px - diff) ** 2
-        rolling = rolls(q_L, q_R, py)
-        if all_(rolling):
+        rolling = rolls(q_L, q_R, py)  # a bool, or a bool array (then: do all roll?)
+        if rolling is True or (rolling is not False and rolling.all()):
             vx, vy, w = tx, ty, tw
         else:
             vx, vy, w = ops.slip(rolling, k, vx, vy, w, t_L, t_R, (tx, ty, tw))
         vel_x, vel_y = c * vx - s * vy, s * vx + c * vy
-        sinc, cosc = sinc_cosc(w * dt)
+        sinc, cosc = sinc_cosc(w * dt, False)
         chord_x = sinc * vel_x - cosc * vel_y
         chord_y = cosc * vel_x + sinc * vel_y
         x, y, th, hit = advance(chord_x, chord_y, w)
-        if ops.any(hit):
+        if hit is True or (hit is not False and hit.any()):
             collided = collided | hit
             after_x, after_y, w = velocity()  # pymunk's contact impulses (0 without contact)
             vel_x += after_x - chord_x
@@ -483,17 +469,6 @@ class PymunkDrive:
     def wheel_angles(self) -> np.ndarray:
         return np.array(self._phi)
 
-    def _advance(self, chord_x: float, chord_y: float,
-                 w: float) -> tuple[float, float, float, bool]:
-        body, contact = self._body, self._contact
-        body.velocity = (chord_x, chord_y)
-        body.angular_velocity = w
-        self._space.step(self.dt)
-        hit = contact.hit
-        contact.hit = False
-        x, y = body.position
-        return x, y, body.angle, hit
-
     def _body_velocity(self) -> tuple[float, float, float]:
         body = self._body
         vx, vy = body.velocity
@@ -506,11 +481,22 @@ class PymunkDrive:
             # position-correction velocity), so a run after a wall contact starts in a fresh
             # space: pickling between runs then continues bit-identically.
             self._build_space(tuple(self._body.position), self._body.angle)
-        x, y = self._body.position
-        state = (*self._omega, *self._phi, *self._velocity, self._omega_body,
-                 x, y, self._body.angle)
+        body, contact, step, dt = self._body, self._contact, self._space.step, self.dt
+
+        def advance(chord_x: float, chord_y: float,
+                    w: float) -> tuple[float, float, float, bool]:
+            body.velocity = (chord_x, chord_y)
+            body.angular_velocity = w
+            step(dt)
+            hit = contact.hit
+            contact.hit = False
+            x, y = body.position
+            return x, y, body.angle, hit
+
+        x, y = body.position
+        state = (*self._omega, *self._phi, *self._velocity, self._omega_body, x, y, body.angle)
         state, collided, path, wheels = traction_ticks(
-            _FloatOps, self._traction, state, cmd_L, cmd_R, n_ticks, self._advance,
+            _FloatOps, self._traction, state, cmd_L, cmd_R, n_ticks, advance,
             self._body_velocity, record=True)
         w_L, w_R, phi_L, phi_R, vel_x, vel_y, w = state[:7]
         self._omega = [w_L, w_R]
