@@ -35,7 +35,7 @@ WALL_RADIUS = 0.05  # m, half-thickness of the arena's wall segments
 SLIP_ITERATIONS = 6  # Gauss-Seidel sweeps over the two wheels when a friction cap binds
 #: Slipping robots of a batch solved one by one on Python floats up to this many (each takes a
 #: few microseconds; numpy's per-call overhead makes arrays faster only beyond).
-SCALAR_SLIP_MAX = 24
+SCALAR_SLIP_MAX = 12
 _CHASSIS_TYPE, _WALL_TYPE = 1, 2  # pymunk collision types
 
 
@@ -218,8 +218,9 @@ class _ArrayOps:
 
     @staticmethod
     def rolls(q_L, q_R, py):
-        fits = np.sqrt(np.maximum(q_L, 0.0)) + np.sqrt(np.maximum(q_R, 0.0))
-        return (q_L >= 0.0) & (q_R >= 0.0) & (np.abs(py) <= fits)
+        # sqrt of a negative q is nan (the caller silences the warning) and fails the test,
+        # as the floats' q >= 0 checks do
+        return np.abs(py) <= np.sqrt(q_L) + np.sqrt(q_R)
 
     @staticmethod
     def slip(rolling, k, vx, vy, w, t_L, t_R, rolled):
@@ -641,14 +642,43 @@ class PymunkBatchDrive:
             self._space.add(self._shapes[i])
         com = self._read()
         state = (*self._state, com[0], com[1], com[2])
-        k = _Traction(self.dt, self._constants, self._robot_traction)
-        state, collided, _, _ = traction_ticks(
-            _ArrayOps, k, state, commands[:, 0], commands[:, 1], n_ticks, self._advance,
-            self._body_velocity)
-        self._state = np.array(state[:7])
+        if self.n == 1:  # one robot: the kernel on Python floats, as PymunkDrive runs it
+            state, collided = self._run_one(tuple(float(v[0]) for v in state),
+                                            commands[0].tolist(), n_ticks)
+        else:
+            k = _Traction(self.dt, self._constants, self._robot_traction)
+            with np.errstate(invalid="ignore"):  # sqrt of negative q in _ArrayOps.rolls
+                state, collided, _, _ = traction_ticks(
+                    _ArrayOps, k, state, commands[:, 0], commands[:, 1], n_ticks,
+                    self._advance, self._body_velocity)
+        self._state = np.array(state[:7]).reshape(7, self.n)
         collided = np.broadcast_to(collided, (self.n,)).copy()
         self._touched = collided
-        return self.poses(np.array(state[7:])), collided
+        return self.poses(np.array(state[7:]).reshape(3, self.n)), collided
+
+    def _run_one(self, state: tuple[float, ...], command: list[float],
+                 n_ticks: int) -> tuple[tuple[float, ...], bool]:
+        """:func:`traction_ticks` on floats for a batch of one robot."""
+        body, step, dt, contacts, began = (self._bodies[0], self._space.step, self.dt,
+                                           self._contacts, self._began)
+
+        def advance(chord_x: float, chord_y: float,
+                    w: float) -> tuple[float, float, float, bool]:
+            body.velocity = (chord_x, chord_y)
+            body.angular_velocity = w
+            step(dt)
+            hit = bool(contacts[0] > 0 or began[0])
+            began[0] = False
+            x, y = body.position
+            return x, y, body.angle, hit
+
+        def velocity() -> tuple[float, float, float]:
+            vx, vy = body.velocity
+            return vx, vy, body.angular_velocity
+
+        state, collided, _, _ = traction_ticks(_FloatOps, self._robot_traction[0], state,
+                                               *command, n_ticks, advance, velocity)
+        return state, collided
 
 
 class IdealBatchDrive:

@@ -81,6 +81,11 @@ class RelativePoseSensor:
         """Noisy body-frame increment (dx, dy, dtheta); one fresh noise draw per segment."""
         return _add_noise(true_increment, self._sigma, rng)
 
+    def each(self, values: np.ndarray, rngs: list[np.random.Generator]) -> np.ndarray:
+        """Noisy readings (N, 3) of N robots' increments or poses (N, 3), robot i drawing from
+        ``rngs[i]`` exactly as :meth:`measure` / :meth:`absolute` would."""
+        return values + self._sigma * np.array([rng.standard_normal(3) for rng in rngs])
+
     def absolute(self, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy world pose(s) (..., 3) (x, y, theta), an independent draw per reading; theta
         stays continuous (not wrapped)."""

@@ -142,10 +142,14 @@ class _World:
         self.dt = 1.0 / self.config.physics_hz  # s, one physics tick
 
     def _measure(self, phi_start: np.ndarray, phi_end: np.ndarray, true_increment: np.ndarray,
-                 rng: np.random.Generator) -> np.ndarray:
-        """The calibration row (dphi_L, dphi_R, dx, dy, dtheta) of one segment."""
-        return np.concatenate([self.encoders.increments(phi_start, phi_end),
-                               self.pose_sensor.measure(true_increment, rng)])
+                 rngs: list[np.random.Generator]) -> np.ndarray:
+        """The calibration rows (N, 5) (dphi_L, dphi_R, dx, dy, dtheta) of N segments: wheel
+        angles (N, 2) at the start and end, true increments (N, 3), one generator per robot
+        (three normal draws each, as RelativePoseSensor.measure)."""
+        rows = np.empty((len(rngs), 5))
+        rows[:, :2] = self.encoders.increments(phi_start, phi_end)
+        rows[:, 2:] = self.pose_sensor.each(true_increment, rngs)
+        return rows
 
     def _ticks(self, seconds: float, name: str, minimum: int) -> int:
         ticks = seconds * self.config.physics_hz if math.isfinite(seconds) else -1.0
@@ -218,7 +222,8 @@ class Simulation(_World):
             collision = collision or stop_collision
         phi_end = self.drive.wheel_angles
         true_increment = relative_pose(path[0], path[-1])
-        measurement = self._measure(phi_start, phi_end, true_increment, self._rng)
+        measurement = self._measure(phi_start[None], phi_end[None], true_increment[None],
+                                    [self._rng])[0]
         return SegmentOutcome(
             measurement=_read_only(measurement),
             true_increment=_read_only(true_increment),
@@ -306,8 +311,7 @@ class BatchSimulation(_World):
             collision = collision | stopped
         phi_end = self.drive.wheel_angles
         true_increment = relative_pose(pose_start, pose_end)
-        measurement = np.array([self._measure(phi_start[i], phi_end[i], true_increment[i], rng)
-                                for i, rng in enumerate(self._rngs)])
+        measurement = self._measure(phi_start, phi_end, true_increment, self._rngs)
         return BatchOutcome(measurement, true_increment, collision, pose_start, pose_end)
 
     @property

@@ -183,9 +183,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
                                            single.segment_duration, config["settle_time"])
             collision = outcome.collision & moving
             previous, previous_error = self._sigma_min.copy(), self._error.copy()
-            for i in np.flatnonzero(moving):
-                rows[i] = self._record(i, outcome.measurement[i], outcome.true_increment[i],
-                                       outcome.pose_end[i], actions[i])
+            rows[moving] = self._record(np.flatnonzero(moving), outcome, actions)
             self._update_information(moving)
             terms["information"] = (self._sigma_min - previous) / config["information_scale"]
             terms["collision"] = -float(config["collision_penalty"]) * collision
@@ -227,28 +225,34 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             self._ended = ended
         return obs, reward, terminated, truncated, info
 
-    def _record(self, i: int, measurement: np.ndarray, true_increment: np.ndarray,
-                pose_end: np.ndarray, action: np.ndarray) -> np.ndarray:
-        """Robot i's segment: the sensor's row, the estimator update, the log, the measured
-        pose (DiffDriveCalibEnv.step's order of random draws)."""
-        row = measurement
-        mount = self._mounts[i]
-        if mount is not None:  # the sensor measures its own motion, in its own frame
-            sensed = body_to_sensor(true_increment[None, :], mount)[0]
-            noise = self.single.sigma * self._sensor_rngs[i].standard_normal(3)
-            row = np.concatenate([row[:2], sensed + noise])
-        self.estimators[i].update(*row.tolist())
-        n = self._n[i]
-        if n == self._log.shape[1]:  # stepped past the budget: the log grows
+    def _record(self, robots: np.ndarray, outcome, actions: np.ndarray) -> np.ndarray:
+        """The moving robots' segments: the sensor's rows, the estimator updates, the log, the
+        measured poses (each robot's random draws in DiffDriveCalibEnv.step's order)."""
+        rows = outcome.measurement[robots]
+        rngs = [self._sensor_rngs[i] for i in robots]
+        mounts = [self._mounts[i] for i in robots]
+        for j, (i, mount) in enumerate(zip(robots, mounts, strict=True)):
+            if mount is not None:  # the sensor measures its own motion, in its own frame
+                sensed = body_to_sensor(outcome.true_increment[i][None, :], mount)[0]
+                rows[j, 2:] = sensed + self.single.sigma * rngs[j].standard_normal(3)
+        for j, i in enumerate(robots):
+            self.estimators[i].update(*rows[j].tolist())
+            _, self._theta[i] = read_estimate(self.estimators[i], self.model,
+                                              self.single.nominal_theta)
+        n = self._n[robots]
+        if n.max() == self._log.shape[1]:  # stepped past the budget: the logs grow
             self._log = np.concatenate([self._log, np.zeros_like(self._log)], axis=1)
-        self._log[i, n] = row
-        self._n[i] = n + 1
-        self._last_action[i] = action
-        _, self._theta[i] = read_estimate(self.estimators[i], self.model,
-                                          self.single.nominal_theta)
-        self._measured_pose[i] = measure_pose(self.sim.pose_sensor, pose_end,
-                                              self._sensor_rngs[i], mount, self._theta[i])
-        return row
+        self._log[robots, n] = rows
+        self._n[robots] = n + 1
+        self._last_action[robots] = actions[robots]
+        pose_end = outcome.pose_end[robots]
+        if all(mount is None for mount in mounts):
+            self._measured_pose[robots] = self.sim.pose_sensor.each(pose_end, rngs)
+        else:
+            for j, i in enumerate(robots):
+                self._measured_pose[i] = measure_pose(self.sim.pose_sensor, pose_end[j],
+                                                      rngs[j], mounts[j], self._theta[i])
+        return rows
 
     def _update_information(self, robots: np.ndarray) -> None:
         """F at each robot's estimate over its log, its eigen-decomposition and sigma_min."""

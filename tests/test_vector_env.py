@@ -234,3 +234,20 @@ def test_information_matrices_match_information_matrix(model):
                     if c else np.zeros((model.size,) * 2))
         np.testing.assert_allclose(batch[i], expected, rtol=1e-10,
                                    atol=1e-10 * max(1.0, np.abs(expected).max()))
+
+
+def test_a_batch_of_one_is_the_single_simulation_bit_for_bit_with_wall_contacts():
+    """N = 1 runs the kernel on floats: the same rows as Simulation, collisions included."""
+    config = SimulationConfig()
+    robot = robot_distribution({}).sample(np.random.default_rng(3))
+    batch, single = BatchSimulation(config, 1), Simulation(config)
+    batch.reset(0, robot, np.random.default_rng(8))
+    single.reset(robot, np.random.default_rng(8))
+    collisions = 0
+    for command in np.random.default_rng(4).uniform(-20, 20, (30, 2)):
+        out = batch.run_segment(command[None], 1.0)
+        expected = single.run_segment(*command, 1.0)
+        np.testing.assert_array_equal(out.measurement[0], expected.measurement)
+        assert out.collision[0] == expected.collision
+        collisions += expected.collision
+    assert collisions >= 3
