@@ -243,7 +243,8 @@ class _ArrayOps:
 
     @staticmethod
     def capped(x, y, cap):
-        norm = np.hypot(x, y)
+        # Python's hypot (numpy's differs from it in the last bit now and then)
+        norm = np.array([math.hypot(a, b) for a, b in zip(x.tolist(), y.tolist(), strict=True)])
         over = norm > cap
         norm = np.where(over, norm, cap)
         return np.where(over, x * cap / norm, x), np.where(over, y * cap / norm, y)
@@ -513,13 +514,15 @@ class PymunkBatchDrive:
 
     Every chassis is in the same arena at its own world pose; the chassis share one pymunk
     shape-filter group, so robots never touch each other, only the walls. The motors and
-    traction of all robots are one :func:`traction_ticks` call on (N,) arrays; body
-    velocities go into pymunk and poses come out in bulk (``pymunk.batch``); wall contacts are
-    counted per robot by the collision callbacks (begin / separate: they run only when a
-    contact starts or ends). Robot i driven alone by a :class:`PymunkDrive` follows the same
-    equations; pymunk's contact solver in a shared space and numpy's elementwise hypot (when
-    more than SCALAR_SLIP_MAX robots slip at once) may differ in the last bits, so the two agree
-    statistically rather than bit for bit on the slip env after a wall contact.
+    traction of all robots are one :func:`traction_ticks` call on (N,) arrays (on floats for
+    N = 1); body velocities go into pymunk and poses come out in bulk (``pymunk.batch``); wall
+    contacts are counted per robot by the collision callbacks (begin / separate: they run only
+    when a contact starts or ends). As PymunkDrive builds a fresh space, a robot gets a fresh
+    pymunk body at its reset and after a run that touched a wall (a pymunk body keeps contact
+    state that a fresh one does not).
+
+    Robot i driven alone by a :class:`PymunkDrive` gives the same numbers bit for bit, wall
+    contacts included (tested; pymunk resolves each chassis' wall contacts on their own).
     """
 
     _GET = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
@@ -531,10 +534,10 @@ class PymunkBatchDrive:
         self.dt = 1.0 / physics_hz
         self.n = n
         self._space = _new_space(arena, self.dt)
-        self._bodies = [pymunk.Body(1.0, 1.0) for _ in range(n)]
+        self._bodies: list[pymunk.Body | None] = [None] * n
         self._shapes: list[pymunk.Poly | None] = [None] * n
+        self._robots: list[RobotSpec | None] = [None] * n
         self._shape_index: dict[pymunk.Shape, int] = {}
-        self._space.add(*self._bodies)
         self._contacts = np.zeros(n, dtype=int)  # wall contacts each chassis is in now
         self._began = np.zeros(n, dtype=bool)  # a contact began during this tick
         self._space.on_collision(_CHASSIS_TYPE, _WALL_TYPE, begin=self._begin,
@@ -544,17 +547,8 @@ class PymunkBatchDrive:
         self._touched = np.zeros(n, dtype=bool)
         self._state = np.zeros((7, n))  # w_L, w_R, phi_L, phi_R, vel_x, vel_y, w
         self._constants = np.ones((len(TRACTION_FIELDS), n))
-        order = pymunk.batch.Buffer()
-        pymunk.batch.get_space_bodies(self._space, pymunk.batch.BodyFields.BODY_ID, order)
-        ids = list(memoryview(order.int_buf()).cast("P"))
-        # pymunk lists the dynamic bodies in insertion order, then the walls' static body.
-        if ids[:n] != [body.id for body in self._bodies]:
-            raise RuntimeError("pymunk.batch does not list the bodies in insertion order")
-        self._listed = len(ids)
+        self._slots: np.ndarray | None = None  # robot i's row in pymunk.batch's body list
         self._set = pymunk.batch.Buffer()
-        # vx, vy, w per listed body (the static body's row stays 0)
-        self._velocities = np.zeros((self._listed, 3))
-        self._set.set_float_buf(self._velocities)
         self._get = pymunk.batch.Buffer()
 
     def _robot_of(self, arbiter: pymunk.Arbiter) -> int:
@@ -574,19 +568,8 @@ class PymunkBatchDrive:
         """Place robot ``i`` at rest at world pose (x, y, theta) with wheel angles (rad)."""
         x, y, theta = (float(v) for v in pose)
         d = robot.com_offset
-        body = self._bodies[i]
-        if self._shapes[i] is not None:
-            self._space.remove(self._shapes[i])
-            del self._shape_index[self._shapes[i]]
-        body.mass, body.moment = robot.mass, robot.inertia
-        body.angle = theta
-        body.position = (x + d * math.cos(theta), y + d * math.sin(theta))
-        body.velocity, body.angular_velocity = (0.0, 0.0), 0.0
-        shape = _chassis(body, robot)
-        shape.filter = self._filter
-        self._shape_index[shape] = i
-        self._space.add(shape)
-        self._shapes[i] = shape
+        self._robots[i] = robot
+        self._new_body(i, (x + d * math.cos(theta), y + d * math.sin(theta)), theta)
         self._state[:, i] = (0.0, 0.0, float(wheel_angles[0]), float(wheel_angles[1]),
                              0.0, 0.0, 0.0)
         constants = traction_constants(robot, self.dt)
@@ -594,18 +577,48 @@ class PymunkBatchDrive:
         self._robot_traction[i] = _Traction(self.dt, constants)
         self._touched[i] = False
 
+    def _new_body(self, i: int, com: tuple[float, float], angle: float) -> None:
+        """A fresh body and chassis for robot i at rest, COM at ``com`` (m), yaw ``angle``."""
+        if self._bodies[i] is not None:
+            self._space.remove(self._bodies[i], self._shapes[i])
+            del self._shape_index[self._shapes[i]]
+        robot = self._robots[i]
+        body = pymunk.Body(robot.mass, robot.inertia)
+        body.angle = angle
+        body.position = com
+        shape = _chassis(body, robot)
+        shape.filter = self._filter
+        self._shape_index[shape] = i
+        self._space.add(body, shape)
+        self._bodies[i], self._shapes[i] = body, shape
+        self._slots = None  # pymunk's body order changed
+
+    def _order(self) -> np.ndarray:
+        """Each robot's row in pymunk.batch's body list (the dynamic bodies, then the walls'
+        static body), and the float buffer the velocities are set from."""
+        if self._slots is None:
+            listing = pymunk.batch.Buffer()
+            pymunk.batch.get_space_bodies(self._space, pymunk.batch.BodyFields.BODY_ID, listing)
+            ids = list(memoryview(listing.int_buf()).cast("P"))
+            row = {body_id: k for k, body_id in enumerate(ids)}
+            self._slots = np.array([row[body.id] for body in self._bodies])
+            self._velocities = np.zeros((len(ids), 3))  # vx, vy, w per listed body
+            self._set = pymunk.batch.Buffer()
+            self._set.set_float_buf(self._velocities)
+        return self._slots
+
     def _read(self) -> np.ndarray:
         """(6, N): COM x, y (m), yaw (rad), velocity x, y (m/s), yaw rate (rad/s)."""
         self._get.clear()
         pymunk.batch.get_space_bodies(self._space, self._GET, self._get)
-        bodies = np.frombuffer(self._get.float_buf(), dtype=float).reshape(self._listed, 6)
-        return bodies[:self.n].T.copy()
+        bodies = np.frombuffer(self._get.float_buf(), dtype=float).reshape(-1, 6)
+        return bodies[self._slots].T
 
     def _advance(self, chord_x: np.ndarray, chord_y: np.ndarray, w: np.ndarray):
-        velocities = self._velocities
-        velocities[:self.n, 0] = chord_x
-        velocities[:self.n, 1] = chord_y
-        velocities[:self.n, 2] = w
+        velocities, slots = self._velocities, self._slots
+        velocities[slots, 0] = chord_x
+        velocities[slots, 1] = chord_y
+        velocities[slots, 2] = w
         pymunk.batch.set_space_bodies(self._space, self._SET, self._set)
         self._space.step(self.dt)
         self._last = self._read()
@@ -622,10 +635,19 @@ class PymunkBatchDrive:
 
     def poses(self, com: np.ndarray | None = None) -> np.ndarray:
         """World poses (N, 3) of the axle midpoints (x, y, theta)."""
-        com = self._read() if com is None else com
+        if com is None:
+            self._order()
+            com = self._read()
         d = self._constants[TRACTION_FIELDS.index("d")]
         th = com[2]
         return np.stack([com[0] - d * np.cos(th), com[1] - d * np.sin(th), th], axis=1)
+
+    def pose(self, i: int) -> np.ndarray:
+        """Robot i's world pose (x, y, theta) of the axle midpoint."""
+        x, y = self._bodies[i].position
+        th = self._bodies[i].angle
+        d = self._robots[i].com_offset
+        return np.array([x - d * math.cos(th), y - d * math.sin(th), th])
 
     @property
     def wheel_angles(self) -> np.ndarray:
@@ -635,11 +657,10 @@ class PymunkBatchDrive:
     def run(self, commands: np.ndarray, n_ticks: int) -> tuple[np.ndarray, np.ndarray]:
         """Hold wheel-speed commands (N, 2) (rad/s) for ``n_ticks`` ticks on every robot.
         Returns the end poses (N, 3) and whether each robot touched a wall (N,)."""
-        for i in np.flatnonzero(self._touched):
-            # As PymunkDrive's fresh space after a contact: drop the chassis' cached contacts
-            # (warm-start impulses) by taking its shape out and back in.
-            self._space.remove(self._shapes[i])
-            self._space.add(self._shapes[i])
+        for i in np.flatnonzero(self._touched):  # as PymunkDrive's fresh space after a contact
+            body = self._bodies[i]
+            self._new_body(i, tuple(body.position), body.angle)
+        self._order()
         com = self._read()
         state = (*self._state, com[0], com[1], com[2])
         if self.n == 1:  # one robot: the kernel on Python floats, as PymunkDrive runs it
@@ -705,6 +726,9 @@ class IdealBatchDrive:
 
     def poses(self) -> np.ndarray:
         return self._poses.copy()
+
+    def pose(self, i: int) -> np.ndarray:
+        return self._poses[i].copy()
 
     @property
     def wheel_angles(self) -> np.ndarray:

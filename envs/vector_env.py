@@ -37,11 +37,10 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     microseconds of pure Python) and its own random streams.
 
     Robot i reset with seed s draws exactly as the single env reset with seed s + i: the
-    same hidden robot, start, sensor mounting and noise. On the Ideal id, robot i given the
-    single env's actions produces the single env's segments bit for bit. On the slip ids the
-    traction kernel is the same, but numpy's hypot and pymunk's contact ordering in a shared
-    space differ from the single env in the last bits, so episodes agree statistically
-    (tested on final error and sigma_min).
+    same hidden robot, start, sensor mounting and noise; given the single env's actions it
+    produces the single env's segments bit for bit (the physics is the same kernel; tested).
+    Observations and rewards agree to rounding: F's eigen-decomposition is LAPACK's here and
+    a closed form in the single env.
 
     Autoreset: ``autoreset_mode`` NEXT_STEP (default, gymnasium's documented convention: the
     step after an episode's end resets that robot and returns its first observation with
@@ -160,7 +159,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self._eigenvalues[i] = 0.0
         self._weakest[i] = 0.0
         self._weakest[i, 0] = 1.0
-        self._measured_pose[i] = measure_pose(self.sim.pose_sensor, self.sim.poses[i],
+        self._measured_pose[i] = measure_pose(self.sim.pose_sensor, self.sim.pose(i),
                                               self._sensor_rngs[i], mount, self._theta[i])
         self._error[i] = self._max_relative_error(i)
 
