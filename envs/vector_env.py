@@ -55,7 +55,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
 
     Info (arrays over robots): ``reward_terms`` (a dict of (N,) arrays), ``sigma_min``,
     ``collision``, ``n_segments``, ``measurement`` (N, 5), ``estimate`` (N, P). For evaluation:
-    ``true_theta`` (N, P), ``estimates`` (N, P), ``max_relative_errors`` (N,).
+    ``true_theta`` (N, P), ``true_params``, ``max_relative_errors`` (N,), ``segments_logged``.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -238,9 +238,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             self.estimators[i].update(*rows[j].tolist())
             _, self._theta[i] = read_estimate(self.estimators[i], self.model,
                                               self.single.nominal_theta)
-        n = self._n[robots]
-        if n.max() == self._log.shape[1]:  # stepped past the budget: the logs grow
-            self._log = np.concatenate([self._log, np.zeros_like(self._log)], axis=1)
+        n = self._n[robots]  # < budget: an episode ends at the budget and autoresets
         self._log[robots, n] = rows
         self._n[robots] = n + 1
         self._last_action[robots] = actions[robots]
@@ -285,11 +283,6 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     def true_params(self) -> list[Params]:
         """The hidden wheel parameters of every robot (evaluation only)."""
         return [Params(*row[:3]) for row in self._true_theta]
-
-    @property
-    def estimates(self) -> np.ndarray:
-        """Every robot's current estimate (N, P)."""
-        return self._theta.copy()
 
     @property
     def max_relative_errors(self) -> np.ndarray:
