@@ -6,6 +6,10 @@ Two implementations of one `Drive` interface:
   motor lag and a friction circle per wheel (it slips under hard accelerations).
 - `IdealDrive`: rolls without slip and without lag, so the kinematic model is exact.
 
+and their batches of N robots stepped together (`PymunkBatchDrive`, `IdealBatchDrive`), which
+run the same kernels (`traction_ticks` on arrays instead of floats, `ideal_arcs`) and give
+each robot the single drive's numbers bit for bit.
+
 Frames and units: world frame x right, y up, theta counter-clockwise (rad, continuous);
 body frame x forward, y left, origin at the axle midpoint (the reference point of every
 pose). The left wheel is at +b/2 on body y, the right at -b/2. Meters, radians, seconds.

@@ -255,3 +255,25 @@ def test_a_batch_of_one_is_the_single_simulation_bit_for_bit_with_wall_contacts(
         assert out.collision[0] == expected.collision
         collisions += expected.collision
     assert collisions >= 3
+
+
+def test_user_estimators_partial_resets_and_seed_lists():
+    from excite import OnlineEstimator
+
+    made = []
+
+    def factory(nominal, sigma):
+        made.append(OnlineEstimator(nominal, sigma=sigma, iterations=1))
+        return made[-1]
+
+    venv = DiffDriveCalibVectorEnv(num_envs=3, estimator_factory=factory, budget=5, ideal=True)
+    obs, _ = venv.reset(seed=[4, None, 9])
+    assert len(made) == 3 and venv.estimators == made
+    single = gym.make(IDEAL, budget=5)
+    np.testing.assert_allclose(obs[2], single.reset(seed=9)[0], atol=1e-6)
+    venv.step(np.full((3, 2), 0.4))
+    assert all(e.n_segments == 1 for e in made)
+    obs, info = venv.reset(options={"reset_mask": np.array([False, True, False])})
+    assert info["n_segments"].tolist() == [1, 0, 1] and len(made) == 4
+    with pytest.raises(ValueError, match="seed"):
+        venv.reset(seed=[1, 2])
