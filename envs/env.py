@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -343,11 +344,10 @@ class DiffDriveCalibEnv(gym.Env):
 
     def _observation(self) -> np.ndarray:
         eigenvalues, weakest = self._eigen
-        return observations(
-            self.model, self._theta[None], self.nominal_theta, np.array([eigenvalues]),
-            np.array([weakest]), self._measured_pose[None], np.array([self._last_action]),
-            np.array([self._n / self.budget]), self.config["arena_size"],
-            self.observation_space)[0]
+        return observation(self.model, self._theta.tolist(), self.nominal_theta.tolist(),
+                           eigenvalues, weakest, self._measured_pose.tolist(),
+                           self._last_action, self._n / self.budget,
+                           self.config["arena_size"], self.observation_space)
 
     # -- evaluation only -------------------------------------------------------------------------
     @property
@@ -450,29 +450,36 @@ def measure_pose(sensor: RelativePoseSensor, body_pose: np.ndarray, rng: np.rand
     return se2.compose(reading, se2.inverse(theta[3:6]))
 
 
-def observations(model: SegmentModel, theta: np.ndarray, nominal_theta: np.ndarray,
-                 eigenvalues: np.ndarray, weakest: np.ndarray, pose: np.ndarray,
-                 last_action: np.ndarray, used: np.ndarray, arena_size: float,
-                 space: spaces.Box) -> np.ndarray:
-    """The observations (N, 3 P + 7) of N robots (the table in DiffDriveCalibEnv's doc).
+def observation(model: SegmentModel, theta: Sequence[float], nominal_theta: Sequence[float],
+                eigenvalues: Sequence[float], weakest: Sequence[float], pose: Sequence[float],
+                last_action: Sequence[float], used: float, arena_size: float,
+                space: spaces.Box) -> np.ndarray:
+    """One robot's observation (3 P + 7,) float32 (the table in DiffDriveCalibEnv's doc), from
+    Python floats (a few microseconds: the single env's step; the vector env calls it per
+    robot).
 
-    theta (N, P) the estimates, nominal_theta (P,); eigenvalues (N, P) ascending and weakest
-    (N, P) the eigenvector of the smallest (given a unique sign here: its largest entry is
-    positive); pose (N, 3) the measured world pose (m, m, rad); last_action (N, 2); used (N,)
-    the fraction of the budget used; arena_size (m). Clipped to ``space``.
+    theta: the estimate (P values), nominal_theta: the nominal ones; eigenvalues (ascending)
+    and weakest, the eigenvector of the smallest (given a unique sign here: its largest
+    entry is positive); pose: the measured world pose (x, y in m, theta in rad); last_action
+    (2 values); used: the fraction of the budget used; arena_size (m). Clipped to ``space``.
     """
-    b = nominal_theta[2]
-    relative = theta[:, :3] / nominal_theta[:3] - 1.0
+    sign = 1.0 if max(weakest, key=abs) >= 0 else -1.0  # a unique sign for the direction
+    relative = [theta[0] / nominal_theta[0] - 1.0, theta[1] / nominal_theta[1] - 1.0,
+                theta[2] / nominal_theta[2] - 1.0]
     if model is not AXLE:
-        offset = theta[:, 3:] - nominal_theta[3:]
-        relative = np.concatenate([relative, offset[:, :2] / b, offset[:, 2:]], axis=1)
-    rows = np.arange(len(weakest))
-    sign = np.where(weakest[rows, np.argmax(np.abs(weakest), axis=1)] >= 0, 1.0, -1.0)
+        b = nominal_theta[2]
+        relative += [(theta[3] - nominal_theta[3]) / b, (theta[4] - nominal_theta[4]) / b,
+                     theta[5] - nominal_theta[5]]
+    x, y, heading = pose
     to_unit = 2.0 / arena_size
-    obs = np.concatenate([
-        relative, 0.1 * np.log1p(np.maximum(eigenvalues, 0.0)), sign[:, None] * weakest,
-        pose[:, :2] * to_unit, np.cos(pose[:, 2:]), np.sin(pose[:, 2:]), last_action,
-        used[:, None]], axis=1).astype(np.float32)
+    obs = np.array([
+        *relative,
+        *[0.1 * math.log1p(max(lam, 0.0)) for lam in eigenvalues],
+        *[sign * v for v in weakest],
+        x * to_unit, y * to_unit, math.cos(heading), math.sin(heading),
+        *last_action,
+        used,
+    ], dtype=np.float32)
     return np.minimum(np.maximum(obs, space.low, out=obs), space.high, out=obs)
 
 

@@ -19,14 +19,12 @@ def relative_pose(pose_start: np.ndarray, pose_end: np.ndarray) -> np.ndarray:
     dx, dy (m) are the displacement expressed in the body frame at `pose_start` (x forward,
     y left); dtheta (rad) is the continuous heading change theta_end - theta_start.
     """
-    if np.ndim(pose_start) == 1:  # one pose: the same arithmetic as a batch of one
-        return relative_pose(np.asarray(pose_start)[None], np.asarray(pose_end)[None])[0]
-    ex = pose_end[:, 0] - pose_start[:, 0]
-    ey = pose_end[:, 1] - pose_start[:, 1]
-    c = np.cos(pose_start[:, 2])
-    s = np.sin(pose_start[:, 2])
-    return np.stack([c * ex + s * ey, -s * ex + c * ey, pose_end[:, 2] - pose_start[:, 2]],
-                    axis=1)
+    ex = pose_end[..., 0] - pose_start[..., 0]
+    ey = pose_end[..., 1] - pose_start[..., 1]
+    th = pose_start[..., 2]
+    # one pose: math's cos and sin (faster on a scalar; the same bits as numpy's here)
+    c, s = (math.cos(th), math.sin(th)) if np.ndim(th) == 0 else (np.cos(th), np.sin(th))
+    return np.array([c * ex + s * ey, -s * ex + c * ey, pose_end[..., 2] - th]).T
 
 
 class WheelEncoders:

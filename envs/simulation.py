@@ -141,16 +141,6 @@ class _World:
         self.pose_sensor = RelativePoseSensor(self.config.sigma_xy, self.config.sigma_theta)
         self.dt = 1.0 / self.config.physics_hz  # s, one physics tick
 
-    def _measure(self, phi_start: np.ndarray, phi_end: np.ndarray, true_increment: np.ndarray,
-                 rngs: list[np.random.Generator]) -> np.ndarray:
-        """The calibration rows (N, 5) (dphi_L, dphi_R, dx, dy, dtheta) of N segments: wheel
-        angles (N, 2) at the start and end, true increments (N, 3), one generator per robot
-        (three normal draws each, as RelativePoseSensor.measure)."""
-        rows = np.empty((len(rngs), 5))
-        rows[:, :2] = self.encoders.increments(phi_start, phi_end)
-        rows[:, 2:] = self.pose_sensor.each(true_increment, rngs)
-        return rows
-
     def _ticks(self, seconds: float, name: str, minimum: int) -> int:
         ticks = seconds * self.config.physics_hz if math.isfinite(seconds) else -1.0
         n = round(ticks)
@@ -222,8 +212,8 @@ class Simulation(_World):
             collision = collision or stop_collision
         phi_end = self.drive.wheel_angles
         true_increment = relative_pose(path[0], path[-1])
-        measurement = self._measure(phi_start[None], phi_end[None], true_increment[None],
-                                    [self._rng])[0]
+        measurement = np.concatenate([self.encoders.increments(phi_start, phi_end),
+                                      self.pose_sensor.measure(true_increment, self._rng)])
         return SegmentOutcome(
             measurement=_read_only(measurement),
             true_increment=_read_only(true_increment),
@@ -313,6 +303,16 @@ class BatchSimulation(_World):
         true_increment = relative_pose(pose_start, pose_end)
         measurement = self._measure(phi_start, phi_end, true_increment, self._rngs)
         return BatchOutcome(measurement, true_increment, collision, pose_start, pose_end)
+
+    def _measure(self, phi_start: np.ndarray, phi_end: np.ndarray, true_increment: np.ndarray,
+                 rngs: list[np.random.Generator]) -> np.ndarray:
+        """The calibration rows (N, 5) (dphi_L, dphi_R, dx, dy, dtheta) of N segments, as
+        Simulation.run_segment measures one: wheel angles (N, 2) at the start and end, true
+        increments (N, 3), one generator per robot."""
+        rows = np.empty((len(rngs), 5))
+        rows[:, :2] = self.encoders.increments(phi_start, phi_end)
+        rows[:, 2:] = self.pose_sensor.each(true_increment, rngs)
+        return rows
 
     @property
     def poses(self) -> np.ndarray:

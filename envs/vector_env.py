@@ -13,7 +13,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from envs.env import DiffDriveCalibEnv, measure_pose, observations, read_estimate
+from envs.env import DiffDriveCalibEnv, measure_pose, observation, read_estimate
 from envs.robot import RobotSpec
 from envs.simulation import BatchSimulation
 from excite.contracts import EstimatorFactory
@@ -264,10 +264,15 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self._sigma_min[robots] = np.sqrt(np.maximum(eigenvalues[robots, 0], 0.0))
 
     def _observations(self) -> np.ndarray:
-        return observations(self.model, self._theta, self.single.nominal_theta,
-                            self._eigenvalues, self._weakest, self._measured_pose,
-                            self._last_action, self._n / self.budget,
-                            self.config["arena_size"], self.single_observation_space)
+        """Every robot's observation (N, 3 P + 7), each built as the single env builds it."""
+        nominal, used = self.single.nominal_theta.tolist(), (self._n / self.budget).tolist()
+        columns = zip(self._theta.tolist(), self._eigenvalues.tolist(), self._weakest.tolist(),
+                      self._measured_pose.tolist(), self._last_action.tolist(), used,
+                      strict=True)
+        return np.array([observation(self.model, theta, nominal, eigenvalues, weakest, pose,
+                                     action, fraction, self.config["arena_size"],
+                                     self.single_observation_space)
+                         for theta, eigenvalues, weakest, pose, action, fraction in columns])
 
     # -- evaluation only ---------------------------------------------------------------------
     def _max_relative_error(self, i: int) -> float:
