@@ -9,14 +9,15 @@
   +-10% or more): median segments/s over the blocks and the ratio to the single env's median;
 - with ``--reference DIR`` (another checkout, e.g. main's code extracted with git archive):
   that tree's single env and this one's, each block in a fresh subprocess, alternating;
-- memory over 100k steps of the single env, and over ``--vector-memory-segments`` (1M
-  by default) segments of the vector env at N = 64: Python heap traced by tracemalloc at
-  checkpoints, as found (including reference cycles awaiting the garbage collector: every
-  pymunk Space is one) and after gc.collect() (live memory: flat means no leak); and the
-  process's peak resident set size.
+- memory over ``--memory-steps`` (100k) steps of the single env: Python heap traced by
+  tracemalloc at checkpoints, as found (including reference cycles awaiting the garbage
+  collector: every pymunk Space is one) and after gc.collect() (live memory: flat means no
+  leak), and the process's peak resident set size; over ``--vector-memory-segments`` (1M)
+  segments of the vector env at N = 64: the resident set size and the objects tracked by the
+  garbage collector at checkpoints (flat means no leak).
 
 Usage: python benchmarks/bench_env.py [--env ID] [--blocks 7] [--reference DIR]
-       [--vector-memory-segments 1000000] [--skip-memory]
+       [--memory-steps 100000] [--vector-memory-segments 1000000] [--skip-memory]
 """
 
 from __future__ import annotations
@@ -161,24 +162,29 @@ def memory(steps: int = 100_000, checkpoints: int = 5, env_id: str = ENV_ID) -> 
     return {"found_mib": found, "live_mib": live, "peak_rss_mib": peak_rss_mib()}
 
 
+def _rss_mib() -> float:
+    """The process's current resident set size (MiB), from /proc (Linux)."""
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
 def vector_memory(segments: int = 1_000_000, n: int = 64, checkpoints: int = 5,
                   env_id: str = ENV_ID) -> dict:
-    """Live traced heap (after gc.collect) of the vector env at ``checkpoints`` points over
-    ``segments`` segments (segments / n steps), and the peak RSS."""
+    """Resident set size (after gc.collect) of the vector env at ``checkpoints`` points over
+    ``segments`` segments (segments / n steps; tracemalloc would slow this run several fold),
+    with the number of objects the garbage collector tracks."""
     venv = gym.make_vec(env_id, num_envs=n)
     venv.reset(seed=2)
     steps = segments // n
     rng = np.random.default_rng(2)
-    tracemalloc.start()
-    live = []
+    rss, objects = [], []
     for k in tqdm(range(steps), desc=f"vector env memory (N={n})", leave=False):
         venv.step(rng.uniform(-0.6, 0.6, (n, 2)))
         if (k + 1) % (steps // checkpoints) == 0:
             gc.collect()
-            live.append(tracemalloc.get_traced_memory()[0] / 2**20)
-    tracemalloc.stop()
-    return {"vector_live_mib": live, "vector_segments": steps * n,
-            "peak_rss_mib": peak_rss_mib()}
+            rss.append(_rss_mib())
+            objects.append(len(gc.get_objects()))
+    return {"vector_rss_mib": rss, "vector_gc_objects": objects, "vector_segments": steps * n}
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -186,6 +192,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--env", default=ENV_ID)
     parser.add_argument("--blocks", type=int, default=7)
     parser.add_argument("--reference", help="another source tree to time the single env of")
+    parser.add_argument("--memory-steps", type=int, default=100_000,
+                        help="single env steps traced by tracemalloc")
     parser.add_argument("--vector-memory-segments", type=int, default=1_000_000)
     parser.add_argument("--skip-memory", action="store_true")
     args = parser.parse_args(argv)
@@ -211,17 +219,19 @@ def main(argv: list[str] | None = None) -> dict:
     results.update(tp)
     if args.skip_memory:
         return results
-    mem = memory(env_id=args.env)
-    print("single env, traced Python heap over 100k steps (MiB at each 20k): as found "
+    mem = memory(args.memory_steps, env_id=args.env)
+    print(f"single env, traced Python heap over {args.memory_steps:,} steps (MiB at each "
+          "fifth): as found "
           + ", ".join(f"{m:.2f}" for m in mem["found_mib"]) + "; live (after gc.collect) "
           + ", ".join(f"{m:.3f}" for m in mem["live_mib"])
           + f"; peak RSS {mem['peak_rss_mib']:.0f} MiB", flush=True)
     results.update(mem)
     if args.vector_memory_segments:
         vm = vector_memory(args.vector_memory_segments, env_id=args.env)
-        print(f"vector env N=64, live traced heap over {vm['vector_segments']:,} segments "
-              f"(MiB at each fifth): " + ", ".join(f"{m:.3f}" for m in vm["vector_live_mib"])
-              + f"; peak RSS {vm['peak_rss_mib']:.0f} MiB")
+        print(f"vector env N=64 over {vm['vector_segments']:,} segments, at each fifth: RSS "
+              "(MiB, after gc.collect) " + ", ".join(f"{m:.1f}" for m in vm["vector_rss_mib"])
+              + "; objects tracked by gc "
+              + ", ".join(str(k) for k in vm["vector_gc_objects"]))
         results.update(vm)
     return results
 
