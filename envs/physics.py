@@ -24,7 +24,8 @@ overlap, small against any chassis).
 from __future__ import annotations
 
 import math
-from typing import Protocol
+from collections.abc import Callable
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 import pymunk
@@ -195,10 +196,6 @@ class _FloatOps:
         return min(max(value, -limit), limit)
 
     @staticmethod
-    def rolls(q_L, q_R, py):
-        return q_L >= 0.0 and q_R >= 0.0 and abs(py) <= math.sqrt(q_L) + math.sqrt(q_R)
-
-    @staticmethod
     def slip(rolling, k, vx, vy, w, t_L, t_R, rolled):
         return _slip(_FloatOps, k, vx, vy, w, t_L, t_R)
 
@@ -254,26 +251,52 @@ class _ArrayOps:
         return np.where(over, x * cap / norm, x), np.where(over, y * cap / norm, y)
 
 
-def traction_ticks(ops, k, state: tuple, cmd_L, cmd_R, n_ticks: int, advance, velocity,
-                   record: bool = False):
+class OneBody(NamedTuple):
+    """One robot's pymunk I/O for :func:`traction_ticks` on floats: its body, the space's step
+    and a flag with ``hit`` set (and cleared by the kernel) when the chassis touches a wall."""
+
+    body: pymunk.Body
+    step: Callable[[float], None]
+    contact: Any
+
+
+class BodyBatch(NamedTuple):
+    """N robots' pymunk I/O for :func:`traction_ticks` on arrays: advance(chord_x, chord_y, w)
+    sets the bodies' velocities, steps pymunk one tick and returns the COM poses (x, y, th) and
+    which bodies touched a wall; velocity() reads the velocities after that step."""
+
+    advance: Callable
+    velocity: Callable
+
+
+def traction_ticks(ops, k, state: tuple, cmd_L, cmd_R, n_ticks: int,
+                   world: OneBody | BodyBatch, record: bool = False):
     """The motors, the traction and the tick loop of :class:`PymunkDrive`, written once for one
-    robot on Python floats (``ops=_FloatOps``) or N robots on arrays (``ops=_ArrayOps``).
+    robot on Python floats (``ops=_FloatOps``, ``world`` a :class:`OneBody`) or N robots on
+    arrays (``ops=_ArrayOps``, ``world`` a :class:`BodyBatch`).
 
     k: the traction constants (:data:`TRACTION_FIELDS` attributes, floats or (N,) arrays).
     state: (w_L, w_R, phi_L, phi_R, vel_x, vel_y, w, x, y, th): motor speeds (rad/s), wheel
     angles (rad), world inertial COM velocity (m/s), yaw rate (rad/s), COM position (m) and yaw
-    (rad). advance(chord_x, chord_y, w) sets the bodies' velocities, steps pymunk one tick and
-    returns the COM poses (x, y, th) and which bodies touched a wall; velocity() reads the
-    bodies' velocities after that step (called only after a contact). Returns the new state,
-    whether each robot touched a wall, and (with ``record``) the axle poses and wheel angles
-    at every tick, the current ones first (lists of tuples).
+    (rad). Returns the new state, whether each robot touched a wall, and (with ``record``) the
+    axle poses and wheel angles at every tick, the current ones first (lists of tuples).
+
+    Two small pieces are written per backend, in place (the single robot's hot path, where a
+    function call per tick costs percents): the rolling test (``_ArrayOps.rolls`` on arrays)
+    and the pymunk I/O (a :class:`BodyBatch` on arrays).
     """
     w_L, w_R, phi_L, phi_R, vel_x, vel_y, w, x, y, th = state
     cmd_L, cmd_R = ops.clip(cmd_L, k.limit), ops.clip(cmd_R, k.limit)
     dt, alpha, cap2 = k.dt, k.alpha, k.cap2
     m, inertia, d, r_L, r_R = k.m, k.inertia, k.d, k.r_L, k.r_R
     inv_b, two_over_b = k.inv_b, k.two_over_b
-    cos, sin, sinc_cosc, rolls = ops.cos, ops.sin, ops.sinc_cosc, ops.rolls
+    cos, sin, sinc_cosc = ops.cos, ops.sin, ops.sinc_cosc
+    scalar, sqrt = ops is _FloatOps, math.sqrt
+    if scalar:
+        body, step, contact = world
+    else:
+        advance, velocity = world
+        rolls = ops.rolls
     c, s = cos(th), sin(th)
     path = [(x - d * c, y - d * s, th)] if record else None
     wheels = [(phi_L, phi_R)] if record else None
@@ -294,7 +317,10 @@ def traction_ticks(ops, k, state: tuple, cmd_L, cmd_R, n_ticks: int, advance, ve
         diff = -(inertia * (tw - w) + d * py) * two_over_b  # P_Lx - P_Rx
         q_L = cap2 - 0.25 * (px + diff) ** 2
         q_R = cap2 - 0.25 * (px - diff) ** 2
-        rolling = rolls(q_L, q_R, py)  # a bool, or a bool array (then: do all roll?)
+        if scalar:  # _ArrayOps.rolls on floats
+            rolling = q_L >= 0.0 and q_R >= 0.0 and abs(py) <= sqrt(q_L) + sqrt(q_R)
+        else:
+            rolling = rolls(q_L, q_R, py)
         if rolling is True or (rolling is not False and rolling.all()):
             vx, vy, w = tx, ty, tw
         else:
@@ -303,12 +329,26 @@ def traction_ticks(ops, k, state: tuple, cmd_L, cmd_R, n_ticks: int, advance, ve
         sinc, cosc = sinc_cosc(w * dt, False)
         chord_x = sinc * vel_x - cosc * vel_y
         chord_y = cosc * vel_x + sinc * vel_y
-        x, y, th, hit = advance(chord_x, chord_y, w)
-        if hit is True or (hit is not False and hit.any()):
-            collided = collided | hit
-            after_x, after_y, w = velocity()  # pymunk's contact impulses (0 without contact)
-            vel_x += after_x - chord_x
-            vel_y += after_y - chord_y
+        if scalar:
+            body.velocity = (chord_x, chord_y)
+            body.angular_velocity = w
+            step(dt)
+            if contact.hit:  # add pymunk's contact impulses
+                contact.hit = False
+                collided = True
+                after_x, after_y = body.velocity
+                vel_x += after_x - chord_x
+                vel_y += after_y - chord_y
+                w = body.angular_velocity
+            x, y = body.position
+            th = body.angle
+        else:
+            x, y, th, hit = advance(chord_x, chord_y, w)
+            if hit.any():  # add pymunk's contact impulses (0 on the bodies without contact)
+                collided = collided | hit
+                after_x, after_y, w = velocity()
+                vel_x += after_x - chord_x
+                vel_y += after_y - chord_y
         c, s = cos(th), sin(th)
         if record:
             path.append((x - d * c, y - d * s, th))
@@ -475,11 +515,6 @@ class PymunkDrive:
     def wheel_angles(self) -> np.ndarray:
         return np.array(self._phi)
 
-    def _body_velocity(self) -> tuple[float, float, float]:
-        body = self._body
-        vx, vy = body.velocity
-        return vx, vy, body.angular_velocity
-
     def run(self, cmd_L: float, cmd_R: float,
             n_ticks: int) -> tuple[np.ndarray, np.ndarray, bool]:
         if self._touched:
@@ -487,23 +522,12 @@ class PymunkDrive:
             # position-correction velocity), so a run after a wall contact starts in a fresh
             # space: pickling between runs then continues bit-identically.
             self._build_space(tuple(self._body.position), self._body.angle)
-        body, contact, step, dt = self._body, self._contact, self._space.step, self.dt
-
-        def advance(chord_x: float, chord_y: float,
-                    w: float) -> tuple[float, float, float, bool]:
-            body.velocity = (chord_x, chord_y)
-            body.angular_velocity = w
-            step(dt)
-            hit = contact.hit
-            contact.hit = False
-            x, y = body.position
-            return x, y, body.angle, hit
-
+        body = self._body
         x, y = body.position
         state = (*self._omega, *self._phi, *self._velocity, self._omega_body, x, y, body.angle)
         state, collided, path, wheels = traction_ticks(
-            _FloatOps, self._traction, state, cmd_L, cmd_R, n_ticks, advance,
-            self._body_velocity, record=True)
+            _FloatOps, self._traction, state, cmd_L, cmd_R, n_ticks,
+            OneBody(body, self._space.step, self._contact), record=True)
         w_L, w_R, phi_L, phi_R, vel_x, vel_y, w = state[:7]
         self._omega = [w_L, w_R]
         self._phi = [phi_L, phi_R]
@@ -675,7 +699,7 @@ class PymunkBatchDrive:
             with np.errstate(invalid="ignore"):  # sqrt of negative q in _ArrayOps.rolls
                 state, collided, _, _ = traction_ticks(
                     _ArrayOps, k, state, commands[:, 0], commands[:, 1], n_ticks,
-                    self._advance, self._body_velocity)
+                    BodyBatch(self._advance, self._body_velocity))
         self._state = np.array(state[:7]).reshape(7, self.n)
         collided = np.broadcast_to(collided, (self.n,)).copy()
         self._touched = collided
@@ -684,26 +708,26 @@ class PymunkBatchDrive:
     def _run_one(self, state: tuple[float, ...], command: list[float],
                  n_ticks: int) -> tuple[tuple[float, ...], bool]:
         """:func:`traction_ticks` on floats for a batch of one robot."""
-        body, step, dt, contacts, began = (self._bodies[0], self._space.step, self.dt,
-                                           self._contacts, self._began)
-
-        def advance(chord_x: float, chord_y: float,
-                    w: float) -> tuple[float, float, float, bool]:
-            body.velocity = (chord_x, chord_y)
-            body.angular_velocity = w
-            step(dt)
-            hit = bool(contacts[0] > 0 or began[0])
-            began[0] = False
-            x, y = body.position
-            return x, y, body.angle, hit
-
-        def velocity() -> tuple[float, float, float]:
-            vx, vy = body.velocity
-            return vx, vy, body.angular_velocity
-
+        world = OneBody(self._bodies[0], self._space.step, _CountedContact(self))
         state, collided, _, _ = traction_ticks(_FloatOps, self._robot_traction[0], state,
-                                               *command, n_ticks, advance, velocity)
+                                               *command, n_ticks, world)
         return state, collided
+
+
+class _CountedContact:
+    """PymunkBatchDrive's wall contacts of robot 0 as a :class:`_ContactFlag`: ``hit`` while
+    in contact or when a contact began during the last tick; clearing it forgets the latter."""
+
+    def __init__(self, drive: PymunkBatchDrive) -> None:
+        self._contacts, self._began = drive._contacts, drive._began
+
+    @property
+    def hit(self) -> bool:
+        return bool(self._contacts[0] > 0 or self._began[0])
+
+    @hit.setter
+    def hit(self, value: bool) -> None:
+        self._began[0] = value
 
 
 class IdealBatchDrive:
