@@ -1,9 +1,10 @@
 """Environment benchmarks (issue 3 acceptance 4, issue 12 acceptance 1).
 
 - throughput of the single env (1-s segments, random actions within 60% of the motor limit):
-  segments per second (= simulated seconds per wall-clock second), and its overhead over its
-  own bare physics loop (Simulation.run_segment with the same commands and resets):
-  (t_env - t_sim) / t_sim;
+  segments per second (= simulated seconds per second), per wall-clock second and per second
+  of the process's CPU time (the ratios below use both; CPU time is far less disturbed by
+  other processes on a shared machine), and its overhead over its own bare physics loop
+  (Simulation.run_segment with the same commands and resets): (t_env - t_sim) / t_sim;
 - the native vector env (``gymnasium.make_vec(id, num_envs=N)``) at N = 1, 8, 64 beside the
   single env, in alternating blocks of one run (a shared 2-core VM moves single timings by
   +-10% or more): median segments/s over the blocks and the ratio to the single env's median;
@@ -47,41 +48,53 @@ def _actions(n: int, seed: int = 0) -> np.ndarray:
     return np.random.default_rng(seed).uniform(-0.6, 0.6, size=(n, 2))
 
 
-def _time_env(env, actions: np.ndarray) -> float:
+def _clocks() -> tuple[float, float]:
+    """(wall-clock, this process's CPU) seconds."""
+    return time.perf_counter(), time.process_time()
+
+
+def _since(start: tuple[float, float]) -> tuple[float, float]:
+    wall, cpu = _clocks()
+    return wall - start[0], cpu - start[1]
+
+
+def _time_env(env, actions: np.ndarray) -> tuple[float, float]:
     env.reset(seed=0)
-    start = time.perf_counter()
+    start = _clocks()
     for k, a in enumerate(actions):
         env.step(a)
         if (k + 1) % env.budget == 0:
             env.reset()
-    return time.perf_counter() - start
+    return _since(start)
 
 
-def _time_bare_physics(env, actions: np.ndarray) -> float:
+def _time_bare_physics(env, actions: np.ndarray) -> tuple[float, float]:
     env.reset(seed=0)
     sim, speed = env.sim, env.max_wheel_speed
-    start = time.perf_counter()
+    start = _clocks()
     for k, a in enumerate(actions):
         sim.run_segment(a[0] * speed, a[1] * speed, 1.0)
         if (k + 1) % env.budget == 0:
             env.reset()
-    return time.perf_counter() - start
+    return _since(start)
 
 
-def _time_vector(venv, steps: int, seed: int = 0) -> float:
-    """Seconds for ``steps`` steps of all robots (autoreset at the budget)."""
+def _time_vector(venv, steps: int, seed: int = 0) -> tuple[float, float]:
+    """(wall, CPU) seconds for ``steps`` steps of all robots (autoreset at the budget)."""
     actions = np.random.default_rng(seed).uniform(-0.6, 0.6, (steps, venv.num_envs, 2))
     venv.reset(seed=seed)
-    start = time.perf_counter()
+    start = _clocks()
     for a in actions:
         venv.step(a)
-    return time.perf_counter() - start
+    return _since(start)
 
 
 def throughput(env_id: str = ENV_ID, blocks: int = 7, segments_per_block: int = 1500,
                sizes: tuple[int, ...] = VECTOR_SIZES) -> dict:
     """Single env, its bare physics and the vector env at each size, in alternating blocks
-    of about ``segments_per_block`` segments each."""
+    of about ``segments_per_block`` segments each: segments per wall-clock second and per
+    second of this process's CPU time (which a loaded shared machine disturbs far less), the
+    medians over the blocks, and the vector env's ratios to the single env."""
     env = gym.make(env_id).unwrapped
     vectors = {n: gym.make_vec(env_id, num_envs=n) for n in sizes}
     actions = _actions(segments_per_block)
@@ -89,22 +102,28 @@ def throughput(env_id: str = ENV_ID, blocks: int = 7, segments_per_block: int = 
     for n, venv in vectors.items():
         _time_vector(venv, max(300 // n, 3))
     t_env, t_sim = [], []
-    rates: dict[int, list[float]] = {n: [] for n in sizes}
+    rates: dict[int, list[tuple[float, float]]] = {n: [] for n in sizes}
     for _ in tqdm(range(blocks), desc="throughput blocks", leave=False):
         t_env.append(_time_env(env, actions))
         t_sim.append(_time_bare_physics(env, actions))
         for n, venv in vectors.items():
             steps = max(segments_per_block // n, 10)
-            rates[n].append(steps * n / _time_vector(venv, steps))
-    overheads = [(e - s) / s for e, s in zip(t_env, t_sim, strict=True)]
-    single = segments_per_block / statistics.median(t_env)
-    return {"segments_per_s": single,
-            "bare_physics_segments_per_s": segments_per_block / statistics.median(t_sim),
-            "overhead": statistics.median(overheads),
-            "overhead_range": (min(overheads), max(overheads)),
-            "vector_segments_per_s": {n: statistics.median(r) for n, r in rates.items()},
-            "vector_range": {n: (min(r), max(r)) for n, r in rates.items()},
-            "vector_ratio": {n: statistics.median(r) / single for n, r in rates.items()}}
+            wall, cpu = _time_vector(venv, steps)
+            rates[n].append((steps * n / wall, steps * n / cpu))
+    overheads = [(e[1] - s[1]) / s[1] for e, s in zip(t_env, t_sim, strict=True)]
+    single = [segments_per_block / statistics.median(t[c] for t in t_env) for c in (0, 1)]
+    out = {"segments_per_s": single[0], "cpu_segments_per_s": single[1],
+           "bare_physics_segments_per_s": segments_per_block / statistics.median(
+               t[1] for t in t_sim),
+           "overhead": statistics.median(overheads),
+           "overhead_range": (min(overheads), max(overheads))}
+    for c, clock in enumerate(("wall", "cpu")):
+        medians = {n: statistics.median(r[c] for r in rs) for n, rs in rates.items()}
+        out[f"vector_{clock}_segments_per_s"] = medians
+        out[f"vector_{clock}_range"] = {n: (min(r[c] for r in rs), max(r[c] for r in rs))
+                                        for n, rs in rates.items()}
+        out[f"vector_{clock}_ratio"] = {n: m / single[c] for n, m in medians.items()}
+    return out
 
 
 _SINGLE_BLOCK = """
@@ -113,35 +132,41 @@ env = gym.make({env_id!r}).unwrapped
 actions = np.random.default_rng(0).uniform(-0.6, 0.6, ({segments}, 2))
 def run(acts):
     env.reset(seed=0)
-    start = time.perf_counter()
+    start = time.perf_counter(), time.process_time()
     for k, a in enumerate(acts):
         env.step(a)
         if (k + 1) % env.budget == 0:
             env.reset()
-    return time.perf_counter() - start
+    return time.perf_counter() - start[0], time.process_time() - start[1]
 run(actions[:300])
-print({segments} / run(actions))
+wall, cpu = run(actions)
+print({segments} / wall, {segments} / cpu)
 """
 
 
 def reference_comparison(reference: str, env_id: str = ENV_ID, blocks: int = 7,
                          segments: int = 1500) -> dict:
     """The single env of ``reference`` (a source tree) and of this tree, each block in a fresh
-    subprocess (PYTHONPATH set to the tree), alternating; medians and the ratio."""
+    subprocess (PYTHONPATH set to the tree), alternating; medians (segments per wall-clock
+    second and per CPU second) and the ratios."""
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     code = _SINGLE_BLOCK.format(env_id=env_id, segments=segments)
-    rates: dict[str, list[float]] = {"reference": [], "this": []}
+    rates: dict[str, list[list[float]]] = {"reference": [], "this": []}
     for _ in tqdm(range(blocks), desc="reference blocks", leave=False):
         for name, tree in (("reference", reference), ("this", here)):
             out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                                  env={**os.environ, "PYTHONPATH": tree}, check=True,
                                  cwd="/")
-            rates[name].append(float(out.stdout.strip().splitlines()[-1]))
-    ref, this = statistics.median(rates["reference"]), statistics.median(rates["this"])
-    return {"reference_segments_per_s": ref, "this_segments_per_s": this,
-            "ratio": this / ref, "reference_range": (min(rates["reference"]),
-                                                     max(rates["reference"])),
-            "this_range": (min(rates["this"]), max(rates["this"]))}
+            rates[name].append([float(v) for v in out.stdout.split()[-2:]])
+    result = {}
+    for c, clock in enumerate(("wall", "cpu")):
+        ref = [r[c] for r in rates["reference"]]
+        this = [r[c] for r in rates["this"]]
+        result[clock] = {"reference": statistics.median(ref), "this": statistics.median(this),
+                         "ratio": statistics.median(this) / statistics.median(ref),
+                         "reference_range": (min(ref), max(ref)),
+                         "this_range": (min(this), max(this))}
+    return result
 
 
 def memory(steps: int = 100_000, checkpoints: int = 5, env_id: str = ENV_ID) -> dict:
@@ -200,22 +225,27 @@ def main(argv: list[str] | None = None) -> dict:
     results: dict = {}
     if args.reference:
         ref = reference_comparison(args.reference, args.env, args.blocks)
-        print(f"single env, {args.blocks} alternating subprocess blocks of 1500 segments: "
-              f"reference {ref['reference_segments_per_s']:.0f}/s "
-              f"(range {ref['reference_range'][0]:.0f}-{ref['reference_range'][1]:.0f}), "
-              f"this tree {ref['this_segments_per_s']:.0f}/s (range {ref['this_range'][0]:.0f}-"
-              f"{ref['this_range'][1]:.0f}): ratio {ref['ratio']:.2f}", flush=True)
-        results.update(ref)
+        for clock, r in ref.items():
+            print(f"single env, {args.blocks} alternating subprocess blocks of 1500 segments, "
+                  f"segments per {clock} second: reference {r['reference']:.0f} (range "
+                  f"{r['reference_range'][0]:.0f}-{r['reference_range'][1]:.0f}), this tree "
+                  f"{r['this']:.0f} (range {r['this_range'][0]:.0f}-{r['this_range'][1]:.0f}):"
+                  f" ratio {r['ratio']:.3f}", flush=True)
+        results["reference"] = ref
     tp = throughput(args.env, args.blocks)
     low, high = tp["overhead_range"]
-    print(f"{args.env}: single env {tp['segments_per_s']:.0f} segments/s (1-s segments = "
-          f"simulated s per wall s); bare physics {tp['bare_physics_segments_per_s']:.0f}/s; "
-          f"env overhead {100 * tp['overhead']:.1f}% (median of {args.blocks} alternating "
-          f"blocks; range {100 * low:.1f}-{100 * high:.1f}%)")
-    for n, rate in tp["vector_segments_per_s"].items():
-        lo, hi = tp["vector_range"][n]
-        print(f"  vector env N={n}: {rate:.0f} segments/s (range {lo:.0f}-{hi:.0f}), "
-              f"{tp['vector_ratio'][n]:.2f}x the single env", flush=True)
+    print(f"{args.env}: single env {tp['segments_per_s']:.0f} segments/s wall clock, "
+          f"{tp['cpu_segments_per_s']:.0f} per CPU second (1-s segments = simulated s per s); "
+          f"bare physics {tp['bare_physics_segments_per_s']:.0f} per CPU s; env overhead "
+          f"{100 * tp['overhead']:.1f}% (CPU; median of {args.blocks} alternating blocks; "
+          f"range {100 * low:.1f}-{100 * high:.1f}%)")
+    for n in tp["vector_cpu_segments_per_s"]:
+        parts = []
+        for clock in ("cpu", "wall"):
+            lo, hi = tp[f"vector_{clock}_range"][n]
+            parts.append(f"{tp[f'vector_{clock}_segments_per_s'][n]:.0f} per {clock} s "
+                         f"(range {lo:.0f}-{hi:.0f}), {tp[f'vector_{clock}_ratio'][n]:.2f}x")
+        print(f"  vector env N={n}: " + "; ".join(parts) + " the single env", flush=True)
     results.update(tp)
     if args.skip_memory:
         return results
