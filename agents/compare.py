@@ -89,7 +89,7 @@ def episode_seeds(settings: CompareSettings, episodes: int) -> list[int]:
 def make_env(env_id: str, segments: int, robot: str = "default", **config) -> gym.Env:
     """The env ``env_id`` with a budget of ``segments``, the robot preset and further
     keyword arguments of the env (config overrides, ``estimator_factory``)."""
-    return gym.make(env_id, budget=segments, max_episode_steps=segments, robot=robot, **config)
+    return gym.make(env_id, budget=segments, robot=robot, **config)
 
 
 def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[dict]:

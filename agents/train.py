@@ -37,11 +37,14 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNorm
 from tqdm import tqdm
 
 import excite  # noqa: F401  (registers the environment ids)
+from agents.vec_env import NativeVecEnv
 from excite.errors import ExciteError
 
 ALGOS = {"ppo": PPO, "sac": SAC}
 CONFIG_DIR = Path(__file__).parent / "configs"
-VEC_ENVS = {"subproc": SubprocVecEnv, "dummy": DummyVecEnv}
+#: native: all envs in one process, stepped together (envs.vector_env); subproc / dummy: one
+#: single env per worker process / in a loop.
+VEC_ENVS = ("native", "subproc", "dummy")
 
 
 class TrainingError(ExciteError, ValueError):
@@ -64,12 +67,19 @@ def load_config(algo: str, path: str | Path | None = None) -> dict[str, Any]:
 
 
 def make_training_env(config: dict, n_envs: int, seed: int, training: bool = True):
-    """Vectorized, monitored, normalized env. Worker processes import excite through the
-    "excite:" id prefix."""
-    env_id = "excite:" + config["env_id"]
-    vec_cls = VEC_ENVS[config.get("vec_env", "dummy")] if n_envs > 1 else DummyVecEnv
-    venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
-                        env_kwargs=config.get("env_kwargs", {}))
+    """Vectorized, monitored, normalized env: several envs as config ``vec_env`` says
+    (default native, one process), one env as a DummyVecEnv. Worker processes import excite
+    through the "excite:" id prefix."""
+    kind = config.get("vec_env", "native") if n_envs > 1 else "dummy"
+    if kind not in VEC_ENVS:
+        raise TrainingError(f"unknown vec_env {kind!r}; choose from {', '.join(VEC_ENVS)}")
+    if kind == "native":
+        venv = NativeVecEnv(config["env_id"], n_envs, config.get("env_kwargs", {}))
+        venv.seed(seed)
+    else:
+        venv = make_vec_env("excite:" + config["env_id"], n_envs=n_envs, seed=seed,
+                            vec_env_cls=DummyVecEnv if kind == "dummy" else SubprocVecEnv,
+                            env_kwargs=config.get("env_kwargs", {}))
     norm = config.get("normalize", {})
     return VecNormalize(venv, training=training,
                         norm_obs=norm.get("norm_obs", True),

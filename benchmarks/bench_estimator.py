@@ -14,8 +14,7 @@ from excite import calibrate
 
 
 def batch_nees(seeds: int = 100, segments: int = 150) -> np.ndarray:
-    env = gym.make("excite/DiffDriveCalibIdeal-v0", budget=segments,
-                   max_episode_steps=segments).unwrapped
+    env = gym.make("excite/DiffDriveCalibIdeal-v0", budget=segments).unwrapped
     nees = []
     for seed in range(seeds):
         env.reset(seed=seed)
@@ -33,11 +32,9 @@ def main() -> dict:
     inside = float(np.mean(nees <= chi2.ppf(0.95, 3)))
     print(f"ideal env, batch calibrate, 100 seeds x 150 random segments: {100 * inside:.0f}% "
           f"inside the 95% ellipse; mean NEES {nees.mean():.2f} (3 expected)")
-    ideal = check_estimator("excite/DiffDriveCalibIdeal-v0", episodes=100, budget=150,
-                            max_episode_steps=150)
+    ideal = check_estimator("excite/DiffDriveCalibIdeal-v0", episodes=100, budget=150)
     print("harness, online estimator: " + ideal.summary())
-    slip = check_estimator("excite/DiffDriveCalib-v0", episodes=100, budget=150,
-                           max_episode_steps=150)
+    slip = check_estimator("excite/DiffDriveCalib-v0", episodes=100, budget=150)
     print("harness, online estimator: " + slip.summary())
     return {"batch_inside_95": inside, "batch_mean_nees": float(nees.mean()),
             "ideal_anees": float(ideal.anees[-1]), "ideal_bounds": ideal.anees_bounds,

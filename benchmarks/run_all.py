@@ -25,5 +25,5 @@ if __name__ == "__main__":
     for module in (bench_import, bench_calibration, bench_sensor_pose, bench_simulation,
                    bench_env, bench_slip, bench_estimator, bench_compare, bench_ray):
         print(f"\n=== {module.__name__} ===", flush=True)
-        with_argv = (bench_calibration, bench_sensor_pose, bench_ray)
+        with_argv = (bench_calibration, bench_sensor_pose, bench_ray, bench_env)
         module.main([]) if module in with_argv else module.main()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -13,6 +14,7 @@ from gymnasium import spaces
 from envs.physics import GRAVITY
 from envs.recording import Recorder, Recording, RecordingConfig
 from envs.robot import RobotSpec, robot_distribution
+from envs.sensors import RelativePoseSensor
 from envs.simulation import Simulation, SimulationConfig
 from excite import se2
 from excite.contracts import EstimatorFactory, RobotKnowledge, Traction
@@ -102,14 +104,14 @@ class DiffDriveCalibEnv(gym.Env):
       (final error - nominal's error). The observation never contains the truth.
 
     ## Episode end
-    Truncated after ``budget`` segments (the registered ids also set ``max_episode_steps``;
-    pass ``max_episode_steps`` to ``gymnasium.make`` when you change the budget). Terminated
-    when ``target_sigma_min`` (if set) is reached.
+    Truncated after ``budget`` segments (the env alone owns the budget: the ids register no
+    ``max_episode_steps``). Terminated when ``target_sigma_min`` (if set) is reached.
 
     ## Configuration
     ``DiffDriveCalibEnv.default_config()`` documents every key; override with
     ``config={...}`` or keyword arguments, e.g.
-    ``gymnasium.make("excite/DiffDriveCalib-v0", budget=50, max_episode_steps=50)``.
+    ``gymnasium.make("excite/DiffDriveCalib-v0", budget=50)``. ``gymnasium.make_vec(id,
+    num_envs=N)`` steps N robots in one process (:class:`envs.vector_env.DiffDriveCalibVectorEnv`).
     ``estimator_factory(nominal, sigma)`` plugs in another estimator (default:
     :class:`excite.OnlineEstimator` at the nominal robot).
 
@@ -304,25 +306,11 @@ class DiffDriveCalibEnv(gym.Env):
 
     # -- what the robot knows ------------------------------------------------------------------
     def _read_estimate(self) -> tuple[Params, np.ndarray]:
-        """The estimator's wheel parameters and all model parameters (an estimator without
-        ``theta`` leaves the sensor pose at its nominal value)."""
-        p = self.estimator.params
-        params = p if isinstance(p, Params) else Params.from_array(p)
-        if self.model is AXLE:
-            return params, params.as_array()
-        theta = getattr(self.estimator, "theta", None)
-        if theta is None or len(theta) != self.model.size:
-            theta = np.append(params.as_array(), self.nominal_theta[3:])
-        return params, np.asarray(theta, dtype=float)
+        return read_estimate(self.estimator, self.model, self.nominal_theta)
 
     def _measure_pose(self, body_pose: np.ndarray) -> np.ndarray:
-        """The body's world pose as the robot knows it: the sensor's noisy world pose, taken
-        back to the body with the estimated mounting."""
-        if self._mount is None:
-            return self.sim.pose_sensor.absolute(body_pose, self._sensor_rng)
-        sensor = se2.compose(body_pose, self._mount.as_array())
-        reading = self.sim.pose_sensor.absolute(sensor, self._sensor_rng)
-        return se2.compose(reading, se2.inverse(self._theta[3:6]))
+        return measure_pose(self.sim.pose_sensor, body_pose, self._sensor_rng, self._mount,
+                            self._theta)
 
     @property
     def estimate(self) -> Params:
@@ -360,25 +348,10 @@ class DiffDriveCalibEnv(gym.Env):
 
     def _observation(self) -> np.ndarray:
         eigenvalues, weakest = self._eigen
-        sign = 1.0 if max(weakest, key=abs) >= 0 else -1.0  # a unique sign for the direction
-        estimate, nominal = self._estimate, self.nominal
-        relative = [estimate.r_L / nominal.r_L - 1.0, estimate.r_R / nominal.r_R - 1.0,
-                    estimate.b / nominal.b - 1.0]
-        if self.model is not AXLE:
-            offset = (self._theta[3:] - self.nominal_theta[3:]).tolist()
-            relative += [offset[0] / nominal.b, offset[1] / nominal.b, offset[2]]
-        x, y, theta = self._measured_pose.tolist()
-        to_unit = 2.0 / self.config["arena_size"]
-        obs = np.array([
-            *relative,
-            *[0.1 * math.log1p(max(lam, 0.0)) for lam in eigenvalues],
-            *[sign * v for v in weakest],
-            x * to_unit, y * to_unit, math.cos(theta), math.sin(theta),
-            *self._last_action,
-            self._n / self.budget,
-        ], dtype=np.float32)
-        space = self.observation_space
-        return np.minimum(np.maximum(obs, space.low, out=obs), space.high, out=obs)
+        return observation(self.model, self._theta.tolist(), self.nominal_theta.tolist(),
+                           eigenvalues, weakest, self._measured_pose.tolist(),
+                           self._last_action, self._n / self.budget,
+                           self.config["arena_size"], self.observation_space)
 
     # -- evaluation only -------------------------------------------------------------------------
     @property
@@ -455,6 +428,63 @@ class DiffDriveCalibEnv(gym.Env):
         state = copy.copy(self.__dict__)
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
         return state
+
+
+def read_estimate(estimator, model: SegmentModel,
+                  nominal_theta: np.ndarray) -> tuple[Params, np.ndarray]:
+    """The estimator's wheel parameters and all model parameters (an estimator without
+    ``theta`` leaves the sensor pose at its nominal value)."""
+    p = estimator.params
+    params = p if isinstance(p, Params) else Params.from_array(p)
+    if model is AXLE:
+        return params, params.as_array()
+    theta = getattr(estimator, "theta", None)
+    if theta is None or len(theta) != model.size:
+        theta = np.append(params.as_array(), nominal_theta[3:])
+    return params, np.asarray(theta, dtype=float)
+
+
+def measure_pose(sensor: RelativePoseSensor, body_pose: np.ndarray, rng: np.random.Generator,
+                 mount: SensorPose | None, theta: np.ndarray) -> np.ndarray:
+    """The body's world pose (x, y, theta) as the robot knows it: the sensor's noisy world
+    pose, taken back to the body with the estimated mounting (theta[3:6])."""
+    if mount is None:
+        return sensor.absolute(body_pose, rng)
+    reading = sensor.absolute(se2.compose(body_pose, mount.as_array()), rng)
+    return se2.compose(reading, se2.inverse(theta[3:6]))
+
+
+def observation(model: SegmentModel, theta: Sequence[float], nominal_theta: Sequence[float],
+                eigenvalues: Sequence[float], weakest: Sequence[float], pose: Sequence[float],
+                last_action: Sequence[float], used: float, arena_size: float,
+                space: spaces.Box) -> np.ndarray:
+    """One robot's observation (3 P + 7,) float32 (the table in DiffDriveCalibEnv's doc), from
+    Python floats (a few microseconds: the single env's step; the vector env calls it per
+    robot).
+
+    theta: the estimate (P values), nominal_theta: the nominal ones; eigenvalues (ascending)
+    and weakest, the eigenvector of the smallest (given a unique sign here: its largest
+    entry is positive); pose: the measured world pose (x, y in m, theta in rad); last_action
+    (2 values); used: the fraction of the budget used; arena_size (m). Clipped to ``space``.
+    """
+    sign = 1.0 if max(weakest, key=abs) >= 0 else -1.0  # a unique sign for the direction
+    relative = [theta[0] / nominal_theta[0] - 1.0, theta[1] / nominal_theta[1] - 1.0,
+                theta[2] / nominal_theta[2] - 1.0]
+    if model is not AXLE:
+        b = nominal_theta[2]
+        relative += [(theta[3] - nominal_theta[3]) / b, (theta[4] - nominal_theta[4]) / b,
+                     theta[5] - nominal_theta[5]]
+    x, y, heading = pose
+    to_unit = 2.0 / arena_size
+    obs = np.array([
+        *relative,
+        *[0.1 * math.log1p(max(lam, 0.0)) for lam in eigenvalues],
+        *[sign * v for v in weakest],
+        x * to_unit, y * to_unit, math.cos(heading), math.sin(heading),
+        *last_action,
+        used,
+    ], dtype=np.float32)
+    return np.minimum(np.maximum(obs, space.low, out=obs), space.high, out=obs)
 
 
 def _sensor_ranges(config: dict | None) -> np.ndarray | None:

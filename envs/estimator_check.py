@@ -87,8 +87,7 @@ def check_estimator(
     """Run ``estimator_factory`` in ``env`` (an id or an instance) for ``episodes`` episodes.
 
     policy: observation -> action; None draws uniform random actions (seeded).
-    env_kwargs: passed to ``gymnasium.make`` when ``env`` is an id (e.g. budget=150 and
-    max_episode_steps=150).
+    env_kwargs: passed to ``gymnasium.make`` when ``env`` is an id (e.g. budget=150).
     """
     if isinstance(env, str):
         env_id = env

@@ -14,16 +14,17 @@ import numpy as np
 
 
 def relative_pose(pose_start: np.ndarray, pose_end: np.ndarray) -> np.ndarray:
-    """Body-frame increment (dx, dy, dtheta) from `pose_start` to `pose_end`.
+    """Body-frame increment (dx, dy, dtheta) from `pose_start` to `pose_end` ((3,) or (N, 3)).
 
     dx, dy (m) are the displacement expressed in the body frame at `pose_start` (x forward,
     y left); dtheta (rad) is the continuous heading change theta_end - theta_start.
     """
-    ex = pose_end[0] - pose_start[0]
-    ey = pose_end[1] - pose_start[1]
-    c = math.cos(pose_start[2])
-    s = math.sin(pose_start[2])
-    return np.array([c * ex + s * ey, -s * ex + c * ey, pose_end[2] - pose_start[2]])
+    ex = pose_end[..., 0] - pose_start[..., 0]
+    ey = pose_end[..., 1] - pose_start[..., 1]
+    th = pose_start[..., 2]
+    # one pose: math's cos and sin (faster on a scalar; the same bits as numpy's here)
+    c, s = (math.cos(th), math.sin(th)) if np.ndim(th) == 0 else (np.cos(th), np.sin(th))
+    return np.array([c * ex + s * ey, -s * ex + c * ey, pose_end[..., 2] - th]).T
 
 
 class WheelEncoders:
@@ -77,6 +78,11 @@ class RelativePoseSensor:
     def measure(self, true_increment: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy body-frame increment (dx, dy, dtheta); one fresh noise draw per segment."""
         return _add_noise(true_increment, self._sigma, rng)
+
+    def each(self, values: np.ndarray, rngs: list[np.random.Generator]) -> np.ndarray:
+        """Noisy readings (N, 3) of N robots' increments or poses (N, 3), robot i drawing from
+        ``rngs[i]`` exactly as :meth:`measure` / :meth:`absolute` would."""
+        return values + self._sigma * np.array([rng.standard_normal(3) for rng in rngs])
 
     def absolute(self, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy world pose(s) (..., 3) (x, y, theta), an independent draw per reading; theta

@@ -13,7 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from envs.physics import Arena, Drive, IdealDrive, PymunkDrive
+from envs.physics import (
+    Arena,
+    Drive,
+    IdealBatchDrive,
+    IdealDrive,
+    PymunkBatchDrive,
+    PymunkDrive,
+)
 from envs.robot import DEFAULT_CHASSIS_SIZE, RobotSpec
 from envs.sensors import RelativePoseSensor, WheelEncoders, relative_pose
 
@@ -94,7 +101,58 @@ def _read_only(array: np.ndarray) -> np.ndarray:
     return array
 
 
-class Simulation:
+def start_state(arena: Arena, robot: RobotSpec, rng: np.random.Generator,
+                pose: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A robot's start: world pose (x, y, theta) and absolute wheel angles (rad), drawn from
+    ``rng`` in a fixed order (see :meth:`Simulation.reset`, whose errors it raises)."""
+    if not robot.fits_chassis():
+        raise ValueError(
+            f"robot does not fit its {robot.chassis_length} x {robot.chassis_width} m "
+            f"chassis (length x width): b={robot.b}, com_offset={robot.com_offset}"
+        )
+    if pose is None:
+        margin = spawn_margin(robot)
+        half = np.array([arena.width, arena.height]) / 2 - margin
+        if not (half > 0).all():
+            raise ValueError(
+                f"the {arena.width} x {arena.height} m arena is too small for "
+                f"this robot's {robot.chassis_length} x {robot.chassis_width} m chassis: a "
+                f"random start needs more than {2 * margin:.3g} m (RobotDistribution."
+                f"arena_size() recommends a size)"
+            )
+        pose = np.append(rng.uniform(-half, half), rng.uniform(-math.pi, math.pi))
+    else:
+        pose = np.asarray(pose, dtype=float)
+        if pose.shape != (3,) or not np.isfinite(pose).all():
+            raise ValueError(f"pose must be 3 finite numbers (x, y, theta), got {pose}")
+        if not arena.contains_footprint(pose[0], pose[1], pose[2], chassis=robot.chassis):
+            raise ValueError(f"pose {pose} puts the chassis outside the arena")
+    wheel_angles = rng.uniform(0.0, 2.0 * math.pi, 2)
+    return pose, wheel_angles
+
+
+class _World:
+    """The arena and the sensors of a simulation (one robot or N), and segment timing."""
+
+    def __init__(self, config: SimulationConfig | None = None) -> None:
+        self.config = config or SimulationConfig()
+        self.arena = Arena(self.config.arena_width, self.config.arena_height)
+        self.encoders = WheelEncoders(self.config.ticks_per_rev)
+        self.pose_sensor = RelativePoseSensor(self.config.sigma_xy, self.config.sigma_theta)
+        self.dt = 1.0 / self.config.physics_hz  # s, one physics tick
+
+    def _ticks(self, seconds: float, name: str, minimum: int) -> int:
+        ticks = seconds * self.config.physics_hz if math.isfinite(seconds) else -1.0
+        n = round(ticks)
+        if n < minimum or abs(ticks - n) > 1e-9 * max(n, 1):
+            raise ValueError(
+                f"{name} must be a {'positive' if minimum else 'non-negative'} multiple of the "
+                f"physics tick {self.dt} s, got {seconds}"
+            )
+        return n
+
+
+class Simulation(_World):
     """A robot in a walled arena, run in motion segments with fixed wheel-speed commands.
 
     `reset` must be called before `run_segment`. Noise is drawn from the generator given to
@@ -102,13 +160,9 @@ class Simulation:
     """
 
     def __init__(self, config: SimulationConfig | None = None) -> None:
-        self.config = config or SimulationConfig()
-        self.arena = Arena(self.config.arena_width, self.config.arena_height)
-        self.encoders = WheelEncoders(self.config.ticks_per_rev)
-        self.pose_sensor = RelativePoseSensor(self.config.sigma_xy, self.config.sigma_theta)
+        super().__init__(config)
         drive_type = IdealDrive if self.config.ideal else PymunkDrive
         self.drive: Drive = drive_type(self.arena, self.config.physics_hz)
-        self.dt = self.drive.dt  # s, one physics tick
         self._robot: RobotSpec | None = None
         self._rng: np.random.Generator | None = None
 
@@ -128,30 +182,7 @@ class Simulation:
         |com_offset| < half its length), when a random start needs a wider arena
         (2 spawn margins) or when the given pose puts the chassis outside the arena.
         """
-        if not robot.fits_chassis():
-            raise ValueError(
-                f"robot does not fit its {robot.chassis_length} x {robot.chassis_width} m "
-                f"chassis (length x width): b={robot.b}, com_offset={robot.com_offset}"
-            )
-        if pose is None:
-            margin = spawn_margin(robot)
-            half = np.array([self.arena.width, self.arena.height]) / 2 - margin
-            if not (half > 0).all():
-                raise ValueError(
-                    f"the {self.arena.width} x {self.arena.height} m arena is too small for "
-                    f"this robot's {robot.chassis_length} x {robot.chassis_width} m chassis: a "
-                    f"random start needs more than {2 * margin:.3g} m (RobotDistribution."
-                    f"arena_size() recommends a size)"
-                )
-            pose = np.append(rng.uniform(-half, half), rng.uniform(-math.pi, math.pi))
-        else:
-            pose = np.asarray(pose, dtype=float)
-            if pose.shape != (3,) or not np.isfinite(pose).all():
-                raise ValueError(f"pose must be 3 finite numbers (x, y, theta), got {pose}")
-            if not self.arena.contains_footprint(pose[0], pose[1], pose[2],
-                                                 chassis=robot.chassis):
-                raise ValueError(f"pose {pose} puts the chassis outside the arena")
-        wheel_angles = rng.uniform(0.0, 2.0 * math.pi, 2)
+        pose, wheel_angles = start_state(self.arena, robot, rng, pose)
         self.drive.reset(robot, pose, wheel_angles)
         self._robot = robot
         self._rng = rng
@@ -181,12 +212,8 @@ class Simulation:
             collision = collision or stop_collision
         phi_end = self.drive.wheel_angles
         true_increment = relative_pose(path[0], path[-1])
-        measurement = np.concatenate(
-            [
-                self.encoders.increments(phi_start, phi_end),
-                self.pose_sensor.measure(true_increment, self._rng),
-            ]
-        )
+        measurement = np.concatenate([self.encoders.increments(phi_start, phi_end),
+                                      self.pose_sensor.measure(true_increment, self._rng)])
         return SegmentOutcome(
             measurement=_read_only(measurement),
             true_increment=_read_only(true_increment),
@@ -197,16 +224,6 @@ class Simulation:
             path=_read_only(path),
             wheel_path=_read_only(wheels),
         )
-
-    def _ticks(self, seconds: float, name: str, minimum: int) -> int:
-        ticks = seconds * self.config.physics_hz if math.isfinite(seconds) else -1.0
-        n = round(ticks)
-        if n < minimum or abs(ticks - n) > 1e-9 * max(n, 1):
-            raise ValueError(
-                f"{name} must be a {'positive' if minimum else 'non-negative'} multiple of the "
-                f"physics tick {self.dt} s, got {seconds}"
-            )
-        return n
 
     @property
     def pose(self) -> np.ndarray:
@@ -224,3 +241,89 @@ class Simulation:
         if self._robot is None:
             raise RuntimeError("Simulation.reset has not been called")
         return self._robot
+
+
+@dataclass(frozen=True, eq=False)
+class BatchOutcome:
+    """What one segment produced on each of N robots (the fields of :class:`SegmentOutcome`
+    stacked on a first axis of N, without the per-tick paths)."""
+
+    measurement: np.ndarray  # (N, 5)
+    true_increment: np.ndarray  # (N, 3)
+    collision: np.ndarray  # (N,) bool
+    pose_start: np.ndarray  # (N, 3)
+    pose_end: np.ndarray  # (N, 3)
+
+
+class BatchSimulation(_World):
+    """N robots in one arena (they never touch each other), run segment by segment together.
+
+    Robot i reset with a robot, a generator and a pose draws and measures exactly as a
+    :class:`Simulation` reset with the same arguments (same start draws, same noise draws);
+    the physics is the same kernel on arrays (:class:`envs.physics.PymunkBatchDrive`,
+    :class:`envs.physics.IdealBatchDrive`).
+    """
+
+    def __init__(self, config: SimulationConfig | None = None, n: int = 1) -> None:
+        super().__init__(config)
+        if not isinstance(n, int | np.integer) or n < 1:
+            raise ValueError(f"the number of robots must be a positive integer, got {n!r}")
+        self.n = int(n)
+        drive_type = IdealBatchDrive if self.config.ideal else PymunkBatchDrive
+        self.drive = drive_type(self.arena, self.config.physics_hz, self.n)
+        self._robots: list[RobotSpec | None] = [None] * self.n
+        self._rngs: list[np.random.Generator | None] = [None] * self.n
+
+    def reset(self, i: int, robot: RobotSpec, rng: np.random.Generator,
+              pose: np.ndarray | None = None) -> None:
+        """Place robot ``i`` at rest and keep ``rng`` for its noise (as Simulation.reset)."""
+        pose, wheel_angles = start_state(self.arena, robot, rng, pose)
+        self.drive.reset(i, robot, pose, wheel_angles)
+        self._robots[i] = robot
+        self._rngs[i] = rng
+
+    def run_segment(self, commands: np.ndarray, duration: float,
+                    settle: float = 0.0) -> BatchOutcome:
+        """Hold wheel-speed commands (N, 2) (rad/s, clipped to each motor's limit) for
+        ``duration`` s, then zero for ``settle`` s, on every robot (as Simulation.run_segment)."""
+        if any(robot is None for robot in self._robots):
+            raise RuntimeError("BatchSimulation.reset must be called for every robot first")
+        commands = np.asarray(commands, dtype=float)
+        if commands.shape != (self.n, 2) or not np.isfinite(commands).all():
+            raise ValueError(f"wheel commands must be finite, shape ({self.n}, 2)")
+        n_ticks = self._ticks(duration, "duration", minimum=1)
+        n_settle = self._ticks(settle, "settle", minimum=0)
+        phi_start = self.drive.wheel_angles
+        pose_start = self.drive.poses()
+        pose_end, collision = self.drive.run(commands, n_ticks)
+        if n_settle:
+            pose_end, stopped = self.drive.run(np.zeros_like(commands), n_settle)
+            collision = collision | stopped
+        phi_end = self.drive.wheel_angles
+        true_increment = relative_pose(pose_start, pose_end)
+        measurement = self._measure(phi_start, phi_end, true_increment, self._rngs)
+        return BatchOutcome(measurement, true_increment, collision, pose_start, pose_end)
+
+    def _measure(self, phi_start: np.ndarray, phi_end: np.ndarray, true_increment: np.ndarray,
+                 rngs: list[np.random.Generator]) -> np.ndarray:
+        """The calibration rows (N, 5) (dphi_L, dphi_R, dx, dy, dtheta) of N segments, as
+        Simulation.run_segment measures one: wheel angles (N, 2) at the start and end, true
+        increments (N, 3), one generator per robot."""
+        rows = np.empty((len(rngs), 5))
+        rows[:, :2] = self.encoders.increments(phi_start, phi_end)
+        rows[:, 2:] = self.pose_sensor.each(true_increment, rngs)
+        return rows
+
+    @property
+    def poses(self) -> np.ndarray:
+        """Current world poses (N, 3) of the axle midpoints."""
+        return self.drive.poses()
+
+    def pose(self, i: int) -> np.ndarray:
+        """Robot i's current world pose (x, y, theta) of the axle midpoint."""
+        return self.drive.pose(i)
+
+    @property
+    def robots(self) -> list[RobotSpec]:
+        """The hidden robots of the last resets."""
+        return list(self._robots)

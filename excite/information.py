@@ -34,6 +34,7 @@ __all__ = [
     "scaled_jacobian",
     "segment_information",
     "information_matrix",
+    "information_matrices",
     "eigen_3x3",
     "fisher_information",
     "sigma_min",
@@ -204,6 +205,27 @@ def information_matrix(
     rows = _information_rows(phi_L, phi_R, params, s, scale, model)
     rows = rows.reshape(rows.shape[0], -1)
     return rows @ rows.T
+
+
+def information_matrices(
+    dphi_L: ArrayLike,
+    dphi_R: ArrayLike,
+    theta: ArrayLike,
+    sigma: ArrayLike,
+    scale: ArrayLike,
+    model: SegmentModel = AXLE,
+) -> FloatArray:
+    """F of each of N logs at its own parameters, batch-first: (N, P, P).
+
+    dphi_L, dphi_R (N, K): each log's wheel increments (rad), padded with zeros (a segment
+    without motion adds no information); theta (N, P): where each log's F is evaluated;
+    scale: the nominal parameters of the column scale ((P,) or (N, P)). The same F as
+    :func:`information_matrix` of each log (tested), from the model's Jacobian.
+    """
+    theta = np.asarray(theta, dtype=float)
+    jac = model.jacobian(dphi_L, dphi_R, theta)  # (N, K, 3, P)
+    columns = model.column_scale(np.asarray(scale, dtype=float))[..., None, None, :]
+    return fisher_information(jac / as_sigma(sigma)[:, None] * columns)
 
 
 #: Segment count up to which the pure-Python moments beat numpy's per-call overhead (measured

@@ -14,6 +14,7 @@ import importlib.util
 import sys
 
 ENTRY_POINT = "envs.env:DiffDriveCalibEnv"
+VECTOR_ENTRY_POINT = "envs.vector_env:DiffDriveCalibVectorEnv"
 DEFAULT_BUDGET = 30  # segments per episode
 DEFAULT_ENV_ID = "excite/DiffDriveCalib-v0"
 #: The hidden sensor mounting of the Sensor id, drawn per episode: around 10 cm ahead of the
@@ -33,8 +34,9 @@ def register_envs() -> None:
 
     for env_id, kwargs in ENV_IDS.items():
         if env_id not in gymnasium.registry:
+            # No max_episode_steps: the env owns its budget (config "budget").
             gymnasium.register(id=env_id, entry_point=ENTRY_POINT, kwargs=dict(kwargs),
-                               max_episode_steps=DEFAULT_BUDGET)
+                               vector_entry_point=VECTOR_ENTRY_POINT)
 
 
 class _RegisterAfterGymnasiumImport(importlib.abc.MetaPathFinder):

@@ -66,7 +66,7 @@ def test_greedy_breaks_mirror_ties_towards_the_centre():
     from agents.greedy import command_information
     from agents.motion import predicted_poses, safe_actions, wheel_increments
 
-    env = gym.make(IDEAL, budget=12, max_episode_steps=12, arena_size=12.0)
+    env = gym.make(IDEAL, budget=12, arena_size=12.0)
     env.reset(seed=5, options={"pose": (0.8, -0.5, 0.3)})
     planner = GreedyPlanner(grid=11)
     planner.reset(np.random.default_rng(0))

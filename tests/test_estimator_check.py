@@ -29,8 +29,7 @@ class _WheelsOnly:
 
 
 def test_sensor_env_judges_all_six_parameters_of_a_sensor_pose_estimator():
-    report = check_estimator("excite/DiffDriveCalibSensor-v0", episodes=4, budget=12,
-                             max_episode_steps=12)
+    report = check_estimator("excite/DiffDriveCalibSensor-v0", episodes=4, budget=12)
     assert report.rmse.shape == (12, 6) and report.parameters == 6
     assert report.anees_bounds == anees_bounds(4, 6)
     assert np.all(np.isfinite(report.anees)) and report.nees_final.shape == (4,)
@@ -40,7 +39,7 @@ def test_sensor_env_judges_all_six_parameters_of_a_sensor_pose_estimator():
 
 def test_sensor_env_judges_a_wheels_only_estimator_on_the_wheels():
     report = check_estimator("excite/DiffDriveCalibSensor-v0", _WheelsOnly, episodes=3,
-                             budget=8, max_episode_steps=8)
+                             budget=8)
     assert report.rmse.shape == (8, 3)
     assert report.anees_bounds == anees_bounds(3, 3)
 

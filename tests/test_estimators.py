@@ -280,8 +280,7 @@ def test_factories_pickle_and_plug_into_the_environment():
     for spec in ("ekf", "window:size=4", "tests.test_estimators:half_window"):
         factory = pickle.loads(pickle.dumps(estimator_factory(spec)))
         assert isinstance(factory, EstimatorSpec)
-        env = gym.make("excite/DiffDriveCalibIdeal-v0", budget=6, max_episode_steps=6,
-                       estimator_factory=factory)
+        env = gym.make("excite/DiffDriveCalibIdeal-v0", budget=6, estimator_factory=factory)
         env.reset(seed=0)
         for _ in range(6):
             env.step(np.array([0.6, 0.2], dtype=np.float32))

@@ -27,7 +27,7 @@ WHEELS = ("left_wheel_joint", "right_wheel_joint")
 
 def run_episode(env_id: str = SENSOR, segments: int = 8, seed: int = 5, **config) -> gym.Env:
     """An episode of random wheel commands (within 60% of the motor limit)."""
-    env = gym.make(env_id, budget=segments, max_episode_steps=segments, **config)
+    env = gym.make(env_id, budget=segments, **config)
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     for _ in range(segments):

@@ -78,3 +78,28 @@ def test_bad_policy_files_are_one_line_errors(tmp_path, capsys):
     assert code == 2 and len(err) == 1 and "not a stable-baselines3 policy" in err[0]
     code = main(["train", "--algo", "dqn", "--out", str(tmp_path / "t")])
     assert code == 2 and "invalid choice: 'dqn'" in capsys.readouterr().err
+
+
+def test_native_vec_env_adapter_resets_in_the_same_step():
+    """SB3's conventions on the native vector env: the step that ends an episode returns the
+    next episode's first observation, the last one in terminal_observation, and marks the
+    budget's end TimeLimit.truncated; env i seeded s + i is the single env seeded s + i."""
+    from agents.vec_env import NativeVecEnv
+
+    budget = 3
+    venv = NativeVecEnv("excite/DiffDriveCalibIdeal-v0", 2, {"budget": budget})
+    venv.seed(11)
+    obs = venv.reset()
+    single = make_env("excite/DiffDriveCalibIdeal-v0", budget, robot="default")
+    first, _ = single.reset(seed=12)
+    np.testing.assert_allclose(obs[1], first, atol=1e-6)
+    actions = np.random.default_rng(0).uniform(-1, 1, (budget, 2, 2))
+    for k, action in enumerate(actions):
+        obs, reward, dones, infos = venv.step(action)
+        last, single_reward, *_ = single.step(action[1])
+        assert reward.dtype == np.float32 and dones.tolist() == [k == budget - 1] * 2
+    assert all(info["TimeLimit.truncated"] for info in infos)
+    np.testing.assert_allclose(infos[1]["terminal_observation"], last, atol=1e-6)
+    np.testing.assert_allclose(reward[1], single_reward, atol=1e-6)
+    assert (obs[:, -1] == 0).all()  # the new episodes' budget used
+    assert set(infos[0]["reward_terms"]) >= {"information", "collision"}

@@ -1,0 +1,301 @@
+"""N robots of :class:`envs.env.DiffDriveCalibEnv` stepped together in one process.
+
+``gymnasium.make_vec("excite/DiffDriveCalib-v0", num_envs=N)`` returns
+:class:`DiffDriveCalibVectorEnv` (every id registers it as its ``vector_entry_point``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from envs.env import DiffDriveCalibEnv, measure_pose, observation, read_estimate
+from envs.robot import RobotSpec
+from envs.simulation import BatchSimulation
+from excite.contracts import EstimatorFactory
+from excite.information import information_matrices
+from excite.kinematics import Params
+from excite.models import AXLE, SensorPose, body_to_sensor
+
+#: The reward terms, in the order DiffDriveCalibEnv reports them.
+REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy")
+
+
+class DiffDriveCalibVectorEnv(VectorEnv):
+    """``num_envs`` robots of :class:`envs.env.DiffDriveCalibEnv` in one process.
+
+    Every robot lives in the same arena (one pymunk space; chassis never touch each other,
+    only the walls) and is stepped by one batched physics call per segment
+    (:class:`envs.simulation.BatchSimulation`, the single env's physics kernel on arrays).
+    The information matrices, their eigenvalues, the rewards and the observations are
+    computed for all robots at once; each robot keeps its own estimator
+    (``estimator_factory``, default :class:`excite.OnlineEstimator`: its update is a few
+    microseconds of pure Python) and its own random streams.
+
+    Robot i reset with seed s draws exactly as the single env reset with seed s + i: the
+    same hidden robot, start, sensor mounting and noise; given the single env's actions it
+    produces the single env's segments bit for bit (the physics is the same kernel; tested).
+    Observations and rewards agree to rounding: F's eigen-decomposition is LAPACK's here and
+    a closed form in the single env.
+
+    Autoreset: ``autoreset_mode`` NEXT_STEP (default, gymnasium's documented convention: the
+    step after an episode's end resets that robot and returns its first observation with
+    reward 0) or SAME_STEP (the ended robot is reset in the same step; its last observation
+    and info are in ``info["final_obs"]``, ``info["final_info"]``, masked by
+    ``info["_final_obs"]``).
+
+    Configuration: the single env's keys (``DiffDriveCalibEnv.default_config()``), as
+    ``config={...}`` or keyword arguments; ``budget`` ends every robot's episode.
+    ``reset(options={"robot": RobotSpec, "pose": (x, y, theta)})`` fixes every robot's hidden
+    robot / start pose; ``options={"reset_mask": (N,) bool}`` resets only those robots.
+
+    Info (arrays over robots): ``reward_terms`` (a dict of (N,) arrays), ``sigma_min``,
+    ``collision``, ``n_segments``, ``measurement`` (N, 5), ``estimate`` (N, P). For evaluation:
+    ``true_theta`` (N, P), ``true_params``, ``max_relative_errors`` (N,), ``segments_logged``.
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        config: dict[str, Any] | None = None,
+        estimator_factory: EstimatorFactory | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        render_mode: str | None = None,
+        **overrides: Any,
+    ):
+        if not isinstance(num_envs, int | np.integer) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        if render_mode is not None:
+            raise ValueError("the vector env does not render; render a single env instead")
+        self.autoreset_mode = AutoresetMode(autoreset_mode)
+        if self.autoreset_mode is AutoresetMode.DISABLED:
+            raise ValueError("autoreset_mode must be NEXT_STEP or SAME_STEP")
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
+        # One single env parses and validates the configuration: the same keys, spaces and
+        # nominal robot, the same simulation settings.
+        self.single = DiffDriveCalibEnv(config=config, estimator_factory=estimator_factory,
+                                        **overrides)
+        self.num_envs = int(num_envs)
+        self.config = self.single.config
+        self.single_observation_space = self.single.observation_space
+        self.single_action_space = self.single.action_space
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.render_mode = None
+        self.sim = BatchSimulation(self.single.sim.config, self.num_envs)
+        self.model = self.single.model
+        self.budget = self.single.budget
+        n, p = self.num_envs, self.model.size
+        self._generators: list[np.random.Generator | None] = [None] * n
+        self._robots: list[RobotSpec | None] = [None] * n
+        self._sensor_rngs: list[np.random.Generator | None] = [None] * n
+        self._mounts: list[SensorPose | None] = [None] * n
+        self.estimators: list[Any] = [None] * n
+        self._log = np.zeros((n, self.budget, 5))
+        self._n = np.zeros(n, dtype=int)
+        self._last_action = np.zeros((n, 2))
+        self._sigma_min = np.zeros(n)
+        self._theta = np.tile(self.single.nominal_theta, (n, 1))
+        self._true_theta = np.tile(self.single.nominal_theta, (n, 1))
+        self._eigenvalues = np.zeros((n, p))
+        self._weakest = np.zeros((n, p))
+        self._measured_pose = np.zeros((n, 3))
+        self._error = np.zeros(n)
+        self._ended = np.zeros(n, dtype=bool)  # NEXT_STEP: reset these on the next step
+        self._started = False
+
+    # -- episodes --------------------------------------------------------------------------
+    def reset(self, *, seed: int | list[int | None] | None = None,
+              options: dict[str, Any] | None = None):
+        """Reset every robot (or those of ``options["reset_mask"]``); robot i takes seed
+        ``seed + i`` (or ``seed[i]`` from a list)."""
+        options = dict(options or {})
+        mask = np.asarray(options.pop("reset_mask", np.ones(self.num_envs, dtype=bool)))
+        if mask.shape != (self.num_envs,) or mask.dtype != bool:
+            raise ValueError(f"reset_mask must be {self.num_envs} booleans")
+        if seed is None or isinstance(seed, int | np.integer):
+            seeds = [None if seed is None else int(seed) + i for i in range(self.num_envs)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds")
+        for i in np.flatnonzero(mask):
+            self._reset_robot(i, seeds[i], options)
+        self._ended[mask] = False
+        self._started = True
+        obs = self._observations()
+        info = {"sigma_min": self._sigma_min.copy(), "n_segments": self._n.copy()}
+        return obs, info
+
+    def _reset_robot(self, i: int, seed: int | None, options: dict[str, Any]) -> None:
+        """Robot i's reset, drawing in DiffDriveCalibEnv.reset's order."""
+        single = self.single
+        if seed is not None or self._generators[i] is None:
+            self._generators[i], _ = seeding.np_random(seed)
+        rng = self._generators[i]
+        robot = options.get("robot") or single.distribution.sample(rng)
+        sim_rng = np.random.default_rng(rng.integers(2**63))
+        self.sim.reset(i, robot, sim_rng, pose=options.get("pose"))
+        self._robots[i] = robot
+        self._sensor_rngs[i] = np.random.default_rng(rng.integers(2**63))
+        ranges = single.sensor_ranges
+        mount = None if ranges is None else SensorPose(*rng.uniform(ranges[:, 0], ranges[:, 1]))
+        self._mounts[i] = mount
+        self.estimators[i] = single.estimator_factory(
+            single.nominal if self.model is AXLE else single.nominal_theta.copy(),
+            single.sigma.copy())
+        self._n[i] = 0
+        self._last_action[i] = 0.0
+        self._sigma_min[i] = 0.0
+        self._theta[i] = single.nominal_theta
+        truth = np.array(robot.kinematic_params())
+        self._true_theta[i] = truth if mount is None else np.append(truth, mount.as_array())
+        self._eigenvalues[i] = 0.0
+        self._weakest[i] = 0.0
+        self._weakest[i, 0] = 1.0
+        self._measured_pose[i] = measure_pose(self.sim.pose_sensor, self.sim.pose(i),
+                                              self._sensor_rngs[i], mount, self._theta[i])
+        self._error[i] = self._max_relative_error(i)
+
+    def step(self, actions):
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        actions = np.asarray(actions, dtype=float).reshape(self.num_envs, -1)
+        if actions.shape[1] != 2 or not np.isfinite(actions).all():
+            raise ValueError(f"actions must be ({self.num_envs}, 2) finite numbers")
+        actions = np.clip(actions, -1.0, 1.0)
+        config, single = self.config, self.single
+        resetting = self._ended.copy()
+        moving = ~resetting
+        n_robots = self.num_envs
+        terms = {name: np.zeros(n_robots) for name in REWARD_TERMS}
+        collision = np.zeros(n_robots, dtype=bool)
+        rows = np.zeros((n_robots, 5))
+        if moving.any():
+            outcome = self.sim.run_segment(actions * single.max_wheel_speed,
+                                           single.segment_duration, config["settle_time"])
+            collision = outcome.collision & moving
+            previous, previous_error = self._sigma_min.copy(), self._error.copy()
+            rows[moving] = self._record(np.flatnonzero(moving), outcome, actions)
+            self._update_information(moving)
+            terms["information"] = (self._sigma_min - previous) / config["information_scale"]
+            terms["collision"] = -float(config["collision_penalty"]) * collision
+            terms["effort"] = -float(config["effort_cost"]) * 0.5 * (actions**2).sum(axis=1)
+            terms["time"] = np.full(n_robots, -float(config["time_cost"]))
+            if config["accuracy_weight"]:
+                self._error = np.array([self._max_relative_error(i) for i in range(n_robots)])
+                terms["accuracy"] = (-config["accuracy_weight"] * 100.0
+                                     * (self._error - previous_error))
+            for term in terms.values():
+                term[resetting] = 0.0
+        target = config["target_sigma_min"]
+        terminated = moving & (target is not None) & (self._sigma_min >= (target or 0.0))
+        truncated = moving & (self._n >= self.budget) & ~terminated
+        info = {
+            "reward_terms": terms,
+            "sigma_min": self._sigma_min.copy(),
+            "collision": collision,
+            "measurement": rows,
+            "estimate": self._theta.copy(),
+            "n_segments": self._n.copy(),
+        }
+        reward = sum(terms.values())
+        ended = terminated | truncated
+        if resetting.any():  # NEXT_STEP: the robots that ended last step start anew
+            self.reset(options={"reset_mask": resetting})
+            info["sigma_min"][resetting] = 0.0
+            info["n_segments"][resetting] = 0
+        obs = self._observations()
+        if self.autoreset_mode is AutoresetMode.SAME_STEP and ended.any():
+            info["final_obs"] = np.where(ended[:, None], obs, 0.0).astype(obs.dtype)
+            info["_final_obs"] = ended.copy()
+            info["final_info"] = {key: value.copy() if hasattr(value, "copy") else value
+                                  for key, value in info.items() if not key.startswith("final")}
+            info["_final_info"] = ended.copy()
+            self.reset(options={"reset_mask": ended})
+            obs = np.where(ended[:, None], self._observations(), obs)
+        else:
+            self._ended = ended
+        return obs, reward, terminated, truncated, info
+
+    def _record(self, robots: np.ndarray, outcome, actions: np.ndarray) -> np.ndarray:
+        """The moving robots' segments: the sensor's rows, the estimator updates, the log, the
+        measured poses (each robot's random draws in DiffDriveCalibEnv.step's order)."""
+        rows = outcome.measurement[robots]
+        rngs = [self._sensor_rngs[i] for i in robots]
+        mounts = [self._mounts[i] for i in robots]
+        for j, (i, mount) in enumerate(zip(robots, mounts, strict=True)):
+            if mount is not None:  # the sensor measures its own motion, in its own frame
+                sensed = body_to_sensor(outcome.true_increment[i][None, :], mount)[0]
+                rows[j, 2:] = sensed + self.single.sigma * rngs[j].standard_normal(3)
+        for j, i in enumerate(robots):
+            self.estimators[i].update(*rows[j].tolist())
+            _, self._theta[i] = read_estimate(self.estimators[i], self.model,
+                                              self.single.nominal_theta)
+        n = self._n[robots]  # < budget: an episode ends at the budget and autoresets
+        self._log[robots, n] = rows
+        self._n[robots] = n + 1
+        self._last_action[robots] = actions[robots]
+        pose_end = outcome.pose_end[robots]
+        if all(mount is None for mount in mounts):
+            self._measured_pose[robots] = self.sim.pose_sensor.each(pose_end, rngs)
+        else:
+            for j, i in enumerate(robots):
+                self._measured_pose[i] = measure_pose(self.sim.pose_sensor, pose_end[j],
+                                                      rngs[j], mounts[j], self._theta[i])
+        return rows
+
+    def _update_information(self, robots: np.ndarray) -> None:
+        """F at each robot's estimate over its log, its eigen-decomposition and sigma_min."""
+        k = int(self._n.max())
+        log = self._log[:, :k]
+        information = information_matrices(log[..., 0], log[..., 1], self._theta,
+                                           self.single.sigma, self.single.nominal_theta,
+                                           self.model)
+        eigenvalues, vectors = np.linalg.eigh(information)
+        self._eigenvalues[robots] = eigenvalues[robots]
+        self._weakest[robots] = vectors[robots, :, 0]
+        self._sigma_min[robots] = np.sqrt(np.maximum(eigenvalues[robots, 0], 0.0))
+
+    def _observations(self) -> np.ndarray:
+        """Every robot's observation (N, 3 P + 7), each built as the single env builds it."""
+        nominal, used = self.single.nominal_theta.tolist(), (self._n / self.budget).tolist()
+        columns = zip(self._theta.tolist(), self._eigenvalues.tolist(), self._weakest.tolist(),
+                      self._measured_pose.tolist(), self._last_action.tolist(), used,
+                      strict=True)
+        return np.array([observation(self.model, theta, nominal, eigenvalues, weakest, pose,
+                                     action, fraction, self.config["arena_size"],
+                                     self.single_observation_space)
+                         for theta, eigenvalues, weakest, pose, action, fraction in columns])
+
+    # -- evaluation only ---------------------------------------------------------------------
+    def _max_relative_error(self, i: int) -> float:
+        estimate = self._theta[i, :3]
+        return float(np.max(np.abs(estimate / self._true_theta[i, :3] - 1.0)))
+
+    @property
+    def true_theta(self) -> np.ndarray:
+        """The hidden model parameters (N, P) of every robot (evaluation only)."""
+        return self._true_theta.copy()
+
+    @property
+    def true_params(self) -> list[Params]:
+        """The hidden wheel parameters of every robot (evaluation only)."""
+        return [Params(*row[:3]) for row in self._true_theta]
+
+    @property
+    def max_relative_errors(self) -> np.ndarray:
+        """Every robot's largest relative wheel-parameter error (N,) (evaluation only)."""
+        return np.array([self._max_relative_error(i) for i in range(self.num_envs)])
+
+    @property
+    def segments_logged(self) -> list[np.ndarray]:
+        """Every robot's calibration rows of its current episode (n_i, 5)."""
+        return [self._log[i, :n].copy() for i, n in enumerate(self._n)]
+
