@@ -75,8 +75,10 @@ def env_source(args: argparse.Namespace, i: int
         robot = SAME_ROBOT
         mounting = {k: (v, v) for k, v in zip(("x", "y", "theta"), SENSOR.as_array(),
                                                strict=True)}
+    noise = {} if args.record_noise is None else {
+        "record_sigma_xy": args.record_noise[0], "record_sigma_theta": args.record_noise[1]}
     env = make_env(args.env, int(args.duration), robot=robot, record=True,
-                   sensor_pose=mounting)
+                   sensor_pose=mounting, **noise)
     run_protocol_episode(env, Arcs(speed=args.speed), args.seed + i)
     base = env.unwrapped
     truth = np.append(base.true_params.as_array(), base.true_sensor_pose.as_array())
@@ -111,6 +113,11 @@ def _row(label: str, values: np.ndarray) -> str:
     return label + " " + " ".join(f"{n} {v:.3f}" for n, v in zip(NAMES, values, strict=True))
 
 
+def _pair(text: str) -> tuple[float, float]:
+    sxy, sth = (float(v) for v in text.split(","))
+    return sxy, sth
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--source", choices=("synthetic", "env"), default="synthetic")
@@ -124,6 +131,9 @@ def main() -> None:
                         help="arcs speed, fraction of the motor limit (env)")
     parser.add_argument("--same-robot", action="store_true",
                         help="(env) every log of the nominal robot, the sensor at one mounting")
+    parser.add_argument("--record-noise", type=_pair, default=None, metavar="SXY,STH",
+                        help="(env) noise of each recorded pose, m and rad (default: the "
+                             "env's; 0,0: no pose noise, the physics' slip alone)")
     parser.add_argument("--seed", type=int, default=1000)
     args = parser.parse_args()
     source = synthetic_source if args.source == "synthetic" else env_source
