@@ -70,9 +70,11 @@ def load_config(algo: str, path: str | Path | None = None) -> dict[str, Any]:
     base = config.pop("extends", None)
     if base is None:
         return config
-    # extends: another config of the same folder; this one's keys replace its keys, its
-    # mappings (env_kwargs, hyperparams, ...) merged one level down.
-    merged = load_config(algo, source.with_name(f"{base}.yaml"))
+    # extends: another config (NAME.yaml, relative to this one's folder); this one's keys
+    # replace its keys, its mappings (env_kwargs, hyperparams, ...) merged one level down.
+    if not isinstance(base, str) or not base:
+        raise TrainingError(f"{source}: extends must name a config, got {base!r}")
+    merged = load_config(algo, source.parent / f"{base}.yaml")
     for key, value in config.items():
         both = isinstance(value, dict) and isinstance(merged.get(key), dict)
         merged[key] = {**merged[key], **value} if both else value
