@@ -33,10 +33,11 @@ from stable_baselines3.common.callbacks import (
     EvalCallback,
 )
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 from tqdm import tqdm
 
 import excite  # noqa: F401  (registers the environment ids)
+from agents.mixed_env import ConcatVecEnv
 from agents.vec_env import NativeVecEnv
 from excite.errors import ExciteError
 
@@ -61,30 +62,70 @@ def load_config(algo: str, path: str | Path | None = None) -> dict[str, Any]:
         raise TrainingError(f"unknown algorithm {algo!r}; choose from {', '.join(ALGOS)}")
     source = Path(path) if path else CONFIG_DIR / f"{algo}.yaml"
     try:
-        return yaml.safe_load(source.read_text())
+        config = yaml.safe_load(source.read_text())
     except (OSError, yaml.YAMLError) as exc:
         raise TrainingError(f"cannot read training config {source}: {exc}") from None
+    if not isinstance(config, dict):
+        raise TrainingError(f"training config {source} must be a mapping")
+    base = config.pop("extends", None)
+    if base is None:
+        return config
+    # extends: another config (NAME.yaml, relative to this one's folder); this one's keys
+    # replace its keys, its mappings (env_kwargs, hyperparams, ...) merged one level down.
+    if not isinstance(base, str) or not base:
+        raise TrainingError(f"{source}: extends must name a config, got {base!r}")
+    merged = load_config(algo, source.parent / f"{base}.yaml")
+    for key, value in config.items():
+        both = isinstance(value, dict) and isinstance(merged.get(key), dict)
+        merged[key] = {**merged[key], **value} if both else value
+    return merged
 
 
 def make_training_env(config: dict, n_envs: int, seed: int, training: bool = True):
     """Vectorized, monitored, normalized env: several envs as config ``vec_env`` says
     (default native, one process), one env as a DummyVecEnv. Worker processes import excite
-    through the "excite:" id prefix."""
-    kind = config.get("vec_env", "native") if n_envs > 1 else "dummy"
-    if kind not in VEC_ENVS:
-        raise TrainingError(f"unknown vec_env {kind!r}; choose from {', '.join(VEC_ENVS)}")
-    if kind == "native":
-        venv = NativeVecEnv(config["env_id"], n_envs, config.get("env_kwargs", {}))
-        venv.seed(seed)
-    else:
-        venv = make_vec_env("excite:" + config["env_id"], n_envs=n_envs, seed=seed,
-                            vec_env_cls=DummyVecEnv if kind == "dummy" else SubprocVecEnv,
-                            env_kwargs=config.get("env_kwargs", {}))
+    through the "excite:" id prefix.
+
+    With config ``robots`` (a list of env ``robot`` values: preset names or override
+    mappings) the envs are split evenly over those robots (n_envs a multiple of their number;
+    one env per robot when n_envs is 1, as for evaluation), env i seeded seed + i."""
+    robots = config.get("robots") or [config.get("env_kwargs", {}).get("robot")]
+    per_robot = max(n_envs // len(robots), 1)
+    if n_envs > 1 and per_robot * len(robots) != n_envs:
+        raise TrainingError(f"n_envs {n_envs} must be a multiple of the {len(robots)} robots")
+    parts = [_robot_env(config, robot, per_robot, seed + k * per_robot)
+             for k, robot in enumerate(robots)]
+    venv = parts[0] if len(parts) == 1 else ConcatVecEnv(parts)
     norm = config.get("normalize", {})
     return VecNormalize(venv, training=training,
                         norm_obs=norm.get("norm_obs", True),
                         norm_reward=norm.get("norm_reward", True) and training,
                         gamma=norm.get("gamma", 0.99))
+
+
+def _robot_env(config: dict, robot: Any, n_envs: int, seed: int) -> VecEnv:
+    """n_envs monitored envs of one robot distribution (env i seeded seed + i)."""
+    kwargs = dict(config.get("env_kwargs", {}))
+    if robot is not None:
+        kwargs["robot"] = robot
+    kind = config.get("vec_env", "native") if n_envs > 1 else "dummy"
+    if kind not in VEC_ENVS:
+        raise TrainingError(f"unknown vec_env {kind!r}; choose from {', '.join(VEC_ENVS)}")
+    if kind == "native":
+        venv = NativeVecEnv(config["env_id"], n_envs, kwargs)
+        venv.seed(seed)
+        return venv
+    return make_vec_env("excite:" + config["env_id"], n_envs=n_envs, seed=seed,
+                        vec_env_cls=DummyVecEnv if kind == "dummy" else SubprocVecEnv,
+                        env_kwargs=kwargs)
+
+
+def make_model(config: dict, venv, seed: int, tensorboard: str | None = None):
+    """A new model of the config's algorithm, policy and hyperparameters on ``venv``, on CPU."""
+    return ALGOS[config["algo"]](config.get("policy", "MlpPolicy"), venv, seed=seed,
+                                 device="cpu", policy_kwargs=config.get("policy_kwargs"),
+                                 verbose=0, tensorboard_log=tensorboard,
+                                 **config.get("hyperparams", {}))
 
 
 class _TqdmProgress(BaseCallback):
@@ -175,9 +216,7 @@ def train(
                               tensorboard_log=tensorboard)
     else:
         done_steps = 0
-        model = algo_cls(config.get("policy", "MlpPolicy"), venv, seed=seed, device="cpu",
-                         policy_kwargs=config.get("policy_kwargs"), verbose=0,
-                         tensorboard_log=tensorboard, **config.get("hyperparams", {}))
+        model = make_model(config, venv, seed, tensorboard)
     per_env = max(1, n_envs)
     callbacks = [
         CheckpointCallback(max(config.get("checkpoint_freq", 50_000) // per_env, 1),

@@ -103,3 +103,51 @@ def test_native_vec_env_adapter_resets_in_the_same_step():
     np.testing.assert_allclose(reward[1], single_reward, atol=1e-6)
     assert (obs[:, -1] == 0).all()  # the new episodes' budget used
     assert set(infos[0]["reward_terms"]) >= {"information", "collision"}
+
+
+def test_training_over_several_robots_splits_the_envs_and_seeds_them_in_order(tmp_path):
+    """config robots: env i is its preset's single env seeded s + i (concatenated in order,
+    actions routed to their part); evaluation gets one env per robot; bad splits are errors."""
+    from agents.mixed_env import ConcatVecEnv
+    from agents.train import make_training_env
+
+    config = {"env_id": "excite/DiffDriveCalibIdeal-v0", "env_kwargs": {"budget": 3},
+              "vec_env": "native", "robots": ["turtlebot3", {"preset": "husky"}]}
+    venv = make_training_env(config, 4, seed=7).venv
+    assert isinstance(venv, ConcatVecEnv) and venv.num_envs == 4
+    obs = venv.reset()
+    actions = np.random.default_rng(1).uniform(-1, 1, (2, 4, 2))
+    for action in actions:
+        stepped, *_ = venv.step(action)
+    for i, preset in enumerate(["turtlebot3", "turtlebot3", "husky", "husky"]):
+        single = make_env("excite/DiffDriveCalibIdeal-v0", 3, robot=preset)
+        first, _ = single.reset(seed=7 + i)
+        np.testing.assert_allclose(obs[i], first, atol=1e-6)
+        for action in actions:
+            last, *_ = single.step(action[i])
+        np.testing.assert_allclose(stepped[i], last, atol=1e-6)
+    nominal = venv.get_attr("single", [0, 3])
+    assert [s.nominal.b for s in nominal] == [0.160, 0.555]
+
+    evaluation = make_training_env(config, 1, seed=0, training=False)
+    assert evaluation.num_envs == 2
+    with pytest.raises(TrainingError, match="multiple of the 2 robots"):
+        make_training_env(config, 3, seed=0)
+
+
+def test_configs_extend_others_and_bad_configs_are_errors(tmp_path):
+    from agents.train import load_config
+
+    robots = load_config("ppo", CONFIG_DIR / "ppo_robots.yaml")
+    base = load_config("ppo")
+    assert robots["hyperparams"] == base["hyperparams"]
+    assert robots["eval"]["seed_offset"] == base["eval"]["seed_offset"]
+    assert robots["eval"]["episodes"] % len(robots["robots"]) == 0
+    assert robots["n_envs"] % len(robots["robots"]) == 0
+    child = tmp_path / "child.yaml"
+    child.write_text("extends: missing\nn_envs: 2\n")
+    with pytest.raises(TrainingError, match="missing.yaml"):
+        load_config("ppo", child)
+    child.write_text("- a list\n")
+    with pytest.raises(TrainingError, match="must be a mapping"):
+        load_config("ppo", child)
