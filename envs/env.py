@@ -19,19 +19,16 @@ from envs.simulation import Simulation, SimulationConfig
 from excite import se2
 from excite.contracts import EstimatorFactory, RobotKnowledge, Traction
 from excite.data import Segments
+from excite.estimators import DEFAULT_ESTIMATOR, estimator_factory
 from excite.information import eigen_3x3, information_matrix
 from excite.kinematics import Params
 from excite.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose, body_to_sensor
-from excite.online import OnlineEstimator
 from excite.registration import DEFAULT_BUDGET
 
-
-def default_estimator(nominal: Params | np.ndarray, sigma: np.ndarray) -> OnlineEstimator:
-    """OnlineEstimator started at the nominal robot (and sensor pose), with the sensor's noise
-    levels; the sensor-pose model when ``nominal`` has six parameters."""
-    if isinstance(nominal, Params) or len(nominal) == AXLE.size:
-        return OnlineEstimator(nominal, sigma=sigma)
-    return OnlineEstimator(nominal, sigma=sigma, model=SENSOR_POSE)
+#: The environment's estimator factory given none: the built-in of
+#: :data:`excite.estimators.DEFAULT_ESTIMATOR` (:class:`excite.OnlineEstimator` started at the
+#: nominal robot, and sensor pose on the sensor-pose model, with the sensor's noise levels).
+default_estimator = estimator_factory(DEFAULT_ESTIMATOR)
 
 
 def observation_size(model: SegmentModel) -> int:

@@ -17,9 +17,10 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
-from envs.env import EstimatorFactory, default_estimator
+from envs.env import default_estimator
 from excite.calibration import chi2_quantile
 from excite.consistency import CONFIDENCE, anees, anees_bounds, estimate_error, nees, verdict
+from excite.contracts import EstimatorFactory
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
