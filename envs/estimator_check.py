@@ -18,9 +18,9 @@ import gymnasium as gym
 import numpy as np
 
 from envs.env import default_estimator
-from excite.calibration import chi2_quantile
 from excite.consistency import CONFIDENCE, anees, anees_bounds, estimate_error, nees, verdict
 from excite.contracts import EstimatorFactory
+from excite.noise import chi2_quantile
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
