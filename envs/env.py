@@ -17,7 +17,7 @@ from envs.robot import RobotSpec, robot_distribution
 from envs.sensors import RelativePoseSensor
 from envs.simulation import Simulation, SimulationConfig
 from excite import se2
-from excite.contracts import EstimatorFactory, RobotKnowledge, Traction
+from excite.contracts import Estimator, EstimatorFactory, RobotKnowledge, Traction
 from excite.data import Segments
 from excite.estimators import DEFAULT_ESTIMATOR, estimator_factory
 from excite.information import eigen_3x3, information_matrix
@@ -214,15 +214,11 @@ class DiffDriveCalibEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         options = options or {}
-        robot = options.get("robot") or self.distribution.sample(self.np_random)
-        sim_rng = np.random.default_rng(self.np_random.integers(2**63))
+        robot, sim_rng, self._sensor_rng, self._mount = self.draw_episode(self.np_random,
+                                                                          options)
         self.sim.reset(robot, sim_rng, pose=options.get("pose"))
         self._robot = robot
-        self._sensor_rng = np.random.default_rng(self.np_random.integers(2**63))
-        self._mount = None if self.sensor_ranges is None else SensorPose(
-            *self.np_random.uniform(self.sensor_ranges[:, 0], self.sensor_ranges[:, 1]))
-        self.estimator = self.estimator_factory(
-            self.nominal if self.model is AXLE else self.nominal_theta.copy(), self.sigma.copy())
+        self.estimator = self.new_estimator()
         if self.recording_config is not None:  # its own noise stream, spawned: no draw taken
             self._recorder = Recorder(
                 self.recording_config, self.sim.encoders, self.sim.config.physics_hz,
@@ -243,6 +239,25 @@ class DiffDriveCalibEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return self._observation(), {"sigma_min": 0.0, "n_segments": 0}
+
+    def draw_episode(self, rng: np.random.Generator, options: dict[str, Any]) -> tuple[
+            RobotSpec, np.random.Generator, np.random.Generator, SensorPose | None]:
+        """An episode's draws from ``rng``, in this order: the hidden robot (unless
+        ``options["robot"]``), the simulation's and the pose sensor's random streams, and the
+        hidden sensor mounting (None on the axle model). The vector env draws each robot's
+        episode here too, so robot i with seed s + i is the single env with seed s + i."""
+        robot = options.get("robot") or self.distribution.sample(rng)
+        sim_rng = np.random.default_rng(rng.integers(2**63))
+        sensor_rng = np.random.default_rng(rng.integers(2**63))
+        mount = None if self.sensor_ranges is None else SensorPose(
+            *rng.uniform(self.sensor_ranges[:, 0], self.sensor_ranges[:, 1]))
+        return robot, sim_rng, sensor_rng, mount
+
+    def new_estimator(self) -> Estimator:
+        """A fresh estimator of ``estimator_factory`` at the nominal robot (and nominal sensor
+        pose on the sensor-pose model), with the sensor's noise levels."""
+        return self.estimator_factory(
+            self.nominal if self.model is AXLE else self.nominal_theta.copy(), self.sigma.copy())
 
     def step(self, action):
         if self._robot is None:

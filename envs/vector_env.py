@@ -19,7 +19,7 @@ from envs.simulation import BatchSimulation
 from excite.contracts import EstimatorFactory
 from excite.information import information_matrices
 from excite.kinematics import Params
-from excite.models import AXLE, SensorPose, body_to_sensor
+from excite.models import SensorPose, body_to_sensor
 
 #: The reward terms, in the order DiffDriveCalibEnv reports them.
 REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy")
@@ -139,17 +139,11 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         if seed is not None or self._generators[i] is None:
             self._generators[i], _ = seeding.np_random(seed)
         rng = self._generators[i]
-        robot = options.get("robot") or single.distribution.sample(rng)
-        sim_rng = np.random.default_rng(rng.integers(2**63))
+        robot, sim_rng, self._sensor_rngs[i], mount = single.draw_episode(rng, options)
         self.sim.reset(i, robot, sim_rng, pose=options.get("pose"))
         self._robots[i] = robot
-        self._sensor_rngs[i] = np.random.default_rng(rng.integers(2**63))
-        ranges = single.sensor_ranges
-        mount = None if ranges is None else SensorPose(*rng.uniform(ranges[:, 0], ranges[:, 1]))
         self._mounts[i] = mount
-        self.estimators[i] = single.estimator_factory(
-            single.nominal if self.model is AXLE else single.nominal_theta.copy(),
-            single.sigma.copy())
+        self.estimators[i] = single.new_estimator()
         self._n[i] = 0
         self._last_action[i] = 0.0
         self._sigma_min[i] = 0.0
