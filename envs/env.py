@@ -293,17 +293,10 @@ class DiffDriveCalibEnv(gym.Env):
         target = config["target_sigma_min"]
         terminated = target is not None and self._sigma_min >= target
         truncated = n >= self.budget and not terminated
-        terms = {
-            "information": (self._sigma_min - previous) / config["information_scale"],
-            "collision": -float(config["collision_penalty"]) if outcome.collision else 0.0,
-            "effort": -float(config["effort_cost"]) * 0.5 * (left * left + right * right),
-            "time": -float(config["time_cost"]),
-            "accuracy": 0.0,
-        }
         if config["accuracy_weight"]:
             self._error = self.max_relative_error
-            terms["accuracy"] = (-config["accuracy_weight"] * 100.0
-                                 * (self._error - previous_error))
+        terms = reward_terms(config, self._sigma_min - previous, outcome.collision,
+                             left * left + right * right, self._error - previous_error)
         info = {
             "reward_terms": terms,
             "sigma_min": self._sigma_min,
@@ -440,6 +433,31 @@ class DiffDriveCalibEnv(gym.Env):
         state = copy.copy(self.__dict__)
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
         return state
+
+
+#: The reward's terms, in the order the envs report them in ``info["reward_terms"]``.
+REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy")
+
+
+def reward_terms(config: dict[str, Any], sigma_gain: float | np.ndarray,
+                 collision: bool | np.ndarray, effort: float | np.ndarray,
+                 error_change: float | np.ndarray) -> dict[str, Any]:
+    """The reward's terms (see DiffDriveCalibEnv, "Reward") of one segment of one robot
+    (floats) or of N robots (arrays (N,); ``time``, and ``accuracy`` when it is off, stay
+    scalars for the caller to broadcast).
+
+    config: the env's configuration; sigma_gain: sigma_min's increase (relative information
+    units); collision: whether the chassis touched a wall; effort: the sum of the squared
+    normalised wheel commands; error_change: the max relative error's change (unused when
+    ``accuracy_weight`` is 0)."""
+    weight = config["accuracy_weight"]
+    return {
+        "information": sigma_gain / config["information_scale"],
+        "collision": -float(config["collision_penalty"]) * collision + 0.0,  # 0.0, not -0.0
+        "effort": -float(config["effort_cost"]) * 0.5 * effort,
+        "time": -float(config["time_cost"]),
+        "accuracy": -weight * 100.0 * error_change if weight else 0.0,
+    }
 
 
 def read_estimate(estimator, model: SegmentModel,

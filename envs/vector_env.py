@@ -13,16 +13,20 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from envs.env import DiffDriveCalibEnv, measure_pose, observation, read_estimate
+from envs.env import (
+    REWARD_TERMS,
+    DiffDriveCalibEnv,
+    measure_pose,
+    observation,
+    read_estimate,
+    reward_terms,
+)
 from envs.robot import RobotSpec
 from envs.simulation import BatchSimulation
 from excite.contracts import EstimatorFactory
 from excite.information import information_matrices
 from excite.kinematics import Params
 from excite.models import SensorPose, body_to_sensor
-
-#: The reward terms, in the order DiffDriveCalibEnv reports them.
-REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy")
 
 
 class DiffDriveCalibVectorEnv(VectorEnv):
@@ -178,16 +182,11 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             previous, previous_error = self._sigma_min.copy(), self._error.copy()
             rows[moving] = self._record(np.flatnonzero(moving), outcome, actions)
             self._update_information(moving)
-            terms["information"] = (self._sigma_min - previous) / config["information_scale"]
-            terms["collision"] = -float(config["collision_penalty"]) * collision
-            terms["effort"] = -float(config["effort_cost"]) * 0.5 * (actions**2).sum(axis=1)
-            terms["time"] = np.full(n_robots, -float(config["time_cost"]))
             if config["accuracy_weight"]:
                 self._error = np.array([self._max_relative_error(i) for i in range(n_robots)])
-                terms["accuracy"] = (-config["accuracy_weight"] * 100.0
-                                     * (self._error - previous_error))
-            for term in terms.values():
-                term[resetting] = 0.0
+            terms = {name: np.where(resetting, 0.0, value) for name, value in reward_terms(
+                config, self._sigma_min - previous, collision, (actions**2).sum(axis=1),
+                self._error - previous_error).items()}
         target = config["target_sigma_min"]
         terminated = moving & (target is not None) & (self._sigma_min >= (target or 0.0))
         truncated = moving & (self._n >= self.budget) & ~terminated
