@@ -131,6 +131,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
                 raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds")
         for i in np.flatnonzero(mask):
             self._reset_robot(i, seeds[i], options)
+        self._error[mask] = self.max_relative_errors[mask]
         self._ended[mask] = False
         self._started = True
         obs = self._observations()
@@ -159,7 +160,6 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self._weakest[i, 0] = 1.0
         self._measured_pose[i] = measure_pose(self.sim.pose_sensor, self.sim.pose(i),
                                               self._sensor_rngs[i], mount, self._theta[i])
-        self._error[i] = self._max_relative_error(i)
 
     def step(self, actions):
         if not self._started:
@@ -183,7 +183,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             rows[moving] = self._record(np.flatnonzero(moving), outcome, actions)
             self._update_information(moving)
             if config["accuracy_weight"]:
-                self._error = np.array([self._max_relative_error(i) for i in range(n_robots)])
+                self._error = self.max_relative_errors
             terms = {name: np.where(resetting, 0.0, value) for name, value in reward_terms(
                 config, self._sigma_min - previous, collision, (actions**2).sum(axis=1),
                 self._error - previous_error).items()}
@@ -268,10 +268,6 @@ class DiffDriveCalibVectorEnv(VectorEnv):
                          for theta, eigenvalues, weakest, pose, action, fraction in columns])
 
     # -- evaluation only ---------------------------------------------------------------------
-    def _max_relative_error(self, i: int) -> float:
-        estimate = self._theta[i, :3]
-        return float(np.max(np.abs(estimate / self._true_theta[i, :3] - 1.0)))
-
     @property
     def true_theta(self) -> np.ndarray:
         """The hidden model parameters (N, P) of every robot (evaluation only)."""
@@ -285,7 +281,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     @property
     def max_relative_errors(self) -> np.ndarray:
         """Every robot's largest relative wheel-parameter error (N,) (evaluation only)."""
-        return np.array([self._max_relative_error(i) for i in range(self.num_envs)])
+        return np.max(np.abs(self._theta[:, :3] / self._true_theta[:, :3] - 1.0), axis=1)
 
     @property
     def segments_logged(self) -> list[np.ndarray]:
