@@ -92,10 +92,7 @@ class GreedyPlanner(Protocol):
         score = np.where(ok, score, -np.inf)
         if self.lookahead and knowledge.n_segments + 1 < knowledge.budget:
             score = self._two_step_scores(knowledge, gains, score)
-        return self.candidates[self._best(score, knowledge)]
-
-    def _best(self, score: np.ndarray, knowledge: RobotKnowledge) -> int:
-        return best_index(score, self.candidates, knowledge)
+        return self.candidates[best_index(score, self.candidates, knowledge)]
 
     def _two_step_scores(self, knowledge: RobotKnowledge, gains: np.ndarray,
                          score: np.ndarray) -> np.ndarray:

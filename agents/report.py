@@ -26,8 +26,9 @@ import numpy as np
 from agents.metrics import N_BOOT, error_time_area, paired_ratio, time_to_accuracy
 from excite.consistency import CONFIDENCE, anees_bounds, verdict
 from excite.estimators import DEFAULT_ESTIMATOR
+from excite.models import AXLE
 
-PARAMETERS = ("r_L", "r_R", "b")
+PARAMETERS = AXLE.names
 UNDETERMINED_REL_STD = 0.1  # a parameter whose median final relative std exceeds this is flagged
 #: Accuracy thresholds of the time to accuracy (max relative error; keys of the summary).
 THRESHOLDS = {"0.5%": 0.005, "0.2%": 0.002}

@@ -40,15 +40,15 @@ from tqdm import tqdm
 from excite.calibration import calibrate
 from excite.data import Segments
 from excite.models import SENSOR_POSE, SensorPose
-from excite.noise import ChainWhitener, NoiseLevels
+from excite.noise import ChainWhitener, NoiseLevels, chi2_quantile
 from excite.registration import SENSOR_MOUNTING
 from excite.solver import Problem, levenberg_marquardt, normal_system
 from excite.synthetic import synthetic_log
 from excite.timeseries import TimeSeries, segment_timeseries
 
 SENSOR = SensorPose(0.1, -0.03, 0.4)
-CHI2_6_95 = 12.5916
-NAMES = ("r_L", "r_R", "b", "l_x", "l_y", "l_theta")
+CHI2_6_95 = chi2_quantile(0.95, SENSOR_POSE.size)
+NAMES = SENSOR_POSE.names
 #: The nominal robot without spread (--same-robot): every hidden value fixed at the nominal.
 SAME_ROBOT = {"radius_rel": 0.0, "separation_rel": 0.0, "mass_rel": 0.0, "mu_range": (0.8, 0.8),
               "com_offset_range": (0.04, 0.04)}

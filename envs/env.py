@@ -17,21 +17,18 @@ from envs.robot import RobotSpec, robot_distribution
 from envs.sensors import RelativePoseSensor
 from envs.simulation import Simulation, SimulationConfig
 from excite import se2
-from excite.contracts import EstimatorFactory, RobotKnowledge, Traction
+from excite.contracts import Estimator, EstimatorFactory, RobotKnowledge, Traction
 from excite.data import Segments
+from excite.estimators import DEFAULT_ESTIMATOR, estimator_factory
 from excite.information import eigen_3x3, information_matrix
 from excite.kinematics import Params
 from excite.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose, body_to_sensor
-from excite.online import OnlineEstimator
 from excite.registration import DEFAULT_BUDGET
 
-
-def default_estimator(nominal: Params | np.ndarray, sigma: np.ndarray) -> OnlineEstimator:
-    """OnlineEstimator started at the nominal robot (and sensor pose), with the sensor's noise
-    levels; the sensor-pose model when ``nominal`` has six parameters."""
-    if isinstance(nominal, Params) or len(nominal) == AXLE.size:
-        return OnlineEstimator(nominal, sigma=sigma)
-    return OnlineEstimator(nominal, sigma=sigma, model=SENSOR_POSE)
+#: The environment's estimator factory given none: the built-in of
+#: :data:`excite.estimators.DEFAULT_ESTIMATOR` (:class:`excite.OnlineEstimator` started at the
+#: nominal robot, and sensor pose on the sensor-pose model, with the sensor's noise levels).
+default_estimator = estimator_factory(DEFAULT_ESTIMATOR)
 
 
 def observation_size(model: SegmentModel) -> int:
@@ -217,15 +214,11 @@ class DiffDriveCalibEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         options = options or {}
-        robot = options.get("robot") or self.distribution.sample(self.np_random)
-        sim_rng = np.random.default_rng(self.np_random.integers(2**63))
+        robot, sim_rng, self._sensor_rng, self._mount = self.draw_episode(self.np_random,
+                                                                          options)
         self.sim.reset(robot, sim_rng, pose=options.get("pose"))
         self._robot = robot
-        self._sensor_rng = np.random.default_rng(self.np_random.integers(2**63))
-        self._mount = None if self.sensor_ranges is None else SensorPose(
-            *self.np_random.uniform(self.sensor_ranges[:, 0], self.sensor_ranges[:, 1]))
-        self.estimator = self.estimator_factory(
-            self.nominal if self.model is AXLE else self.nominal_theta.copy(), self.sigma.copy())
+        self.estimator = self.new_estimator()
         if self.recording_config is not None:  # its own noise stream, spawned: no draw taken
             self._recorder = Recorder(
                 self.recording_config, self.sim.encoders, self.sim.config.physics_hz,
@@ -246,6 +239,25 @@ class DiffDriveCalibEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return self._observation(), {"sigma_min": 0.0, "n_segments": 0}
+
+    def draw_episode(self, rng: np.random.Generator, options: dict[str, Any]) -> tuple[
+            RobotSpec, np.random.Generator, np.random.Generator, SensorPose | None]:
+        """An episode's draws from ``rng``, in this order: the hidden robot (unless
+        ``options["robot"]``), the simulation's and the pose sensor's random streams, and the
+        hidden sensor mounting (None on the axle model). The vector env draws each robot's
+        episode here too, so robot i with seed s + i is the single env with seed s + i."""
+        robot = options.get("robot") or self.distribution.sample(rng)
+        sim_rng = np.random.default_rng(rng.integers(2**63))
+        sensor_rng = np.random.default_rng(rng.integers(2**63))
+        mount = None if self.sensor_ranges is None else SensorPose(
+            *rng.uniform(self.sensor_ranges[:, 0], self.sensor_ranges[:, 1]))
+        return robot, sim_rng, sensor_rng, mount
+
+    def new_estimator(self) -> Estimator:
+        """A fresh estimator of ``estimator_factory`` at the nominal robot (and nominal sensor
+        pose on the sensor-pose model), with the sensor's noise levels."""
+        return self.estimator_factory(
+            self.nominal if self.model is AXLE else self.nominal_theta.copy(), self.sigma.copy())
 
     def step(self, action):
         if self._robot is None:
@@ -281,17 +293,10 @@ class DiffDriveCalibEnv(gym.Env):
         target = config["target_sigma_min"]
         terminated = target is not None and self._sigma_min >= target
         truncated = n >= self.budget and not terminated
-        terms = {
-            "information": (self._sigma_min - previous) / config["information_scale"],
-            "collision": -float(config["collision_penalty"]) if outcome.collision else 0.0,
-            "effort": -float(config["effort_cost"]) * 0.5 * (left * left + right * right),
-            "time": -float(config["time_cost"]),
-            "accuracy": 0.0,
-        }
         if config["accuracy_weight"]:
             self._error = self.max_relative_error
-            terms["accuracy"] = (-config["accuracy_weight"] * 100.0
-                                 * (self._error - previous_error))
+        terms = reward_terms(config, self._sigma_min - previous, outcome.collision,
+                             left * left + right * right, self._error - previous_error)
         info = {
             "reward_terms": terms,
             "sigma_min": self._sigma_min,
@@ -428,6 +433,31 @@ class DiffDriveCalibEnv(gym.Env):
         state = copy.copy(self.__dict__)
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
         return state
+
+
+#: The reward's terms, in the order the envs report them in ``info["reward_terms"]``.
+REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy")
+
+
+def reward_terms(config: dict[str, Any], sigma_gain: float | np.ndarray,
+                 collision: bool | np.ndarray, effort: float | np.ndarray,
+                 error_change: float | np.ndarray) -> dict[str, Any]:
+    """The reward's terms (see DiffDriveCalibEnv, "Reward") of one segment of one robot
+    (floats) or of N robots (arrays (N,); ``time``, and ``accuracy`` when it is off, stay
+    scalars for the caller to broadcast).
+
+    config: the env's configuration; sigma_gain: sigma_min's increase (relative information
+    units); collision: whether the chassis touched a wall; effort: the sum of the squared
+    normalised wheel commands; error_change: the max relative error's change (unused when
+    ``accuracy_weight`` is 0)."""
+    weight = config["accuracy_weight"]
+    return {
+        "information": sigma_gain / config["information_scale"],
+        "collision": -float(config["collision_penalty"]) * collision + 0.0,  # 0.0, not -0.0
+        "effort": -float(config["effort_cost"]) * 0.5 * effort,
+        "time": -float(config["time_cost"]),
+        "accuracy": -weight * 100.0 * error_change if weight else 0.0,
+    }
 
 
 def read_estimate(estimator, model: SegmentModel,

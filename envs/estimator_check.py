@@ -17,9 +17,11 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
-from envs.env import EstimatorFactory, default_estimator
-from excite.calibration import chi2_quantile
+from envs.env import default_estimator
 from excite.consistency import CONFIDENCE, anees, anees_bounds, estimate_error, nees, verdict
+from excite.contracts import EstimatorFactory
+from excite.models import SENSOR_POSE
+from excite.noise import chi2_quantile
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
@@ -64,10 +66,9 @@ class EstimatorReport:
 
     def summary(self) -> str:
         low, high = self.anees_bounds
-        names = ("r_L", "r_R", "b", "l_x", "l_y", "l_theta")[:self.parameters]
-        units = ("m", "m", "m", "m", "m", "rad")
-        rmse = ", ".join(f"{n} {v:.2e} {u}" for n, v, u in zip(names, self.rmse[-1], units,
-                                                                strict=False))
+        # The judged parameters lead the sensor-pose model's (the wheels first).
+        rmse = ", ".join(f"{n} {v:.2e} {u}" for n, v, u in zip(
+            SENSOR_POSE.names, self.rmse[-1], SENSOR_POSE.units, strict=False))
         return (f"{self.env_id}: {self.episodes} episodes x {len(self.anees)} segments; "
                 f"final RMSE {rmse}; "
                 f"ANEES {self.anees[-1]:.2f} (95% bounds {low:.2f}-{high:.2f}, "

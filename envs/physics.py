@@ -436,6 +436,30 @@ def _chassis(body: pymunk.Body, robot: RobotSpec) -> pymunk.Poly:
     return chassis
 
 
+def _robot_body(robot: RobotSpec, com: tuple[float, float], angle: float) -> pymunk.Body:
+    """A body of the robot at rest, its origin (the COM) at ``com`` (m), yaw ``angle`` (rad)."""
+    body = pymunk.Body(robot.mass, robot.inertia)
+    body.angle = angle
+    body.position = com
+    return body
+
+
+def _com(robot: RobotSpec, pose: np.ndarray) -> tuple[tuple[float, float], float]:
+    """The COM (m) and yaw (rad) of the robot at world pose (x, y, theta) of its axle
+    midpoint (the COM is com_offset ahead of the axle)."""
+    x, y, theta = (float(v) for v in pose)
+    d = robot.com_offset
+    return (x + d * math.cos(theta), y + d * math.sin(theta)), theta
+
+
+def _axle_pose(body: pymunk.Body, robot: RobotSpec) -> np.ndarray:
+    """World pose (x, y, theta) of the axle midpoint of the robot's ``body``."""
+    x, y = body.position
+    th = body.angle
+    d = robot.com_offset
+    return np.array([x - d * math.cos(th), y - d * math.sin(th), th])
+
+
 class PymunkDrive:
     """pymunk chassis driven by two lagging motors through friction-limited traction.
 
@@ -478,9 +502,7 @@ class PymunkDrive:
 
     def reset(self, robot: RobotSpec, pose: np.ndarray, wheel_angles: np.ndarray) -> None:
         self._robot = robot
-        x, y, theta = (float(v) for v in pose)
-        d = robot.com_offset
-        self._build_space((x + d * math.cos(theta), y + d * math.sin(theta)), theta)
+        self._build_space(*_com(robot, pose))
         self._touched = False
         self._velocity = (0.0, 0.0)
         self._omega_body = 0.0
@@ -495,21 +517,15 @@ class PymunkDrive:
         The body origin is the COM (pymunk's pickling loses a non-zero center_of_gravity);
         the axle midpoint, the pose reference, sits at body (-com_offset, 0).
         """
-        robot = self._robot
         space = _new_space(self.arena, self.dt)
-        body = pymunk.Body(robot.mass, robot.inertia)
-        body.angle = angle
-        body.position = com
-        space.add(body, _chassis(body, robot))
+        body = _robot_body(self._robot, com, angle)
+        space.add(body, _chassis(body, self._robot))
         space.on_collision(_CHASSIS_TYPE, _WALL_TYPE, pre_solve=_mark_contact, data=self._contact)
         self._space, self._body = space, body
 
     @property
     def pose(self) -> np.ndarray:
-        x, y = self._body.position
-        th = self._body.angle
-        d = self._robot.com_offset
-        return np.array([x - d * math.cos(th), y - d * math.sin(th), th])
+        return _axle_pose(self._body, self._robot)
 
     @property
     def wheel_angles(self) -> np.ndarray:
@@ -594,10 +610,8 @@ class PymunkBatchDrive:
     def reset(self, i: int, robot: RobotSpec, pose: np.ndarray,
               wheel_angles: np.ndarray) -> None:
         """Place robot ``i`` at rest at world pose (x, y, theta) with wheel angles (rad)."""
-        x, y, theta = (float(v) for v in pose)
-        d = robot.com_offset
         self._robots[i] = robot
-        self._new_body(i, (x + d * math.cos(theta), y + d * math.sin(theta)), theta)
+        self._new_body(i, *_com(robot, pose))
         self._state[:, i] = (0.0, 0.0, float(wheel_angles[0]), float(wheel_angles[1]),
                              0.0, 0.0, 0.0)
         constants = traction_constants(robot, self.dt)
@@ -611,9 +625,7 @@ class PymunkBatchDrive:
             self._space.remove(self._bodies[i], self._shapes[i])
             del self._shape_index[self._shapes[i]]
         robot = self._robots[i]
-        body = pymunk.Body(robot.mass, robot.inertia)
-        body.angle = angle
-        body.position = com
+        body = _robot_body(robot, com, angle)
         shape = _chassis(body, robot)
         shape.filter = self._filter
         self._shape_index[shape] = i
@@ -672,10 +684,7 @@ class PymunkBatchDrive:
 
     def pose(self, i: int) -> np.ndarray:
         """Robot i's world pose (x, y, theta) of the axle midpoint."""
-        x, y = self._bodies[i].position
-        th = self._bodies[i].angle
-        d = self._robots[i].com_offset
-        return np.array([x - d * math.cos(th), y - d * math.sin(th), th])
+        return _axle_pose(self._bodies[i], self._robots[i])
 
     @property
     def wheel_angles(self) -> np.ndarray:

@@ -13,16 +13,20 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from envs.env import DiffDriveCalibEnv, measure_pose, observation, read_estimate
+from envs.env import (
+    REWARD_TERMS,
+    DiffDriveCalibEnv,
+    measure_pose,
+    observation,
+    read_estimate,
+    reward_terms,
+)
 from envs.robot import RobotSpec
 from envs.simulation import BatchSimulation
 from excite.contracts import EstimatorFactory
 from excite.information import information_matrices
 from excite.kinematics import Params
-from excite.models import AXLE, SensorPose, body_to_sensor
-
-#: The reward terms, in the order DiffDriveCalibEnv reports them.
-REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy")
+from excite.models import SensorPose, body_to_sensor
 
 
 class DiffDriveCalibVectorEnv(VectorEnv):
@@ -127,6 +131,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
                 raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds")
         for i in np.flatnonzero(mask):
             self._reset_robot(i, seeds[i], options)
+        self._error[mask] = self.max_relative_errors[mask]
         self._ended[mask] = False
         self._started = True
         obs = self._observations()
@@ -139,17 +144,11 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         if seed is not None or self._generators[i] is None:
             self._generators[i], _ = seeding.np_random(seed)
         rng = self._generators[i]
-        robot = options.get("robot") or single.distribution.sample(rng)
-        sim_rng = np.random.default_rng(rng.integers(2**63))
+        robot, sim_rng, self._sensor_rngs[i], mount = single.draw_episode(rng, options)
         self.sim.reset(i, robot, sim_rng, pose=options.get("pose"))
         self._robots[i] = robot
-        self._sensor_rngs[i] = np.random.default_rng(rng.integers(2**63))
-        ranges = single.sensor_ranges
-        mount = None if ranges is None else SensorPose(*rng.uniform(ranges[:, 0], ranges[:, 1]))
         self._mounts[i] = mount
-        self.estimators[i] = single.estimator_factory(
-            single.nominal if self.model is AXLE else single.nominal_theta.copy(),
-            single.sigma.copy())
+        self.estimators[i] = single.new_estimator()
         self._n[i] = 0
         self._last_action[i] = 0.0
         self._sigma_min[i] = 0.0
@@ -161,7 +160,6 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self._weakest[i, 0] = 1.0
         self._measured_pose[i] = measure_pose(self.sim.pose_sensor, self.sim.pose(i),
                                               self._sensor_rngs[i], mount, self._theta[i])
-        self._error[i] = self._max_relative_error(i)
 
     def step(self, actions):
         if not self._started:
@@ -184,16 +182,11 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             previous, previous_error = self._sigma_min.copy(), self._error.copy()
             rows[moving] = self._record(np.flatnonzero(moving), outcome, actions)
             self._update_information(moving)
-            terms["information"] = (self._sigma_min - previous) / config["information_scale"]
-            terms["collision"] = -float(config["collision_penalty"]) * collision
-            terms["effort"] = -float(config["effort_cost"]) * 0.5 * (actions**2).sum(axis=1)
-            terms["time"] = np.full(n_robots, -float(config["time_cost"]))
             if config["accuracy_weight"]:
-                self._error = np.array([self._max_relative_error(i) for i in range(n_robots)])
-                terms["accuracy"] = (-config["accuracy_weight"] * 100.0
-                                     * (self._error - previous_error))
-            for term in terms.values():
-                term[resetting] = 0.0
+                self._error = self.max_relative_errors
+            terms = {name: np.where(resetting, 0.0, value) for name, value in reward_terms(
+                config, self._sigma_min - previous, collision, (actions**2).sum(axis=1),
+                self._error - previous_error).items()}
         target = config["target_sigma_min"]
         terminated = moving & (target is not None) & (self._sigma_min >= (target or 0.0))
         truncated = moving & (self._n >= self.budget) & ~terminated
@@ -275,10 +268,6 @@ class DiffDriveCalibVectorEnv(VectorEnv):
                          for theta, eigenvalues, weakest, pose, action, fraction in columns])
 
     # -- evaluation only ---------------------------------------------------------------------
-    def _max_relative_error(self, i: int) -> float:
-        estimate = self._theta[i, :3]
-        return float(np.max(np.abs(estimate / self._true_theta[i, :3] - 1.0)))
-
     @property
     def true_theta(self) -> np.ndarray:
         """The hidden model parameters (N, P) of every robot (evaluation only)."""
@@ -292,7 +281,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     @property
     def max_relative_errors(self) -> np.ndarray:
         """Every robot's largest relative wheel-parameter error (N,) (evaluation only)."""
-        return np.array([self._max_relative_error(i) for i in range(self.num_envs)])
+        return np.max(np.abs(self._theta[:, :3] / self._true_theta[:, :3] - 1.0), axis=1)
 
     @property
     def segments_logged(self) -> list[np.ndarray]:

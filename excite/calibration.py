@@ -24,7 +24,14 @@ from excite.errors import DataError
 from excite.information import as_sigma, inverse_information
 from excite.kinematics import Params
 from excite.models import AXLE, SENSOR_POSE, FixedSensorPoseModel, SegmentModel, SensorPose
-from excite.noise import ChainWhitener, NoiseLevels, chi2_quantile, moment_noise, reml_noise
+from excite.noise import (
+    ChainWhitener,
+    NoiseLevels,
+    chi2_quantile,
+    chi2_survival,
+    moment_noise,
+    reml_noise,
+)
 from excite.solver import Fit, Loss, Problem, complement, levenberg_marquardt, normal_system
 from excite.starts import (
     DEFAULT_NOMINAL,
@@ -57,12 +64,6 @@ NOISE_ROUNDS = 8
 #: The noise levels have settled when no level moves by more than this fraction.
 NOISE_RTOL = 0.01
 _UNIT_SIGMA = np.ones(3)
-
-
-def _chi2_survival(x: float, dof: float) -> float:
-    from scipy.special import chdtrc
-
-    return float(chdtrc(dof, x))
 
 
 @dataclass(frozen=True)
@@ -328,7 +329,7 @@ def _goodness_of_fit(mf: _ModelFit, sigma: FloatArray) -> tuple[bool, FloatArray
     inverse = np.linalg.pinv(system.information, hermitian=True)
     dof = mf.problem.n - np.einsum("ij,cji->c", inverse, system.channel_information)
     statistic = mf.fit.ev.unit_system()[2] / sigma**2
-    survival = np.array([_chi2_survival(s, d) for s, d in zip(statistic, dof, strict=True)])
+    survival = np.array([chi2_survival(s, d) for s, d in zip(statistic, dof, strict=True)])
     ratio = np.sqrt(statistic / np.maximum(dof, 1.0))
     return bool(np.all(survival > (1.0 - TEST_LEVEL) / 3.0)), ratio
 

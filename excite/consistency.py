@@ -15,10 +15,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from excite.calibration import chi2_quantile
 from excite.contracts import Estimator
 from excite.errors import MetricError
 from excite.kinematics import Params
+from excite.noise import chi2_quantile
 
 __all__ = [
     "CONFIDENCE",

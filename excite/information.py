@@ -102,17 +102,20 @@ def scaled_jacobian(
     scale: Params | ArrayLike | None = None,
     model: SegmentModel = AXLE,
 ) -> FloatArray:
-    """Whitened, relatively scaled Jacobian of each segment, shape (N, 3, P).
+    """Whitened, relatively scaled Jacobian of each segment, shape (N, 3, P), batch-first:
+    (..., N, 3, P) for logs of wheel increments shaped (..., N), each at its own parameters.
 
-    params: where the Jacobian is evaluated (Params, or the model's P parameters). scale: the
-    nominal parameters whose ``model.column_scale`` multiplies the columns (default: params
-    itself). model: the segment model (default the axle model).
+    params: where the Jacobian is evaluated (Params, or the model's P parameters, (..., P)).
+    scale: the nominal parameters whose ``model.column_scale`` multiplies the columns
+    (default: params itself; (P,) or (..., P)). model: the segment model (default the axle
+    model).
     """
     theta = as_theta(params)
     nominal = theta if scale is None else as_theta(scale)
-    phi_L, phi_R = _increments(dphi_L, dphi_R)
+    phi_L, phi_R = np.broadcast_arrays(np.atleast_1d(np.asarray(dphi_L, dtype=float)),
+                                       np.atleast_1d(np.asarray(dphi_R, dtype=float)))
     jac = model.jacobian(phi_L, phi_R, theta)
-    return jac / as_sigma(sigma)[:, None] * model.column_scale(nominal)[None, :]
+    return jac / as_sigma(sigma)[:, None] * model.column_scale(nominal)[..., None, None, :]
 
 
 def _information_rows(
@@ -220,12 +223,10 @@ def information_matrices(
     dphi_L, dphi_R (N, K): each log's wheel increments (rad), padded with zeros (a segment
     without motion adds no information); theta (N, P): where each log's F is evaluated;
     scale: the nominal parameters of the column scale ((P,) or (N, P)). The same F as
-    :func:`information_matrix` of each log (tested), from the model's Jacobian.
+    :func:`information_matrix` of each log (tested), from the batched
+    :func:`scaled_jacobian`.
     """
-    theta = np.asarray(theta, dtype=float)
-    jac = model.jacobian(dphi_L, dphi_R, theta)  # (N, K, 3, P)
-    columns = model.column_scale(np.asarray(scale, dtype=float))[..., None, None, :]
-    return fisher_information(jac / as_sigma(sigma)[:, None] * columns)
+    return fisher_information(scaled_jacobian(dphi_L, dphi_R, theta, sigma, scale, model))
 
 
 #: Segment count up to which the pure-Python moments beat numpy's per-call overhead (measured

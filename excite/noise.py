@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 from excite.data import Segments
 
 __all__ = ["NoiseLevels", "ChainWhitener", "moment_noise", "reml_noise", "chi2_quantile",
-           "chi_bar_square_quantile", "SEGMENT_NOISE_TEST_LEVEL"]
+           "chi2_survival", "chi_bar_square_quantile", "SEGMENT_NOISE_TEST_LEVEL"]
 
 FloatArray = NDArray[np.float64]
 _BAND = 5  # lower bandwidth of C in segment-major order (x, y, theta per segment)
@@ -69,17 +69,24 @@ def chi2_quantile(q: float, dof: float) -> float:
     return float(chdtri(dof, 1.0 - q))
 
 
+def chi2_survival(x: float, dof: float) -> float:
+    """P(X > x) for X chi-square with ``dof`` degrees of freedom (scipy's special function,
+    imported on first use)."""
+    from scipy.special import chdtrc
+
+    return float(chdtrc(dof, x))
+
+
 def chi_bar_square_quantile(q: float, components: int) -> float:
     """The q-quantile (2^-n < q < 1) of the chi-bar-square distribution of the likelihood ratio
     for n = ``components`` orthogonal variance components on the boundary: the mixture
     sum_k binom(n, k) / 2^n chi2(k), k = 0..n (chi2(0) a point mass at 0)."""
     from scipy.optimize import brentq
-    from scipy.special import chdtrc
 
     weights = [math.comb(components, k) / 2**components for k in range(1, components + 1)]
 
     def excess(x: float) -> float:
-        return sum(w * chdtrc(k, x) for k, w in enumerate(weights, start=1)) - (1.0 - q)
+        return sum(w * chi2_survival(x, k) for k, w in enumerate(weights, start=1)) - (1.0 - q)
 
     return float(brentq(excess, 0.0, chi2_quantile(q, components)))
 
