@@ -71,7 +71,7 @@ from tqdm import tqdm
 from agents.backends import LOCAL, RAY, check_backend, ray_session
 from agents.train import (
     ALGOS,
-    _latest_checkpoint,
+    latest_checkpoint,
     load_config,
     normalization_path,
     train,
@@ -288,7 +288,7 @@ def _run_trial(params: dict, sweep: SweepConfig, out: str) -> None:
     config_path.write_text(yaml.safe_dump(trial_config(sweep, params), sort_keys=False))
     report = ReportToTune(folder / "tune_report.json")
     train(folder, sweep.algo, sweep.timesteps, seed=int(params["seed"]),
-          resume=_latest_checkpoint(folder) is not None, config_path=config_path,
+          resume=latest_checkpoint(folder) is not None, config_path=config_path,
           progress=False, after_eval=report)
     if not report.reported and (stored := report.stored()) is not None:
         tune.report(stored["last"])  # resumed with nothing left to train

@@ -159,7 +159,9 @@ class _SaveNormalizationOnBest(BaseCallback):
         return True
 
 
-def _latest_checkpoint(out: Path) -> tuple[Path, Path, int] | None:
+def latest_checkpoint(out: Path) -> tuple[Path, Path, int] | None:
+    """The newest checkpoint in ``out``: (model zip, its normalization pickle, steps), or None
+    when there is none with both files."""
     best = None
     for model in (out / "checkpoints").glob("ckpt_*_steps.zip"):
         steps = int(model.stem.split("_")[1])
@@ -205,7 +207,7 @@ def train(
     eval_cfg = config.get("eval", {})
     eval_env = make_training_env(config, 1, seed + eval_cfg.get("seed_offset", 1_000_000),
                                  training=False)
-    checkpoint = _latest_checkpoint(out) if resume else None
+    checkpoint = latest_checkpoint(out) if resume else None
     if resume and checkpoint is None:
         raise TrainingError(f"nothing to resume in {out} (no checkpoint yet)")
     tensorboard = str(out / "tensorboard") if importlib.util.find_spec("tensorboard") else None
