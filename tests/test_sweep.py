@@ -71,7 +71,10 @@ def test_killed_sweep_resumes_its_trials(ray_cluster, tmp_path):
     """SIGKILL `excite sweep` (joined to the session's Ray) once a trial has finished; the
     same command restores the Tune experiment: the finished trial is kept, not retrained."""
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "excite.cli", "sweep", str(_config(tmp_path, TINY)),
+    # One trial at a time (2 CPUs each on the 2-CPU session Ray), each long enough that the
+    # later ones are still to run when the first has ended, however fast the machine.
+    serial = {**TINY, "timesteps": 2048, "cpus_per_trial": 2}
+    cmd = [sys.executable, "-m", "excite.cli", "sweep", str(_config(tmp_path, serial)),
            "--out", str(out), "--backend", "ray", "--address", ray_cluster]
     env = {**os.environ, "PYTHONPATH": os.getcwd()}
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -79,10 +82,10 @@ def test_killed_sweep_resumes_its_trials(ray_cluster, tmp_path):
     deadline, finished = time.time() + 150, []
     while time.time() < deadline and not finished:  # a trial ended, and Tune saved after
         ended = [p.stat().st_mtime for p in (out / "trials").glob("*/checkpoints/"
-                                                                   "ckpt_512_steps.zip")]
+                                                                   "ckpt_2048_steps.zip")]
         saved = [p.stat().st_mtime for p in (out / "tune").glob("experiment_state-*.json")]
         if ended and saved and max(saved) > min(ended):
-            finished = list((out / "trials").glob("*/checkpoints/ckpt_512_steps.zip"))
+            finished = list((out / "trials").glob("*/checkpoints/ckpt_2048_steps.zip"))
         time.sleep(0.2)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
