@@ -67,6 +67,7 @@ def synthetic_source(args: argparse.Namespace, i: int
 def env_source(args: argparse.Namespace, i: int
                ) -> tuple[TimeSeries, np.ndarray, tuple[float, float]]:
     """A log of the simulator driven by the arcs protocol at args.speed."""
+    from agents.catalog import make_protocol
     from agents.compare import make_env, run_protocol_episode
     from agents.protocols import Arcs
 
@@ -79,7 +80,8 @@ def env_source(args: argparse.Namespace, i: int
         "record_sigma_xy": args.record_noise[0], "record_sigma_theta": args.record_noise[1]}
     env = make_env(args.env, int(args.duration), robot=robot, record=True,
                    sensor_pose=mounting, **noise)
-    run_protocol_episode(env, Arcs(speed=args.speed), args.seed + i)
+    protocol = Arcs(speed=args.speed) if args.protocol is None else make_protocol(args.protocol)
+    run_protocol_episode(env, protocol, args.seed + i)
     base = env.unwrapped
     truth = np.append(base.true_params.as_array(), base.true_sensor_pose.as_array())
     sigma = base.recording.sigma
@@ -129,6 +131,9 @@ def main() -> None:
     parser.add_argument("--env", default="excite/DiffDriveCalibSensor-v0", help="(env)")
     parser.add_argument("--speed", type=float, default=0.2,
                         help="arcs speed, fraction of the motor limit (env)")
+    parser.add_argument("--protocol", default=None, metavar="SPEC",
+                        help="(env) drive with this protocol (e.g. random) instead of arcs at "
+                             "--speed")
     parser.add_argument("--same-robot", action="store_true",
                         help="(env) every log of the nominal robot, the sensor at one mounting")
     parser.add_argument("--record-noise", type=_pair, default=None, metavar="SXY,STH",
@@ -155,7 +160,8 @@ def main() -> None:
             known.append(theta - truth)
     errors, known, distances = np.array(errors), np.array(known), np.array(distances)
     rmse = np.sqrt(np.mean(errors**2, axis=0))
-    what = (f"{args.env}, arcs at {args.speed:g}" if args.source == "env" else
+    driven = f"arcs at {args.speed:g}" if args.protocol is None else args.protocol
+    what = (f"{args.env}, {driven}" if args.source == "env" else
             f"synthetic, pose noise {args.pose_noise:g}, slip {args.slip:g}")
     print(f"{args.logs} logs of {args.duration:g} s ({what})")
     print(f"truth inside the 95% ellipse (6 parameters): {np.mean(distances < CHI2_6_95):.3f}")

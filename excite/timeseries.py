@@ -637,8 +637,9 @@ class Limits:
     max_gap (s): a stream interval longer than this (or than the window) is a gap; None means
         3x the stream's median sample period.
     max_speed (m/s), max_turn_rate (rad/s): sensor speed and turn rate between consecutive pose
-        samples above which the step is a jump. Sized for ground robots below ~2 m/s and
-        ~3 rad/s; note the apparent speed includes the pose noise divided by the period
+        samples above which the step is a jump. Sized for ground robots below ~3.5 m/s and
+        3 revolutions per second (the presets reach 2 m/s and, spinning at full speed, up to
+        10.7 rad/s); note the apparent speed includes the pose noise divided by the period
         (1 cm at 100 Hz reads as ~1.4 m/s).
     max_wheel_rate (rad/s): wheel rate between consecutive encoder samples above which the
         step is a jump (a counter reset or overflow).
@@ -649,7 +650,7 @@ class Limits:
 
     max_gap: float | None = None
     max_speed: float = 5.0
-    max_turn_rate: float = 2.0 * math.pi
+    max_turn_rate: float = 6.0 * math.pi
     max_wheel_rate: float = 200.0
     still_wheel: float = 0.02
     still_distance: float = 0.01
