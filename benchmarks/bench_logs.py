@@ -38,6 +38,7 @@ import numpy as np
 from tqdm import tqdm
 
 from excite.calibration import calibrate
+from excite.commands.args import pose_noise_arg
 from excite.data import Segments
 from excite.models import SENSOR_POSE, SensorPose
 from excite.noise import ChainWhitener, NoiseLevels, chi2_quantile
@@ -115,11 +116,6 @@ def _row(label: str, values: np.ndarray) -> str:
     return label + " " + " ".join(f"{n} {v:.3f}" for n, v in zip(NAMES, values, strict=True))
 
 
-def _pair(text: str) -> tuple[float, float]:
-    sxy, sth = (float(v) for v in text.split(","))
-    return sxy, sth
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--source", choices=("synthetic", "env"), default="synthetic")
@@ -136,7 +132,7 @@ def main() -> None:
                              "--speed")
     parser.add_argument("--same-robot", action="store_true",
                         help="(env) every log of the nominal robot, the sensor at one mounting")
-    parser.add_argument("--record-noise", type=_pair, default=None, metavar="SXY,STH",
+    parser.add_argument("--record-noise", type=pose_noise_arg, default=None, metavar="SXY,STH",
                         help="(env) noise of each recorded pose, m and rad (default: the "
                              "env's; 0,0: no pose noise, the physics' slip alone)")
     parser.add_argument("--seed", type=int, default=1000)

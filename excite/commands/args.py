@@ -4,6 +4,7 @@ or raises :class:`UsageError` with a one-line message naming the option."""
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Sequence
 
 from excite.errors import ExciteError
@@ -62,6 +63,19 @@ def sensor_pose_arg(text: str, option: str = "--sensor-pose"):
         return SensorPose(*map(float, parts))
     except ValueError:
         raise UsageError(f"{option}: X,Y,THETA must be finite numbers, got {text!r}") from None
+
+
+def pose_noise_arg(text: str) -> tuple[float, float]:
+    """--pose-noise SXY,STH: two finite numbers >= 0 (m, rad); 0 turns that noise off."""
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 2 or not all(0 <= v < math.inf for v in values):
+        raise argparse.ArgumentTypeError(f"must be SXY,STH: two finite numbers >= 0 (m, rad), "
+                                         f"got {text!r}")
+    return values[0], values[1]
 
 
 def fraction_arg(text: str) -> float:

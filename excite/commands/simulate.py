@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +24,13 @@ from excite.bags import (
     RIGHT_WHEEL,
     STORAGES,
 )
-from excite.commands.args import UsageError, env_id, positive_int, robot_preset
+from excite.commands.args import (
+    UsageError,
+    env_id,
+    pose_noise_arg,
+    positive_int,
+    robot_preset,
+)
 from excite.registration import DEFAULT_ENV_ID
 
 FORMATS = ("segments", "timeseries", "bag")
@@ -48,26 +53,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     sim.add_argument("--storage", choices=STORAGES,
                      help="bag storage (with --format bag): sqlite3 (default) or mcap "
                      "(rosbag2, OUT is a directory), ros1 (OUT is a .bag file)")
-    sim.add_argument("--pose-noise", type=_pose_noise, metavar="SXY,STH",
+    sim.add_argument("--pose-noise", type=pose_noise_arg, metavar="SXY,STH",
                      help="noise std of each recorded pose (m, rad; with --format timeseries "
                      "or bag; default: the env's record_sigma_xy, record_sigma_theta)")
     sim.add_argument("--out", required=True, metavar="FILE",
                      help="the log (segment CSV, time-series CSV or bag); the hidden truth "
                      "goes to FILE.truth.json")
     sim.set_defaults(handler=run)
-
-
-def _pose_noise(text: str) -> tuple[float, float]:
-    """--pose-noise SXY,STH: two finite numbers >= 0 (m, rad); 0 turns that noise off."""
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 2 or not all(0 <= v < math.inf for v in values):
-        raise argparse.ArgumentTypeError(f"must be SXY,STH: two finite numbers >= 0 (m, rad), "
-                                         f"got {text!r}")
-    return values[0], values[1]
 
 
 def _check_output(args: argparse.Namespace, out: Path) -> None:
