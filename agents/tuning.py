@@ -42,7 +42,7 @@ from excite.errors import ExciteError
 
 #: Version of the tuned-settings file format.
 TUNED_FORMAT = 1
-#: Where the package keeps the tuned settings of its registered envs.
+#: Where the package keeps the tuned settings of its registered envs (per robot preset).
 SHIPPED_DIR = Path(__file__).parent / "tuned"
 CRITERION = ("lowest median over the tuning episodes of the final max relative error of "
              "r_L, r_R, b")
@@ -68,9 +68,11 @@ def work_dir(out: str | Path) -> Path:
     return Path(out).with_suffix(".tuning")
 
 
-def shipped_path(env_id: str) -> Path:
-    """The package's tuned-settings file of an env id (it may not exist)."""
-    return SHIPPED_DIR / (env_id.replace("/", "_") + ".json")
+def shipped_path(env_id: str, robot: str = "default") -> Path:
+    """The package's tuned-settings file of an env id and robot preset (it may not exist):
+    ``excite_ID.json`` for the default robot, ``excite_ID.PRESET.json`` for another."""
+    stem = env_id.replace("/", "_")
+    return SHIPPED_DIR / (f"{stem}.json" if robot == "default" else f"{stem}.{robot}.json")
 
 
 def select(columns: Mapping[str, np.ndarray], spec: ProtocolSpec,

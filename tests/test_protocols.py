@@ -22,7 +22,14 @@ from agents.catalog import (
 )
 from agents.compare import STREAM_SPAN, CompareSettings, episode_seed, episode_seeds
 from agents.protocols import Parameter, Protocol
-from agents.tuning import TunedError, candidates, check_disjoint, load_tuned, shipped_path
+from agents.tuning import (
+    SHIPPED_DIR,
+    TunedError,
+    candidates,
+    check_disjoint,
+    load_tuned,
+    shipped_path,
+)
 from excite.contracts import RobotKnowledge
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID, ENV_IDS
 from tests.conftest import assert_one_line_error, run_cli
@@ -217,18 +224,21 @@ def test_compare_refuses_tuned_settings_chosen_on_its_own_episodes(tmp_path, cap
     assert_one_line_error(code, err, "--out must name a .json file")
 
 
-@pytest.mark.parametrize("env", list(ENV_IDS))
-def test_shipped_tuned_settings_were_tuned_on_tuning_seeds_only(env):
-    path = shipped_path(env)
-    if not path.exists():
-        assert env != DEFAULT_ENV_ID, "the default env ships its tuned settings"
-        pytest.skip(f"no tuned settings shipped for {env}")
+def test_the_default_env_and_robot_ship_tuned_settings():
+    assert shipped_path(DEFAULT_ENV_ID).exists()
+    assert shipped_path(DEFAULT_ENV_ID, "jackal").name == "excite_DiffDriveCalib-v0.jackal.json"
+
+
+@pytest.mark.parametrize("path", sorted(SHIPPED_DIR.glob("*.json")), ids=lambda p: p.name)
+def test_shipped_tuned_settings_were_tuned_on_tuning_seeds_only(path):
     document = load_tuned(path)
-    assert document["env_id"] == env and document["segments"] == DEFAULT_BUDGET
+    env, robot = document["env_id"], document["robot"]
+    assert env in ENV_IDS and shipped_path(env, robot) == path  # found by compare --robot
+    assert document["segments"] == DEFAULT_BUDGET
     assert document["stream"] == "tuning" and document["episodes"] >= 100
     assert min(document["tuning_seeds"]) >= STREAM_SPAN
     assert document["tuning_seeds"] == episode_seeds(
-        CompareSettings(env, DEFAULT_BUDGET, document["seed"], stream="tuning"),
+        CompareSettings(env, DEFAULT_BUDGET, document["seed"], robot, stream="tuning"),
         document["episodes"])
     scripted = {spec.label for spec in default_protocols()} - {"learned"}
     assert scripted <= set(document["protocols"])

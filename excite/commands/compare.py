@@ -5,8 +5,8 @@ parameters; a user's protocol is ``module:Class``). ``--estimators`` adds a seco
 every protocol runs with every estimator (``online``, ``ekf``, ``window``, with
 ``:KEY=VALUE`` settings, or a user's ``module:factory``) on the same episodes. Settings
 tuned by ``excite tune`` apply to the protocols written as they were tuned (``--tuned``); by
-default the settings the package ships for ``--env`` (when tuned for the same segments and
-robot).
+default the settings the package ships for ``--env`` and ``--robot`` (when tuned for the same
+segments).
 """
 
 from __future__ import annotations
@@ -87,8 +87,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       "episodes (default: online)")
     cmp_.add_argument("--tuned", default=TUNED_AUTO, metavar="TUNED.json",
                       help="settings from excite tune for the protocols written as tuned; "
-                      "auto (default): those shipped for --env if tuned for these segments "
-                      "and robot; none: the declared defaults")
+                      "auto (default): those shipped for --env and --robot if tuned for these "
+                      "segments; none: the declared defaults")
     cmp_.add_argument("--out", default="excite_compare", metavar="DIR")
     cmp_.set_defaults(handler=run)
 
@@ -170,9 +170,10 @@ def tuned_specs(specs: list[ProtocolSpec], tuned: str, settings: CompareSettings
 
     if tuned == TUNED_NONE:
         return defaults("--tuned none")
-    path = shipped_path(settings.env_id) if tuned == TUNED_AUTO else Path(tuned)
+    path = shipped_path(settings.env_id, settings.robot) if tuned == TUNED_AUTO else Path(tuned)
     if tuned == TUNED_AUTO and not path.exists():
-        return defaults(f"no tuned settings are shipped for {settings.env_id}")
+        return defaults(f"no tuned settings are shipped for {settings.env_id} and the "
+                        f"{settings.robot} robot")
     document = load_tuned(path)
     if reason := mismatch(document, settings):
         if tuned != TUNED_AUTO:
