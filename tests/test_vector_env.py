@@ -277,3 +277,68 @@ def test_user_estimators_partial_resets_and_seed_lists():
     assert info["n_segments"].tolist() == [1, 0, 1] and len(made) == 4
     with pytest.raises(ValueError, match="seed"):
         venv.reset(seed=[1, 2])
+
+
+@pytest.mark.parametrize("model", [AXLE, SENSOR_POSE])
+def test_batched_observations_are_the_single_env_observation(model):
+    """observations (the vector env's, batch-first) and observation (the single env's, on
+    Python floats) give the same float32 numbers, clipping and the eigenvector's sign
+    included (ties in magnitude: the first entry decides)."""
+    from envs.env import DiffDriveCalibEnv, observation, observations
+
+    env = DiffDriveCalibEnv(sensor_pose=None if model is AXLE else {"x": (0.0, 0.1)})
+    rng = np.random.default_rng(0)
+    n, p = 200, model.size
+    nominal = env.nominal_theta
+    theta = nominal * rng.uniform(0.0, 2.5, (n, p)) + rng.normal(0, 0.05, (n, p))
+    eigenvalues = np.sort(rng.lognormal(3.0, 6.0, (n, p)), axis=1) * rng.choice([-1e-9, 1], (n, p))
+    weakest = rng.normal(size=(n, p))
+    weakest[:5, :2] = [[0.5, -0.5], [-0.5, 0.5], [0.0, 0.0], [-1.0, 1.0], [1.0, -1.0]]
+    pose = rng.uniform(-4, 4, (n, 3)) * [1, 1, 3]
+    actions = rng.uniform(-1, 1, (n, 2))
+    used = rng.uniform(0, 1, n)
+    batch = observations(model, theta, nominal, eigenvalues, weakest, pose, actions, used,
+                         env.config["arena_size"], env.observation_space)
+    assert batch.dtype == np.float32 and batch.shape == (n, 3 * p + 7)
+    for i in range(n):
+        one = observation(model, theta[i].tolist(), nominal.tolist(), eigenvalues[i].tolist(),
+                          weakest[i].tolist(), pose[i].tolist(), actions[i].tolist(),
+                          float(used[i]), env.config["arena_size"], env.observation_space)
+        np.testing.assert_array_equal(batch[i], one)
+    space = env.observation_space
+    assert (batch == space.high).any() and (batch == space.low).any()  # clipped both ways
+
+
+def test_batched_sensor_increments_and_poses_are_the_single_robots():
+    """body_to_sensor with one mounting per increment, and measure_poses / sense_increments
+    of N robots, are the one-robot computations bit for bit (each robot drawing its own
+    noise)."""
+    from envs.env import measure_poses, sense_increments
+    from envs.sensors import RelativePoseSensor
+    from excite.models import SensorPose, body_to_sensor
+
+    rng = np.random.default_rng(1)
+    n = 9
+    body = rng.normal(0, 0.5, (n, 3))
+    mounts = rng.uniform(-0.2, 0.2, (n, 3)) * [1, 1, 10]
+    each = body_to_sensor(body, mounts)
+    for i in range(n):
+        np.testing.assert_array_equal(each[i], body_to_sensor(body[i:i + 1],
+                                                              SensorPose(*mounts[i]))[0])
+    sensor = RelativePoseSensor()
+    theta = np.column_stack([np.full((n, 3), 0.1), mounts + 0.01])
+
+    def rngs(robots):
+        return [np.random.default_rng(i) for i in robots]
+
+    sensed = sense_increments(sensor, body, rngs(range(n)), mounts)
+    poses = measure_poses(sensor, body, rngs(range(n)), mounts, theta)
+    axle = measure_poses(sensor, body, rngs(range(n)), None, theta)
+    for i in range(n):
+        one = slice(i, i + 1)
+        np.testing.assert_array_equal(
+            sensed[i], sense_increments(sensor, body[one], rngs([i]), mounts[one])[0])
+        np.testing.assert_array_equal(
+            poses[i], measure_poses(sensor, body[one], rngs([i]), mounts[one], theta[one])[0])
+        np.testing.assert_array_equal(axle[i], sensor.absolute(body[i], rngs([i])[0]))
+    assert not np.array_equal(sensed, body) and not np.array_equal(axle, body)
