@@ -6,6 +6,7 @@ import pytest
 from gymnasium.vector import AutoresetMode
 from scipy import stats
 
+import envs.env as env_module
 import envs.physics as physics
 import excite  # noqa: F401  (registers the ids)
 from envs.robot import robot_distribution
@@ -13,6 +14,7 @@ from envs.simulation import BatchSimulation, Simulation, SimulationConfig
 from envs.vector_env import DiffDriveCalibVectorEnv
 from excite.information import information_matrices, information_matrix
 from excite.models import AXLE, SENSOR_POSE
+from excite.online import OnlineEstimators
 
 IDEAL, SLIP, SENSOR = ("excite/DiffDriveCalibIdeal-v0", "excite/DiffDriveCalib-v0",
                        "excite/DiffDriveCalibSensor-v0")
@@ -79,12 +81,18 @@ def run_pair(env_id, n, seed, steps, actions_seed=0, **config):
     return out
 
 
+@pytest.mark.parametrize("batch_estimator", [False, True])
 @pytest.mark.parametrize("env_id", [IDEAL, SLIP])
-def test_robot_i_is_the_single_env_with_seed_plus_i(env_id):
+def test_robot_i_is_the_single_env_with_seed_plus_i(env_id, batch_estimator, monkeypatch):
     """Identical segments (bit for bit) across an autoreset, wall contacts and slip included;
-    observations and rewards equal up to the eigen-solvers' rounding (LAPACK's eigh here, the
-    closed form in the single env): an eigenvalue near 0 is known to eps * ||F|| (||F|| < 1e8
-    here), so sigma_min to sqrt(1e-16 * 1e8) = 1e-4 and the reward (sigma_min / 100) to 1e-6."""
+    observations and rewards equal up to rounding: the eigen-solvers' (LAPACK's eigh here,
+    the closed form in the single env: an eigenvalue near 0 is known to eps * ||F|| (||F|| <
+    1e8 here), so sigma_min to sqrt(1e-16 * 1e8) = 1e-4 and the reward (sigma_min / 100) to
+    1e-6) and, with the estimators batched (as from BATCH_ESTIMATOR_MIN robots), the
+    filter's (numpy's exp against Python's: estimates within ~1e-12 relative)."""
+    monkeypatch.setattr(env_module, "BATCH_ESTIMATOR_MIN", 1 if batch_estimator else 10**9)
+    estimators = gym.make_vec(env_id, num_envs=3).unwrapped.estimators
+    assert isinstance(estimators, OnlineEstimators) == batch_estimator
     out = run_pair(env_id, 3, seed=40, steps=25, budget=12)
     collisions = 0
     for obs, s_obs, reward, s_reward, rows, s_rows in out:
