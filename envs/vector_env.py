@@ -102,7 +102,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         n, p = self.num_envs, self.model.size
         self._generators: list[np.random.Generator | None] = [None] * n
         self._robots: list[RobotSpec | None] = [None] * n
-        self._sensor_rngs: list[np.random.Generator] = [np.random.default_rng()] * n
+        self._sensor_rngs: list[np.random.Generator | None] = [None] * n  # set by reset
         #: the hidden sensor mountings (N, 3) (x, y in m, theta in rad); None on the axle
         self._mounts = None if self.single.sensor_ranges is None else np.zeros((n, 3))
         #: every robot's estimator: one batch of the built-in filter, or one per robot
@@ -136,23 +136,36 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds")
-        robots = np.flatnonzero(mask)
-        for i in robots:
-            self._reset_robot(i, seeds[i], options)
-        if isinstance(self.estimators, OnlineEstimators):
-            self.estimators.reset(mask)
-        self._measured_pose[robots] = measure_poses(
-            self.sim.pose_sensor, self.sim.poses[robots], [self._sensor_rngs[i] for i in robots],
-            None if self._mounts is None else self._mounts[robots], self._theta[robots])
-        self._error[mask] = self.max_relative_errors[mask]
-        self._ended[mask] = False
+        self._reset_robots(mask, seeds, options)
         self._started = True
         obs = self._observations()
         info = {"sigma_min": self._sigma_min.copy(), "n_segments": self._n.copy()}
         return obs, info
 
+    def _reset_robots(self, mask: np.ndarray, seeds: list[int | None],
+                      options: dict[str, Any]) -> None:
+        """Start new episodes for the robots of ``mask`` (N,): each robot's draws one by one
+        (its own streams, in DiffDriveCalibEnv.reset's order), the rest for all at once."""
+        robots = np.flatnonzero(mask)
+        for i in robots:
+            self._reset_robot(i, seeds[i], options)
+        if isinstance(self.estimators, OnlineEstimators):
+            self.estimators.reset(mask)
+        self._n[mask] = 0
+        self._last_action[mask] = 0.0
+        self._sigma_min[mask] = 0.0
+        self._theta[mask] = self.single.nominal_theta
+        self._eigenvalues[mask] = 0.0
+        self._weakest[mask] = np.eye(1, self.model.size)
+        self._measured_pose[robots] = measure_poses(
+            self.sim.pose_sensor, self.sim.poses[robots], [self._sensor_rngs[i] for i in robots],
+            None if self._mounts is None else self._mounts[robots], self._theta[robots])
+        self._error[mask] = self.max_relative_errors[mask]
+        self._ended[mask] = False
+
     def _reset_robot(self, i: int, seed: int | None, options: dict[str, Any]) -> None:
-        """Robot i's reset, drawing in DiffDriveCalibEnv.reset's order."""
+        """Robot i's draws, in DiffDriveCalibEnv.reset's order: the hidden robot, its start,
+        its streams and sensor mounting."""
         single = self.single
         if seed is not None or self._generators[i] is None:
             self._generators[i], _ = seeding.np_random(seed)
@@ -167,13 +180,6 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self._true_theta[i] = truth
         if not isinstance(self.estimators, OnlineEstimators):
             self.estimators[i] = single.new_estimator()
-        self._n[i] = 0
-        self._last_action[i] = 0.0
-        self._sigma_min[i] = 0.0
-        self._theta[i] = single.nominal_theta
-        self._eigenvalues[i] = 0.0
-        self._weakest[i] = 0.0
-        self._weakest[i, 0] = 1.0
 
     def step(self, actions):
         if not self._started:
@@ -215,7 +221,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         reward = sum(terms.values())
         ended = terminated | truncated
         if resetting.any():  # NEXT_STEP: the robots that ended last step start anew
-            self.reset(options={"reset_mask": resetting})
+            self._reset_robots(resetting, [None] * n_robots, {})
             info["sigma_min"][resetting] = 0.0
             info["n_segments"][resetting] = 0
         obs = self._observations()
@@ -225,7 +231,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             info["final_info"] = {key: value.copy() if hasattr(value, "copy") else value
                                   for key, value in info.items() if not key.startswith("final")}
             info["_final_info"] = ended.copy()
-            self.reset(options={"reset_mask": ended})
+            self._reset_robots(ended, [None] * n_robots, {})
             obs = np.where(ended[:, None], self._observations(), obs)
         else:
             self._ended = ended
