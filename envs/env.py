@@ -23,7 +23,7 @@ from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factor
 from excite.information import eigen_3x3, information_matrix
 from excite.kinematics import Params
 from excite.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose, body_to_sensor
-from excite.online import OnlineEstimators
+from excite.online import BatchOnlineEstimator
 from excite.registration import DEFAULT_BUDGET
 
 #: The environment's estimator factory given none: the built-in of
@@ -224,6 +224,7 @@ class DiffDriveCalibEnv(gym.Env):
         options = options or {}
         robot, sim_rng, self._sensor_rng, self._mount = self.draw_episode(self.np_random,
                                                                           options)
+        # the mounting as a batch of one (1, 3) for the batch-first sensor functions
         self._mounts = None if self._mount is None else self._mount.as_array()[None]
         self.sim.reset(robot, sim_rng, pose=options.get("pose"))
         self._robot = robot
@@ -268,8 +269,8 @@ class DiffDriveCalibEnv(gym.Env):
         return self.estimator_factory(
             self.nominal if self.model is AXLE else self.nominal_theta.copy(), self.sigma.copy())
 
-    def new_estimators(self, n: int) -> OnlineEstimators | None:
-        """``n`` estimators updated together (:class:`excite.online.OnlineEstimators`, one
+    def new_estimators(self, n: int) -> BatchOnlineEstimator | None:
+        """``n`` estimators updated together (:class:`excite.online.BatchOnlineEstimator`, one
         pass of array code per segment) when ``estimator_factory`` is the built-in
         ``online`` (any settings), except on the axle model below ``BATCH_ESTIMATOR_MIN``
         robots, where the one-robot filter's unrolled update is faster; else None (one
@@ -278,7 +279,7 @@ class DiffDriveCalibEnv(gym.Env):
         if not (isinstance(factory, EstimatorSpec) and factory.name == "online") or (
                 self.model is AXLE and n < BATCH_ESTIMATOR_MIN):
             return None
-        return OnlineEstimators(n, self.nominal_theta, sigma=self.sigma, model=self.model,
+        return BatchOnlineEstimator(n, self.nominal_theta, sigma=self.sigma, model=self.model,
                                 **dict(factory.settings))
 
     def step(self, action):

@@ -4,7 +4,7 @@ Each segment updates the estimate and its information matrix at constant cost (P
 arithmetic, independent of how many segments came before). The general update is batch-first
 (:func:`update_batch`: N independent filters, each fed its own segment, in one pass of array
 code on the segment model's ``evaluate``); :class:`OnlineEstimator` runs it with N = 1 and
-:class:`OnlineEstimators` on N robots at once (the vector environment's step). The axle model
+:class:`BatchOnlineEstimator` on N robots at once (the vector environment's step). The axle model
 (r_L, r_R, b) has an unrolled pure-Python 3x3 update (the single environment's hot path), a
 tested specialisation of the general update.
 
@@ -29,7 +29,7 @@ from excite.kinematics import Params, sinc_cosc_scalar
 from excite.models import AXLE, SegmentModel
 from excite.segment_estimator import MAX_CHART_STEP, SegmentEstimator
 
-__all__ = ["OnlineEstimator", "OnlineEstimators", "update_batch"]
+__all__ = ["OnlineEstimator", "BatchOnlineEstimator", "update_batch"]
 
 _TWO_PI = 2.0 * math.pi
 #: A second Gauss–Newton iteration is taken only after a first step larger than this (in the
@@ -284,15 +284,18 @@ def _solve_each(m: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.fl
         return out
 
 
-class OnlineEstimators:
+class BatchOnlineEstimator:
     """N independent :class:`OnlineEstimator` filters with the same settings, each fed its
     own segments, updated together in array code (:func:`update_batch`): the vector
     environment's estimator, one per robot.
 
     n: the number of filters; initial, prior_std, sigma, iterations, model: as
     :class:`OnlineEstimator` (shared by all). Filter i after the segments given to it is
-    OnlineEstimator after the same segments, up to rounding (numpy's exp against Python's:
-    last bits; tested).
+    OnlineEstimator after the same segments (tested): the same kernel on models other than
+    the axle; on the axle model OnlineEstimator's unrolled update orders its arithmetic
+    differently and takes Python's exp, so the estimates differ in the last bits (~1e-12
+    relative after 30 segments; up to ~1e-9 where the normal equations are ill-conditioned:
+    the slip id's final estimates, benchmarks/bench_equivalence.py).
     """
 
     def __init__(

@@ -142,20 +142,21 @@ def _batch_rows(rng, model, nominal, n, k):
 
 @pytest.mark.parametrize("model_name", ["axle", "sensor_pose"])
 def test_batched_filters_are_the_single_filter_each(rng, model_name):
-    """Filter i of OnlineEstimators fed its own segments (some robots skipping some steps,
+    """Filter i of BatchOnlineEstimator fed its own segments (some robots skipping some steps,
     one restarted midway) is OnlineEstimator fed the same: to an ulp on the sensor-pose model
     (the same kernel, a batch of one; theta read out with numpy's exp against Python's), to
     1e-10 relative on the axle model (the single
-    filter's unrolled update takes Python's exp, the batch numpy's: the last bits differ,
-    and 30 updates grow that to a few 1e-12, a millionth of the estimates' std)."""
+    filter's unrolled update orders its arithmetic differently and takes Python's exp, the
+    batch numpy's: the last bits differ, and 30 updates grow that to a few 1e-12, a
+    millionth of the estimates' std)."""
     from excite.models import AXLE, SENSOR_POSE
-    from excite.online import OnlineEstimators
+    from excite.online import BatchOnlineEstimator
 
     model = AXLE if model_name == "axle" else SENSOR_POSE
     nominal = np.array([0.05, 0.05, 0.30, 0.04, -0.02, 0.2])[:model.size]
     n, k = 7, 30
     rows = _batch_rows(rng, model, nominal, n, k)
-    batch = OnlineEstimators(n, nominal, sigma=SIGMA, model=model)
+    batch = BatchOnlineEstimator(n, nominal, sigma=SIGMA, model=model)
     singles = [OnlineEstimator(nominal, sigma=SIGMA, model=model) for _ in range(n)]
     for j in range(k):
         mask = rng.uniform(size=n) < 0.8
@@ -185,9 +186,9 @@ def test_batched_filters_never_produce_nan_or_non_physical_values(rows, repeats)
     tested on real segments above: on segments the model cannot fit, the wrapped heading
     residual makes the update discontinuous, so last-bit differences may pick another
     branch.)"""
-    from excite.online import OnlineEstimators
+    from excite.online import BatchOnlineEstimator
 
-    batch = OnlineEstimators(3, NOMINAL, sigma=SIGMA)
+    batch = BatchOnlineEstimator(3, NOMINAL, sigma=SIGMA)
     for _ in range(repeats):
         batch.update(np.array(rows), np.ones(3, dtype=bool))
         assert np.all(np.isfinite(batch.theta)) and np.all(batch.theta > 0)
@@ -195,9 +196,9 @@ def test_batched_filters_never_produce_nan_or_non_physical_values(rows, repeats)
 
 
 def test_batched_filters_reject_non_finite_segments_and_solve_around_singular_systems():
-    from excite.online import OnlineEstimators, _solve_each
+    from excite.online import BatchOnlineEstimator, _solve_each
 
-    batch = OnlineEstimators(2, NOMINAL, sigma=SIGMA)
+    batch = BatchOnlineEstimator(2, NOMINAL, sigma=SIGMA)
     with pytest.raises(ValueError, match="finite"):
         batch.update(np.array([[1.0, 1.0, 0.0, 0.0, 0.0], [np.nan, 1.0, 0.0, 0.0, 0.0]]),
                      np.ones(2, dtype=bool))
