@@ -67,6 +67,8 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     Info (arrays over robots): ``reward_terms`` (a dict of (N,) arrays), ``sigma_min``,
     ``collision``, ``n_segments``, ``measurement`` (N, 5), ``estimate`` (N, P). For evaluation:
     ``true_theta`` (N, P), ``true_params``, ``max_relative_errors`` (N,), ``segments_logged``.
+    The estimators: ``estimators``, a :class:`excite.online.BatchOnlineEstimator` (its
+    ``theta`` (N, P)) or a list of one estimator per robot.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}

@@ -350,3 +350,32 @@ def test_batched_sensor_increments_and_poses_are_the_single_robots():
             poses[i], measure_poses(sensor, body[one], rngs([i]), mounts[one], theta[one])[0])
         np.testing.assert_array_equal(axle[i], sensor.absolute(body[i], rngs([i])[0]))
     assert not np.array_equal(sensed, body) and not np.array_equal(axle, body)
+
+
+def test_the_built_in_filter_keeps_its_settings_when_batched(monkeypatch):
+    """estimator_factory "online:..." becomes one BatchOnlineEstimator with the spec's
+    settings (the estimates follow the single env's filter with the same spec, far closer
+    than the settings' effect); other built-ins stay one estimator per robot."""
+    from excite.estimators import estimator_factory
+
+    monkeypatch.setattr(env_module, "BATCH_ESTIMATOR_MIN", 1)
+    spec = estimator_factory("online:iterations=1:prior_std=0.002")
+    kwargs = {"budget": 6, "ideal": True}
+    venv = DiffDriveCalibVectorEnv(num_envs=2, estimator_factory=spec, **kwargs)
+    assert isinstance(venv.estimators, BatchOnlineEstimator)
+    default = DiffDriveCalibVectorEnv(num_envs=2, **kwargs)
+    singles = [gym.make(IDEAL, estimator_factory=spec, **kwargs).unwrapped for _ in range(2)]
+    venv.reset(seed=7)
+    default.reset(seed=7)
+    for i, env in enumerate(singles):
+        env.reset(seed=7 + i)
+    for action in np.random.default_rng(2).uniform(-1, 1, (5, 2, 2)):
+        *_, info = venv.step(action)
+        *_, default_info = default.step(action)
+        expected = [env.step(a)[-1]["estimate"] for env, a in zip(singles, action, strict=True)]
+        np.testing.assert_allclose(info["estimate"], expected, rtol=1e-10)
+    settings_effect = np.abs(info["estimate"] / default_info["estimate"] - 1).max()
+    assert settings_effect > 1e-6
+    ekf = DiffDriveCalibVectorEnv(num_envs=2, estimator_factory=estimator_factory("ekf"),
+                                  **kwargs)
+    assert isinstance(ekf.estimators, list)
