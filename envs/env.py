@@ -38,10 +38,11 @@ def observation_size(model: SegmentModel) -> int:
 
 
 #: Robots from which the vector env updates the built-in filter of every robot in one pass
-#: of array code on the axle model (below, one by one: the unrolled update is a few
-#: microseconds a robot, the array pass a fixed ~0.2 ms). Measured on the ideal id, CPU us
-#: per robot-step one by one vs in one pass: 66 vs 76 at 8 robots, 44 vs 46 at 16, 37 vs 35
-#: at 24, 33 vs 30 at 32.
+#: of array code (below, one by one: the one-robot update is microseconds of pure Python,
+#: the array pass a fixed ~0.2 ms). Measured on the ideal id (axle model), CPU us per
+#: robot-step one by one vs in one pass: 66 vs 76 at 8 robots, 44 vs 46 at 16, 37 vs 35 at
+#: 24, 33 vs 30 at 32. (The sensor-pose model's one-robot update is slower, ~90 us, so its
+#: crossover is lower; one threshold keeps the rule simple.)
 BATCH_ESTIMATOR_MIN = 20
 
 #: The observation length on the axle model.
@@ -272,12 +273,12 @@ class DiffDriveCalibEnv(gym.Env):
     def new_estimators(self, n: int) -> BatchOnlineEstimator | None:
         """``n`` estimators updated together (:class:`excite.online.BatchOnlineEstimator`, one
         pass of array code per segment) when ``estimator_factory`` is the built-in
-        ``online`` (any settings), except on the axle model below ``BATCH_ESTIMATOR_MIN``
-        robots, where the one-robot filter's unrolled update is faster; else None (one
-        :meth:`new_estimator` per robot then)."""
+        ``online`` (any settings) and ``n`` is at least ``BATCH_ESTIMATOR_MIN``; else None
+        (one :meth:`new_estimator` per robot then: below the threshold the one-robot
+        filter's pure-Python update is faster)."""
         factory = self.estimator_factory
         if not (isinstance(factory, EstimatorSpec) and factory.name == "online") or (
-                self.model is AXLE and n < BATCH_ESTIMATOR_MIN):
+                n < BATCH_ESTIMATOR_MIN):
             return None
         return BatchOnlineEstimator(n, self.nominal_theta, sigma=self.sigma, model=self.model,
                                 **dict(factory.settings))

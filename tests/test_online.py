@@ -143,12 +143,10 @@ def _batch_rows(rng, model, nominal, n, k):
 @pytest.mark.parametrize("model_name", ["axle", "sensor_pose"])
 def test_batched_filters_are_the_single_filter_each(rng, model_name):
     """Filter i of BatchOnlineEstimator fed its own segments (some robots skipping some steps,
-    one restarted midway) is OnlineEstimator fed the same: to an ulp on the sensor-pose model
-    (the same kernel, a batch of one; theta read out with numpy's exp against Python's), to
-    1e-10 relative on the axle model (the single
-    filter's unrolled update orders its arithmetic differently and takes Python's exp, the
-    batch numpy's: the last bits differ, and 30 updates grow that to a few 1e-12, a
-    millionth of the estimates' std)."""
+    one restarted midway) is OnlineEstimator fed the same, to 1e-10 relative: the single
+    filter's one-robot specialisations (pure-Python model, unrolled on the axle) order their
+    arithmetic differently and take Python's exp, the batch numpy's: the last bits differ,
+    and 30 updates grow that to a few 1e-12, a millionth of the estimates' std."""
     from excite.models import AXLE, SENSOR_POSE
     from excite.online import BatchOnlineEstimator
 
@@ -171,7 +169,7 @@ def test_batched_filters_are_the_single_filter_each(rng, model_name):
     expected_information = np.array([s.information for s in singles])
     assert batch.n_segments.tolist() == [s.n_segments for s in singles]
     assert not np.allclose(batch.theta, nominal, rtol=1e-3)  # the filters moved
-    rtol = 1e-10 if model is AXLE else 1e-15
+    rtol = 1e-10
     np.testing.assert_allclose(batch.theta, expected_theta, rtol=rtol, atol=0)
     np.testing.assert_allclose(batch.information, expected_information, rtol=100 * rtol,
                                atol=1e-9 * np.abs(expected_information).max())

@@ -104,9 +104,11 @@ def test_robot_i_is_the_single_env_with_seed_plus_i(env_id, batch_estimator, mon
     assert collisions >= 2, "the random actions must reach the walls"
 
 
-def test_sensor_id_draws_the_same_robots_mountings_and_noise():
+@pytest.mark.parametrize("batch_estimator", [False, True])
+def test_sensor_id_draws_the_same_robots_mountings_and_noise(batch_estimator, monkeypatch):
     """Same rows; same observations except the weakest eigenvector (indices 12-17), which is
     arbitrary within the null space of F while fewer segments than parameters are in."""
+    monkeypatch.setattr(env_module, "BATCH_ESTIMATOR_MIN", 1 if batch_estimator else 10**9)
     out = run_pair(SENSOR, 2, seed=3, steps=3, budget=8, ideal=True)
     keep = np.r_[0:12, 18:25]
     for obs, s_obs, _, _, rows, s_rows in out:
