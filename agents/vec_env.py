@@ -69,17 +69,21 @@ class NativeVecEnv(VecEnv):
         return obs, reward.astype(np.float32), dones, infos
 
     def _split(self, info: dict[str, Any]) -> list[dict[str, Any]]:
-        """The vector env's info (arrays over robots) as one dict per robot."""
+        """The vector env's info (arrays over robots, fresh each step) as one dict per robot:
+        Python numbers for (N,) arrays, row views for (N, k) arrays, a dict of numbers for a
+        dict of (N,) arrays (one ``tolist`` per array, not one conversion per robot)."""
         out: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         for key, value in info.items():
             if key.startswith("_") or key.startswith("final_"):
                 continue
-            for i, entry in enumerate(out):
-                if isinstance(value, dict):
-                    entry[key] = {name: float(v[i]) for name, v in value.items()}
-                else:
-                    item = value[i]
-                    entry[key] = item.copy() if isinstance(item, np.ndarray) else item.item()
+            if isinstance(value, dict):
+                names = list(value)
+                items = [dict(zip(names, row, strict=True)) for row in
+                         zip(*(value[name].tolist() for name in names), strict=True)]
+            else:
+                items = value.tolist() if value.ndim == 1 else list(value)
+            for entry, item in zip(out, items, strict=True):
+                entry[key] = item
         return out
 
     def close(self) -> None:

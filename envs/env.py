@@ -19,10 +19,11 @@ from envs.simulation import Simulation, SimulationConfig
 from excite import se2
 from excite.contracts import Estimator, EstimatorFactory, RobotKnowledge, Traction
 from excite.data import Segments
-from excite.estimators import DEFAULT_ESTIMATOR, estimator_factory
+from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
 from excite.information import eigen_3x3, information_matrix
 from excite.kinematics import Params
 from excite.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose, body_to_sensor
+from excite.online import BatchOnlineEstimator
 from excite.registration import DEFAULT_BUDGET
 
 #: The environment's estimator factory given none: the built-in of
@@ -35,6 +36,14 @@ def observation_size(model: SegmentModel) -> int:
     """Length of the observation vector for a model with P parameters: 3 P + 7."""
     return 3 * model.size + 7
 
+
+#: Robots from which the vector env updates the built-in filter of every robot in one pass
+#: of array code (below, one by one: the one-robot update is microseconds of pure Python,
+#: the array pass a fixed ~0.2 ms). Measured on the ideal id (axle model), CPU us per
+#: robot-step one by one vs in one pass: 66 vs 76 at 8 robots, 44 vs 46 at 16, 37 vs 35 at
+#: 24, 33 vs 30 at 32. (The sensor-pose model's one-robot update is slower, ~90 us, so its
+#: crossover is lower; one threshold keeps the rule simple.)
+BATCH_ESTIMATOR_MIN = 20
 
 #: The observation length on the axle model.
 OBS_SIZE = observation_size(AXLE)
@@ -216,6 +225,8 @@ class DiffDriveCalibEnv(gym.Env):
         options = options or {}
         robot, sim_rng, self._sensor_rng, self._mount = self.draw_episode(self.np_random,
                                                                           options)
+        # the mounting as a batch of one (1, 3) for the batch-first sensor functions
+        self._mounts = None if self._mount is None else self._mount.as_array()[None]
         self.sim.reset(robot, sim_rng, pose=options.get("pose"))
         self._robot = robot
         self.estimator = self.new_estimator()
@@ -259,6 +270,19 @@ class DiffDriveCalibEnv(gym.Env):
         return self.estimator_factory(
             self.nominal if self.model is AXLE else self.nominal_theta.copy(), self.sigma.copy())
 
+    def new_estimators(self, n: int) -> BatchOnlineEstimator | None:
+        """``n`` estimators updated together (:class:`excite.online.BatchOnlineEstimator`, one
+        pass of array code per segment) when ``estimator_factory`` is the built-in
+        ``online`` (any settings) and ``n`` is at least ``BATCH_ESTIMATOR_MIN``; else None
+        (one :meth:`new_estimator` per robot then: below the threshold the one-robot
+        filter's pure-Python update is faster)."""
+        factory = self.estimator_factory
+        if not (isinstance(factory, EstimatorSpec) and factory.name == "online") or (
+                n < BATCH_ESTIMATOR_MIN):
+            return None
+        return BatchOnlineEstimator(n, self.nominal_theta, sigma=self.sigma, model=self.model,
+                                **dict(factory.settings))
+
     def step(self, action):
         if self._robot is None:
             raise RuntimeError("call reset() before step()")
@@ -270,9 +294,9 @@ class DiffDriveCalibEnv(gym.Env):
                                        self.segment_duration, self.config["settle_time"])
         row = outcome.measurement
         if self._mount is not None:  # the sensor measures its own motion, in its own frame
-            sensed = body_to_sensor(outcome.true_increment[None, :], self._mount)[0]
-            noise = self.sigma * self._sensor_rng.standard_normal(3)
-            row = np.concatenate([row[:2], sensed + noise])
+            sensed = sense_increments(self.sim.pose_sensor, outcome.true_increment[None],
+                                      [self._sensor_rng], self._mounts)
+            row = np.concatenate([row[:2], sensed[0]])
         self.estimator.update(*row.tolist())
         if self._n == len(self._log):
             self._log = np.concatenate([self._log, np.empty_like(self._log)])
@@ -314,8 +338,10 @@ class DiffDriveCalibEnv(gym.Env):
         return read_estimate(self.estimator, self.model, self.nominal_theta)
 
     def _measure_pose(self, body_pose: np.ndarray) -> np.ndarray:
-        return measure_pose(self.sim.pose_sensor, body_pose, self._sensor_rng, self._mount,
-                            self._theta)
+        if self._mounts is None:  # on the axle: the sensor reads the body's pose
+            return self.sim.pose_sensor.absolute(body_pose, self._sensor_rng)
+        return measure_poses(self.sim.pose_sensor, body_pose[None], [self._sensor_rng],
+                             self._mounts, self._theta[None])[0]
 
     @property
     def estimate(self) -> Params:
@@ -474,14 +500,26 @@ def read_estimate(estimator, model: SegmentModel,
     return params, np.asarray(theta, dtype=float)
 
 
-def measure_pose(sensor: RelativePoseSensor, body_pose: np.ndarray, rng: np.random.Generator,
-                 mount: SensorPose | None, theta: np.ndarray) -> np.ndarray:
-    """The body's world pose (x, y, theta) as the robot knows it: the sensor's noisy world
-    pose, taken back to the body with the estimated mounting (theta[3:6])."""
-    if mount is None:
-        return sensor.absolute(body_pose, rng)
-    reading = sensor.absolute(se2.compose(body_pose, mount.as_array()), rng)
-    return se2.compose(reading, se2.inverse(theta[3:6]))
+def sense_increments(sensor: RelativePoseSensor, true_increments: np.ndarray,
+                     rngs: Sequence[np.random.Generator], mounts: np.ndarray) -> np.ndarray:
+    """N off-axle sensors' noisy increments (N, 3): each sensor's own motion in its own frame
+    at the segment's start (DESIGN.md, "Sensor pose"; x, y in m, theta in rad), robot i
+    drawing its noise from ``rngs[i]``. true_increments (N, 3): the bodies' true increments;
+    mounts (N, 3): the sensors' mountings in the body frame."""
+    return sensor.each(body_to_sensor(true_increments, mounts), rngs)
+
+
+def measure_poses(sensor: RelativePoseSensor, body_poses: np.ndarray,
+                  rngs: Sequence[np.random.Generator], mounts: np.ndarray | None,
+                  theta: np.ndarray) -> np.ndarray:
+    """N bodies' world poses (N, 3) (x, y, theta) as the robots know them: each sensor's
+    noisy world pose (robot i drawing from ``rngs[i]``), taken back to the body with the
+    estimated mounting (theta[:, 3:6]). body_poses (N, 3): the true poses; mounts (N, 3): the
+    sensors' true mountings (None: on the axle); theta (N, P): the estimates."""
+    if mounts is None:
+        return sensor.each(body_poses, rngs)
+    readings = sensor.each(se2.compose(body_poses, mounts), rngs)
+    return se2.compose(readings, se2.inverse(theta[:, 3:6]))
 
 
 def observation(model: SegmentModel, theta: Sequence[float], nominal_theta: Sequence[float],
@@ -489,8 +527,9 @@ def observation(model: SegmentModel, theta: Sequence[float], nominal_theta: Sequ
                 last_action: Sequence[float], used: float, arena_size: float,
                 space: spaces.Box) -> np.ndarray:
     """One robot's observation (3 P + 7,) float32 (the table in DiffDriveCalibEnv's doc), from
-    Python floats (a few microseconds: the single env's step; the vector env calls it per
-    robot).
+    Python floats: the single env's step (a few microseconds, where :func:`observations` of a
+    batch of one spends several times that on numpy's call overheads); a tested
+    specialisation of :func:`observations`, the same numbers.
 
     theta: the estimate (P values), nominal_theta: the nominal ones; eigenvalues (ascending)
     and weakest, the eigenvector of the smallest (given a unique sign here: its largest
@@ -515,6 +554,39 @@ def observation(model: SegmentModel, theta: Sequence[float], nominal_theta: Sequ
         used,
     ], dtype=np.float32)
     return np.minimum(np.maximum(obs, space.low, out=obs), space.high, out=obs)
+
+
+def observations(model: SegmentModel, theta: np.ndarray, nominal_theta: np.ndarray,
+                 eigenvalues: np.ndarray, weakest: np.ndarray, pose: np.ndarray,
+                 last_action: np.ndarray, used: np.ndarray, arena_size: float,
+                 space: spaces.Box) -> np.ndarray:
+    """N robots' observations (N, 3 P + 7) float32 (the table in DiffDriveCalibEnv's doc),
+    batch-first.
+
+    theta (N, P): the estimates; nominal_theta (P,): the nominal parameters; eigenvalues
+    (N, P), ascending, and weakest (N, P), the eigenvector of the smallest (given a unique
+    sign here: its first entry of largest magnitude is positive); pose (N, 3): the measured
+    world poses (x, y in m, theta in rad); last_action (N, 2); used (N,): the fraction of the
+    budget used; arena_size (m). Clipped to ``space``. The vector env's step; the single
+    env's is :func:`observation`.
+    """
+    n, p = theta.shape
+    obs = np.empty((n, 3 * p + 7))
+    np.divide(theta[:, :3], nominal_theta[:3], out=obs[:, :3])
+    obs[:, :3] -= 1.0
+    if model is not AXLE:  # offsets in units of the nominal b, the angle in rad
+        obs[:, 3:5] = (theta[:, 3:5] - nominal_theta[3:5]) / nominal_theta[2]
+        obs[:, 5] = theta[:, 5] - nominal_theta[5]
+    obs[:, p:2 * p] = 0.1 * np.log1p(np.maximum(eigenvalues, 0.0))
+    largest = weakest[np.arange(n), np.abs(weakest).argmax(axis=1)]
+    np.multiply(weakest, np.where(largest >= 0, 1.0, -1.0)[:, None], out=obs[:, 2 * p:3 * p])
+    obs[:, 3 * p:3 * p + 2] = pose[:, :2] * (2.0 / arena_size)
+    obs[:, 3 * p + 2] = np.cos(pose[:, 2])
+    obs[:, 3 * p + 3] = np.sin(pose[:, 2])
+    obs[:, 3 * p + 4:3 * p + 6] = last_action
+    obs[:, 3 * p + 6] = used
+    out = obs.astype(np.float32)
+    return np.minimum(np.maximum(out, space.low, out=out), space.high, out=out)
 
 
 def _sensor_ranges(config: dict | None) -> np.ndarray | None:

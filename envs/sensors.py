@@ -82,7 +82,11 @@ class RelativePoseSensor:
     def each(self, values: np.ndarray, rngs: list[np.random.Generator]) -> np.ndarray:
         """Noisy readings (N, 3) of N robots' increments or poses (N, 3), robot i drawing from
         ``rngs[i]`` exactly as :meth:`measure` / :meth:`absolute` would."""
-        return values + self._sigma * np.array([rng.standard_normal(3) for rng in rngs])
+        noise = np.empty((len(rngs), 3))
+        for rng, row in zip(rngs, noise, strict=True):  # drawn in place: no array per robot
+            rng.standard_normal(out=row)
+        noise *= self._sigma
+        return values + noise
 
     def absolute(self, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy world pose(s) (..., 3) (x, y, theta), an independent draw per reading; theta

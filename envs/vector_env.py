@@ -16,17 +16,18 @@ from gymnasium.vector.utils import batch_space
 from envs.env import (
     REWARD_TERMS,
     DiffDriveCalibEnv,
-    measure_pose,
-    observation,
+    measure_poses,
+    observations,
     read_estimate,
     reward_terms,
+    sense_increments,
 )
 from envs.robot import RobotSpec
-from envs.simulation import BatchSimulation
-from excite.contracts import EstimatorFactory
+from envs.simulation import BatchOutcome, BatchSimulation
+from excite.contracts import Estimator, EstimatorFactory
 from excite.information import information_matrices
 from excite.kinematics import Params
-from excite.models import SensorPose, body_to_sensor
+from excite.online import BatchOnlineEstimator
 
 
 class DiffDriveCalibVectorEnv(VectorEnv):
@@ -35,16 +36,22 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     Every robot lives in the same arena (one pymunk space; chassis never touch each other,
     only the walls) and is stepped by one batched physics call per segment
     (:class:`envs.simulation.BatchSimulation`, the single env's physics kernel on arrays).
-    The information matrices, their eigenvalues, the rewards and the observations are
-    computed for all robots at once; each robot keeps its own estimator
-    (``estimator_factory``, default :class:`excite.OnlineEstimator`: its update is a few
-    microseconds of pure Python) and its own random streams.
+    Everything after the physics is array code over the robots too: the sensor rows, the
+    estimator updates (the default ``estimator_factory``, the built-in ``online``, becomes
+    :class:`excite.online.BatchOnlineEstimator`, every robot's filter in one pass; any other
+    factory gives one estimator per robot, updated in turn), the logs, the information
+    matrices, their eigenvalues, the rewards and the observations. Each robot keeps its own
+    random streams (its noise is drawn from them one robot at a time).
 
     Robot i reset with seed s draws exactly as the single env reset with seed s + i: the
     same hidden robot, start, sensor mounting and noise; given the single env's actions it
     produces the single env's segments bit for bit (the physics is the same kernel; tested).
-    Observations and rewards agree to rounding: F's eigen-decomposition is LAPACK's here and
-    a closed form in the single env.
+    Estimates, observations and rewards agree to rounding: from ``BATCH_ESTIMATOR_MIN``
+    robots the filter is :class:`excite.online.BatchOnlineEstimator` (the single env's
+    unrolled filter orders its arithmetic differently: final estimates within ~1e-9
+    relative), F comes from the batched chord rows (the single env's from pure-Python
+    moments), and its eigen-decomposition is LAPACK's here and a closed form in the single
+    env (sigma_min within ~1e-9 relative; benchmarks/bench_equivalence.py).
 
     Autoreset: ``autoreset_mode`` NEXT_STEP (default, gymnasium's documented convention: the
     step after an episode's end resets that robot and returns its first observation with
@@ -60,6 +67,8 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     Info (arrays over robots): ``reward_terms`` (a dict of (N,) arrays), ``sigma_min``,
     ``collision``, ``n_segments``, ``measurement`` (N, 5), ``estimate`` (N, P). For evaluation:
     ``true_theta`` (N, P), ``true_params``, ``max_relative_errors`` (N,), ``segments_logged``.
+    The estimators: ``estimators``, a :class:`excite.online.BatchOnlineEstimator` (its
+    ``theta`` (N, P)) or a list of one estimator per robot.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -98,9 +107,12 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         n, p = self.num_envs, self.model.size
         self._generators: list[np.random.Generator | None] = [None] * n
         self._robots: list[RobotSpec | None] = [None] * n
-        self._sensor_rngs: list[np.random.Generator | None] = [None] * n
-        self._mounts: list[SensorPose | None] = [None] * n
-        self.estimators: list[Any] = [None] * n
+        self._sensor_rngs: list[np.random.Generator | None] = [None] * n  # set by reset
+        #: the hidden sensor mountings (N, 3) (x, y in m, theta in rad); None on the axle
+        self._mounts = None if self.single.sensor_ranges is None else np.zeros((n, 3))
+        #: every robot's estimator: one batch of the built-in filter, or one per robot
+        self.estimators: BatchOnlineEstimator | list[Estimator | None] = (
+            self.single.new_estimators(n) or [None] * n)
         self._log = np.zeros((n, self.budget, 5))
         self._n = np.zeros(n, dtype=int)
         self._last_action = np.zeros((n, 2))
@@ -129,17 +141,36 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed must be an int or a list of {self.num_envs} seeds")
-        for i in np.flatnonzero(mask):
-            self._reset_robot(i, seeds[i], options)
-        self._error[mask] = self.max_relative_errors[mask]
-        self._ended[mask] = False
+        self._reset_robots(mask, seeds, options)
         self._started = True
         obs = self._observations()
         info = {"sigma_min": self._sigma_min.copy(), "n_segments": self._n.copy()}
         return obs, info
 
+    def _reset_robots(self, mask: np.ndarray, seeds: list[int | None],
+                      options: dict[str, Any]) -> None:
+        """Start new episodes for the robots of ``mask`` (N,): each robot's draws one by one
+        (its own streams, in DiffDriveCalibEnv.reset's order), the rest for all at once."""
+        robots = np.flatnonzero(mask)
+        for i in robots:
+            self._reset_robot(i, seeds[i], options)
+        if isinstance(self.estimators, BatchOnlineEstimator):
+            self.estimators.reset(mask)
+        self._n[mask] = 0
+        self._last_action[mask] = 0.0
+        self._sigma_min[mask] = 0.0
+        self._theta[mask] = self.single.nominal_theta
+        self._eigenvalues[mask] = 0.0
+        self._weakest[mask] = np.eye(1, self.model.size)
+        self._measured_pose[robots] = measure_poses(
+            self.sim.pose_sensor, self.sim.poses[robots], [self._sensor_rngs[i] for i in robots],
+            None if self._mounts is None else self._mounts[robots], self._theta[robots])
+        self._error[mask] = self.max_relative_errors[mask]
+        self._ended[mask] = False
+
     def _reset_robot(self, i: int, seed: int | None, options: dict[str, Any]) -> None:
-        """Robot i's reset, drawing in DiffDriveCalibEnv.reset's order."""
+        """Robot i's draws, in DiffDriveCalibEnv.reset's order: the hidden robot, its start,
+        its streams and sensor mounting."""
         single = self.single
         if seed is not None or self._generators[i] is None:
             self._generators[i], _ = seeding.np_random(seed)
@@ -147,19 +178,13 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         robot, sim_rng, self._sensor_rngs[i], mount = single.draw_episode(rng, options)
         self.sim.reset(i, robot, sim_rng, pose=options.get("pose"))
         self._robots[i] = robot
-        self._mounts[i] = mount
-        self.estimators[i] = single.new_estimator()
-        self._n[i] = 0
-        self._last_action[i] = 0.0
-        self._sigma_min[i] = 0.0
-        self._theta[i] = single.nominal_theta
         truth = np.array(robot.kinematic_params())
-        self._true_theta[i] = truth if mount is None else np.append(truth, mount.as_array())
-        self._eigenvalues[i] = 0.0
-        self._weakest[i] = 0.0
-        self._weakest[i, 0] = 1.0
-        self._measured_pose[i] = measure_pose(self.sim.pose_sensor, self.sim.pose(i),
-                                              self._sensor_rngs[i], mount, self._theta[i])
+        if mount is not None:
+            self._mounts[i] = mount.as_array()
+            truth = np.append(truth, self._mounts[i])
+        self._true_theta[i] = truth
+        if not isinstance(self.estimators, BatchOnlineEstimator):
+            self.estimators[i] = single.new_estimator()
 
     def step(self, actions):
         if not self._started:
@@ -180,7 +205,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
                                            single.segment_duration, config["settle_time"])
             collision = outcome.collision & moving
             previous, previous_error = self._sigma_min.copy(), self._error.copy()
-            rows[moving] = self._record(np.flatnonzero(moving), outcome, actions)
+            rows[moving] = self._record(moving, outcome, actions)
             self._update_information(moving)
             if config["accuracy_weight"]:
                 self._error = self.max_relative_errors
@@ -201,7 +226,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         reward = sum(terms.values())
         ended = terminated | truncated
         if resetting.any():  # NEXT_STEP: the robots that ended last step start anew
-            self.reset(options={"reset_mask": resetting})
+            self._reset_robots(resetting, [None] * n_robots, {})
             info["sigma_min"][resetting] = 0.0
             info["n_segments"][resetting] = 0
         obs = self._observations()
@@ -211,37 +236,40 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             info["final_info"] = {key: value.copy() if hasattr(value, "copy") else value
                                   for key, value in info.items() if not key.startswith("final")}
             info["_final_info"] = ended.copy()
-            self.reset(options={"reset_mask": ended})
+            self._reset_robots(ended, [None] * n_robots, {})
             obs = np.where(ended[:, None], self._observations(), obs)
         else:
             self._ended = ended
         return obs, reward, terminated, truncated, info
 
-    def _record(self, robots: np.ndarray, outcome, actions: np.ndarray) -> np.ndarray:
-        """The moving robots' segments: the sensor's rows, the estimator updates, the log, the
-        measured poses (each robot's random draws in DiffDriveCalibEnv.step's order)."""
-        rows = outcome.measurement[robots]
+    def _record(self, moving: np.ndarray, outcome: BatchOutcome,
+                actions: np.ndarray) -> np.ndarray:
+        """The moving robots' (mask (N,)) segments: the sensor's rows, the estimator updates,
+        the log, the measured poses (each robot's random draws in DiffDriveCalibEnv.step's
+        order); returns their rows (M, 5)."""
+        robots = np.flatnonzero(moving)
         rngs = [self._sensor_rngs[i] for i in robots]
-        mounts = [self._mounts[i] for i in robots]
-        for j, (i, mount) in enumerate(zip(robots, mounts, strict=True)):
-            if mount is not None:  # the sensor measures its own motion, in its own frame
-                sensed = body_to_sensor(outcome.true_increment[i][None, :], mount)[0]
-                rows[j, 2:] = sensed + self.single.sigma * rngs[j].standard_normal(3)
-        for j, i in enumerate(robots):
-            self.estimators[i].update(*rows[j].tolist())
-            _, self._theta[i] = read_estimate(self.estimators[i], self.model,
-                                              self.single.nominal_theta)
+        rows = outcome.measurement.copy()
+        mounts = None if self._mounts is None else self._mounts[robots]
+        if mounts is not None:  # the sensor measures its own motion, in its own frame
+            rows[robots, 2:] = sense_increments(self.sim.pose_sensor,
+                                                outcome.true_increment[robots], rngs, mounts)
+        if isinstance(self.estimators, BatchOnlineEstimator):
+            self.estimators.update(rows, moving)
+            self._theta[robots] = self.estimators.theta[robots]
+        else:
+            for i in robots:
+                self.estimators[i].update(*rows[i].tolist())
+                _, self._theta[i] = read_estimate(self.estimators[i], self.model,
+                                                  self.single.nominal_theta)
+        rows = rows[robots]
         n = self._n[robots]  # < budget: an episode ends at the budget and autoresets
         self._log[robots, n] = rows
         self._n[robots] = n + 1
         self._last_action[robots] = actions[robots]
-        pose_end = outcome.pose_end[robots]
-        if all(mount is None for mount in mounts):
-            self._measured_pose[robots] = self.sim.pose_sensor.each(pose_end, rngs)
-        else:
-            for j, i in enumerate(robots):
-                self._measured_pose[i] = measure_pose(self.sim.pose_sensor, pose_end[j],
-                                                      rngs[j], mounts[j], self._theta[i])
+        self._measured_pose[robots] = measure_poses(self.sim.pose_sensor,
+                                                    outcome.pose_end[robots], rngs, mounts,
+                                                    self._theta[robots])
         return rows
 
     def _update_information(self, robots: np.ndarray) -> None:
@@ -257,15 +285,11 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self._sigma_min[robots] = np.sqrt(np.maximum(eigenvalues[robots, 0], 0.0))
 
     def _observations(self) -> np.ndarray:
-        """Every robot's observation (N, 3 P + 7), each built as the single env builds it."""
-        nominal, used = self.single.nominal_theta.tolist(), (self._n / self.budget).tolist()
-        columns = zip(self._theta.tolist(), self._eigenvalues.tolist(), self._weakest.tolist(),
-                      self._measured_pose.tolist(), self._last_action.tolist(), used,
-                      strict=True)
-        return np.array([observation(self.model, theta, nominal, eigenvalues, weakest, pose,
-                                     action, fraction, self.config["arena_size"],
-                                     self.single_observation_space)
-                         for theta, eigenvalues, weakest, pose, action, fraction in columns])
+        """Every robot's observation (N, 3 P + 7) (:func:`envs.env.observations`)."""
+        return observations(self.model, self._theta, self.single.nominal_theta,
+                            self._eigenvalues, self._weakest, self._measured_pose,
+                            self._last_action, self._n / self.budget, self.config["arena_size"],
+                            self.single_observation_space)
 
     # -- evaluation only ---------------------------------------------------------------------
     @property

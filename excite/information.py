@@ -15,6 +15,7 @@ Every estimator, the environment's reward and the planners use these functions.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -139,25 +140,33 @@ def _information_rows(
     That is half the work of the Jacobian itself (the environment's hot path).
     """
     s = as_sigma(sigma)
-    phi = np.array(_increments(dphi_L, dphi_R))  # (2, N), a copy
+    phi_L, phi_R = _increments(dphi_L, dphi_R)
     sigma_xy, sigma_y, sigma_theta = s.tolist()
     if sigma_y != sigma_xy or model is not AXLE:
-        return scaled_jacobian(phi[0], phi[1], params, s, scale, model).transpose(2, 1, 0)
+        return scaled_jacobian(phi_L, phi_R, params, s, scale, model).transpose(2, 1, 0)
     p = _as_params(params)
-    scale = p if scale is None else _as_params(scale)
-    v_L, v_R, w_L, w_R, h_L, h_R, h_v, e_L, e_R = _chord_coefficients(p, scale, sigma_xy)
-    v, w = np.array([v_L, v_R, w_L, w_R]).reshape(2, 2) @ phi
+    coefficients = _chord_coefficients(p, p if scale is None else _as_params(scale), sigma_xy)
+    return _chord_rows(phi_L, phi_R, coefficients, sigma_theta)
+
+
+def _chord_rows(phi_L: FloatArray, phi_R: FloatArray, coefficients: tuple[Any, ...],
+                sigma_theta: float) -> FloatArray:
+    """The rows of :func:`_information_rows` (3 parameters, 3 rows, ...) of wheel increments
+    (...) (rad), batch-first: ``coefficients`` (:func:`_chord_coefficients`) are floats or
+    arrays broadcasting with the increments (one robot's parameters per leading index)."""
+    v_L, v_R, w_L, w_R, h_L, h_R, h_v, e_L, e_R = coefficients
+    v = v_L * phi_L + v_R * phi_R
+    w = w_L * phi_L + w_R * phi_R
     sinc, dsinc = sinc_and_derivative(v)
-    rows = np.empty((3, 3, phi.shape[1]))
+    rows = np.empty((3, 3) + v.shape)
     heading = rows[:, 2]  # the heading gradient, whitened at the end
-    heading[:2] = phi
-    heading[2] = v
-    heading *= np.array([h_L, h_R, h_v]).reshape(3, 1)
+    np.multiply(h_L, phi_L, out=heading[0])
+    np.multiply(h_R, phi_R, out=heading[1])
+    np.multiply(h_v, v, out=heading[2])
     np.multiply(heading, w * dsinc, out=rows[:, 0])
     np.multiply(heading, w * sinc, out=rows[:, 1])
-    phi *= np.array([e_L, e_R]).reshape(2, 1)
-    phi *= sinc
-    rows[:2, 0] += phi
+    rows[0, 0] += e_L * phi_L * sinc
+    rows[1, 0] += e_R * phi_R * sinc
     heading *= 1.0 / sigma_theta
     return rows
 
@@ -223,10 +232,21 @@ def information_matrices(
     dphi_L, dphi_R (N, K): each log's wheel increments (rad), padded with zeros (a segment
     without motion adds no information); theta (N, P): where each log's F is evaluated;
     scale: the nominal parameters of the column scale ((P,) or (N, P)). The same F as
-    :func:`information_matrix` of each log (tested), from the batched
-    :func:`scaled_jacobian`.
+    :func:`information_matrix` of each log (tested): on the axle model with sigma_x ==
+    sigma_y from the chord rows of :func:`_information_rows` (half the work), each robot's
+    coefficients broadcast over its segments; else from the batched :func:`scaled_jacobian`.
     """
-    return fisher_information(scaled_jacobian(dphi_L, dphi_R, theta, sigma, scale, model))
+    s = as_sigma(sigma)
+    if model is not AXLE or s[0] != s[1]:
+        return fisher_information(scaled_jacobian(dphi_L, dphi_R, theta, s, scale, model))
+    theta = np.asarray(theta, dtype=float)
+    nominal = np.broadcast_to(np.asarray(scale, dtype=float), theta.shape)
+    # the chord rows (_information_rows), each robot's coefficients (N, 1) over its K segments
+    coefficients = _chord_coefficients(theta.T[..., None], nominal.T[..., None], float(s[0]))
+    rows = _chord_rows(np.asarray(dphi_L, dtype=float), np.asarray(dphi_R, dtype=float),
+                       coefficients, float(s[2]))  # (3, 3, N, K)
+    flat = rows.transpose(2, 0, 1, 3).reshape(theta.shape[0], 3, -1)
+    return flat @ flat.transpose(0, 2, 1)
 
 
 #: Segment count up to which the pure-Python moments beat numpy's per-call overhead (measured

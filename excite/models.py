@@ -353,10 +353,15 @@ def increment_jacobian(dphi_L: ArrayLike, dphi_R: ArrayLike,
                          np.atleast_1d(np.asarray(dphi_R, dtype=float)), theta.reshape(3))
 
 
-def body_to_sensor(body: ArrayLike, pose: SensorPose) -> FloatArray:
-    """The sensor's increments s (N, 3) from the body's o (N, 3): s = (-l) (+) o (+) l."""
-    prediction, _ = _to_sensor(np.asarray(body, dtype=float).T, None, pose.as_array(), True)
-    return prediction.T
+def body_to_sensor(body: ArrayLike, pose: SensorPose | ArrayLike) -> FloatArray:
+    """The sensor's increments s (N, 3) from the body's o (N, 3): s = (-l) (+) o (+) l, for
+    one sensor pose l (SensorPose) or one per increment ((N, 3): x, y in m, theta in rad)."""
+    body = np.asarray(body, dtype=float)
+    if isinstance(pose, SensorPose):
+        prediction, _ = _to_sensor(body.T, None, pose.as_array(), True)
+        return prediction.T
+    prediction, _ = _to_sensor(body.T[..., None], None, np.asarray(pose, dtype=float), False)
+    return prediction[..., 0].T
 
 
 def sensor_to_body(measured: ArrayLike, pose: SensorPose) -> FloatArray:

@@ -1,9 +1,13 @@
 """Online estimation of a segment model's parameters: an iterated extended information filter.
 
-Each segment updates the estimate and its information matrix at constant cost (pure-Python
-P x P arithmetic: microseconds, independent of how many segments came before). The axle model
-(r_L, r_R, b) has an unrolled 3x3 update (the environment's hot path), a tested
-specialisation of the general update that serves every other model (the sensor-pose model).
+Each segment updates the estimate and its information matrix at constant cost (P x P
+arithmetic, independent of how many segments came before). The general update is batch-first
+(:func:`update_batch`: N independent filters, each fed its own segment, in one pass of array
+code on the segment model's ``evaluate``), run by :class:`BatchOnlineEstimator` on N robots at
+once (the vector environment's step). :class:`OnlineEstimator` runs tested specialisations of
+it for one robot, where numpy's call overheads would dominate: the model in pure Python with
+P x P numpy algebra for any model, and an unrolled pure-Python 3x3 update for the axle model
+(r_L, r_R, b; the single environment's hot path).
 
 The filter runs on log-parameters q = log p. The heading change is invariant under a common
 scale of (r_L, r_R, b); in q that invariant direction is (1, 1, 1) wherever the estimate is,
@@ -13,6 +17,7 @@ leak into the scale, which is what makes a filter in p drift from the batch solu
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
 
@@ -25,7 +30,7 @@ from excite.kinematics import Params, sinc_cosc_scalar
 from excite.models import AXLE, SegmentModel
 from excite.segment_estimator import MAX_CHART_STEP, SegmentEstimator
 
-__all__ = ["OnlineEstimator"]
+__all__ = ["OnlineEstimator", "BatchOnlineEstimator", "update_batch"]
 
 _TWO_PI = 2.0 * math.pi
 #: A second Gauss–Newton iteration is taken only after a first step larger than this (in the
@@ -100,7 +105,9 @@ class OnlineEstimator(SegmentEstimator):
         self._info = [[float(x) for x in row] for row in self._prior]
         if model is AXLE:  # the unrolled specialisation of _update_general
             self._update = self._update_axle
-        self._w_array = np.array(self._w)[:, None]
+        self._weights = np.array(self._w)  # 1 / sigma^2 of (dx, dy, dtheta)
+        # The chart's unit of each parameter for update_batch: NaN marks a log parameter.
+        self._units_array = np.where(self._log, np.nan, self._units)
 
     def _to_theta(self, q: list[float]) -> tuple[float, ...]:
         return tuple(math.exp(x) if log else x * c
@@ -108,7 +115,10 @@ class OnlineEstimator(SegmentEstimator):
 
     def _update_general(self, phi_L: float, phi_R: float, zx: float, zy: float,
                         zt: float) -> None:
-        """The update for any model (P x P algebra in numpy; the model in pure Python)."""
+        """The update for any model on one robot: :func:`update_batch` specialised to a
+        batch of one (the model evaluated in pure Python, ``evaluate_scalar``, and P x P
+        algebra in numpy: several times faster than the array code on one robot; tested
+        against it)."""
         q = np.array(self._q)
         info = np.asarray(self._info)
         x = q
@@ -116,7 +126,7 @@ class OnlineEstimator(SegmentEstimator):
             theta = self._to_theta(x.tolist())
             (px, py, pt), rows = self.model.evaluate_scalar(phi_L, phi_R, theta)
             h = np.array(rows) * self._chart_derivative(theta)
-            weighted = h * self._w_array
+            weighted = h * self._weights[:, None]
             innovation = np.array((zx - px, zy - py, _wrap(zt - pt))) + h @ (x - q)
             m = info + weighted.T @ h
             try:
@@ -136,7 +146,9 @@ class OnlineEstimator(SegmentEstimator):
 
     def _update_axle(self, phi_L: float, phi_R: float, zx: float, zy: float,
                      zt: float) -> None:
-        """The axle model's update, unrolled (a specialisation of :meth:`_update_general`)."""
+        """The axle model's update, unrolled in pure Python (a specialisation of
+        :func:`update_batch`, microseconds for one robot where numpy's call overheads would
+        dominate; tested against it)."""
         wx, wy, wt = self._w
         q0, q1, q2 = self._q
         (a00, a01, a02), (_, a11, a12), (_, _, a22) = self._info
@@ -215,3 +227,154 @@ class OnlineEstimator(SegmentEstimator):
         ratio = (self.model.column_scale(self._nominal_theta)
                  / self._chart_derivative(self._to_theta(self._q)))
         return (np.array(self._info) - self._prior) * np.outer(ratio, ratio)
+
+
+def update_batch(model: SegmentModel, q: NDArray[np.float64], info: NDArray[np.float64],
+                 rows: NDArray[np.float64], weights: NDArray[np.float64],
+                 units: NDArray[np.float64], iterations: int
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """One segment folded into each of N independent filters: the iterated update of
+    :class:`OnlineEstimator` (Gauss–Newton on the new segment, the past summarised by the
+    estimate and its information), batch-first.
+
+    model: the segment model (prediction and Jacobian from its ``evaluate``); q (N, P): the
+    estimates in the chart (log of lengths, offsets in units of the nominal b, angles in
+    rad); info (N, P, P): their information in the chart; rows (N, 5): each filter's segment
+    (dphi_L, dphi_R [rad], dx, dy [m], dtheta [rad]); weights (3,): 1 / sigma^2 of the
+    measured (dx, dy, dtheta); units (P,): the chart's unit of each parameter (NaN for a log
+    parameter); iterations: the most Gauss–Newton iterations (a filter stops after a step
+    below ``_RELINEARIZE``). Returns the new (q, info); a filter whose update is not finite
+    keeps its old values.
+    """
+    x, m = q, info
+    live = None  # the filters still iterating (None: all)
+    for iteration in range(iterations):
+        if live is None:
+            q_live, info_live, rows_live, x_live = q, info, rows, x
+        else:
+            q_live, info_live, rows_live, x_live = q[live], info[live], rows[live], x[live]
+        theta = chart_to_theta(x_live, units)
+        prediction, jac = model.evaluate(rows_live[:, :1], rows_live[:, 1:2], theta)
+        # d theta / d q: the value for a log parameter, else the chart's unit
+        derivative = theta if model.transforms.count("log") == model.size else np.where(
+            np.isnan(units), theta, units)
+        h = jac[..., 0].transpose(2, 0, 1) * derivative[:, None, :]  # (n, 3, P)
+        innovation = rows_live[:, 2:] - prediction[..., 0].T
+        innovation[:, 2] = _wrap(innovation[:, 2])
+        if iteration:  # relinearized around the prior's mean
+            innovation += (h @ (x_live - q_live)[..., None])[..., 0]
+        weighted_t = h.transpose(0, 2, 1) * weights  # (n, P, 3)
+        m_live = info_live + weighted_t @ h
+        step = _solve_each(m_live, weighted_t @ innovation[..., None])[..., 0]
+        largest = np.abs(step).max(axis=1)
+        step *= (MAX_CHART_STEP / np.maximum(largest, MAX_CHART_STEP))[:, None]  # trust region
+        x_new = q_live + step
+        change = largest if not iteration else np.abs(x_new - x_live).max(axis=1)
+        going = ~(change < _RELINEARIZE)
+        if live is None:
+            x, m = x_new, m_live
+            if not going.all():
+                live = np.flatnonzero(going)
+        else:
+            x[live], m[live] = x_new, m_live
+            live = live[going]
+        if live is not None and not live.size:
+            break
+    finite = np.isfinite(x.sum(axis=1) + np.trace(m, axis1=1, axis2=2))
+    if finite.all():
+        return x, m
+    return np.where(finite[:, None], x, q), np.where(finite[:, None, None], m, info)
+
+
+def chart_to_theta(q: NDArray[np.float64], units: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The parameters theta (N, P) of chart coordinates q (N, P): exp(q) for a log parameter
+    (``units`` NaN), else q times the chart's unit (m or rad)."""
+    is_log = np.isnan(units)
+    if is_log.all():
+        return np.exp(q)
+    return np.where(is_log, np.exp(np.where(is_log, q, 0.0)), q * units)
+
+
+def _solve_each(m: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """x with m x = v for stacks m (N, P, P), v (N, P, 1); NaN for a singular m."""
+    try:
+        return np.linalg.solve(m, v)
+    except np.linalg.LinAlgError:  # some m singular: solve one by one
+        out = np.full_like(v, np.nan)
+        for i in range(len(m)):
+            with contextlib.suppress(np.linalg.LinAlgError):
+                out[i] = np.linalg.solve(m[i], v[i])
+        return out
+
+
+class BatchOnlineEstimator:
+    """N independent :class:`OnlineEstimator` filters with the same settings, each fed its
+    own segments, updated together in array code (:func:`update_batch`): the vector
+    environment's estimator, one per robot.
+
+    n: the number of filters; initial, prior_std, sigma, iterations, model: as
+    :class:`OnlineEstimator` (shared by all). Filter i after the segments given to it is
+    OnlineEstimator after the same segments (tested): the same kernel on models other than
+    the axle; on the axle model OnlineEstimator's unrolled update orders its arithmetic
+    differently and takes Python's exp, so the estimates differ in the last bits (~1e-12
+    relative after 30 segments; up to ~1e-9 where the normal equations are ill-conditioned:
+    the slip id's final estimates, benchmarks/bench_equivalence.py).
+    """
+
+    def __init__(
+        self,
+        n: int,
+        initial: Params | ArrayLike,
+        prior_std: float | ArrayLike | None = None,
+        sigma: ArrayLike = DEFAULT_SIGMA,
+        iterations: int = 2,
+        model: SegmentModel = AXLE,
+    ):
+        self._one = OnlineEstimator(initial, prior_std, sigma, iterations, model)
+        self.model = model
+        self._q = np.tile(self._one._q, (n, 1))
+        self._info = np.tile(self._one._prior, (n, 1, 1))
+        self.n_segments = np.zeros(n, dtype=int)
+        self._angles = [i for i, t in enumerate(model.transforms) if t == "angle"]
+
+    def reset(self, mask: NDArray[np.bool_]) -> None:
+        """Start the filters of ``mask`` (N,) anew, at the prior."""
+        self._q[mask] = self._one._q
+        self._info[mask] = self._one._prior
+        self.n_segments[mask] = 0
+
+    def update(self, rows: ArrayLike, mask: NDArray[np.bool_]) -> None:
+        """Fold segment ``rows[i]`` (dphi_L, dphi_R [rad], dx, dy [m], dtheta [rad]) into
+        filter i for each i of ``mask`` (N,) (the other rows are ignored)."""
+        rows = np.asarray(rows, dtype=float)
+        one, every = self._one, bool(mask.all())
+        if not every:
+            rows = rows[mask]
+        if not np.isfinite(rows).all():
+            raise ValueError("segment values must be finite")
+        q, info = update_batch(self.model, self._q if every else self._q[mask],
+                               self._info if every else self._info[mask], rows,
+                               one._weights, one._units_array, one._iterations)
+        if every:
+            self._q, self._info = q, info
+        else:
+            self._q[mask], self._info[mask] = q, info
+        self.n_segments += mask
+
+    @property
+    def theta(self) -> NDArray[np.float64]:
+        """Every filter's P parameters (N, P) (m, rad; angles wrapped to (-pi, pi])."""
+        theta = chart_to_theta(self._q, self._one._units_array)
+        if self._angles:
+            theta[:, self._angles] = _wrap(theta[:, self._angles])
+        return theta
+
+    @property
+    def information(self) -> NDArray[np.float64]:
+        """Every filter's dimensionless Fisher information (N, P, P), as
+        :attr:`OnlineEstimator.information`."""
+        one = self._one
+        theta = chart_to_theta(self._q, one._units_array)
+        derivative = np.where(np.isnan(one._units_array), theta, one._units_array)
+        ratio = one.model.column_scale(one._nominal_theta) / derivative
+        return (self._info - one._prior) * ratio[:, :, None] * ratio[:, None, :]

@@ -103,6 +103,12 @@ def test_native_vec_env_adapter_resets_in_the_same_step():
     np.testing.assert_allclose(reward[1], single_reward, atol=1e-6)
     assert (obs[:, -1] == 0).all()  # the new episodes' budget used
     assert set(infos[0]["reward_terms"]) >= {"information", "collision"}
+    for i, info in enumerate(infos):  # plain Python numbers and row arrays, robot by robot
+        assert isinstance(info["sigma_min"], float) and isinstance(info["collision"], bool)
+        assert isinstance(info["n_segments"], int) and info["measurement"].shape == (5,)
+        assert all(isinstance(v, float) for v in info["reward_terms"].values())
+        assert sum(info["reward_terms"].values()) == pytest.approx(reward[i], abs=1e-6)
+    assert not np.array_equal(infos[0]["measurement"], infos[1]["measurement"])
 
 
 def test_training_over_several_robots_splits_the_envs_and_seeds_them_in_order(tmp_path):

@@ -6,6 +6,7 @@ import pytest
 from gymnasium.vector import AutoresetMode
 from scipy import stats
 
+import envs.env as env_module
 import envs.physics as physics
 import excite  # noqa: F401  (registers the ids)
 from envs.robot import robot_distribution
@@ -13,6 +14,7 @@ from envs.simulation import BatchSimulation, Simulation, SimulationConfig
 from envs.vector_env import DiffDriveCalibVectorEnv
 from excite.information import information_matrices, information_matrix
 from excite.models import AXLE, SENSOR_POSE
+from excite.online import BatchOnlineEstimator
 
 IDEAL, SLIP, SENSOR = ("excite/DiffDriveCalibIdeal-v0", "excite/DiffDriveCalib-v0",
                        "excite/DiffDriveCalibSensor-v0")
@@ -79,12 +81,18 @@ def run_pair(env_id, n, seed, steps, actions_seed=0, **config):
     return out
 
 
+@pytest.mark.parametrize("batch_estimator", [False, True])
 @pytest.mark.parametrize("env_id", [IDEAL, SLIP])
-def test_robot_i_is_the_single_env_with_seed_plus_i(env_id):
+def test_robot_i_is_the_single_env_with_seed_plus_i(env_id, batch_estimator, monkeypatch):
     """Identical segments (bit for bit) across an autoreset, wall contacts and slip included;
-    observations and rewards equal up to the eigen-solvers' rounding (LAPACK's eigh here, the
-    closed form in the single env): an eigenvalue near 0 is known to eps * ||F|| (||F|| < 1e8
-    here), so sigma_min to sqrt(1e-16 * 1e8) = 1e-4 and the reward (sigma_min / 100) to 1e-6."""
+    observations and rewards equal up to rounding: the eigen-solvers' (LAPACK's eigh here,
+    the closed form in the single env: an eigenvalue near 0 is known to eps * ||F|| (||F|| <
+    1e8 here), so sigma_min to sqrt(1e-16 * 1e8) = 1e-4 and the reward (sigma_min / 100) to
+    1e-6) and, with the estimators batched (as from BATCH_ESTIMATOR_MIN robots), the
+    filter's (the unrolled one orders its arithmetic differently: estimates within ~1e-9)."""
+    monkeypatch.setattr(env_module, "BATCH_ESTIMATOR_MIN", 1 if batch_estimator else 10**9)
+    estimators = gym.make_vec(env_id, num_envs=3).unwrapped.estimators
+    assert isinstance(estimators, BatchOnlineEstimator) == batch_estimator
     out = run_pair(env_id, 3, seed=40, steps=25, budget=12)
     collisions = 0
     for obs, s_obs, reward, s_reward, rows, s_rows in out:
@@ -96,9 +104,11 @@ def test_robot_i_is_the_single_env_with_seed_plus_i(env_id):
     assert collisions >= 2, "the random actions must reach the walls"
 
 
-def test_sensor_id_draws_the_same_robots_mountings_and_noise():
+@pytest.mark.parametrize("batch_estimator", [False, True])
+def test_sensor_id_draws_the_same_robots_mountings_and_noise(batch_estimator, monkeypatch):
     """Same rows; same observations except the weakest eigenvector (indices 12-17), which is
     arbitrary within the null space of F while fewer segments than parameters are in."""
+    monkeypatch.setattr(env_module, "BATCH_ESTIMATOR_MIN", 1 if batch_estimator else 10**9)
     out = run_pair(SENSOR, 2, seed=3, steps=3, budget=8, ideal=True)
     keep = np.r_[0:12, 18:25]
     for obs, s_obs, _, _, rows, s_rows in out:
@@ -277,3 +287,97 @@ def test_user_estimators_partial_resets_and_seed_lists():
     assert info["n_segments"].tolist() == [1, 0, 1] and len(made) == 4
     with pytest.raises(ValueError, match="seed"):
         venv.reset(seed=[1, 2])
+
+
+@pytest.mark.parametrize("model", [AXLE, SENSOR_POSE])
+def test_batched_observations_are_the_single_env_observation(model):
+    """observations (the vector env's, batch-first) and observation (the single env's, on
+    Python floats) give the same float32 numbers, clipping and the eigenvector's sign
+    included (ties in magnitude: the first entry decides)."""
+    from envs.env import DiffDriveCalibEnv, observation, observations
+
+    env = DiffDriveCalibEnv(sensor_pose=None if model is AXLE else {"x": (0.0, 0.1)})
+    rng = np.random.default_rng(0)
+    n, p = 200, model.size
+    nominal = env.nominal_theta
+    theta = nominal * rng.uniform(0.0, 2.5, (n, p)) + rng.normal(0, 0.05, (n, p))
+    eigenvalues = np.sort(rng.lognormal(3.0, 6.0, (n, p)), axis=1) * rng.choice([-1e-9, 1], (n, p))
+    weakest = rng.normal(size=(n, p))
+    weakest[:5, :2] = [[0.5, -0.5], [-0.5, 0.5], [0.0, 0.0], [-1.0, 1.0], [1.0, -1.0]]
+    pose = rng.uniform(-4, 4, (n, 3)) * [1, 1, 3]
+    actions = rng.uniform(-1, 1, (n, 2))
+    used = rng.uniform(0, 1, n)
+    batch = observations(model, theta, nominal, eigenvalues, weakest, pose, actions, used,
+                         env.config["arena_size"], env.observation_space)
+    assert batch.dtype == np.float32 and batch.shape == (n, 3 * p + 7)
+    for i in range(n):
+        one = observation(model, theta[i].tolist(), nominal.tolist(), eigenvalues[i].tolist(),
+                          weakest[i].tolist(), pose[i].tolist(), actions[i].tolist(),
+                          float(used[i]), env.config["arena_size"], env.observation_space)
+        np.testing.assert_array_equal(batch[i], one)
+    space = env.observation_space
+    assert (batch == space.high).any() and (batch == space.low).any()  # clipped both ways
+
+
+def test_batched_sensor_increments_and_poses_are_the_single_robots():
+    """body_to_sensor with one mounting per increment, and measure_poses / sense_increments
+    of N robots, are the one-robot computations bit for bit (each robot drawing its own
+    noise)."""
+    from envs.env import measure_poses, sense_increments
+    from envs.sensors import RelativePoseSensor
+    from excite.models import SensorPose, body_to_sensor
+
+    rng = np.random.default_rng(1)
+    n = 9
+    body = rng.normal(0, 0.5, (n, 3))
+    mounts = rng.uniform(-0.2, 0.2, (n, 3)) * [1, 1, 10]
+    each = body_to_sensor(body, mounts)
+    for i in range(n):
+        np.testing.assert_array_equal(each[i], body_to_sensor(body[i:i + 1],
+                                                              SensorPose(*mounts[i]))[0])
+    sensor = RelativePoseSensor()
+    theta = np.column_stack([np.full((n, 3), 0.1), mounts + 0.01])
+
+    def rngs(robots):
+        return [np.random.default_rng(i) for i in robots]
+
+    sensed = sense_increments(sensor, body, rngs(range(n)), mounts)
+    poses = measure_poses(sensor, body, rngs(range(n)), mounts, theta)
+    axle = measure_poses(sensor, body, rngs(range(n)), None, theta)
+    for i in range(n):
+        one = slice(i, i + 1)
+        np.testing.assert_array_equal(
+            sensed[i], sense_increments(sensor, body[one], rngs([i]), mounts[one])[0])
+        np.testing.assert_array_equal(
+            poses[i], measure_poses(sensor, body[one], rngs([i]), mounts[one], theta[one])[0])
+        np.testing.assert_array_equal(axle[i], sensor.absolute(body[i], rngs([i])[0]))
+    assert not np.array_equal(sensed, body) and not np.array_equal(axle, body)
+
+
+def test_the_built_in_filter_keeps_its_settings_when_batched(monkeypatch):
+    """estimator_factory "online:..." becomes one BatchOnlineEstimator with the spec's
+    settings (the estimates follow the single env's filter with the same spec, far closer
+    than the settings' effect); other built-ins stay one estimator per robot."""
+    from excite.estimators import estimator_factory
+
+    monkeypatch.setattr(env_module, "BATCH_ESTIMATOR_MIN", 1)
+    spec = estimator_factory("online:iterations=1:prior_std=0.002")
+    kwargs = {"budget": 6, "ideal": True}
+    venv = DiffDriveCalibVectorEnv(num_envs=2, estimator_factory=spec, **kwargs)
+    assert isinstance(venv.estimators, BatchOnlineEstimator)
+    default = DiffDriveCalibVectorEnv(num_envs=2, **kwargs)
+    singles = [gym.make(IDEAL, estimator_factory=spec, **kwargs).unwrapped for _ in range(2)]
+    venv.reset(seed=7)
+    default.reset(seed=7)
+    for i, env in enumerate(singles):
+        env.reset(seed=7 + i)
+    for action in np.random.default_rng(2).uniform(-1, 1, (5, 2, 2)):
+        *_, info = venv.step(action)
+        *_, default_info = default.step(action)
+        expected = [env.step(a)[-1]["estimate"] for env, a in zip(singles, action, strict=True)]
+        np.testing.assert_allclose(info["estimate"], expected, rtol=1e-10)
+    settings_effect = np.abs(info["estimate"] / default_info["estimate"] - 1).max()
+    assert settings_effect > 1e-6
+    ekf = DiffDriveCalibVectorEnv(num_envs=2, estimator_factory=estimator_factory("ekf"),
+                                  **kwargs)
+    assert isinstance(ekf.estimators, list)
