@@ -177,11 +177,11 @@ def traction_constants(robot: RobotSpec, dt: float) -> tuple[float, ...]:
             robot.max_wheel_speed, *k_inv)
 
 
-class _BatchIO:
-    """The tick loop of the pymunk drives: the compiled kernel, then pymunk.batch's bulk set of
-    the velocities, the space's step and the bulk get of the bodies. Robot i's body is row
-    ``slots[i]`` of the space's body list (pymunk's order: the dynamic bodies, then the walls'
-    static body); rebuild this after adding or removing a body."""
+class _TickLoop:
+    """The tick loop of both pymunk drives on a space: the compiled kernel, then pymunk.batch's
+    bulk set of the velocities, the space's step and the bulk get of the bodies. Robot i's body
+    is row ``slots[i]`` of the space's body list (pymunk's order: the dynamic bodies, then the
+    walls' static body); rebuild this after adding or removing a body."""
 
     _GET = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
             | pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
@@ -338,7 +338,7 @@ class PymunkDrive:
     traction), so the traction supplies centripetal forces, e.g. m*w^2*com_offset in a spin.
 
     Steps 1-2 are the compiled kernel :func:`envs.traction_kernel.traction_tick`, run here on
-    a batch of one robot, and the tick loop is the one of :class:`PymunkBatchDrive`.
+    a batch of one robot in the tick loop of :class:`PymunkBatchDrive` (:class:`_TickLoop`).
     """
 
     def __init__(self, arena: Arena, physics_hz: float) -> None:
@@ -347,7 +347,7 @@ class PymunkDrive:
         self._robot: RobotSpec | None = None
         self._space: pymunk.Space | None = None
         self._body: pymunk.Body | None = None
-        self._io: _BatchIO | None = None  # rebuilt after unpickling (pymunk buffers do not pickle)
+        self._io: _TickLoop | None = None  # rebuilt after unpickling (pymunk buffers don't)
         self._began = np.zeros(1, dtype=bool)  # set by pymunk's pre-solve on a wall contact
         self._no_contacts = np.zeros(1, dtype=np.int64)  # (pre-solve runs every tick in contact)
         self._touched = False  # the last run touched a wall (pymunk holds contact state)
@@ -394,7 +394,7 @@ class PymunkDrive:
             # space: pickling between runs then continues bit-identically.
             self._build_space(tuple(self._body.position), self._body.angle)
         if self._io is None:
-            self._io = _BatchIO(self._space, [self._body])
+            self._io = _TickLoop(self._space, [self._body])
         path = np.empty((n_ticks + 1, 1, len(PATH_FIELDS)))
         collided = self._io.run(self.dt, self._constants, self._state,
                                 np.array([[cmd_L, cmd_R]], dtype=float), self._no_contacts,
@@ -436,7 +436,7 @@ class PymunkBatchDrive:
         self._touched = np.zeros(n, dtype=bool)
         self._state = np.zeros((n, len(STATE_FIELDS)))  # the kernel's state of each robot
         self._constants = np.ones((n, len(TRACTION_FIELDS)))
-        self._io: _BatchIO | None = None  # rebuilt when pymunk's body order changes
+        self._io: _TickLoop | None = None  # rebuilt when pymunk's body order changes
 
     def _robot_of(self, arbiter: pymunk.Arbiter) -> int:
         a, b = arbiter.shapes  # (bodies are gone when a removed shape separates)
@@ -474,14 +474,14 @@ class PymunkBatchDrive:
         self._bodies[i], self._shapes[i] = body, shape
         self._io = None  # pymunk's body order changed
 
-    def _batch_io(self) -> _BatchIO:
+    def _ticks(self) -> _TickLoop:
         if self._io is None:
-            self._io = _BatchIO(self._space, self._bodies)
+            self._io = _TickLoop(self._space, self._bodies)
         return self._io
 
     def poses(self) -> np.ndarray:
         """World poses (N, 3) of the axle midpoints (x, y, theta)."""
-        self._batch_io().poses(self._constants, self._state)
+        self._ticks().poses(self._constants, self._state)
         return self._state[:, _POSE].copy()
 
     def pose(self, i: int) -> np.ndarray:
@@ -499,7 +499,7 @@ class PymunkBatchDrive:
         for i in np.flatnonzero(self._touched):  # as PymunkDrive's fresh space after a contact
             body = self._bodies[i]
             self._new_body(i, tuple(body.position), body.angle)
-        self._touched = self._batch_io().run(self.dt, self._constants, self._state,
+        self._touched = self._ticks().run(self.dt, self._constants, self._state,
                                              np.ascontiguousarray(commands, dtype=float),
                                              self._contacts, self._began, n_ticks)
         return self._state[:, _POSE].copy(), self._touched.copy()
