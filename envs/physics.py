@@ -181,19 +181,21 @@ class _TickLoop:
     """The tick loop of both pymunk drives on a space: the compiled kernel, then pymunk.batch's
     bulk set of the velocities, the space's step and the bulk get of the bodies. Robot i's body
     is row ``slots[i]`` of the space's body list (pymunk's order: the dynamic bodies, then the
-    walls' static body); rebuild this after adding or removing a body."""
+    walls' static body); rebuild this after adding or removing a body. ``body_ids``: the robots'
+    ``pymunk.Body.id`` (kept by the drives: reading 64 of them costs more than this whole
+    setup)."""
 
     _GET = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
             | pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
     _SET = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY
 
-    def __init__(self, space: pymunk.Space, bodies: list[pymunk.Body]) -> None:
+    def __init__(self, space: pymunk.Space, body_ids: list[int]) -> None:
         self._space = space
         listing = pymunk.batch.Buffer()
         pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.BODY_ID, listing)
         ids = list(memoryview(listing.int_buf()).cast("P"))
         row = {body_id: k for k, body_id in enumerate(ids)}
-        self.slots = np.array([row[body.id] for body in bodies], dtype=np.int64)
+        self.slots = np.array([row[body_id] for body_id in body_ids], dtype=np.int64)
         # (M, 3) vx, vy (m/s), w (rad/s) per listed body: the buffer pymunk's velocities are
         # set from (the kernel writes the robots' rows)
         self._velocities = np.zeros((len(ids), 3))
@@ -394,7 +396,7 @@ class PymunkDrive:
             # space: pickling between runs then continues bit-identically.
             self._build_space(tuple(self._body.position), self._body.angle)
         if self._io is None:
-            self._io = _TickLoop(self._space, [self._body])
+            self._io = _TickLoop(self._space, [self._body.id])
         path = np.empty((n_ticks + 1, 1, len(PATH_FIELDS)))
         collided = self._io.run(self.dt, self._constants, self._state,
                                 np.array([[cmd_L, cmd_R]], dtype=float), self._no_contacts,
@@ -426,6 +428,7 @@ class PymunkBatchDrive:
         self._space = _new_space(arena, self.dt)
         self._bodies: list[pymunk.Body | None] = [None] * n
         self._shapes: list[pymunk.Poly | None] = [None] * n
+        self._body_ids = [0] * n  # pymunk.Body.id of each robot's body
         self._robots: list[RobotSpec | None] = [None] * n
         self._shape_index: dict[pymunk.Shape, int] = {}
         self._contacts = np.zeros(n, dtype=np.int64)  # wall contacts each chassis is in now
@@ -471,12 +474,12 @@ class PymunkBatchDrive:
         shape.filter = self._filter
         self._shape_index[shape] = i
         self._space.add(body, shape)
-        self._bodies[i], self._shapes[i] = body, shape
+        self._bodies[i], self._shapes[i], self._body_ids[i] = body, shape, body.id
         self._io = None  # pymunk's body order changed
 
     def _ticks(self) -> _TickLoop:
         if self._io is None:
-            self._io = _TickLoop(self._space, self._bodies)
+            self._io = _TickLoop(self._space, self._body_ids)
         return self._io
 
     def poses(self) -> np.ndarray:
