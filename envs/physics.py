@@ -24,7 +24,7 @@ overlap, small against any chassis).
 from __future__ import annotations
 
 import math
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import pymunk
@@ -177,21 +177,35 @@ def traction_constants(robot: RobotSpec, dt: float) -> tuple[float, ...]:
             robot.max_wheel_speed, *k_inv)
 
 
+class _Buffers(NamedTuple):
+    """pymunk.batch buffers kept for the life of a drive and reused by every :class:`_TickLoop`
+    on it: pymunk never frees a Buffer's C arrays (a new Buffer per rebuild leaked ~6 KB)."""
+
+    listing: pymunk.batch.Buffer
+    put: pymunk.batch.Buffer
+    get: pymunk.batch.Buffer
+
+    @classmethod
+    def new(cls) -> _Buffers:
+        return cls(pymunk.batch.Buffer(), pymunk.batch.Buffer(), pymunk.batch.Buffer())
+
+
 class _TickLoop:
     """The tick loop of both pymunk drives on a space: the compiled kernel, then pymunk.batch's
     bulk set of the velocities, the space's step and the bulk get of the bodies. Robot i's body
     is row ``slots[i]`` of the space's body list (pymunk's order: the dynamic bodies, then the
     walls' static body); rebuild this after adding or removing a body. ``body_ids``: the robots'
     ``pymunk.Body.id`` (kept by the drives: reading 64 of them costs more than this whole
-    setup)."""
+    setup); ``buffers``: the drive's."""
 
     _GET = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
             | pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
     _SET = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY
 
-    def __init__(self, space: pymunk.Space, body_ids: list[int]) -> None:
+    def __init__(self, space: pymunk.Space, body_ids: list[int], buffers: _Buffers) -> None:
         self._space = space
-        listing = pymunk.batch.Buffer()
+        listing = buffers.listing
+        listing.clear()
         pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.BODY_ID, listing)
         ids = list(memoryview(listing.int_buf()).cast("P"))
         row = {body_id: k for k, body_id in enumerate(ids)}
@@ -199,12 +213,13 @@ class _TickLoop:
         # (M, 3) vx, vy (m/s), w (rad/s) per listed body: the buffer pymunk's velocities are
         # set from (the kernel writes the robots' rows)
         self._velocities = np.zeros((len(ids), 3))
-        self._set = pymunk.batch.Buffer()
+        self._set = buffers.put
         self._set.set_float_buf(self._velocities)
         # pymunk.batch's get buffer grows only when a reading does not fit, so after a first
         # reading of these bodies every later one rewrites the same memory: one numpy view of
         # it serves every tick (a new view per tick costs percents at N = 1); run() checks it.
-        self._get = pymunk.batch.Buffer()
+        self._get = buffers.get
+        self._get.clear()
         pymunk.batch.get_space_bodies(space, self._GET, self._get)
         self._bodies = np.frombuffer(self._get.float_buf(), dtype=float)
 
@@ -349,7 +364,8 @@ class PymunkDrive:
         self._robot: RobotSpec | None = None
         self._space: pymunk.Space | None = None
         self._body: pymunk.Body | None = None
-        self._io: _TickLoop | None = None  # rebuilt after unpickling (pymunk buffers don't)
+        self._io: _TickLoop | None = None  # per space
+        self._buffers: _Buffers | None = None  # (pymunk buffers do not pickle: made again)
         self._began = np.zeros(1, dtype=bool)  # set by pymunk's pre-solve on a wall contact
         self._no_contacts = np.zeros(1, dtype=np.int64)  # (pre-solve runs every tick in contact)
         self._touched = False  # the last run touched a wall (pymunk holds contact state)
@@ -357,7 +373,7 @@ class PymunkDrive:
         self._constants = np.ones((1, len(TRACTION_FIELDS)))
 
     def __getstate__(self) -> dict:
-        return {**self.__dict__, "_io": None}
+        return {**self.__dict__, "_io": None, "_buffers": None}
 
     def reset(self, robot: RobotSpec, pose: np.ndarray, wheel_angles: np.ndarray) -> None:
         self._robot = robot
@@ -396,7 +412,8 @@ class PymunkDrive:
             # space: pickling between runs then continues bit-identically.
             self._build_space(tuple(self._body.position), self._body.angle)
         if self._io is None:
-            self._io = _TickLoop(self._space, [self._body.id])
+            self._buffers = self._buffers or _Buffers.new()
+            self._io = _TickLoop(self._space, [self._body.id], self._buffers)
         path = np.empty((n_ticks + 1, 1, len(PATH_FIELDS)))
         collided = self._io.run(self.dt, self._constants, self._state,
                                 np.array([[cmd_L, cmd_R]], dtype=float), self._no_contacts,
@@ -440,6 +457,7 @@ class PymunkBatchDrive:
         self._state = np.zeros((n, len(STATE_FIELDS)))  # the kernel's state of each robot
         self._constants = np.ones((n, len(TRACTION_FIELDS)))
         self._io: _TickLoop | None = None  # rebuilt when pymunk's body order changes
+        self._buffers = _Buffers.new()
 
     def _robot_of(self, arbiter: pymunk.Arbiter) -> int:
         a, b = arbiter.shapes  # (bodies are gone when a removed shape separates)
@@ -479,7 +497,7 @@ class PymunkBatchDrive:
 
     def _ticks(self) -> _TickLoop:
         if self._io is None:
-            self._io = _TickLoop(self._space, self._body_ids)
+            self._io = _TickLoop(self._space, self._body_ids, self._buffers)
         return self._io
 
     def poses(self) -> np.ndarray:
