@@ -7,11 +7,13 @@ import sys
 
 import numba
 import numpy as np
+import pymunk.batch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from envs.physics import traction_constants
 from envs.robot import PRESETS, robot_distribution
+from envs.simulation import BatchSimulation, Simulation, SimulationConfig
 from envs.traction_kernel import (
     PATH_FIELDS,
     STATE_FIELDS,
@@ -165,3 +167,28 @@ def test_the_compiled_kernel_is_reused_from_the_disk_cache(tmp_path):
                            text=True, check=True).stdout.split() for _ in range(2)]
     assert runs == [["0", "1"], ["1", "0"]]
     assert any(tmp_path.rglob("*.nbi")) and any(tmp_path.rglob("*.nbc"))
+
+
+def test_the_drives_make_no_pymunk_batch_buffers_per_run(monkeypatch):
+    """pymunk never frees a pymunk.batch.Buffer's C arrays, so the drives make their buffers
+    once and reuse them, through wall contacts (fresh bodies, a fresh space) and resets."""
+    made = []
+    original = pymunk.batch.Buffer.__init__
+    monkeypatch.setattr(pymunk.batch.Buffer, "__init__",
+                        lambda self: (made.append(1), original(self))[1])
+    config = SimulationConfig(arena_width=1.5, arena_height=1.5)  # small: walls reached often
+    robot = robot_distribution({}).nominal()
+    single, batch = Simulation(config), BatchSimulation(config, 3)
+    commands = np.random.default_rng(4).uniform(-15, 15, (40, 3, 2))
+    contacts = 0
+    for episode in range(2):
+        single.reset(robot, np.random.default_rng(episode), pose=(0.0, 0.0, 0.0))
+        for i in range(3):
+            batch.reset(i, robot, np.random.default_rng(episode), pose=(0.0, 0.0, 0.0))
+        for step, command in enumerate(commands):
+            contacts += single.run_segment(*command[0], 0.5).collision
+            contacts += batch.run_segment(command, 0.5).collision.sum()
+            if step == 0 and episode == 0:
+                first = len(made)
+    assert contacts > 20, "the robots must touch the walls"
+    assert len(made) == first == 6  # each drive's three, made at its first run
