@@ -7,8 +7,8 @@ Two implementations of one `Drive` interface:
 - `IdealDrive`: rolls without slip and without lag, so the kinematic model is exact.
 
 and their batches of N robots stepped together (`PymunkBatchDrive`, `IdealBatchDrive`), which
-run the same kernels (`traction_ticks` on arrays instead of floats, `ideal_arcs`) and give
-each robot the single drive's numbers bit for bit.
+run the same kernels (the compiled `envs.traction_kernel.traction_tick` on N robots instead of
+one, `ideal_arcs`) and give each robot the single drive's numbers bit for bit.
 
 Frames and units: world frame x right, y up, theta counter-clockwise (rad, continuous);
 body frame x forward, y left, origin at the axle midpoint (the reference point of every
@@ -24,24 +24,22 @@ overlap, small against any chassis).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any, NamedTuple, Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import pymunk
 import pymunk.batch
 
 from envs.robot import RobotSpec
+from envs.traction_kernel import PATH_FIELDS, STATE_FIELDS, TRACTION_FIELDS, traction_tick
 from excite.arena import Arena
-from excite.kinematics import sinc_cosc_scalar, sinc_family
+from excite.kinematics import sinc_family
 
 GRAVITY = 9.81  # m/s^2
 WALL_RADIUS = 0.05  # m, half-thickness of the arena's wall segments
-SLIP_ITERATIONS = 6  # Gauss-Seidel sweeps over the two wheels when a friction cap binds
-#: Slipping robots of a batch solved one by one on Python floats up to this many (each takes a
-#: few microseconds; numpy's per-call overhead makes arrays faster only beyond).
-SCALAR_SLIP_MAX = 12
 _CHASSIS_TYPE, _WALL_TYPE = 1, 2  # pymunk collision types
+_PHI = slice(STATE_FIELDS.index("phi_L"), STATE_FIELDS.index("phi_R") + 1)  # state columns
+_POSE = slice(STATE_FIELDS.index("x"), STATE_FIELDS.index("theta") + 1)
 
 
 class Drive(Protocol):
@@ -179,235 +177,108 @@ def traction_constants(robot: RobotSpec, dt: float) -> tuple[float, ...]:
             robot.max_wheel_speed, *k_inv)
 
 
-#: Names of :func:`traction_constants`' values (a float each per robot, or an array over N).
-TRACTION_FIELDS = ("m", "inertia", "d", "r_L", "r_R", "inv_b", "two_over_b", "hb", "alpha",
-                   "cap", "cap2", "inv_m", "inv_i", "limit",
-                   "k00_L", "k01_L", "k11_L", "k00_R", "k01_R", "k11_R")
+class _Buffers(NamedTuple):
+    """pymunk.batch buffers kept for the life of a drive and reused by every :class:`_TickLoop`
+    on it: pymunk never frees a Buffer's C arrays (a new Buffer per rebuild leaked ~6 KB)."""
+
+    listing: pymunk.batch.Buffer
+    put: pymunk.batch.Buffer
+    get: pymunk.batch.Buffer
+
+    @classmethod
+    def new(cls) -> _Buffers:
+        return cls(pymunk.batch.Buffer(), pymunk.batch.Buffer(), pymunk.batch.Buffer())
 
 
-class _FloatOps:
-    """The traction kernel's operations on one robot's Python floats (the single env)."""
+class _TickLoop:
+    """The tick loop of both pymunk drives on a space: the compiled kernel, then pymunk.batch's
+    bulk set of the velocities, the space's step and the bulk get of the bodies. Robot i's body
+    is row ``slots[i]`` of the space's body list (pymunk's order: the dynamic bodies, then the
+    walls' static body); rebuild this after adding or removing a body. ``body_ids``: the robots'
+    ``pymunk.Body.id`` (kept by the drives: reading 64 of them costs more than this whole
+    setup); ``buffers``: the drive's."""
 
-    cos, sin = math.cos, math.sin
-    sinc_cosc = staticmethod(sinc_cosc_scalar)  # called with derivatives=False (positional)
+    _GET = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
+            | pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
+    _SET = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY
 
-    @staticmethod
-    def clip(value, limit):
-        return min(max(value, -limit), limit)
+    def __init__(self, space: pymunk.Space, body_ids: list[int], buffers: _Buffers) -> None:
+        self._space = space
+        listing = buffers.listing
+        listing.clear()
+        pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.BODY_ID, listing)
+        ids = list(memoryview(listing.int_buf()).cast("P"))
+        row = {body_id: k for k, body_id in enumerate(ids)}
+        self.slots = np.array([row[body_id] for body_id in body_ids], dtype=np.int64)
+        # (M, 3) vx, vy (m/s), w (rad/s) per listed body: the buffer pymunk's velocities are
+        # set from (the kernel writes the robots' rows)
+        self._velocities = np.zeros((len(ids), 3))
+        self._set = buffers.put
+        self._set.set_float_buf(self._velocities)
+        # pymunk.batch's get buffer grows only when a reading does not fit, so after a first
+        # reading of these bodies every later one rewrites the same memory: one numpy view of
+        # it serves every tick (a new view per tick costs percents at N = 1); run() checks it.
+        self._get = buffers.get
+        self._get.clear()
+        pymunk.batch.get_space_bodies(space, self._GET, self._get)
+        self._bodies = np.frombuffer(self._get.float_buf(), dtype=float)
 
-    @staticmethod
-    def slip(rolling, k, vx, vy, w, t_L, t_R, rolled):
-        return _slip(_FloatOps, k, vx, vy, w, t_L, t_R)
+    def read(self) -> np.ndarray:
+        """(M * 6,): each listed body's COM x, y (m), yaw (rad), velocity x, y (m/s), yaw rate
+        (rad/s), flat (a view that the next reading overwrites)."""
+        self._get.clear()
+        pymunk.batch.get_space_bodies(self._space, self._GET, self._get)
+        return self._bodies
 
-    @staticmethod
-    def capped(x, y, cap):
-        norm = math.hypot(x, y)
-        if norm > cap:
-            return x * cap / norm, y * cap / norm
-        return x, y
+    def _check_view(self) -> None:
+        """Raise if pymunk.batch moved its get buffer away from the view."""
+        now = np.frombuffer(self._get.float_buf(), dtype=float)
+        if now.ctypes.data != self._bodies.ctypes.data or len(now) != len(self._bodies):
+            raise RuntimeError("pymunk.batch moved its body buffer during a run")
 
+    def run(self, dt: float, k: np.ndarray, state: np.ndarray, commands: np.ndarray,
+            contacts: np.ndarray, began: np.ndarray, n_ticks: int,
+            path: np.ndarray | None = None) -> np.ndarray:
+        """Hold ``commands`` (N, 2) (rad/s) for ``n_ticks`` ticks of ``dt`` s: each tick one
+        call of the compiled kernel (:func:`envs.traction_kernel.traction_tick`, which first
+        takes in the step before it), then pymunk's bulk set, step and get; a last kernel call
+        takes in the last step. k (N, F) the robots' constants, ``state`` (N, S) updated in
+        place; ``contacts``, ``began`` (N,): the robots' wall contacts kept by the collision
+        callbacks; ``path`` (n_ticks + 1, N, 5) records every tick when given. Returns whether
+        each robot touched a wall (N,)."""
+        collided = np.zeros(len(state), dtype=bool)
+        path = _NO_PATH if path is None else path
+        space, put, get, fields_set, fields_get = (self._space, self._set, self._get,
+                                                   self._SET, self._GET)
+        set_bodies, get_bodies = pymunk.batch.set_space_bodies, pymunk.batch.get_space_bodies
+        slots, velocities = self.slots, self._velocities
+        bodies = self.read()
+        for tick in range(n_ticks):  # (inlined: a method call per tick costs percents at N = 1)
+            traction_tick(k, state, commands, dt, bodies, slots, contacts, began, collided,
+                          velocities, path, tick, n_ticks)
+            set_bodies(space, fields_set, put)
+            space.step(dt)
+            get.clear()
+            get_bodies(space, fields_get, get)
+        self._check_view()
+        traction_tick(k, state, commands, dt, bodies, slots, contacts, began, collided,
+                      velocities, path, n_ticks, n_ticks)
+        return collided
 
-class _ArrayOps:
-    """The same operations elementwise on arrays over N robots (the vector env)."""
-
-    cos, sin = np.cos, np.sin
-    sinc_cosc = staticmethod(sinc_family)
-
-    @staticmethod
-    def clip(value, limit):
-        return np.clip(value, -limit, limit)
-
-    @staticmethod
-    def rolls(q_L, q_R, py):
-        # sqrt of a negative q is nan (the caller silences the warning) and fails the test,
-        # as the floats' q >= 0 checks do
-        return np.abs(py) <= np.sqrt(q_L) + np.sqrt(q_R)
-
-    @staticmethod
-    def slip(rolling, k, vx, vy, w, t_L, t_R, rolled):
-        """The rolling robots take ``rolled``; the slipping ones run :func:`_slip`, one by one
-        on Python floats (exactly the single robot's arithmetic) when they are few, else on
-        arrays of the slipping robots."""
-        out = tuple(value.copy() for value in rolled)
-        slipping = np.flatnonzero(~rolling)
-        inputs = (vx, vy, w, t_L, t_R)
-        if len(slipping) > SCALAR_SLIP_MAX:
-            result = _slip(_ArrayOps, k.subset(slipping), *(a[slipping] for a in inputs))
-            for target, value in zip(out, result, strict=True):
-                target[slipping] = value
-            return out
-        columns = [a[slipping].tolist() for a in inputs]
-        for j, i in enumerate(slipping.tolist()):
-            result = _slip(_FloatOps, k.robots[i], *(column[j] for column in columns))
-            out[0][i], out[1][i], out[2][i] = result
-        return out
-
-    @staticmethod
-    def capped(x, y, cap):
-        # Python's hypot (numpy's differs from it in the last bit now and then)
-        norm = np.array([math.hypot(a, b) for a, b in zip(x.tolist(), y.tolist(), strict=True)])
-        over = norm > cap
-        norm = np.where(over, norm, cap)
-        return np.where(over, x * cap / norm, x), np.where(over, y * cap / norm, y)
-
-
-class OneBody(NamedTuple):
-    """One robot's pymunk I/O for :func:`traction_ticks` on floats: its body, the space's step
-    and a flag with ``hit`` set (and cleared by the kernel) when the chassis touches a wall."""
-
-    body: pymunk.Body
-    step: Callable[[float], None]
-    contact: Any
-
-
-class BodyBatch(NamedTuple):
-    """N robots' pymunk I/O for :func:`traction_ticks` on arrays: advance(chord_x, chord_y, w)
-    sets the bodies' velocities, steps pymunk one tick and returns the COM poses (x, y, th) and
-    which bodies touched a wall; velocity() reads the velocities after that step."""
-
-    advance: Callable
-    velocity: Callable
-
-
-def traction_ticks(ops, k, state: tuple, cmd_L, cmd_R, n_ticks: int,
-                   world: OneBody | BodyBatch, record: bool = False):
-    """The motors, the traction and the tick loop of :class:`PymunkDrive`, written once for one
-    robot on Python floats (``ops=_FloatOps``, ``world`` a :class:`OneBody`) or N robots on
-    arrays (``ops=_ArrayOps``, ``world`` a :class:`BodyBatch`).
-
-    k: the traction constants (:data:`TRACTION_FIELDS` attributes, floats or (N,) arrays).
-    state: (w_L, w_R, phi_L, phi_R, vel_x, vel_y, w, x, y, th): motor speeds (rad/s), wheel
-    angles (rad), world inertial COM velocity (m/s), yaw rate (rad/s), COM position (m) and yaw
-    (rad). Returns the new state, whether each robot touched a wall, and (with ``record``) the
-    axle poses and wheel angles at every tick, the current ones first (lists of tuples).
-
-    Two small pieces are written per backend, in place (the single robot's hot path, where a
-    function call per tick costs percents): the rolling test (``_ArrayOps.rolls`` on arrays)
-    and the pymunk I/O (a :class:`BodyBatch` on arrays).
-    """
-    w_L, w_R, phi_L, phi_R, vel_x, vel_y, w, x, y, th = state
-    cmd_L, cmd_R = ops.clip(cmd_L, k.limit), ops.clip(cmd_R, k.limit)
-    dt, alpha, cap2 = k.dt, k.alpha, k.cap2
-    m, inertia, d, r_L, r_R = k.m, k.inertia, k.d, k.r_L, k.r_R
-    inv_b, two_over_b = k.inv_b, k.two_over_b
-    cos, sin, sinc_cosc = ops.cos, ops.sin, ops.sinc_cosc
-    scalar, sqrt = ops is _FloatOps, math.sqrt
-    if scalar:
-        body, step, contact = world
-    else:
-        advance, velocity = world
-        rolls = ops.rolls
-    c, s = cos(th), sin(th)
-    path = [(x - d * c, y - d * s, th)] if record else None
-    wheels = [(phi_L, phi_R)] if record else None
-    collided = False
-    for _ in range(n_ticks):
-        w_L += (cmd_L - w_L) * alpha
-        w_R += (cmd_R - w_R) * alpha
-        phi_L += w_L * dt
-        phi_R += w_R * dt
-        vx = c * vel_x + s * vel_y  # body-frame COM velocity
-        vy = c * vel_y - s * vel_x
-        # Rolling target: contact velocities (r*omega, 0) fix the whole twist.
-        t_L, t_R = r_L * w_L, r_R * w_R
-        tx, tw = 0.5 * (t_L + t_R), (t_R - t_L) * inv_b
-        ty = tw * d
-        # Impulses of the exact rolling solution; the lateral split is free.
-        px, py = m * (tx - vx), m * (ty - vy)
-        diff = -(inertia * (tw - w) + d * py) * two_over_b  # P_Lx - P_Rx
-        q_L = cap2 - 0.25 * (px + diff) ** 2
-        q_R = cap2 - 0.25 * (px - diff) ** 2
-        if scalar:  # _ArrayOps.rolls on floats
-            rolling = q_L >= 0.0 and q_R >= 0.0 and abs(py) <= sqrt(q_L) + sqrt(q_R)
-        else:
-            rolling = rolls(q_L, q_R, py)
-        if rolling is True or (rolling is not False and rolling.all()):
-            vx, vy, w = tx, ty, tw
-        else:
-            vx, vy, w = ops.slip(rolling, k, vx, vy, w, t_L, t_R, (tx, ty, tw))
-        vel_x, vel_y = c * vx - s * vy, s * vx + c * vy
-        sinc, cosc = sinc_cosc(w * dt, False)
-        chord_x = sinc * vel_x - cosc * vel_y
-        chord_y = cosc * vel_x + sinc * vel_y
-        if scalar:
-            body.velocity = (chord_x, chord_y)
-            body.angular_velocity = w
-            step(dt)
-            if contact.hit:  # add pymunk's contact impulses
-                contact.hit = False
-                collided = True
-                after_x, after_y = body.velocity
-                vel_x += after_x - chord_x
-                vel_y += after_y - chord_y
-                w = body.angular_velocity
-            x, y = body.position
-            th = body.angle
-        else:
-            x, y, th, hit = advance(chord_x, chord_y, w)
-            if hit.any():  # add pymunk's contact impulses (0 on the bodies without contact)
-                collided = collided | hit
-                after_x, after_y, w = velocity()
-                vel_x += after_x - chord_x
-                vel_y += after_y - chord_y
-        c, s = cos(th), sin(th)
-        if record:
-            path.append((x - d * c, y - d * s, th))
-            wheels.append((phi_L, phi_R))
-    return (w_L, w_R, phi_L, phi_R, vel_x, vel_y, w, x, y, th), collided, path, wheels
+    def poses(self, k: np.ndarray, state: np.ndarray) -> None:
+        """The kernel's axle poses in ``state`` (N, S) from the bodies now (nothing else
+        changes)."""
+        n = len(state)
+        traction_tick(k, state, np.zeros((n, 2)), 0.0, self.read(), self.slots,
+                      np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool),
+                      np.zeros(n, dtype=bool), self._velocities, _NO_PATH, 0, 0)
 
 
-def _slip(ops, k, vx, vy, w, t_L, t_R):
-    """Friction-capped traction by projected Gauss-Seidel over the two wheels.
-
-    Works on the body-frame COM velocity (vx, vy) (m/s) and yaw rate w (rad/s); t_L, t_R
-    are the wheel surface speeds (m/s). Accumulated impulses per wheel stay inside the
-    friction circle of radius k.cap (N s). Returns the new (vx, vy, w).
-    """
-    inv_m, inv_i, d, hb, cap = k.inv_m, k.inv_i, k.d, k.hb, k.cap
-    capped = ops.capped
-    contacts = ((1.0, k.k00_L, k.k01_L, k.k11_L, t_L), (-1.0, k.k00_R, k.k01_R, k.k11_R, t_R))
-    acc = [(0.0, 0.0), (0.0, 0.0)]
-    for _ in range(SLIP_ITERATIONS):
-        for i in (0, 1):
-            side, k00, k01, k11, target = contacts[i]
-            ex = target - (vx - w * side * hb)  # wanted minus contact velocity
-            ey = w * d - vy
-            old_x, old_y = acc[i]
-            new_x, new_y = capped(old_x + k00 * ex + k01 * ey, old_y + k01 * ex + k11 * ey, cap)
-            acc[i] = (new_x, new_y)
-            dx, dy = new_x - old_x, new_y - old_y
-            vx += dx * inv_m
-            vy += dy * inv_m
-            w -= (side * hb * dx + d * dy) * inv_i
-    return vx, vy, w
+_NO_PATH = np.empty((0, 0, len(PATH_FIELDS)))
 
 
-class _Traction:
-    """Traction constants as attributes (floats for one robot, arrays over N robots, then
-    with ``robots``: each robot's float constants)."""
-
-    def __init__(self, dt: float, values, robots: list[_Traction] | None = None) -> None:
-        self.dt = dt
-        self.robots = robots
-        self._values = values
-        for name, value in zip(TRACTION_FIELDS, values, strict=True):
-            setattr(self, name, value)
-
-    def subset(self, rows: np.ndarray) -> _Traction:
-        """The constants of some of the robots (arrays)."""
-        return _Traction(self.dt, self._values[:, rows])
-
-
-class _ContactFlag:
-    """Set by the pymunk collision callback when the chassis touches a wall."""
-
-    def __init__(self) -> None:
-        self.hit = False
-
-
-def _mark_contact(arbiter: pymunk.Arbiter, space: pymunk.Space, flag: _ContactFlag) -> None:
-    flag.hit = True
-
+def _mark_contact(arbiter: pymunk.Arbiter, space: pymunk.Space, began: np.ndarray) -> None:
+    began[0] = True
 
 def _new_space(arena: Arena, dt: float) -> pymunk.Space:
     """An empty space with the arena's walls; contact settings sized for meters."""
@@ -483,8 +354,8 @@ class PymunkDrive:
     The velocity state carried between ticks is the inertial one (the body's velocity after
     traction), so the traction supplies centripetal forces, e.g. m*w^2*com_offset in a spin.
 
-    Steps 1-2 and the tick loop are :func:`traction_ticks`, the kernel
-    :class:`PymunkBatchDrive` runs on N robots at once; here it runs on Python floats.
+    Steps 1-2 are the compiled kernel :func:`envs.traction_kernel.traction_tick`, run here on
+    a batch of one robot in the tick loop of :class:`PymunkBatchDrive` (:class:`_TickLoop`).
     """
 
     def __init__(self, arena: Arena, physics_hz: float) -> None:
@@ -493,23 +364,25 @@ class PymunkDrive:
         self._robot: RobotSpec | None = None
         self._space: pymunk.Space | None = None
         self._body: pymunk.Body | None = None
-        self._contact = _ContactFlag()
+        self._io: _TickLoop | None = None  # per space
+        self._buffers: _Buffers | None = None  # (pymunk buffers do not pickle: made again)
+        self._began = np.zeros(1, dtype=bool)  # set by pymunk's pre-solve on a wall contact
+        self._no_contacts = np.zeros(1, dtype=np.int64)  # (pre-solve runs every tick in contact)
         self._touched = False  # the last run touched a wall (pymunk holds contact state)
-        self._velocity = (0.0, 0.0)  # m/s, world-frame inertial COM velocity
-        self._omega_body = 0.0  # rad/s, chassis yaw rate
-        self._omega = [0.0, 0.0]  # rad/s, motor speeds (L, R)
-        self._phi = [0.0, 0.0]  # rad, absolute wheel angles (L, R)
+        self._state = np.zeros((1, len(STATE_FIELDS)))  # the kernel's state of the robot
+        self._constants = np.ones((1, len(TRACTION_FIELDS)))
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "_io": None, "_buffers": None}
 
     def reset(self, robot: RobotSpec, pose: np.ndarray, wheel_angles: np.ndarray) -> None:
         self._robot = robot
         self._build_space(*_com(robot, pose))
         self._touched = False
-        self._velocity = (0.0, 0.0)
-        self._omega_body = 0.0
-        self._omega = [0.0, 0.0]
-        self._phi = [float(wheel_angles[0]), float(wheel_angles[1])]
-        self._contact.hit = False
-        self._traction = _Traction(self.dt, traction_constants(robot, self.dt))
+        self._state[:] = 0.0
+        self._state[0, _PHI] = (float(wheel_angles[0]), float(wheel_angles[1]))
+        self._began[0] = False
+        self._constants[0] = traction_constants(robot, self.dt)
 
     def _build_space(self, com: tuple[float, float], angle: float) -> None:
         """A fresh space: the walls and the chassis at rest, COM at `com` (m), yaw `angle` (rad).
@@ -520,8 +393,8 @@ class PymunkDrive:
         space = _new_space(self.arena, self.dt)
         body = _robot_body(self._robot, com, angle)
         space.add(body, _chassis(body, self._robot))
-        space.on_collision(_CHASSIS_TYPE, _WALL_TYPE, pre_solve=_mark_contact, data=self._contact)
-        self._space, self._body = space, body
+        space.on_collision(_CHASSIS_TYPE, _WALL_TYPE, pre_solve=_mark_contact, data=self._began)
+        self._space, self._body, self._io = space, body, None
 
     @property
     def pose(self) -> np.ndarray:
@@ -529,7 +402,7 @@ class PymunkDrive:
 
     @property
     def wheel_angles(self) -> np.ndarray:
-        return np.array(self._phi)
+        return self._state[0, _PHI].copy()
 
     def run(self, cmd_L: float, cmd_R: float,
             n_ticks: int) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -538,40 +411,32 @@ class PymunkDrive:
             # position-correction velocity), so a run after a wall contact starts in a fresh
             # space: pickling between runs then continues bit-identically.
             self._build_space(tuple(self._body.position), self._body.angle)
-        body = self._body
-        x, y = body.position
-        state = (*self._omega, *self._phi, *self._velocity, self._omega_body, x, y, body.angle)
-        state, collided, path, wheels = traction_ticks(
-            _FloatOps, self._traction, state, cmd_L, cmd_R, n_ticks,
-            OneBody(body, self._space.step, self._contact), record=True)
-        w_L, w_R, phi_L, phi_R, vel_x, vel_y, w = state[:7]
-        self._omega = [w_L, w_R]
-        self._phi = [phi_L, phi_R]
-        self._velocity = (vel_x, vel_y)
-        self._omega_body = w
-        self._touched = collided
-        return np.array(path), np.array(wheels), collided
+        if self._io is None:
+            self._buffers = self._buffers or _Buffers.new()
+            self._io = _TickLoop(self._space, [self._body.id], self._buffers)
+        path = np.empty((n_ticks + 1, 1, len(PATH_FIELDS)))
+        collided = self._io.run(self.dt, self._constants, self._state,
+                                np.array([[cmd_L, cmd_R]], dtype=float), self._no_contacts,
+                                self._began, n_ticks, path)
+        self._touched = bool(collided[0])
+        return path[:, 0, :3].copy(), path[:, 0, 3:].copy(), self._touched
 
 
 class PymunkBatchDrive:
     """N robots of :class:`PymunkDrive`'s physics in one pymunk space, stepped together.
 
     Every chassis is in the same arena at its own world pose; the chassis share one pymunk
-    shape-filter group, so robots never touch each other, only the walls. The motors and
-    traction of all robots are one :func:`traction_ticks` call on (N,) arrays (on floats for
-    N = 1); body velocities go into pymunk and poses come out in bulk (``pymunk.batch``); wall
-    contacts are counted per robot by the collision callbacks (begin / separate: they run only
-    when a contact starts or ends). As PymunkDrive builds a fresh space, a robot gets a fresh
-    pymunk body at its reset and after a run that touched a wall (a pymunk body keeps contact
-    state that a fresh one does not).
+    shape-filter group, so robots never touch each other, only the walls. Each tick is one call
+    of the compiled kernel over all robots (:func:`envs.traction_kernel.traction_tick`, the one
+    PymunkDrive runs on its robot), then the body velocities go into pymunk and poses come out
+    in bulk (``pymunk.batch``); wall contacts are counted per robot by the collision callbacks
+    (begin / separate: they run only when a contact starts or ends). As PymunkDrive builds a
+    fresh space, a robot gets a fresh pymunk body at its reset and after a run that touched a
+    wall (a pymunk body keeps contact state that a fresh one does not).
 
     Robot i driven alone by a :class:`PymunkDrive` gives the same numbers bit for bit, wall
     contacts included (tested; pymunk resolves each chassis' wall contacts on their own).
     """
-
-    _GET = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
-            | pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
-    _SET = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY
 
     def __init__(self, arena: Arena, physics_hz: float, n: int) -> None:
         self.arena = arena
@@ -580,20 +445,19 @@ class PymunkBatchDrive:
         self._space = _new_space(arena, self.dt)
         self._bodies: list[pymunk.Body | None] = [None] * n
         self._shapes: list[pymunk.Poly | None] = [None] * n
+        self._body_ids = [0] * n  # pymunk.Body.id of each robot's body
         self._robots: list[RobotSpec | None] = [None] * n
         self._shape_index: dict[pymunk.Shape, int] = {}
-        self._contacts = np.zeros(n, dtype=int)  # wall contacts each chassis is in now
-        self._began = np.zeros(n, dtype=bool)  # a contact began during this tick
+        self._contacts = np.zeros(n, dtype=np.int64)  # wall contacts each chassis is in now
+        self._began = np.zeros(n, dtype=bool)  # a contact began since the kernel's last look
         self._space.on_collision(_CHASSIS_TYPE, _WALL_TYPE, begin=self._begin,
                                  separate=self._separate)
-        self._robot_traction: list[_Traction | None] = [None] * n
         self._filter = pymunk.ShapeFilter(group=1)  # chassis never collide with each other
         self._touched = np.zeros(n, dtype=bool)
-        self._state = np.zeros((7, n))  # w_L, w_R, phi_L, phi_R, vel_x, vel_y, w
-        self._constants = np.ones((len(TRACTION_FIELDS), n))
-        self._slots: np.ndarray | None = None  # robot i's row in pymunk.batch's body list
-        self._set = pymunk.batch.Buffer()
-        self._get = pymunk.batch.Buffer()
+        self._state = np.zeros((n, len(STATE_FIELDS)))  # the kernel's state of each robot
+        self._constants = np.ones((n, len(TRACTION_FIELDS)))
+        self._io: _TickLoop | None = None  # rebuilt when pymunk's body order changes
+        self._buffers = _Buffers.new()
 
     def _robot_of(self, arbiter: pymunk.Arbiter) -> int:
         a, b = arbiter.shapes  # (bodies are gone when a removed shape separates)
@@ -612,11 +476,9 @@ class PymunkBatchDrive:
         """Place robot ``i`` at rest at world pose (x, y, theta) with wheel angles (rad)."""
         self._robots[i] = robot
         self._new_body(i, *_com(robot, pose))
-        self._state[:, i] = (0.0, 0.0, float(wheel_angles[0]), float(wheel_angles[1]),
-                             0.0, 0.0, 0.0)
-        constants = traction_constants(robot, self.dt)
-        self._constants[:, i] = constants
-        self._robot_traction[i] = _Traction(self.dt, constants)
+        self._state[i] = 0.0
+        self._state[i, _PHI] = (float(wheel_angles[0]), float(wheel_angles[1]))
+        self._constants[i] = traction_constants(robot, self.dt)
         self._touched[i] = False
 
     def _new_body(self, i: int, com: tuple[float, float], angle: float) -> None:
@@ -630,57 +492,18 @@ class PymunkBatchDrive:
         shape.filter = self._filter
         self._shape_index[shape] = i
         self._space.add(body, shape)
-        self._bodies[i], self._shapes[i] = body, shape
-        self._slots = None  # pymunk's body order changed
+        self._bodies[i], self._shapes[i], self._body_ids[i] = body, shape, body.id
+        self._io = None  # pymunk's body order changed
 
-    def _order(self) -> np.ndarray:
-        """Each robot's row in pymunk.batch's body list (the dynamic bodies, then the walls'
-        static body), and the float buffer the velocities are set from."""
-        if self._slots is None:
-            listing = pymunk.batch.Buffer()
-            pymunk.batch.get_space_bodies(self._space, pymunk.batch.BodyFields.BODY_ID, listing)
-            ids = list(memoryview(listing.int_buf()).cast("P"))
-            row = {body_id: k for k, body_id in enumerate(ids)}
-            self._slots = np.array([row[body.id] for body in self._bodies])
-            self._velocities = np.zeros((len(ids), 3))  # vx, vy, w per listed body
-            self._set = pymunk.batch.Buffer()
-            self._set.set_float_buf(self._velocities)
-        return self._slots
+    def _ticks(self) -> _TickLoop:
+        if self._io is None:
+            self._io = _TickLoop(self._space, self._body_ids, self._buffers)
+        return self._io
 
-    def _read(self) -> np.ndarray:
-        """(6, N): COM x, y (m), yaw (rad), velocity x, y (m/s), yaw rate (rad/s)."""
-        self._get.clear()
-        pymunk.batch.get_space_bodies(self._space, self._GET, self._get)
-        bodies = np.frombuffer(self._get.float_buf(), dtype=float).reshape(-1, 6)
-        return bodies[self._slots].T
-
-    def _advance(self, chord_x: np.ndarray, chord_y: np.ndarray, w: np.ndarray):
-        velocities, slots = self._velocities, self._slots
-        velocities[slots, 0] = chord_x
-        velocities[slots, 1] = chord_y
-        velocities[slots, 2] = w
-        pymunk.batch.set_space_bodies(self._space, self._SET, self._set)
-        self._space.step(self.dt)
-        self._last = self._read()
-        # In contact during this tick: pymunk's pre-solve would have run (a contact that began
-        # and ended within the tick counts too).
-        hit = self._contacts > 0
-        if self._began.any():
-            hit |= self._began
-            self._began[:] = False
-        return self._last[0], self._last[1], self._last[2], hit
-
-    def _body_velocity(self):
-        return self._last[3], self._last[4], self._last[5]
-
-    def poses(self, com: np.ndarray | None = None) -> np.ndarray:
+    def poses(self) -> np.ndarray:
         """World poses (N, 3) of the axle midpoints (x, y, theta)."""
-        if com is None:
-            self._order()
-            com = self._read()
-        d = self._constants[TRACTION_FIELDS.index("d")]
-        th = com[2]
-        return np.stack([com[0] - d * np.cos(th), com[1] - d * np.sin(th), th], axis=1)
+        self._ticks().poses(self._constants, self._state)
+        return self._state[:, _POSE].copy()
 
     def pose(self, i: int) -> np.ndarray:
         """Robot i's world pose (x, y, theta) of the axle midpoint."""
@@ -689,7 +512,7 @@ class PymunkBatchDrive:
     @property
     def wheel_angles(self) -> np.ndarray:
         """Absolute wheel angles (N, 2) (phi_L, phi_R) in rad, unquantized."""
-        return self._state[2:4].T.copy()
+        return self._state[:, _PHI].copy()
 
     def run(self, commands: np.ndarray, n_ticks: int) -> tuple[np.ndarray, np.ndarray]:
         """Hold wheel-speed commands (N, 2) (rad/s) for ``n_ticks`` ticks on every robot.
@@ -697,46 +520,10 @@ class PymunkBatchDrive:
         for i in np.flatnonzero(self._touched):  # as PymunkDrive's fresh space after a contact
             body = self._bodies[i]
             self._new_body(i, tuple(body.position), body.angle)
-        self._order()
-        com = self._read()
-        state = (*self._state, com[0], com[1], com[2])
-        if self.n == 1:  # one robot: the kernel on Python floats, as PymunkDrive runs it
-            state, collided = self._run_one(tuple(float(v[0]) for v in state),
-                                            commands[0].tolist(), n_ticks)
-        else:
-            k = _Traction(self.dt, self._constants, self._robot_traction)
-            with np.errstate(invalid="ignore"):  # sqrt of negative q in _ArrayOps.rolls
-                state, collided, _, _ = traction_ticks(
-                    _ArrayOps, k, state, commands[:, 0], commands[:, 1], n_ticks,
-                    BodyBatch(self._advance, self._body_velocity))
-        self._state = np.array(state[:7]).reshape(7, self.n)
-        collided = np.broadcast_to(collided, (self.n,)).copy()
-        self._touched = collided
-        return self.poses(np.array(state[7:]).reshape(3, self.n)), collided
-
-    def _run_one(self, state: tuple[float, ...], command: list[float],
-                 n_ticks: int) -> tuple[tuple[float, ...], bool]:
-        """:func:`traction_ticks` on floats for a batch of one robot."""
-        world = OneBody(self._bodies[0], self._space.step, _CountedContact(self))
-        state, collided, _, _ = traction_ticks(_FloatOps, self._robot_traction[0], state,
-                                               *command, n_ticks, world)
-        return state, collided
-
-
-class _CountedContact:
-    """PymunkBatchDrive's wall contacts of robot 0 as a :class:`_ContactFlag`: ``hit`` while
-    in contact or when a contact began during the last tick; clearing it forgets the latter."""
-
-    def __init__(self, drive: PymunkBatchDrive) -> None:
-        self._contacts, self._began = drive._contacts, drive._began
-
-    @property
-    def hit(self) -> bool:
-        return bool(self._contacts[0] > 0 or self._began[0])
-
-    @hit.setter
-    def hit(self, value: bool) -> None:
-        self._began[0] = value
+        self._touched = self._ticks().run(self.dt, self._constants, self._state,
+                                             np.ascontiguousarray(commands, dtype=float),
+                                             self._contacts, self._began, n_ticks)
+        return self._state[:, _POSE].copy(), self._touched.copy()
 
 
 class IdealBatchDrive:

@@ -138,7 +138,8 @@ def test_console_script_has_no_traceback_and_version(tmp_path):
 
 def test_import_excite_stays_light():
     code = ("import sys, excite, gymnasium; "
-            "heavy = {'pymunk', 'torch', 'stable_baselines3', 'matplotlib'} & set(sys.modules); "
+            "heavy = {'pymunk', 'numba', 'torch', 'stable_baselines3', 'matplotlib'} "
+            "& set(sys.modules); "
             "print(sorted(heavy))")
     # gymnasium itself may be imported by the user; excite must not pull the others.
     proc = subprocess.run([sys.executable, "-c", code.replace(", gymnasium", "")],

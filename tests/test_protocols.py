@@ -135,12 +135,12 @@ def test_a_user_protocol_plugs_in_by_module_and_class(tmp_path, capsys, monkeypa
         "zigzag:amplitude=0.0", "zigzag:amplitude=0.5"]
 
 
-def test_protocol_modules_import_neither_pymunk_nor_gymnasium():
+def test_protocol_modules_import_neither_pymunk_nor_gymnasium_nor_numba():
     code = ("import sys, agents.protocols, agents.catalog, agents.greedy, agents.slip_aware, "
             "agents.motion, "
             "agents.learned, excite.contracts, excite.arena\n"
-            "heavy = sorted(m for m in ('pymunk', 'gymnasium', 'torch', 'stable_baselines3') "
-            "if m in sys.modules)\n"
+            "heavy = sorted(m for m in ('pymunk', 'gymnasium', 'numba', 'torch', "
+            "'stable_baselines3') if m in sys.modules)\n"
             "assert not heavy, heavy\n"
             "from agents.catalog import PROTOCOLS, make_protocol\n"
             "[make_protocol(name) for name in PROTOCOLS if name != 'learned']\n"
