@@ -505,10 +505,6 @@ class PymunkBatchDrive:
         self._ticks().poses(self._constants, self._state)
         return self._state[:, _POSE].copy()
 
-    def pose(self, i: int) -> np.ndarray:
-        """Robot i's world pose (x, y, theta) of the axle midpoint."""
-        return _axle_pose(self._bodies[i], self._robots[i])
-
     @property
     def wheel_angles(self) -> np.ndarray:
         """Absolute wheel angles (N, 2) (phi_L, phi_R) in rad, unquantized."""
@@ -550,9 +546,6 @@ class IdealBatchDrive:
 
     def poses(self) -> np.ndarray:
         return self._poses.copy()
-
-    def pose(self, i: int) -> np.ndarray:
-        return self._poses[i].copy()
 
     @property
     def wheel_angles(self) -> np.ndarray:

@@ -319,10 +319,6 @@ class BatchSimulation(_World):
         """Current world poses (N, 3) of the axle midpoints."""
         return self.drive.poses()
 
-    def pose(self, i: int) -> np.ndarray:
-        """Robot i's current world pose (x, y, theta) of the axle midpoint."""
-        return self.drive.pose(i)
-
     @property
     def robots(self) -> list[RobotSpec]:
         """The hidden robots of the last resets."""
