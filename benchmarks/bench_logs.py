@@ -56,18 +56,20 @@ SAME_ROBOT = {"radius_rel": 0.0, "separation_rel": 0.0, "mass_rel": 0.0, "mu_ran
 
 
 def synthetic_source(args: argparse.Namespace, i: int
-                     ) -> tuple[TimeSeries, np.ndarray, tuple[float, float]]:
-    """A synthetic log: its series, the truth (6,) and the pose noise (xy m, theta rad)."""
+                     ) -> tuple[TimeSeries, np.ndarray, tuple[float, float], float | None]:
+    """A synthetic log: its series, the truth (6,), the pose noise (xy m, theta rad) and the
+    encoder resolution (None: not quantised)."""
     log = synthetic_log(np.random.default_rng(args.seed + i), args.duration,
                         sensor_pose=SENSOR, pose_noise=(args.pose_noise, args.pose_noise),
-                        slip=args.slip)
+                        slip=args.slip, ticks_per_rev=args.ticks_per_rev)
     return (log.series, np.append(log.params.as_array(), SENSOR.as_array()),
-            (args.pose_noise, args.pose_noise))
+            (args.pose_noise, args.pose_noise), args.ticks_per_rev)
 
 
 def env_source(args: argparse.Namespace, i: int
-               ) -> tuple[TimeSeries, np.ndarray, tuple[float, float]]:
-    """A log of the simulator driven by the arcs protocol at args.speed."""
+               ) -> tuple[TimeSeries, np.ndarray, tuple[float, float], float | None]:
+    """A log of the simulator driven by the arcs protocol at args.speed (as
+    :func:`synthetic_source`; the encoders count whole ticks)."""
     from agents.catalog import make_protocol
     from agents.compare import make_env, run_protocol_episode
     from agents.protocols import Arcs
@@ -86,7 +88,8 @@ def env_source(args: argparse.Namespace, i: int
     base = env.unwrapped
     truth = np.append(base.true_params.as_array(), base.true_sensor_pose.as_array())
     sigma = base.recording.sigma
-    return base.recording.series, truth, (float(sigma[0]), float(sigma[2]))
+    return (base.recording.series, truth, (float(sigma[0]), float(sigma[2])),
+            base.recording.ticks_per_rev)
 
 
 def pose_noise_fit(segments: Segments, truth: np.ndarray, start: np.ndarray,
@@ -124,6 +127,9 @@ def main() -> None:
     parser.add_argument("--pose-noise", type=float, default=0.002, help="m and rad (synthetic)")
     parser.add_argument("--slip", type=float, default=0.0,
                         help="rad / sqrt(s) per wheel (synthetic)")
+    parser.add_argument("--ticks-per-rev", type=int, default=None,
+                        help="(synthetic) encoders count whole ticks of this resolution "
+                             "(default: exact angles)")
     parser.add_argument("--env", default="excite/DiffDriveCalibSensor-v0", help="(env)")
     parser.add_argument("--speed", type=float, default=0.2,
                         help="arcs speed, fraction of the motor limit (env)")
@@ -140,9 +146,9 @@ def main() -> None:
     source = synthetic_source if args.source == "synthetic" else env_source
     errors, known, distances, reported, covariances, bounds = [], [], [], [], [], []
     for i in tqdm(range(args.logs), desc="logs"):
-        series, truth, pose_noise = source(args, i)
+        series, truth, pose_noise, ticks = source(args, i)
         segments = segment_timeseries(series).segments
-        result = calibrate(segments, sensor_pose="estimate")
+        result = calibrate(segments, sensor_pose="estimate", ticks_per_rev=ticks)
         estimate = np.append(result.params.as_array(), result.sensor_pose.as_array())
         error = estimate - truth
         error[5] = (error[5] + np.pi) % (2 * np.pi) - np.pi
