@@ -400,33 +400,40 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
         u[free] = result.x
         return u, float(result.fun)
 
-    # A level far below where it matters has no slope in the deviance: also start the
-    # segment levels at fractions of the residuals' size, and keep the best start.
+    # A level far below where it matters has no slope in the deviance: each search also
+    # starts the free segment levels at fractions of the residuals' size (the best start is
+    # kept), so that a level held at its floor in one model can rise in the next.
     rms = np.sqrt(np.mean(residual**2, axis=1)) if residual.size else np.ones(3)
-    candidates = [u0]
-    for fraction in START_FRACTIONS:
-        u = u0.copy()
-        u[:3] = np.log(np.maximum(fraction * rms, np.exp(lower[:3])))
-        if wheels is not None:
-            u[5] = max(np.log(fraction * float(np.max(rms)) / unit), lower[5])
-        candidates.append(np.minimum(np.maximum(u, u0), upper))
-    u0 = min(candidates, key=deviance)
-    u_hat, best = optimum(u0, np.zeros(u0.size, dtype=bool))
-    white = np.zeros(u0.size, dtype=bool)
-    white[:3] = True
-    quantile = chi_bar_square_quantile(1.0 - test_level, 3)
+
+    def search(start_u: FloatArray, fixed: NDArray[np.bool_]) -> tuple[FloatArray, float]:
+        candidates = [start_u]
+        for fraction in START_FRACTIONS:
+            u = start_u.copy()
+            u[:3] = np.maximum(np.log(np.maximum(fraction * rms, 1e-300)), start_u[:3])
+            if wheels is not None:
+                u[5] = max(np.log(max(fraction * float(np.max(rms)), 1e-300) / unit),
+                           start_u[5])
+            candidates.append(np.minimum(np.maximum(u, lower), upper))
+        return optimum(min(candidates, key=lambda u: deviance(np.where(fixed, lower, u))),
+                       fixed)
+
+    none = np.zeros(u0.size, dtype=bool)
+    u_hat, best = search(u0, none)
     if not np.any(u_hat[segment] > lower[segment]):
         return levels_of(u_hat)
+    white = none.copy()
+    white[:3] = True
+    no_slip = none.copy()
+    no_slip[segment[3:]] = True
+    quantile = chi_bar_square_quantile(1.0 - test_level, 3)
     # 1. Is there segment noise at all? "None" against white segment noise (slip held at its
     # floor): three boundary components.
-    no_slip = np.zeros(u0.size, dtype=bool)
-    no_slip[segment[3:]] = True
-    u_white, best_white = optimum(u_hat, no_slip) if wheels is not None else (u_hat, best)
+    _, best_white = search(u_hat, no_slip) if wheels is not None else (u_hat, best)
     u_null, null = optimum(u_hat, white | no_slip)
     if null - best_white < quantile:
         return levels_of(u_null)
     if wheels is None:
         return levels_of(u_hat)
     # 2. There is: does slip through the wheels explain it, without white segment noise?
-    u_slip, only_slip = optimum(u_hat, white)
+    u_slip, only_slip = search(u_hat, white)
     return levels_of(u_slip if only_slip - best < quantile else u_hat)
