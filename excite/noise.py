@@ -39,6 +39,30 @@ rejections than nominal: about 1% of the ideal env's logs keep their segment lev
 The test is joint, not per channel: slip enters through the wheels, so when any channel shows
 it, the others carry it too (and a per-channel test drops real but weak x noise of slipping
 logs: coverage 0.77 instead of 0.86 on synthetic slip).
+
+Wheel-space noise (:class:`WheelNoise`, for segments cut from a log: sub-steps of one encoder
+period). Noise that enters through the wheels reaches the measured increment through the
+segment model's wheel Jacobian G_kj = d(increment k)/d(sub-increment j)
+(:meth:`excite.models.SegmentModel.wheel_jacobian`):
+
+* wheel slip: each wheel's ground contact drifts from its encoder by a random walk of
+  intensity ``slip`` (rad / sqrt(s)), independent between wheels; segment k gets
+  slip^2 sum_j dt_j G_kj G_kj^T (3 x 3, full: slip moves x, y and theta together), no
+  correlation between segments. Its level is estimated by REML with the others.
+* encoder quantization: each angle sample errs by its rounding, variance q = tick^2 / 12 per
+  wheel, known from the resolution (not estimated). A boundary sample is shared by the two
+  segments it separates: q (G_start G_start^T + G_end G_end^T) on the diagonal block and
+  -q G_start,k G_end,k-1^T between chained segments (inside the band, like the pose samples);
+  the samples inside a segment enter through the change of G between sub-steps, bounded for
+  correlated rounding (see :class:`WheelNoise`).
+
+With wheel-space noise the REML levels are six (white x, y, theta; pose xy, theta; slip) and
+the tests nest: first "no segment noise" against white segment noise (three components, as
+above: the pose-only logs keep the behaviour of the white model), then, if rejected, "slip
+alone" against slip plus white (three components): slip through the wheels is kept unless
+the white levels are needed too. Every search also starts the segment levels at fractions of
+the residuals' RMS, because a level at its floor has no slope in the deviance and would stay
+there.
 """
 
 from __future__ import annotations
@@ -136,11 +160,13 @@ class WheelNoise:
         (m^2 / (rad^2 / s) ... rad^2 / (rad^2 / s)).
     start, end (N, 3, 2): the derivatives by the wheel angles at the segment's first and last
         encoder sample (the first sub-step's G, and the last one's; m/rad, rad/rad).
-    inner (N, 3, 3): sum_j sum_w D_jw D_jw^T over the samples inside the segment, D_j =
-        G_j - G_(j+1) (a sample between sub-steps j and j + 1 moves the first by +e and the
-        next by -e; m^2/rad^2 ... ). Small (~1/K of the boundaries'), but without it the
-        covariance of the increments would be singular (2 wheel angles per boundary, 3
-        channels per segment).
+    inner (N, 3, 3): (K - 1) sum_j sum_w D_jw D_jw^T over the K - 1 samples inside the
+        segment, D_j = G_j - G_(j+1) (a sample between sub-steps j and j + 1 moves the first
+        by +e and the next by -e; m^2/rad^2 ... ). Consecutive rounding errors of a smoothly
+        turning wheel are far from independent (a slow sawtooth at a steady rate), so this is
+        the bound of fully correlated errors, not the independent sum (which is ~1/K of the
+        boundaries' and left the increments' covariance nearly singular where the inner
+        samples matter: 2 wheel angles per boundary, 3 channels per segment).
     quantization: variance of each encoder sample's rounding error (rad^2, 0: not modelled).
         An angle sample at a segment boundary errs by e: the segment ending there by
         G_end e, the one starting there by -G_start e, so chained segments share it (like a
@@ -170,9 +196,8 @@ class WheelNoise:
         weight = np.where(moving, ((segments.t_end - segments.t_start) / count)[:, None], 0.0)
         slip = np.einsum("nk,nkaw,nkbw->nab", weight, jac, jac)
         step = (jac[:, :-1] - jac[:, 1:]) * (k[1:] < count[:, None])[:, :, None, None]
-        # The rounding errors of consecutive samples are not independent: at a steady wheel
-        # rate they follow a slow sawtooth. Their sum over a segment is bounded by the fully
-        # correlated case, (sum_j D_j e_j)(...)^T <= (K - 1) sum_j D_j e_j^2 D_j^T.
+        # the bound of fully correlated rounding errors (see the class doc):
+        # (sum_j D_j e_j)(sum_j D_j e_j)^T <= (K - 1) sum_j e_j^2 D_j D_j^T
         inner = np.maximum(count - 1, 1)[:, None, None] * np.einsum("nkaw,nkbw->nab", step,
                                                                      step)
         end = jac[np.arange(len(segments)), count - 1]
