@@ -28,6 +28,8 @@ Sources of logs:
     python benchmarks/bench_logs.py --source env --env excite/DiffDriveCalibIdeal-v0 --logs 200
     python benchmarks/bench_logs.py --source env --speed 0.1 --logs 200       # slip env, gently
     python benchmarks/bench_logs.py --source env --speed 0.1 --logs 200 --same-robot
+    python benchmarks/bench_logs.py --source env --speed 0.1 --logs 200 --same-robot \
+        --record-noise 0,0 [--encoders dithered]     # quantization the only noise
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from excite.noise import ChainWhitener, NoiseLevels, chi2_quantile
 from excite.registration import SENSOR_MOUNTING
 from excite.solver import Problem, levenberg_marquardt, normal_system
 from excite.synthetic import synthetic_log
-from excite.timeseries import TimeSeries, segment_timeseries
+from excite.timeseries import TimeSeries, segment_timeseries, tick_angle
 
 SENSOR = SensorPose(0.1, -0.03, 0.4)
 CHI2_6_95 = chi2_quantile(0.95, SENSOR_POSE.size)
@@ -88,8 +90,16 @@ def env_source(args: argparse.Namespace, i: int
     base = env.unwrapped
     truth = np.append(base.true_params.as_array(), base.true_sensor_pose.as_array())
     sigma = base.recording.sigma
-    return (base.recording.series, truth, (float(sigma[0]), float(sigma[2])),
-            base.recording.ticks_per_rev)
+    recording = base.recording
+    series = recording.series
+    if args.encoders == "dithered":  # the true angles plus independent rounding errors
+        tick = tick_angle(recording.ticks_per_rev)
+        rng = np.random.default_rng(args.seed + i)
+        angles = recording.true_wheel_angles + tick * rng.uniform(
+            -0.5, 0.5, recording.true_wheel_angles.shape)
+        series = TimeSeries(series.t_enc, *angles.T, series.t_pose, series.x, series.y,
+                            series.theta, source=series.source)
+    return series, truth, (float(sigma[0]), float(sigma[2])), recording.ticks_per_rev
 
 
 def pose_noise_fit(segments: Segments, truth: np.ndarray, start: np.ndarray,
@@ -141,6 +151,10 @@ def main() -> None:
     parser.add_argument("--record-noise", type=pose_noise_arg, default=None, metavar="SXY,STH",
                         help="(env) noise of each recorded pose, m and rad (default: the "
                              "env's; 0,0: no pose noise, the physics' slip alone)")
+    parser.add_argument("--encoders", choices=("ticks", "dithered"), default="ticks",
+                        help="(env) the recorded whole-tick angles, or the true angles plus "
+                             "independent uniform errors of one tick (dithered encoders: "
+                             "what the quantization model assumes)")
     parser.add_argument("--seed", type=int, default=1000)
     args = parser.parse_args()
     source = synthetic_source if args.source == "synthetic" else env_source
