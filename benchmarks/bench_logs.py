@@ -28,6 +28,8 @@ Sources of logs:
     python benchmarks/bench_logs.py --source env --env excite/DiffDriveCalibIdeal-v0 --logs 200
     python benchmarks/bench_logs.py --source env --speed 0.1 --logs 200       # slip env, gently
     python benchmarks/bench_logs.py --source env --speed 0.1 --logs 200 --same-robot
+    python benchmarks/bench_logs.py --source env --speed 0.1 --logs 200 --same-robot \
+        --record-noise 0,0 [--encoders dithered]     # quantization the only noise
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from excite.noise import ChainWhitener, NoiseLevels, chi2_quantile
 from excite.registration import SENSOR_MOUNTING
 from excite.solver import Problem, levenberg_marquardt, normal_system
 from excite.synthetic import synthetic_log
-from excite.timeseries import TimeSeries, segment_timeseries
+from excite.timeseries import TimeSeries, segment_timeseries, tick_angle
 
 SENSOR = SensorPose(0.1, -0.03, 0.4)
 CHI2_6_95 = chi2_quantile(0.95, SENSOR_POSE.size)
@@ -56,18 +58,20 @@ SAME_ROBOT = {"radius_rel": 0.0, "separation_rel": 0.0, "mass_rel": 0.0, "mu_ran
 
 
 def synthetic_source(args: argparse.Namespace, i: int
-                     ) -> tuple[TimeSeries, np.ndarray, tuple[float, float]]:
-    """A synthetic log: its series, the truth (6,) and the pose noise (xy m, theta rad)."""
+                     ) -> tuple[TimeSeries, np.ndarray, tuple[float, float], float | None]:
+    """A synthetic log: its series, the truth (6,), the pose noise (xy m, theta rad) and the
+    encoder resolution (None: not quantised)."""
     log = synthetic_log(np.random.default_rng(args.seed + i), args.duration,
                         sensor_pose=SENSOR, pose_noise=(args.pose_noise, args.pose_noise),
-                        slip=args.slip)
+                        slip=args.slip, ticks_per_rev=args.ticks_per_rev)
     return (log.series, np.append(log.params.as_array(), SENSOR.as_array()),
-            (args.pose_noise, args.pose_noise))
+            (args.pose_noise, args.pose_noise), args.ticks_per_rev)
 
 
 def env_source(args: argparse.Namespace, i: int
-               ) -> tuple[TimeSeries, np.ndarray, tuple[float, float]]:
-    """A log of the simulator driven by the arcs protocol at args.speed."""
+               ) -> tuple[TimeSeries, np.ndarray, tuple[float, float], float | None]:
+    """A log of the simulator driven by the arcs protocol at args.speed (as
+    :func:`synthetic_source`; the encoders count whole ticks)."""
     from agents.catalog import make_protocol
     from agents.compare import make_env, run_protocol_episode
     from agents.protocols import Arcs
@@ -86,7 +90,16 @@ def env_source(args: argparse.Namespace, i: int
     base = env.unwrapped
     truth = np.append(base.true_params.as_array(), base.true_sensor_pose.as_array())
     sigma = base.recording.sigma
-    return base.recording.series, truth, (float(sigma[0]), float(sigma[2]))
+    recording = base.recording
+    series = recording.series
+    if args.encoders == "dithered":  # the true angles plus independent rounding errors
+        tick = tick_angle(recording.ticks_per_rev)
+        rng = np.random.default_rng(args.seed + i)
+        angles = recording.true_wheel_angles + tick * rng.uniform(
+            -0.5, 0.5, recording.true_wheel_angles.shape)
+        series = TimeSeries(series.t_enc, *angles.T, series.t_pose, series.x, series.y,
+                            series.theta, source=series.source)
+    return series, truth, (float(sigma[0]), float(sigma[2])), recording.ticks_per_rev
 
 
 def pose_noise_fit(segments: Segments, truth: np.ndarray, start: np.ndarray,
@@ -124,6 +137,9 @@ def main() -> None:
     parser.add_argument("--pose-noise", type=float, default=0.002, help="m and rad (synthetic)")
     parser.add_argument("--slip", type=float, default=0.0,
                         help="rad / sqrt(s) per wheel (synthetic)")
+    parser.add_argument("--ticks-per-rev", type=int, default=None,
+                        help="(synthetic) encoders count whole ticks of this resolution "
+                             "(default: exact angles)")
     parser.add_argument("--env", default="excite/DiffDriveCalibSensor-v0", help="(env)")
     parser.add_argument("--speed", type=float, default=0.2,
                         help="arcs speed, fraction of the motor limit (env)")
@@ -135,14 +151,18 @@ def main() -> None:
     parser.add_argument("--record-noise", type=pose_noise_arg, default=None, metavar="SXY,STH",
                         help="(env) noise of each recorded pose, m and rad (default: the "
                              "env's; 0,0: no pose noise, the physics' slip alone)")
+    parser.add_argument("--encoders", choices=("ticks", "dithered"), default="ticks",
+                        help="(env) the recorded whole-tick angles, or the true angles plus "
+                             "independent uniform errors of one tick (dithered encoders: "
+                             "what the quantization model assumes)")
     parser.add_argument("--seed", type=int, default=1000)
     args = parser.parse_args()
     source = synthetic_source if args.source == "synthetic" else env_source
     errors, known, distances, reported, covariances, bounds = [], [], [], [], [], []
     for i in tqdm(range(args.logs), desc="logs"):
-        series, truth, pose_noise = source(args, i)
+        series, truth, pose_noise, ticks = source(args, i)
         segments = segment_timeseries(series).segments
-        result = calibrate(segments, sensor_pose="estimate")
+        result = calibrate(segments, sensor_pose="estimate", ticks_per_rev=ticks)
         estimate = np.append(result.params.as_array(), result.sensor_pose.as_array())
         error = estimate - truth
         error[5] = (error[5] + np.pi) % (2 * np.pi) - np.pi

@@ -27,6 +27,7 @@ from excite.models import AXLE, SENSOR_POSE, FixedSensorPoseModel, SegmentModel,
 from excite.noise import (
     ChainWhitener,
     NoiseLevels,
+    WheelNoise,
     chi2_quantile,
     chi2_survival,
     moment_noise,
@@ -39,6 +40,7 @@ from excite.starts import (
     initial_estimate,
     sensor_pose_estimate,
 )
+from excite.timeseries import tick_angle
 
 __all__ = ["CalibrationResult", "FitTest", "calibrate", "initial_estimate", "DEFAULT_NOMINAL",
            "chi2_quantile"]
@@ -116,7 +118,10 @@ class CalibrationResult:
     estimated. pose_sigma: for segments cut from a log that share pose samples, the noise std
     of each pose sample (xy [m], theta [rad]) estimated with sigma (then sigma is the noise of
     each segment's own, e.g. slip), the covariance accounting for the shared samples; else
-    None. rms_residual: raw residual RMS per channel. n_outliers: segments whose whitened
+    None. slip: for segments cut from a log (with sub-steps), the estimated wheel slip
+    intensity (rad / sqrt(s): each wheel's random walk against its encoder, modelled through
+    the wheels, :class:`excite.noise.WheelNoise`); else None. rms_residual: raw residual RMS
+    per channel. n_outliers: segments whose whitened
     squared residual exceeds the 99.9% chi2(3) quantile; n_trimmed: segments dropped by
     trimming.
     """
@@ -143,6 +148,7 @@ class CalibrationResult:
     sigma: FloatArray
     sigma_estimated: bool
     pose_sigma: FloatArray | None
+    slip: float | None
     loss: str
     converged: bool
     iterations: int
@@ -180,6 +186,7 @@ class CalibrationResult:
             "pose_sigma": (None if self.pose_sigma is None
                            else dict(zip(("xy", "theta"), map(float, self.pose_sigma),
                                          strict=True))),
+            "slip": self.slip,
             "loss": self.loss,
             "converged": bool(self.converged),
             "iterations": self.iterations,
@@ -226,7 +233,8 @@ class CalibrationResult:
                 *self.sigma, "estimated" if self.sigma_estimated else "given")
             + ("" if self.pose_sigma is None else " per segment; pose samples: xy "
                "{:.3e} m, theta {:.3e} rad (shared by consecutive segments)".format(
-                   *self.pose_sigma)),
+                   *self.pose_sigma))
+            + ("" if self.slip is None else f"; wheel slip {self.slip:.3e} rad/sqrt(s)"),
             f"  outliers        = {self.n_outliers}"
             + (f"; trimmed {self.n_trimmed}" if self.n_trimmed else ""),
             f"  converged       = {self.converged} after {self.iterations} iterations"
@@ -467,6 +475,7 @@ def calibrate(
     max_iterations: int = 100,
     tol: float = 1e-8,
     max_relative_std: float = DEFAULT_MAX_RELATIVE_STD,
+    ticks_per_rev: float | None = None,
 ) -> CalibrationResult:
     """Estimate p = (r_L, r_R, b), and the sensor pose, from segments by weighted maximum
     likelihood.
@@ -487,6 +496,10 @@ def calibrate(
     trim: fraction of segments to drop as outliers (largest whitened residuals), at most 1%
         per pass with a refit after each; 0 keeps all.
     max_relative_std: identifiability threshold on 1/sigma_min.
+    ticks_per_rev: the encoder resolution of the log the segments were cut from (ticks per
+        wheel revolution; None: angles not quantised): each angle sample's rounding error
+        (variance (2 pi / ticks_per_rev)^2 / 12) is then part of the noise model of segments
+        that share samples (:class:`excite.noise.WheelNoise`).
     """
     seg = _as_segments(segments)
     if len(seg) < 3:
@@ -522,8 +535,10 @@ def calibrate(
     data = seg[keep] if trim else seg
     levels, whitener = None, None
     if given is None and data.chained is not None and data.chained.any():
+        tick = None if ticks_per_rev is None else tick_angle(ticks_per_rev)
         levels, whitener, start = _correlated_noise(primary, data, start, loss,
-                                                    max_iterations, tol, max_relative_std)
+                                                    max_iterations, tol, max_relative_std,
+                                                    tick)
     fit_sigma = _UNIT_SIGMA if whitener is not None else given
 
     def fit(model: SegmentModel, theta0: FloatArray) -> _ModelFit:
@@ -570,39 +585,55 @@ def calibrate(
     forced = "" if sensor_pose in ("auto", "estimate") else (
         "axle" if sensor_pose == "axle" else "pose")
     test = _fit_test(chosen, alternative, statistic, name, threshold, given, loss, forced)
+    slip = None if whitener is None or whitener.wheels is None else levels.slip
     return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
-                   len(seg) - len(data), levels)
+                   len(seg) - len(data), levels, slip)
 
 
 def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, loss: Loss,
-                      max_iterations: int, tol: float, max_relative_std: float
-                      ) -> tuple[NoiseLevels, ChainWhitener, FloatArray]:
+                      max_iterations: int, tol: float, max_relative_std: float,
+                      tick: float | None) -> tuple[NoiseLevels, ChainWhitener, FloatArray]:
     """Noise levels of segments that share pose samples (:mod:`excite.noise`), estimated with
     the parameters: a fit with independent per-channel noise gives the moment estimates, then
     rounds of (restricted maximum likelihood of the levels at the fit, linearised; refit
-    whitened) until the levels settle. Returns the levels, their whitener and the last fit's
-    parameters (the start of the final fit)."""
+    whitened) until the levels settle. Segments cut from a log (with sub-steps) also carry
+    wheel-space noise: slip (its level estimated with the others, started where it explains
+    the heading's segment noise) and, with ``tick`` (rad), encoder quantization; its geometry
+    follows the parameters from round to round. Returns the levels, their whitener and the
+    last fit's parameters (the start of the final fit)."""
     settings = (loss, max_iterations, tol, max_relative_std)
     mf = _fit_model(model, data, start, None, *settings)
     floor = mf.problem.sigma_floor
     levels = moment_noise(data, mf.fit.ev.residual, model.size, floor)
+    in_wheels = data.sub_dphi_L is not None and data.t_start is not None
+
+    def wheels_at(theta: FloatArray) -> WheelNoise | None:
+        return WheelNoise.of(model, data, theta, tick) if in_wheels else None
+
+    wheels = wheels_at(mf.theta)
+    if wheels is not None:
+        heading_unit = math.sqrt(max(float(np.mean(wheels.slip[:, 2, 2])), 1e-300))
+        levels = NoiseLevels(levels.sigma, levels.pose, float(levels.sigma[2]) / heading_unit)
     plain = Problem(model, data)
     for _ in range(NOISE_ROUNDS):
         ev = plain.evaluate(mf.theta)
         free = complement(mf.weak)
-        new = reml_noise(data, ev.raw, np.einsum("cpn,pm->cmn", ev.jac, free), levels, floor)
-        settled = new.close_to(levels, NOISE_RTOL)
+        new = reml_noise(data, ev.raw, np.einsum("cpn,pm->cmn", ev.jac, free), levels, floor,
+                         wheels=wheels)
+        settled = new.close_to(levels, NOISE_RTOL, 0.0 if wheels is None else wheels.scale)
         levels = new
         mf = _fit_model(model, data, mf.theta, _UNIT_SIGMA, *settings,
-                        ChainWhitener(data, levels))
+                        ChainWhitener(data, levels, wheels))
+        wheels = wheels_at(mf.theta)
         if settled:
             break
-    return levels, ChainWhitener(data, levels), mf.theta
+    return levels, ChainWhitener(data, levels, wheels), mf.theta
 
 
 def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
             max_relative_std: float, choice: str, test: FitTest,
-            n_trimmed: int, levels: NoiseLevels | None = None) -> CalibrationResult:
+            n_trimmed: int, levels: NoiseLevels | None = None,
+            slip: float | None = None) -> CalibrationResult:
     fit = mf.fit
     theta, info_rel = fit.theta, fit.system.information
     lam, vec = np.linalg.eigh(info_rel)
@@ -645,6 +676,7 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
         sigma=fit.sigma if levels is None else levels.sigma,
         sigma_estimated=sigma_estimated,
         pose_sigma=None if levels is None else levels.pose,
+        slip=slip,
         loss=loss,
         converged=fit.converged,
         iterations=fit.iterations,

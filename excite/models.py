@@ -25,6 +25,11 @@ sub-increments (zero-padded: a zero sub-increment is the identity), and the body
 their composition o = a_1 (+) a_2 (+) ... (+) a_K (:func:`compose_substeps`); the sensor
 transform then applies to o as before. With K = 1 it is the single arc.
 
+Wheel Jacobian: ``wheel_jacobian`` gives the derivatives of the measured increment by the wheel
+increments themselves, (..., N, 2) -> (..., N, 3, 2) (m/rad, rad/rad), or by each sub-increment
+with ``substeps``: (..., N, K, 3, 2). It carries noise that enters through the wheels (slip,
+encoder quantization) into the measured increments (:mod:`excite.noise`).
+
 Estimation transforms (how each parameter is stepped, and what "relative" means):
 ``log`` for lengths that are positive (r_L, r_R, b), ``identity`` for offsets (l_x, l_y: may
 be 0; measured in units of a length scale, the nominal b), ``angle`` for l_theta (wrapped to
@@ -55,6 +60,7 @@ __all__ = [
     "compose_substeps",
     "single_arc_error",
     "increment_jacobian",
+    "substep_derivatives",
     "sensor_to_body",
 ]
 
@@ -118,6 +124,19 @@ class SegmentModel(ABC):
     def jacobian(self, dphi_L: ArrayLike, dphi_R: ArrayLike, theta: ArrayLike) -> FloatArray:
         """d(dx, dy, dtheta)/d theta of each segment, (..., N, 3, P) in the parameters' units."""
         _, jac = self.evaluate(dphi_L, dphi_R, theta)
+        return np.moveaxis(jac, (0, 1), (-2, -1))
+
+    @abstractmethod
+    def evaluate_wheels(self, dphi_L: ArrayLike, dphi_R: ArrayLike, theta: ArrayLike,
+                        substeps: bool = False) -> FloatArray:
+        """Derivatives (3, 2, ..., N) of the predictions by (dphi_L, dphi_R) (m/rad, rad/rad);
+        with ``substeps`` by each sub-increment: (3, 2, ..., N, K) (see the module doc)."""
+
+    def wheel_jacobian(self, dphi_L: ArrayLike, dphi_R: ArrayLike, theta: ArrayLike,
+                       substeps: bool = False) -> FloatArray:
+        """d(dx, dy, dtheta)/d(dphi_L, dphi_R) of each segment, (..., N, 3, 2); with
+        ``substeps`` by each sub-increment, (..., N, K, 3, 2). Units m/rad and rad/rad."""
+        jac = self.evaluate_wheels(dphi_L, dphi_R, theta, substeps)
         return np.moveaxis(jac, (0, 1), (-2, -1))
 
     def column_scale(self, nominal: ArrayLike) -> FloatArray:
@@ -189,6 +208,21 @@ def compose_substeps(prediction: FloatArray, jac: FloatArray | None
     return out, out_jac
 
 
+def substep_derivatives(prediction: FloatArray, jac: FloatArray) -> FloatArray:
+    """Derivatives (3, Q, ..., K) of the composition a_1 (+) ... (+) a_K (body increments
+    (3, ..., K), :func:`compose_substeps`) by Q quantities each of which moves only its own
+    sub-step k, given d a_k / d q (3, Q, ..., K): R(Theta_k) d a_k,xy + J (X - W_<=k)
+    d a_k,theta, with W_<=k the displacement up to and including sub-step k (m, rad)."""
+    dx, dy, dth = prediction
+    heading = np.cumsum(dth, axis=-1) - dth  # Theta_k, exclusive
+    c, s = np.cos(heading), np.sin(heading)
+    world_x, world_y = c * dx - s * dy, s * dx + c * dy
+    tail_x = world_x.sum(axis=-1, keepdims=True) - np.cumsum(world_x, axis=-1)
+    tail_y = world_y.sum(axis=-1, keepdims=True) - np.cumsum(world_y, axis=-1)
+    return np.stack([c * jac[0] - s * jac[1] - tail_y * jac[2],
+                     s * jac[0] + c * jac[1] + tail_x * jac[2], jac[2]])
+
+
 class AxleModel(SegmentModel):
     """The lesson's model: the sensor measures the axle midpoint's arc (3 parameters)."""
 
@@ -212,6 +246,26 @@ class AxleModel(SegmentModel):
         prediction[0], prediction[1], prediction[2] = arc.dx, arc.dy, arc.dtheta
         jac = arc.fill_jacobian(np.empty((3, 3) + shape)) if jacobian else None
         return compose_substeps(prediction, jac) if substeps else (prediction, jac)
+
+    def evaluate_wheels(self, dphi_L, dphi_R, theta, substeps=False):
+        phi_L, phi_R = _broadcast_increments(dphi_L, dphi_R)
+        theta = np.asarray(theta, dtype=float)
+        trailing = 1 + substeps
+        r_L, r_R, b = (_parameter(theta, i, trailing) for i in range(3))
+        arc = Arc(phi_L, phi_R, r_L, r_R, b)
+        # the arc depends on the wheels through ds = (r_L phi_L + r_R phi_R) / 2 and
+        # dtheta = (r_R phi_R - r_L phi_L) / b
+        d_ds, d_dtheta = (0.5 * r_L, 0.5 * r_R), (-r_L / b, r_R / b)
+        shape = np.broadcast_shapes(arc.dx.shape, np.shape(r_L))
+        jac = np.empty((3, 2) + shape)
+        for w in range(2):
+            jac[2, w] = d_dtheta[w]
+            jac[0, w] = d_ds[w] * arc.f + arc.ds * arc.fp * d_dtheta[w]
+            jac[1, w] = d_ds[w] * arc.g + arc.ds * arc.gp * d_dtheta[w]
+        if not substeps:
+            return jac
+        prediction = np.stack(np.broadcast_arrays(arc.dx, arc.dy, arc.dtheta))
+        return substep_derivatives(prediction, jac)
 
     def evaluate_scalar(self, dphi_L, dphi_R, theta):
         r_L, r_R, b = theta[0], theta[1], theta[2]
@@ -243,6 +297,10 @@ class SensorPoseModel(SegmentModel):
         body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta[..., :3], jacobian, substeps)
         return _to_sensor(body, body_jac, theta[..., 3:], theta.ndim == 1)
 
+    def evaluate_wheels(self, dphi_L, dphi_R, theta, substeps=False):
+        theta = np.asarray(theta, dtype=float)
+        return _wheels_to_sensor(dphi_L, dphi_R, theta[..., :3], theta[..., 3:], substeps)
+
     def evaluate_scalar(self, dphi_L, dphi_R, theta):
         body, body_jac = AXLE.evaluate_scalar(dphi_L, dphi_R, theta)
         return _to_sensor_scalar(body, body_jac, theta[3], theta[4], theta[5])
@@ -268,6 +326,10 @@ class FixedSensorPoseModel(SegmentModel):
         body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta, jacobian, substeps)
         prediction, jac = _to_sensor(body, body_jac, self.pose.as_array(), True)
         return prediction, (None if jac is None else jac[:, :3])
+
+    def evaluate_wheels(self, dphi_L, dphi_R, theta, substeps=False):
+        return _wheels_to_sensor(dphi_L, dphi_R, np.asarray(theta, dtype=float),
+                                 self.pose.as_array(), substeps)
 
     def evaluate_scalar(self, dphi_L, dphi_R, theta):
         body, body_jac = AXLE.evaluate_scalar(dphi_L, dphi_R, theta)
@@ -299,21 +361,41 @@ def _to_sensor(body: FloatArray, body_jac: FloatArray | None, pose: FloatArray,
     if body_jac is None:
         return prediction, None
     jac = np.empty((3, 6) + prediction.shape[1:])
-    # d u / d(dtheta) = dR/d(dtheta) l_xy, turned with the heading derivative of each wheel
-    # parameter; then R(-l_theta) of everything that moves u.
-    rot_x = -sin_th * l_x - (1.0 + cos_m1) * l_y
-    rot_y = (1.0 + cos_m1) * l_x - sin_th * l_y
-    for k in range(3):
-        du_x = body_jac[0, k] + rot_x * body_jac[2, k]
-        du_y = body_jac[1, k] + rot_y * body_jac[2, k]
-        jac[0, k] = c * du_x + s * du_y
-        jac[1, k] = c * du_y - s * du_x
-        jac[2, k] = body_jac[2, k]
+    jac[:, :3] = _body_to_sensor_derivatives(body_jac, sin_th, cos_m1, l_x, l_y, c, s)
     jac[0, 3], jac[1, 3] = c * cos_m1 + s * sin_th, c * sin_th - s * cos_m1  # by l_x
     jac[0, 4], jac[1, 4] = s * cos_m1 - c * sin_th, c * cos_m1 + s * sin_th  # by l_y
     jac[0, 5], jac[1, 5] = prediction[1], -prediction[0]  # by l_theta
     jac[2, 3:] = 0.0
     return prediction, jac
+
+
+def _body_to_sensor_derivatives(body_jac: FloatArray, sin_th, cos_m1, l_x, l_y, c, s
+                                ) -> FloatArray:
+    """Derivatives (3, Q, ...) of the sensor's increment from those of the body's (3, Q, ...)
+    by Q quantities that move the body's arc (sin_th = sin(dtheta), cos_m1 = cos(dtheta) - 1,
+    c, s = cos, sin of l_theta; all broadcast over the trailing axes): d u / d(dtheta) =
+    dR/d(dtheta) l_xy, turned with each quantity's heading derivative; then R(-l_theta) of
+    everything that moves u."""
+    rot_x = -sin_th * l_x - (1.0 + cos_m1) * l_y
+    rot_y = (1.0 + cos_m1) * l_x - sin_th * l_y
+    du_x = body_jac[0] + rot_x * body_jac[2]
+    du_y = body_jac[1] + rot_y * body_jac[2]
+    return np.stack([c * du_x + s * du_y, c * du_y - s * du_x, body_jac[2]])
+
+
+def _wheels_to_sensor(dphi_L: ArrayLike, dphi_R: ArrayLike, wheels: FloatArray,
+                      pose: FloatArray, substeps: bool) -> FloatArray:
+    """The sensor-pose models' derivatives by the wheel (sub-)increments (3, 2, ..., N[, K]),
+    for wheel parameters (..., 3) and a sensor pose (..., 3)."""
+    body, _ = AXLE.evaluate(dphi_L, dphi_R, wheels, jacobian=False, substeps=substeps)
+    body_jac = AXLE.evaluate_wheels(dphi_L, dphi_R, wheels, substeps)
+    extra = (None,) * (1 + substeps)  # the trailing axes of the increments
+    l_x, l_y, l_t = ((float(v) for v in pose) if pose.ndim == 1
+                     else (pose[(..., i) + extra] for i in range(3)))
+    th = body[2][..., None] if substeps else body[2]
+    sin_th, cos_m1 = np.sin(th), -2.0 * np.sin(0.5 * th) ** 2
+    return _body_to_sensor_derivatives(body_jac, sin_th, cos_m1, l_x, l_y, np.cos(l_t),
+                                       np.sin(l_t))
 
 
 def _to_sensor_scalar(body: tuple[float, float, float], body_jac: tuple[tuple[float, ...], ...],

@@ -39,6 +39,30 @@ rejections than nominal: about 1% of the ideal env's logs keep their segment lev
 The test is joint, not per channel: slip enters through the wheels, so when any channel shows
 it, the others carry it too (and a per-channel test drops real but weak x noise of slipping
 logs: coverage 0.77 instead of 0.86 on synthetic slip).
+
+Wheel-space noise (:class:`WheelNoise`, for segments cut from a log: sub-steps of one encoder
+period). Noise that enters through the wheels reaches the measured increment through the
+segment model's wheel Jacobian G_kj = d(increment k)/d(sub-increment j)
+(:meth:`excite.models.SegmentModel.wheel_jacobian`):
+
+* wheel slip: each wheel's ground contact drifts from its encoder by a random walk of
+  intensity ``slip`` (rad / sqrt(s)), independent between wheels; segment k gets
+  slip^2 sum_j dt_j G_kj G_kj^T (3 x 3, full: slip moves x, y and theta together), no
+  correlation between segments. Its level is estimated by REML with the others.
+* encoder quantization: each angle sample errs by its rounding, variance q = tick^2 / 12 per
+  wheel, known from the resolution (not estimated). A boundary sample is shared by the two
+  segments it separates: q (G_start G_start^T + G_end G_end^T) on the diagonal block and
+  -q G_start,k G_end,k-1^T between chained segments (inside the band, like the pose samples);
+  the samples inside a segment enter through the change of G between sub-steps, bounded for
+  correlated rounding (see :class:`WheelNoise`).
+
+With wheel-space noise the REML levels are six (white x, y, theta; pose xy, theta; slip) and
+the tests nest: first "no segment noise" against white segment noise (three components, as
+above: the pose-only logs keep the behaviour of the white model), then, if rejected, "slip
+alone" against slip plus white (three components): slip through the wheels is kept unless
+the white levels are needed too. Every search also starts the segment levels at fractions of
+the residuals' RMS, because a level at its floor has no slope in the deviance and would stay
+there.
 """
 
 from __future__ import annotations
@@ -50,15 +74,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from excite.data import Segments
+from excite.models import SegmentModel
 
-__all__ = ["NoiseLevels", "ChainWhitener", "moment_noise", "reml_noise", "chi2_quantile",
-           "chi2_survival", "chi_bar_square_quantile", "SEGMENT_NOISE_TEST_LEVEL"]
+__all__ = ["NoiseLevels", "WheelNoise", "ChainWhitener", "moment_noise", "reml_noise",
+           "chi2_quantile", "chi2_survival", "chi_bar_square_quantile",
+           "quantization_variance", "SEGMENT_NOISE_TEST_LEVEL"]
 
 FloatArray = NDArray[np.float64]
 _BAND = 5  # lower bandwidth of C in segment-major order (x, y, theta per segment)
 #: Level of the test of "no segment noise" (:func:`reml_noise`): the segment levels are held
 #: at their floor unless the data reject that hypothesis at this level.
 SEGMENT_NOISE_TEST_LEVEL = 0.05
+#: Further starts of the REML search (:func:`reml_noise`): the segment levels at these
+#: fractions of the residuals' RMS (a level started far below where it matters stays there).
+START_FRACTIONS = (0.3, 0.03, 0.003)
 
 
 def chi2_quantile(q: float, dof: float) -> float:
@@ -91,21 +120,110 @@ def chi_bar_square_quantile(q: float, components: int) -> float:
     return float(brentq(excess, 0.0, chi2_quantile(q, components)))
 
 
+def quantization_variance(tick: float) -> float:
+    """Variance (rad^2) of the rounding error of one encoder sample whose angle is a whole
+    number of ticks of ``tick`` rad: uniform over one tick, tick^2 / 12."""
+    return tick * tick / 12.0
+
+
 @dataclass(frozen=True)
 class NoiseLevels:
-    """sigma: segment noise std (x [m], y [m], theta [rad]); pose: pose-sample noise std
-    (xy [m], theta [rad])."""
+    """sigma: white segment noise std (x [m], y [m], theta [rad]); pose: pose-sample noise
+    std (xy [m], theta [rad]); slip: wheel slip intensity (rad / sqrt(s): each wheel's ground
+    contact drifts from its encoder by a random walk, variance slip^2 per second of motion;
+    used with a :class:`WheelNoise`)."""
 
     sigma: FloatArray
     pose: FloatArray
+    slip: float = 0.0
 
-    def close_to(self, other: NoiseLevels, rtol: float) -> bool:
+    def close_to(self, other: NoiseLevels, rtol: float, slip_scale: float = 0.0) -> bool:
         """Whether every level is within ``rtol`` of ``other``'s, or within 1e-3 of the
-        largest level (levels near 0 need not settle relatively)."""
-        a = np.concatenate([self.sigma, self.pose])
-        b = np.concatenate([other.sigma, other.pose])
+        largest level (levels near 0 need not settle relatively); the slip level counts in
+        the increments' units, times ``slip_scale`` (the std of an increment per unit of
+        slip, :attr:`WheelNoise.scale`)."""
+        a = np.concatenate([self.sigma, self.pose, [self.slip * slip_scale]])
+        b = np.concatenate([other.sigma, other.pose, [other.slip * slip_scale]])
         return bool(np.all(np.abs(a - b) <= rtol * np.maximum(np.abs(b), 1e-300)
                            + 1e-3 * np.max(np.abs(b))))
+
+
+@dataclass(frozen=True)
+class WheelNoise:
+    """How noise that enters through the wheels reaches each of N segments' measured
+    increments (in the sensor's frame at the segment's start), linearised by the segment
+    model's wheel Jacobian G_kj = d(increment k)/d(sub-increment j) (3, 2) at some parameters.
+
+    slip (N, 3, 3): sum_j w_j G_kj G_kj^T, w_j the duration of sub-step j (s; 0 for a sub-step
+        in which neither wheel turns): the covariance of the increment per unit slip^2 when each
+        wheel slips by a random walk in time, independent between wheels and segments
+        (m^2 / (rad^2 / s) ... rad^2 / (rad^2 / s)).
+    start, end (N, 3, 2): the derivatives by the wheel angles at the segment's first and last
+        encoder sample (the first sub-step's G, and the last one's; m/rad, rad/rad).
+    inner (N, 3, 3): (K - 1) sum_j sum_w D_jw D_jw^T over the K - 1 samples inside the
+        segment, D_j = G_j - G_(j+1) (a sample between sub-steps j and j + 1 moves the first
+        by +e and the next by -e; m^2/rad^2 ... ). Consecutive rounding errors of a smoothly
+        turning wheel are far from independent (a slow sawtooth at a steady rate), so this is
+        the bound of fully correlated errors, not the independent sum (which is ~1/K of the
+        boundaries' and left the increments' covariance nearly singular where the inner
+        samples matter: 2 wheel angles per boundary, 3 channels per segment).
+    quantization: variance of each encoder sample's rounding error (rad^2, 0: not modelled).
+        An angle sample at a segment boundary errs by e: the segment ending there by
+        G_end e, the one starting there by -G_start e, so chained segments share it (like a
+        pose sample). Sub-steps are taken to end at encoder samples (they are one encoder
+        period long, :func:`excite.timeseries.segment_timeseries`).
+    """
+
+    slip: FloatArray
+    start: FloatArray
+    end: FloatArray
+    inner: FloatArray
+    quantization: float
+
+    @classmethod
+    def of(cls, model: SegmentModel, segments: Segments, theta: FloatArray,
+           tick: float | None) -> WheelNoise:
+        """At parameters ``theta`` (P,) for segments cut from a log (with sub-steps and times);
+        ``tick``: the encoder resolution (rad), None when the angles are not quantised."""
+        if segments.sub_dphi_L is None or segments.t_start is None or segments.t_end is None:
+            raise ValueError("wheel-space noise needs segments cut from a log (sub-steps, times)")
+        sub_L, sub_R = segments.sub_dphi_L, segments.sub_dphi_R
+        jac = model.wheel_jacobian(sub_L, sub_R, theta, substeps=True)  # (N, K, 3, 2)
+        moving = (sub_L != 0.0) | (sub_R != 0.0)
+        k = np.arange(moving.shape[1])
+        # sub-steps are equal parts of the segment: their count is up to the last moving one
+        count = np.max(np.where(moving, k + 1, 1), axis=1)
+        weight = np.where(moving, ((segments.t_end - segments.t_start) / count)[:, None], 0.0)
+        slip = np.einsum("nk,nkaw,nkbw->nab", weight, jac, jac)
+        step = (jac[:, :-1] - jac[:, 1:]) * (k[1:] < count[:, None])[:, :, None, None]
+        # the bound of fully correlated rounding errors (see the class doc):
+        # (sum_j D_j e_j)(sum_j D_j e_j)^T <= (K - 1) sum_j e_j^2 D_j D_j^T
+        inner = np.maximum(count - 1, 1)[:, None, None] * np.einsum("nkaw,nkbw->nab", step,
+                                                                     step)
+        end = jac[np.arange(len(segments)), count - 1]
+        return cls(slip, jac[:, 0], end, inner,
+                   0.0 if tick is None else quantization_variance(tick))
+
+    @property
+    def scale(self) -> float:
+        """The typical std of an increment per unit slip level: sqrt of the largest channel's
+        mean slip covariance (m or rad per rad / sqrt(s))."""
+        return float(np.sqrt(np.max(np.mean(np.diagonal(self.slip, axis1=1, axis2=2),
+                                            axis=0))))
+
+    def diagonal_blocks(self, slip: float) -> FloatArray:
+        """Each segment's own covariance (N, 3, 3) from slip and quantization."""
+        blocks = slip * slip * self.slip
+        if self.quantization:
+            blocks = blocks + self.quantization * (
+                np.einsum("naw,nbw->nab", self.start, self.start)
+                + np.einsum("naw,nbw->nab", self.end, self.end) + self.inner)
+        return blocks
+
+    def shared_blocks(self, k: NDArray[np.int64]) -> FloatArray:
+        """C[rows of segment k, columns of k - 1] (m, 3, 3) for chained segments k: the
+        boundary sample's quantization, -q G_start,k G_end,k-1^T."""
+        return -self.quantization * np.einsum("maw,mbw->mab", self.start[k], self.end[k - 1])
 
 
 def _perpendicular(segments: Segments) -> tuple[FloatArray, FloatArray]:
@@ -118,11 +236,28 @@ def _chained(segments: Segments) -> NDArray[np.bool_]:
             else segments.chained)
 
 
+def _add_diagonal_blocks(band: FloatArray, blocks: FloatArray) -> None:
+    """Add symmetric blocks (N, 3, 3) to the diagonal blocks of C in lower band storage."""
+    for a in range(3):
+        for b in range(a + 1):
+            band[a - b, b::3] += blocks[:, a, b]
+
+
+def _add_shared_blocks(band: FloatArray, k: NDArray[np.int64], blocks: FloatArray) -> None:
+    """Add blocks C[rows of k, columns of k - 1] (m, 3, 3) in lower band storage: entry
+    (a, b) is C[3k + a, 3(k-1) + b], at band offset 3 + a - b."""
+    for a in range(3):
+        for b in range(3):
+            band[3 + a - b, 3 * (k - 1) + b] += blocks[:, a, b]
+
+
 class ChainWhitener:
     """Whitening by the Cholesky factor of the covariance C of the stacked increments (see
-    the module doc), for given noise levels."""
+    the module doc), for given noise levels; ``wheels`` adds the noise that enters through
+    the wheels (slip at ``levels.slip``, encoder quantization), :class:`WheelNoise`."""
 
-    def __init__(self, segments: Segments, levels: NoiseLevels):
+    def __init__(self, segments: Segments, levels: NoiseLevels,
+                 wheels: WheelNoise | None = None):
         from scipy.linalg import cholesky_banded
 
         n = len(segments)
@@ -152,8 +287,14 @@ class ChainWhitener:
                        (0, 2): -pth2 * jx[k], (1, 2): -pth2 * jy[k], (2, 2): zero - pth2}
             for (a, b), value in entries.items():
                 band[3 + a - b, 3 * (k - 1) + b] = value
+        if wheels is not None:
+            _add_diagonal_blocks(band, wheels.diagonal_blocks(levels.slip))
+            if wheels.quantization and chained.any():
+                k = np.flatnonzero(chained)
+                _add_shared_blocks(band, k, wheels.shared_blocks(k))
         self._factor = cholesky_banded(band, lower=True)
         self.n = n
+        self.wheels = wheels
 
     @property
     def log_det(self) -> float:
@@ -207,11 +348,11 @@ def moment_noise(segments: Segments, residual: FloatArray, n_parameters: int,
 
 
 def _restricted_deviance(segments: Segments, levels: NoiseLevels, residual: FloatArray,
-                         jac: FloatArray) -> float:
+                         jac: FloatArray, wheels: WheelNoise | None = None) -> float:
     """-2 log restricted likelihood (up to a constant) of residuals (3, N) with Jacobian rows
     (3, P, N) of the linearised model: log det C + log det(J^T C^-1 J) + e^T C^-1 e, with e
     the generalised least-squares residual (the parameters profiled out)."""
-    whitener = ChainWhitener(segments, levels)
+    whitener = ChainWhitener(segments, levels, wheels)
     white, white_jac = whitener.whiten(residual, jac)
     w = white.T.reshape(-1)
     a = white_jac.transpose(2, 0, 1).reshape(w.size, -1)
@@ -223,39 +364,51 @@ def _restricted_deviance(segments: Segments, levels: NoiseLevels, residual: Floa
 
 def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
                start: NoiseLevels, floor: FloatArray,
-               test_level: float = SEGMENT_NOISE_TEST_LEVEL) -> NoiseLevels:
-    """The five noise levels maximising the restricted likelihood of the residuals (3, N)
+               test_level: float = SEGMENT_NOISE_TEST_LEVEL,
+               wheels: WheelNoise | None = None) -> NoiseLevels:
+    """The noise levels maximising the restricted likelihood of the residuals (3, N)
     (predicted - measured) of a fit whose Jacobian rows (3, P, N) span the fitted directions
-    (only the directions the data determine). Optimised over the logs of the levels from
-    ``start`` (L-BFGS-B); each level at least its floor: ``floor`` (3,) is (position,
-    position, heading) and floors the segment levels and (position, heading) the pose levels.
+    (only the directions the data determine): the five of the module doc and, with
+    ``wheels``, the slip level (its quantization is known, not estimated). Optimised over the
+    logs of the levels from ``start`` (L-BFGS-B); each level at least its floor: ``floor``
+    (3,) is (position, position, heading) and floors the segment levels and (position,
+    heading) the pose levels; the slip floor is the heading floor over the slip's scale.
 
     Then the hypothesis "no segment noise" is tested (see the module doc): the restricted
-    deviance with the three segment levels at their floor (the pose levels re-optimised) minus
-    the optimum's, against the (1 - ``test_level``)-quantile of the chi-bar-square
-    distribution; if the data do not reject it, those levels are returned.
+    deviance with the segment levels (and slip) at their floor (the pose levels
+    re-optimised) minus that of white segment noise (slip at its floor), against the
+    (1 - ``test_level``)-quantile of the chi-bar-square distribution of three boundary
+    components; if the data do not reject it, those levels are returned. With ``wheels``, if
+    it is rejected, "slip alone, no white segment noise" is tested against the full optimum
+    the same way (three components), and slip alone is kept unless rejected.
     """
     from scipy.optimize import minimize
 
-    lower = np.log(np.concatenate([floor, floor[[0, 2]]]))
-    u0 = np.maximum(np.log(np.maximum(np.concatenate([start.sigma, start.pose]), 1e-300)),
-                    lower)
     spread = float(np.max(np.abs(residual))) if residual.size else 1.0
+    lower = np.log(np.concatenate([floor, floor[[0, 2]]]))
     upper = np.full(5, np.log(max(10.0 * spread, 1e-300)))
-    u0 = np.minimum(u0, upper)
+    first = np.concatenate([start.sigma, start.pose])
+    segment = [0, 1, 2]  # the levels of segment noise (tested together)
+    if wheels is not None:
+        unit = max(wheels.scale, 1e-300)
+        lower = np.append(lower, np.log(floor[2] / unit))
+        upper = np.append(upper, np.log(max(10.0 * spread / unit, 1e-300)))
+        first = np.append(first, start.slip)
+        segment.append(5)
+    u0 = np.minimum(np.maximum(np.log(np.maximum(first, 1e-300)), lower), upper)
 
     def levels_of(u: FloatArray) -> NoiseLevels:
         sigma = np.exp(u)
-        return NoiseLevels(sigma[:3], sigma[3:])
+        return NoiseLevels(sigma[:3], sigma[3:5], float(sigma[5]) if sigma.size > 5 else 0.0)
 
     def deviance(u: FloatArray) -> float:
         try:
-            return _restricted_deviance(segments, levels_of(u), residual, jac)
+            return _restricted_deviance(segments, levels_of(u), residual, jac, wheels)
         except np.linalg.LinAlgError:  # C numerically not positive definite at the bounds
             return 1e300  # finite: the optimiser's difference quotients stay numbers
 
     def optimum(start_u: FloatArray, fixed: NDArray[np.bool_]) -> tuple[FloatArray, float]:
-        """The minimum of the deviance over the levels not ``fixed`` (5,) at their floor."""
+        """The minimum of the deviance over the levels not ``fixed`` at their floor."""
         u = np.where(fixed, lower, start_u)
         free = np.flatnonzero(~fixed)
         start_value = deviance(u)
@@ -272,9 +425,40 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
         u[free] = result.x
         return u, float(result.fun)
 
-    u_hat, best = optimum(u0, np.zeros(5, dtype=bool))
-    if np.any(u_hat[:3] > lower[:3]):
-        u_null, null = optimum(u_hat, np.array([True, True, True, False, False]))
-        if null - best < chi_bar_square_quantile(1.0 - test_level, 3):
-            u_hat = u_null
-    return levels_of(u_hat)
+    # A level far below where it matters has no slope in the deviance: each search also
+    # starts the free segment levels at fractions of the residuals' size (the best start is
+    # kept), so that a level held at its floor in one model can rise in the next.
+    rms = np.sqrt(np.mean(residual**2, axis=1)) if residual.size else np.ones(3)
+
+    def search(start_u: FloatArray, fixed: NDArray[np.bool_]) -> tuple[FloatArray, float]:
+        candidates = [start_u]
+        for fraction in START_FRACTIONS:
+            u = start_u.copy()
+            u[:3] = np.maximum(np.log(np.maximum(fraction * rms, 1e-300)), start_u[:3])
+            if wheels is not None:
+                u[5] = max(np.log(max(fraction * float(np.max(rms)), 1e-300) / unit),
+                           start_u[5])
+            candidates.append(np.minimum(np.maximum(u, lower), upper))
+        return optimum(min(candidates, key=lambda u: deviance(np.where(fixed, lower, u))),
+                       fixed)
+
+    none = np.zeros(u0.size, dtype=bool)
+    u_hat, best = search(u0, none)
+    if not np.any(u_hat[segment] > lower[segment]):
+        return levels_of(u_hat)
+    white = none.copy()
+    white[:3] = True
+    no_slip = none.copy()
+    no_slip[segment[3:]] = True
+    quantile = chi_bar_square_quantile(1.0 - test_level, 3)
+    # 1. Is there segment noise at all? "None" against white segment noise (slip held at its
+    # floor): three boundary components.
+    _, best_white = search(u_hat, no_slip) if wheels is not None else (u_hat, best)
+    u_null, null = optimum(u_hat, white | no_slip)
+    if null - best_white < quantile:
+        return levels_of(u_null)
+    if wheels is None:
+        return levels_of(u_hat)
+    # 2. There is: does slip through the wheels explain it, without white segment noise?
+    u_slip, only_slip = search(u_hat, white)
+    return levels_of(u_slip if only_slip - best < quantile else u_hat)

@@ -186,3 +186,65 @@ def test_substeps_compose_the_arcs_and_zero_padding_is_the_identity(rng):
                                             substeps=True)
     assert batch.shape == (3, 2, 7) and batch_jac.shape == (3, 6, 2, 7)
     np.testing.assert_allclose(batch[:, 1], prediction, atol=1e-15)
+
+
+# --------------------------------------------------------------------------- wheel Jacobian
+
+
+def _five_point(f, x: np.ndarray, index: tuple, h: float) -> np.ndarray:
+    """d f / d x[index] by the five-point stencil (error O(h^4))."""
+    values = []
+    for j in (-2, -1, 1, 2):
+        moved = x.copy()
+        moved[index] += j * h
+        values.append(f(moved))
+    return (values[0] - 8 * values[1] + 8 * values[2] - values[3]) / (12 * h)
+
+
+@settings(max_examples=200, deadline=None)
+@given(r_L=lengths, r_R=lengths, b=lengths, left=substep_wheel, right=substep_wheel,
+       l_x=offset, l_y=offset, l_t=angle)
+def test_wheel_jacobian_equals_finite_differences(r_L, r_R, b, left, right, l_x, l_y, l_t):
+    """d(measured increment)/d(each wheel sub-increment) of the three models, with sub-steps
+    and (the first sub-step alone) without, against five-point differences."""
+    k = min(len(left), len(right))
+    wheels = np.array([left[:k], right[:k]])[:, None, :]  # (2 wheels, 1 segment, K)
+    pose = SensorPose(l_x, l_y, l_t)
+    models = ((AXLE, np.array([r_L, r_R, b])),
+              (SENSOR_POSE, np.array([r_L, r_R, b, l_x, l_y, l_t])),
+              (FixedSensorPoseModel(pose), np.array([r_L, r_R, b])))
+    for model, theta in models:
+        jac = model.wheel_jacobian(wheels[0], wheels[1], theta, substeps=True)[0]  # (K, 3, 2)
+        single = model.wheel_jacobian(wheels[0, :, 0], wheels[1, :, 0], theta)[0]  # (3, 2)
+        assert jac.shape == (k, 3, 2)
+
+        def composed(w, model=model, theta=theta):
+            return substep_prediction(model, w[0], w[1], theta)
+
+        def one_arc(w, model=model, theta=theta):
+            return model.predict(w[0], w[1], theta)[0]
+
+        for wheel_index in range(2):
+            for j in range(k):
+                h = 1e-6 * max(abs(wheels[wheel_index, 0, j]), 1.0)
+                numeric = _five_point(composed, wheels, (wheel_index, 0, j), h)
+                scale = max(1.0, float(np.abs(jac[j, :, wheel_index]).max()))
+                np.testing.assert_allclose(jac[j, :, wheel_index], numeric, atol=2e-5 * scale)
+            first = wheels[:, :, :1].copy()
+            h = 1e-6 * max(abs(first[wheel_index, 0, 0]), 1.0)
+            numeric = _five_point(lambda w: one_arc(w[:, :, 0]), first, (wheel_index, 0, 0), h)
+            scale = max(1.0, float(np.abs(single[:, wheel_index]).max()))
+            np.testing.assert_allclose(single[:, wheel_index], numeric, atol=2e-5 * scale)
+
+
+def test_wheel_jacobian_is_batch_first(rng):
+    """theta (B, P) with sub-increments (B, N, K): robot b's rows equal its own call."""
+    thetas = np.column_stack([rng.uniform(0.04, 0.06, (3, 2)), rng.uniform(0.2, 0.4, 3),
+                              rng.uniform(-0.1, 0.1, (3, 2)), rng.uniform(-3, 3, 3)])
+    sub_L, sub_R = rng.normal(0, 2, (3, 5, 4)), rng.normal(0, 2, (3, 5, 4))
+    batch = SENSOR_POSE.wheel_jacobian(sub_L, sub_R, thetas, substeps=True)
+    assert batch.shape == (3, 5, 4, 3, 2)
+    for i in range(3):
+        np.testing.assert_allclose(
+            batch[i], SENSOR_POSE.wheel_jacobian(sub_L[i], sub_R[i], thetas[i], substeps=True),
+            rtol=1e-13, atol=1e-300)

@@ -1,0 +1,68 @@
+"""Speed of ``calibrate`` on a 1-hour 100 Hz log, side by side with another checkout of excite
+(ratios, since absolute times drift on a shared machine).
+
+The log: ``excite.synthetic.synthetic_log`` of 3600 s, encoders and poses at 100 Hz, pose
+noise 2 mm / 2 mrad, the sensor off the axle, with and without wheel slip (0.01 rad/sqrt(s)),
+cut into 1 s windows (3600 segments). Each configuration is timed in fresh subprocesses,
+alternating this tree and the baseline, ``--repeats`` times; the medians are printed.
+
+    git archive OLD excite | tar -x -C /tmp/old
+    python benchmarks/bench_log_speed.py --baseline /tmp/old
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parents[1]
+#: Run in a subprocess with the tree to time on sys.path: build the log, time calibrate.
+CHILD = """
+import sys, time
+import numpy as np
+from excite.calibration import calibrate
+from excite.models import SensorPose
+from excite.synthetic import synthetic_log
+from excite.timeseries import segment_timeseries
+
+slip, mode = float(sys.argv[1]), sys.argv[2]
+log = synthetic_log(np.random.default_rng(7), 3600.0, sensor_pose=SensorPose(0.1, -0.03, 0.4),
+                    encoder_rate=100.0, pose_rate=100.0, pose_noise=(2e-3, 2e-3), slip=slip,
+                    step=1e-2 / 4)
+segments = segment_timeseries(log.series).segments
+start = time.perf_counter()
+result = calibrate(segments, sensor_pose=mode)
+print(time.perf_counter() - start, len(segments))
+"""
+
+
+def timed(tree: str, slip: float, mode: str) -> tuple[float, int]:
+    env = dict(os.environ, PYTHONPATH=tree)
+    out = subprocess.run([sys.executable, "-c", CHILD, str(slip), mode], env=env, check=True,
+                         capture_output=True, text=True).stdout.split()
+    return float(out[0]), int(out[1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--baseline", required=True, help="directory holding the other excite/")
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    for slip in (0.0, 0.01):
+        for mode in ("estimate", "auto"):
+            ours, theirs = [], []
+            for _ in range(args.repeats):
+                seconds, n = timed(str(HERE), slip, mode)
+                ours.append(seconds)
+                theirs.append(timed(args.baseline, slip, mode)[0])
+            a, b = statistics.median(ours), statistics.median(theirs)
+            print(f"slip {slip:g}, sensor_pose={mode}: {n} segments; this tree {a:.2f} s, "
+                  f"baseline {b:.2f} s, ratio {a / b:.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
