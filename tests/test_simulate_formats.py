@@ -298,3 +298,22 @@ def test_simulate_bag_without_rosbags_names_the_extra(tmp_path, capsys, monkeypa
     assert code == 2
     assert capsys.readouterr().err == ("excite: error: writing bags needs the ros extra: "
                                        "pip install 'excite[ros]'\n")
+
+
+def test_calibrate_models_the_declared_encoder_resolution(tmp_path, capsys):
+    """`calibrate --ticks-per-rev N` reads ticks and puts their rounding in the noise model:
+    the command's result is excite.calibrate(..., ticks_per_rev=N) on the same segments, and
+    differs from the model without quantization."""
+    path = tmp_path / "log.csv"
+    assert main(["simulate", "--protocol", "random", "--segments", "20", "--seed", "7",
+                 "--env", IDEAL, "--pose-noise", "0.0002,0.0002", "--format", "timeseries",
+                 "--out", str(path)]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", str(path), "--ticks-per-rev", "4096", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    segments = segment_timeseries(read_timeseries(path, ticks_per_rev=4096)).segments
+    with_ticks = calibrate(segments, ticks_per_rev=4096)
+    without = calibrate(segments)
+    cli_std = np.array([report["std"][k] for k in ("r_L", "r_R", "b")])
+    np.testing.assert_allclose(cli_std, with_ticks.std, rtol=1e-9)
+    assert np.abs(cli_std / without.std - 1).max() > 1e-3

@@ -79,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"{len(segments)} segment(s) in total; at least {MIN_SEGMENTS} are "
                          "needed")
     result = calibrate(segments, initial=initial, sigma=sigma, loss=args.loss,
-                       sensor_pose=sensor_pose, trim=args.trim)
+                       sensor_pose=sensor_pose, trim=args.trim,
+                       ticks_per_rev=args.ticks_per_rev)
     validation = None
     if held:
         from excite.validation import summarize, validate_log

@@ -96,7 +96,9 @@ def add_log_options(parser: argparse.ArgumentParser, segmentation: bool = True) 
                            help="cut the log at gaps longer than the window instead of "
                            "refusing it")
     group.add_argument("--ticks-per-rev", type=_positive, metavar="N",
-                       help="encoder resolution, when the CSV has ticks_L,ticks_R columns")
+                       help="encoder resolution: converts ticks_L,ticks_R columns to rad, "
+                       "and calibrate models the encoders' rounding (one tick) in the noise "
+                       "of the segments cut from logs")
     group.add_argument("--time-offset", type=_offset, default=0.0, metavar="S|estimate",
                        help="pose time + S = encoder time (s, default 0), or 'estimate' "
                        "it from the data")
