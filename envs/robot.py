@@ -291,6 +291,32 @@ PRESETS: dict[str, RobotDistribution] = {
 }
 
 _FIELDS = tuple(f.name for f in fields(RobotDistribution))
+
+
+def scaled_robot(base: RobotDistribution, scale: object) -> RobotDistribution:
+    """A geometrically similar robot ``scale`` times the size of ``base``: every length times
+    scale (wheel radius, separation, chassis, centre-of-mass offset and its range), the mass
+    times scale^3 and the inertia times scale^5 (same density and shape), the same top linear
+    speed (the wheel speed limit, rad/s, divided by scale) and motor lag; friction, load
+    fraction and the randomization half-widths unchanged. Raises ValueError unless scale is a
+    positive finite number."""
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (
+            _finite(scale) and scale > 0):
+        raise ValueError(f"robot scale must be a positive number, got {scale!r}")
+    s = float(scale)
+    low, high = base.com_offset_range
+    return dataclasses.replace(
+        base,
+        radius=base.radius * s,
+        separation=base.separation * s,
+        mass=base.mass * s**3,
+        inertia=base.inertia * s**5,
+        com_offset=base.com_offset * s,
+        com_offset_range=(low * s, high * s),
+        max_wheel_speed=base.max_wheel_speed / s,
+        chassis_length=base.chassis_length * s,
+        chassis_width=base.chassis_width * s,
+    )
 _RANGES = ("mu_range", "com_offset_range")
 
 
@@ -300,11 +326,12 @@ def robot_distribution(
     """The robot distribution a configuration names.
 
     spec: None or {} for the default robot; a preset name (a key of PRESETS); a mapping with an
-    optional "preset" (default "default") plus RobotDistribution field overrides, e.g.
+    optional "preset" (default "default"), an optional "scale" (the preset made that many
+    times larger, :func:`scaled_robot`) plus RobotDistribution field overrides, e.g.
     {"preset": "jackal", "radius_rel": 0.03}; or a RobotDistribution, returned as is.
-    Overrides replace the preset's values literally (derived values such as the inertia are not
-    recomputed). Raises ValueError for an unknown preset or key (naming the valid ones) and for
-    values the distribution rejects.
+    Overrides replace the (scaled) preset's values literally (derived values such as the
+    inertia are not recomputed). Raises ValueError for an unknown preset or key (naming the
+    valid ones) and for values the distribution rejects.
     """
     if spec is None or isinstance(spec, RobotDistribution):
         return spec if spec is not None else PRESETS["default"]
@@ -317,10 +344,13 @@ def robot_distribution(
         )
     overrides = dict(spec)
     base = _preset(overrides.pop("preset", "default"))
+    if "scale" in overrides:
+        base = scaled_robot(base, overrides.pop("scale"))
     unknown = sorted(str(k) for k in overrides if k not in _FIELDS)
     if unknown:
         raise ValueError(
-            f"unknown robot key(s) {', '.join(unknown)}; valid: preset, {', '.join(_FIELDS)}"
+            f"unknown robot key(s) {', '.join(unknown)}; valid: preset, scale, "
+            f"{', '.join(_FIELDS)}"
         )
     for name in _RANGES:
         if name in overrides:

@@ -17,6 +17,7 @@ from envs.robot import (
     RobotDistribution,
     RobotSpec,
     robot_distribution,
+    scaled_robot,
 )
 from envs.simulation import SPAWN_MARGIN, Simulation, SimulationConfig, spawn_margin
 from excite import Params, predict_increment
@@ -143,11 +144,44 @@ def test_robot_distribution_rejects_unknown_names_listing_the_valid_ones(spec, n
         {"radius_rel": 1.5},
         {"mu_range": 0.5},
         {"mass": "heavy"},
+        {"scale": 0.0},
+        {"scale": -2.0},
+        {"scale": float("nan")},
+        {"scale": "big"},
+        {"scale": True},
     ],
 )
 def test_robot_distribution_rejects_bad_values(spec):
     with pytest.raises(ValueError):
         robot_distribution(spec)
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("scale", [0.5, 1.0, 2.5])
+def test_a_scaled_preset_is_the_same_robot_made_larger(name, scale):
+    """{"preset": P, "scale": s}: lengths x s, mass x s^3, inertia x s^5, the same top linear
+    speed and motor lag; it fits its own chassis and arena and drives."""
+    base, big = PRESETS[name], robot_distribution({"preset": name, "scale": scale})
+    assert big == scaled_robot(base, scale)
+    for field in ("radius", "separation", "com_offset", "chassis_length", "chassis_width"):
+        assert getattr(big, field) == pytest.approx(getattr(base, field) * scale, rel=1e-12)
+    assert big.com_offset_range == pytest.approx(tuple(v * scale for v in base.com_offset_range))
+    assert big.mass == pytest.approx(base.mass * scale**3, rel=1e-12)
+    assert big.inertia == pytest.approx(base.inertia * scale**5, rel=1e-12)
+    assert big.radius * big.max_wheel_speed == pytest.approx(base.radius * base.max_wheel_speed)
+    for same in ("motor_tau", "mu_range", "wheel_load_fraction", "radius_rel", "separation_rel"):
+        assert getattr(big, same) == getattr(base, same)
+    assert big.max_speed == pytest.approx(base.max_speed, rel=1e-12)  # the arena follows
+    assert big.arena_size() >= 10 * max(big.chassis_length, big.chassis_width) - 1e-3
+    rng = np.random.default_rng(3)
+    robot = big.sample(rng)
+    assert robot.fits_chassis()
+    size = big.arena_size()
+    sim = Simulation(SimulationConfig(arena_width=size, arena_height=size))
+    sim.reset(robot, rng)
+    w = robot.max_wheel_speed
+    outs = [sim.run_segment(*cmd, 1.0) for cmd in rng.uniform(-0.3 * w, 0.3 * w, (5, 2))]
+    assert all(np.isfinite(out.measurement).all() for out in outs)
 
 
 # -- the big robot ----------------------------------------------------------------------------
