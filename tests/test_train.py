@@ -143,13 +143,17 @@ def test_training_over_several_robots_splits_the_envs_and_seeds_them_in_order(tm
 
 def test_configs_extend_others_and_bad_configs_are_errors(tmp_path):
     from agents.train import load_config
+    from envs.robot import robot_distribution
 
-    robots = load_config("ppo", CONFIG_DIR / "ppo_robots.yaml")
     base = load_config("ppo")
-    assert robots["hyperparams"] == base["hyperparams"]
-    assert robots["eval"]["seed_offset"] == base["eval"]["seed_offset"]
-    assert robots["eval"]["episodes"] % len(robots["robots"]) == 0
-    assert robots["n_envs"] % len(robots["robots"]) == 0
+    for name in ("ppo_robots.yaml", "ppo_sizes.yaml"):
+        robots = load_config("ppo", CONFIG_DIR / name)
+        assert robots["hyperparams"] == base["hyperparams"]
+        assert robots["eval"]["seed_offset"] == base["eval"]["seed_offset"]
+        assert robots["eval"]["episodes"] % len(robots["robots"]) == 0
+        assert robots["n_envs"] % len(robots["robots"]) == 0
+        for robot in robots["robots"]:
+            robot_distribution(robot).nominal()  # every robot is valid
     child = tmp_path / "child.yaml"
     child.write_text("extends: missing\nn_envs: 2\n")
     with pytest.raises(TrainingError, match="missing.yaml"):
