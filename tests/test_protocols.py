@@ -246,6 +246,15 @@ def test_shipped_tuned_settings_were_tuned_on_tuning_seeds_only(path):
         parse_protocol(label).under(entry["settings"])  # every setting valid today
 
 
+def test_compare_of_a_preset_runs_that_presets_shipped_settings(tmp_path, capsys):
+    path = shipped_path(DEFAULT_ENV_ID, "turtlebot3")
+    label = load_tuned(path)["protocols"]["umbmark"]["label"]
+    assert label != load_tuned(shipped_path(DEFAULT_ENV_ID))["protocols"]["umbmark"]["label"]
+    code, text, _ = run_cli(capsys, "compare", "--robot", "turtlebot3", "--protocols",
+                            "umbmark", "--episodes", "1", "--workers", "1", "--out", tmp_path)
+    assert code == 0 and label in text and str(path) in text
+
+
 def test_default_compare_runs_the_shipped_settings(tmp_path, capsys):
     document = load_tuned(shipped_path(DEFAULT_ENV_ID))
     code, text, _ = run_cli(capsys, "compare", "--protocols", "umbmark", "--episodes", "1",
