@@ -30,10 +30,15 @@ from excite.information import segment_information
 TIE_TOLERANCE = 1e-9
 
 
+def square_grid(n: int, limit: float = 1.0) -> np.ndarray:
+    """All (left, right) pairs (n^2, 2) of an n x n grid over [-limit, limit]^2, left-major."""
+    axis = np.linspace(-limit, limit, n)
+    return np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1).reshape(-1, 2)
+
+
 def command_grid(n: int, limit: float = 1.0) -> np.ndarray:
     """All (left, right) pairs of an n x n grid over [-limit, limit]^2, without (0, 0)."""
-    axis = np.linspace(-limit, limit, n)
-    grid = np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1).reshape(-1, 2)
+    grid = square_grid(n, limit)
     return grid[np.any(grid != 0.0, axis=1)]
 
 

@@ -39,7 +39,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from agents.greedy import best_index
+from agents.greedy import best_index, square_grid
 from agents.motion import (
     action_margin,
     is_safe,
@@ -172,8 +172,7 @@ class SlipAwarePlanner(Protocol):
 
     def __init__(self, **settings: Value) -> None:
         super().__init__(**settings)
-        axis = np.linspace(-self.max_step, self.max_step, self.grid)
-        self.offsets = np.stack(np.meshgrid(axis, axis, indexing="ij"), -1).reshape(-1, 2)
+        self.offsets = square_grid(self.grid, self.max_step)
 
     def reset(self, rng: np.random.Generator) -> None:
         super().reset(rng)
