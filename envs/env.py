@@ -107,7 +107,13 @@ class DiffDriveCalibEnv(gym.Env):
     - ``accuracy`` (privileged, for training in simulation only; 0 by default):
       -``accuracy_weight`` * 100 * (e_t - e_{t-1}), e the max relative error of the estimate
       against the hidden truth; the episode's sum telescopes to -accuracy_weight * 100 *
-      (final error - nominal's error). The observation never contains the truth.
+      (final error - nominal's error);
+    - ``error`` (privileged, 0 by default): -``error_weight`` * ln(e_t / e_0), e_0 the
+      nominal's error: the orders of magnitude gained so far, paid after every segment, so
+      the episode's sum rewards accuracy reached early (the area between the log-error curve
+      and its start), each halving of the error alike at 4% and at 0.1%.
+
+    The observation never contains the truth.
 
     ## Episode end
     Truncated after ``budget`` segments (the env alone owns the budget: the ids register no
@@ -151,6 +157,7 @@ class DiffDriveCalibEnv(gym.Env):
             "effort_cost": 0.0,
             "time_cost": 0.0,
             "accuracy_weight": 0.0,  # privileged term (uses the hidden truth)
+            "error_weight": 0.0,  # privileged term: the log-error-vs-time area
             "target_sigma_min": None,  # terminate once sigma_min reaches it
             # None: the pose sensor sits on the axle. Else the ranges the hidden mounting is
             # drawn from: {"x": (lo, hi) m, "y": (lo, hi) m, "theta": (lo, hi) rad}.
@@ -246,7 +253,7 @@ class DiffDriveCalibEnv(gym.Env):
         self._information = np.zeros((p, p))
         self._eigen = ((0.0,) * p, (1.0,) + (0.0,) * (p - 1))  # eigenvalues, weakest direction
         self._measured_pose = self._measure_pose(self.sim.pose)
-        self._error = self.max_relative_error
+        self._error = self._start_error = self.max_relative_error
         if self.render_mode == "human":
             self.render()
         return self._observation(), {"sigma_min": 0.0, "n_segments": 0}
@@ -317,10 +324,11 @@ class DiffDriveCalibEnv(gym.Env):
         target = config["target_sigma_min"]
         terminated = target is not None and self._sigma_min >= target
         truncated = n >= self.budget and not terminated
-        if config["accuracy_weight"]:
+        if uses_error(config):
             self._error = self.max_relative_error
         terms = reward_terms(config, self._sigma_min - previous, outcome.collision,
-                             left * left + right * right, self._error - previous_error)
+                             left * left + right * right,
+                             (self._start_error, previous_error, self._error))
         info = {
             "reward_terms": terms,
             "sigma_min": self._sigma_min,
@@ -462,27 +470,34 @@ class DiffDriveCalibEnv(gym.Env):
 
 
 #: The reward's terms, in the order the envs report them in ``info["reward_terms"]``.
-REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy")
+REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy", "error")
+
+
+def uses_error(config: dict[str, Any]) -> bool:
+    """Whether a reward term needs the max relative error against the hidden truth."""
+    return bool(config["accuracy_weight"] or config["error_weight"])
 
 
 def reward_terms(config: dict[str, Any], sigma_gain: float | np.ndarray,
                  collision: bool | np.ndarray, effort: float | np.ndarray,
-                 error_change: float | np.ndarray) -> dict[str, Any]:
+                 errors: tuple[Any, Any, Any]) -> dict[str, Any]:
     """The reward's terms (see DiffDriveCalibEnv, "Reward") of one segment of one robot
-    (floats) or of N robots (arrays (N,); ``time``, and ``accuracy`` when it is off, stay
-    scalars for the caller to broadcast).
+    (floats) or of N robots (arrays (N,); ``time``, and ``accuracy`` and ``error`` when they
+    are off, stay scalars for the caller to broadcast).
 
     config: the env's configuration; sigma_gain: sigma_min's increase (relative information
     units); collision: whether the chassis touched a wall; effort: the sum of the squared
-    normalised wheel commands; error_change: the max relative error's change (unused when
-    ``accuracy_weight`` is 0)."""
-    weight = config["accuracy_weight"]
+    normalised wheel commands; errors: the max relative error at the episode's start, before
+    and after the segment (unused unless :func:`uses_error`)."""
+    accuracy, area = config["accuracy_weight"], config["error_weight"]
+    start, previous, error = errors
     return {
         "information": sigma_gain / config["information_scale"],
         "collision": -float(config["collision_penalty"]) * collision + 0.0,  # 0.0, not -0.0
         "effort": -float(config["effort_cost"]) * 0.5 * effort,
         "time": -float(config["time_cost"]),
-        "accuracy": -weight * 100.0 * error_change if weight else 0.0,
+        "accuracy": -accuracy * 100.0 * (error - previous) if accuracy else 0.0,
+        "error": -area * np.log(error / start) if area else 0.0,
     }
 
 

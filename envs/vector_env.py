@@ -21,6 +21,7 @@ from envs.env import (
     read_estimate,
     reward_terms,
     sense_increments,
+    uses_error,
 )
 from envs.robot import RobotSpec
 from envs.simulation import BatchOutcome, BatchSimulation
@@ -123,6 +124,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self._weakest = np.zeros((n, p))
         self._measured_pose = np.zeros((n, 3))
         self._error = np.zeros(n)
+        self._start_error = np.zeros(n)
         self._ended = np.zeros(n, dtype=bool)  # NEXT_STEP: reset these on the next step
         self._started = False
 
@@ -165,7 +167,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self._measured_pose[robots] = measure_poses(
             self.sim.pose_sensor, self.sim.poses[robots], [self._sensor_rngs[i] for i in robots],
             None if self._mounts is None else self._mounts[robots], self._theta[robots])
-        self._error[mask] = self.max_relative_errors[mask]
+        self._error[mask] = self._start_error[mask] = self.max_relative_errors[mask]
         self._ended[mask] = False
 
     def _reset_robot(self, i: int, seed: int | None, options: dict[str, Any]) -> None:
@@ -207,11 +209,11 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             previous, previous_error = self._sigma_min.copy(), self._error.copy()
             rows[moving] = self._record(moving, outcome, actions)
             self._update_information(moving)
-            if config["accuracy_weight"]:
+            if uses_error(config):
                 self._error = self.max_relative_errors
             terms = {name: np.where(resetting, 0.0, value) for name, value in reward_terms(
                 config, self._sigma_min - previous, collision, (actions**2).sum(axis=1),
-                self._error - previous_error).items()}
+                (self._start_error, previous_error, self._error)).items()}
         target = config["target_sigma_min"]
         terminated = moving & (target is not None) & (self._sigma_min >= (target or 0.0))
         truncated = moving & (self._n >= self.budget) & ~terminated

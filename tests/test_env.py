@@ -120,6 +120,26 @@ def test_reward_is_the_sum_of_named_terms_and_telescopes_to_sigma_min():
     assert total == pytest.approx(info["sigma_min"] / env.config["information_scale"])
 
 
+def test_error_and_accuracy_terms_over_an_episode():
+    """error_weight w: each segment's term is -w * ln(e_t / e_0), e_t the max relative error
+    after it and e_0 the nominal's; accuracy_weight a: the sum telescopes to -a * 100 *
+    (final - nominal's)."""
+    env = gym.make("excite/DiffDriveCalib-v0", error_weight=0.3, accuracy_weight=2.0).unwrapped
+    env.reset(seed=4)
+    start = env.max_relative_error
+    errors, area, accuracy = [], 0.0, 0.0
+    rng = np.random.default_rng(1)
+    for _ in range(env.budget):
+        _, reward, *_, info = env.step(rng.uniform(-0.5, 0.5, 2))
+        errors.append(env.max_relative_error)
+        area += info["reward_terms"]["error"]
+        accuracy += info["reward_terms"]["accuracy"]
+        assert reward == pytest.approx(sum(info["reward_terms"].values()))
+    assert 0 < errors[-1] < start
+    assert area == pytest.approx(-0.3 * np.log(np.array(errors) / start).sum())
+    assert accuracy == pytest.approx(-2.0 * 100 * (errors[-1] - start))
+
+
 def test_sigma_min_matches_batch_information_at_the_estimate():
     env = gym.make("excite/DiffDriveCalibIdeal-v0").unwrapped
     env.reset(seed=2)

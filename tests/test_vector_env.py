@@ -33,7 +33,7 @@ def test_make_vec_returns_the_native_vector_env(mode):
     assert reward.shape == terminated.shape == truncated.shape == (3,)
     assert terminated.dtype == truncated.dtype == bool
     assert set(info["reward_terms"]) == {"information", "collision", "effort", "time",
-                                         "accuracy"}
+                                         "accuracy", "error"}
     np.testing.assert_allclose(sum(info["reward_terms"].values()), reward)
 
 
@@ -92,7 +92,7 @@ def test_robot_i_is_the_single_env_with_seed_plus_i(env_id, batch_estimator, mon
     monkeypatch.setattr(env_module, "BATCH_ESTIMATOR_MIN", 1 if batch_estimator else 10**9)
     estimators = gym.make_vec(env_id, num_envs=3).unwrapped.estimators
     assert isinstance(estimators, BatchOnlineEstimator) == batch_estimator
-    out = run_pair(env_id, 3, seed=40, steps=25, budget=12)
+    out = run_pair(env_id, 3, seed=40, steps=25, budget=12, error_weight=0.01)
     collisions = 0
     for obs, s_obs, reward, s_reward, rows, s_rows in out:
         np.testing.assert_allclose(obs, s_obs, atol=1e-6)
