@@ -92,12 +92,14 @@ def make_env(env_id: str, segments: int, robot: str = "default", **config) -> gy
     return gym.make(env_id, budget=segments, robot=robot, **config)
 
 
-def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int) -> list[dict]:
-    """Run one episode of ``protocol`` with the env's estimator; one record per segment (see
-    COLUMNS): ``nees`` is the estimator's NEES against the hidden truth over the ``nees_dof``
-    parameters it reports a covariance for (:func:`excite.consistency.estimate_error`),
-    ``time`` the seconds driven since the start."""
-    env.reset(seed=seed)
+def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int,
+                         options: dict | None = None) -> list[dict]:
+    """Run one episode of ``protocol`` with the env's estimator (reset with ``seed`` and
+    ``options``); one record per segment (see COLUMNS): ``nees`` is the estimator's NEES
+    against the hidden truth over the ``nees_dof`` parameters it reports a covariance for
+    (:func:`excite.consistency.estimate_error`), ``time`` the seconds driven since the
+    start."""
+    env.reset(seed=seed, options=options)
     base = env.unwrapped
     protocol.reset(np.random.default_rng([seed, 1]))
     truth, true_theta = base.true_params.as_array(), base.true_theta

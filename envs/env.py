@@ -131,8 +131,9 @@ class DiffDriveCalibEnv(gym.Env):
     ``env.unwrapped.true_params`` (hidden truth), ``env.unwrapped.segments`` (the episode's
     calibration log), ``env.unwrapped.estimator``.
 
-    ``reset(options={"robot": RobotSpec, "pose": (x, y, theta)})`` fixes the hidden robot
-    and/or start pose.
+    ``reset(options={"robot": RobotSpec, "sensor_pose": SensorPose, "pose": (x, y, theta)})``
+    fixes the hidden robot, the hidden sensor mounting (sensor-pose envs) and/or the start
+    pose.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
@@ -262,13 +263,18 @@ class DiffDriveCalibEnv(gym.Env):
             RobotSpec, np.random.Generator, np.random.Generator, SensorPose | None]:
         """An episode's draws from ``rng``, in this order: the hidden robot (unless
         ``options["robot"]``), the simulation's and the pose sensor's random streams, and the
-        hidden sensor mounting (None on the axle model). The vector env draws each robot's
-        episode here too, so robot i with seed s + i is the single env with seed s + i."""
+        hidden sensor mounting (None on the axle model; unless ``options["sensor_pose"]``).
+        The vector env draws each robot's episode here too, so robot i with seed s + i is the
+        single env with seed s + i."""
         robot = options.get("robot") or self.distribution.sample(rng)
         sim_rng = np.random.default_rng(rng.integers(2**63))
         sensor_rng = np.random.default_rng(rng.integers(2**63))
-        mount = None if self.sensor_ranges is None else SensorPose(
-            *rng.uniform(self.sensor_ranges[:, 0], self.sensor_ranges[:, 1]))
+        mount = options.get("sensor_pose")
+        if mount is not None and self.sensor_ranges is None:
+            raise ValueError("options['sensor_pose']: this env's pose sensor is on the axle "
+                             "(config sensor_pose is None)")
+        if mount is None and self.sensor_ranges is not None:
+            mount = SensorPose(*rng.uniform(self.sensor_ranges[:, 0], self.sensor_ranges[:, 1]))
         return robot, sim_rng, sensor_rng, mount
 
     def new_estimator(self) -> Estimator:

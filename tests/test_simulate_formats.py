@@ -238,6 +238,35 @@ def test_simulate_timeseries(tmp_path, capsys):
     assert other.read_text() != path.read_text()
 
 
+def test_robot_seed_gives_logs_of_one_robot(tmp_path):
+    """--robot-seed R: the hidden robot and mounting of seed R's episode, the rest (start,
+    noise, protocol draws) of --seed's; R = --seed is the plain run."""
+    plain, plain_truth = simulate(tmp_path, "--format", "timeseries", out="plain.csv")
+    same, same_truth = simulate(tmp_path, "--format", "timeseries", "--robot-seed", "3",
+                                out="same.csv")
+    assert same.read_text() == plain.read_text()
+    assert plain_truth["robot_seed"] == same_truth["robot_seed"] == 3
+    held, held_truth = simulate(tmp_path, "--format", "timeseries", "--robot-seed", "3",
+                                out="held.csv", seed=8)
+    other, other_truth = simulate(tmp_path, "--format", "timeseries", out="other.csv", seed=8)
+    assert held_truth["robot_seed"] == 3 and held_truth["seed"] == 8
+    for key in ("r_L", "r_R", "b", "robot", "sensor_pose"):
+        assert held_truth[key] == plain_truth[key], key
+        assert other_truth[key] != plain_truth[key], key
+    assert held.read_text() not in (plain.read_text(), other.read_text())
+
+
+def test_reset_option_sensor_pose_fixes_the_mounting():
+    env = gym.make(SENSOR).unwrapped
+    mount = excite.SensorPose(0.05, -0.02, 0.3)
+    env.reset(seed=1, options={"sensor_pose": mount})
+    assert env.true_sensor_pose == mount
+    env.reset(seed=1)
+    assert env.true_sensor_pose != mount
+    with pytest.raises(ValueError, match="sensor is on the axle"):
+        gym.make(IDEAL).unwrapped.reset(seed=1, options={"sensor_pose": mount})
+
+
 def test_simulate_segments_is_unchanged(tmp_path):
     path, truth = simulate(tmp_path, env=IDEAL)
     assert truth["format"] == "segments" and truth["calibrate_args"] == []

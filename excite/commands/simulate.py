@@ -42,6 +42,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="a protocol with optional settings (see excite protocols)")
     sim.add_argument("--segments", type=positive_int, required=True, metavar="N")
     sim.add_argument("--seed", type=int, default=0, metavar="S")
+    sim.add_argument("--robot-seed", type=int, metavar="R",
+                     help="drive the hidden robot and sensor mounting of seed R's episode "
+                     "(default: --seed's): logs with other --seed and one --robot-seed are "
+                     "logs of one robot (e.g. held-out logs for excite validate)")
     sim.add_argument("--env", default=DEFAULT_ENV_ID, metavar="ID")
     sim.add_argument("--policy", metavar="PATH",
                      help="policy file of --protocol learned (its policy setting)")
@@ -138,8 +142,12 @@ def run(args: argparse.Namespace) -> int:
         if args.pose_noise is not None:
             recording["record_sigma_xy"], recording["record_sigma_theta"] = args.pose_noise
     env_ = make_env(env, args.segments, robot, **recording)
-    records = run_protocol_episode(env_, protocol, args.seed)
     base = env_.unwrapped
+    options = None
+    if args.robot_seed not in (None, args.seed):  # that seed's episode's robot and mounting
+        env_.reset(seed=args.robot_seed)
+        options = {"robot": base.robot, "sensor_pose": base.true_sensor_pose}
+    records = run_protocol_episode(env_, protocol, args.seed, options)
     written, what = _write_log(args, out, base)
     mount = base.true_sensor_pose
     truth = {**dict(zip(("r_L", "r_R", "b"), base.true_params.as_array().tolist(), strict=True)),
@@ -147,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
              "sigma": dict(zip(("x", "y", "theta"), base.sigma.tolist(), strict=True)),
              "env": env, "protocol": spec.label, "protocol_settings": spec.resolved(),
              "seed": args.seed,
+             "robot_seed": args.seed if args.robot_seed is None else args.robot_seed,
              "segments": len(records),
              "collisions": int(np.sum([r["collision"] for r in records])),
              "format": args.format,
