@@ -111,7 +111,8 @@ class DiffDriveCalibEnv(gym.Env):
     - ``error`` (privileged, 0 by default): -``error_weight`` * ln(e_t / e_0), e_0 the
       nominal's error: the orders of magnitude gained so far, paid after every segment, so
       the episode's sum rewards accuracy reached early (the area between the log-error curve
-      and its start), each halving of the error alike at 4% and at 0.1%.
+      and its start), each halving of the error alike at 4% and at 0.1% (errors floored at
+      1e-12, as a robot drawn without spread starts at 0).
 
     The observation never contains the truth.
 
@@ -479,6 +480,10 @@ class DiffDriveCalibEnv(gym.Env):
 REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy", "error")
 
 
+#: The error term's floor on relative errors (a robot drawn without spread starts at 0).
+ERROR_FLOOR = 1e-12
+
+
 def uses_error(config: dict[str, Any]) -> bool:
     """Whether a reward term needs the max relative error against the hidden truth."""
     return bool(config["accuracy_weight"] or config["error_weight"])
@@ -503,7 +508,8 @@ def reward_terms(config: dict[str, Any], sigma_gain: float | np.ndarray,
         "effort": -float(config["effort_cost"]) * 0.5 * effort,
         "time": -float(config["time_cost"]),
         "accuracy": -accuracy * 100.0 * (error - previous) if accuracy else 0.0,
-        "error": -area * np.log(error / start) if area else 0.0,
+        "error": -area * np.log(np.maximum(error, ERROR_FLOOR) / np.maximum(start, ERROR_FLOOR))
+        if area else 0.0,
     }
 
 

@@ -140,6 +140,15 @@ def test_error_and_accuracy_terms_over_an_episode():
     assert accuracy == pytest.approx(-2.0 * 100 * (errors[-1] - start))
 
 
+def test_error_term_is_finite_for_a_robot_without_spread():
+    env = gym.make("excite/DiffDriveCalibIdeal-v0", error_weight=0.1,
+                   robot={"radius_rel": 0.0, "separation_rel": 0.0}).unwrapped
+    env.reset(seed=0)
+    assert env.max_relative_error == 0.0
+    _, reward, *_ = env.step(np.array([0.3, 0.1]))
+    assert np.isfinite(reward)
+
+
 def test_sigma_min_matches_batch_information_at_the_estimate():
     env = gym.make("excite/DiffDriveCalibIdeal-v0").unwrapped
     env.reset(seed=2)
