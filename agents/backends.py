@@ -111,8 +111,6 @@ class Executor:
 
 
 class _LocalExecutor(Executor):
-    task_seconds = 0.0
-
     def __init__(self, pool: ProcessPoolExecutor):
         self.pool, self.pending = pool, set()
 

@@ -31,11 +31,9 @@ class ConcatVecEnv(VecEnv):
                 raise ValueError("ConcatVecEnv: every part must have the same spaces")
         self.parts = list(parts)
         self.offsets = np.cumsum([0] + [part.num_envs for part in self.parts])
+        self.slices = [slice(int(a), int(b)) for a, b in zip(self.offsets[:-1],
+                                                             self.offsets[1:], strict=True)]
         super().__init__(int(self.offsets[-1]), first.observation_space, first.action_space)
-
-    def _slices(self) -> list[slice]:
-        return [slice(int(a), int(b)) for a, b in zip(self.offsets[:-1], self.offsets[1:],
-                                                      strict=True)]
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         for part, start in zip(self.parts, self.offsets, strict=False):
@@ -44,7 +42,7 @@ class ConcatVecEnv(VecEnv):
 
     def set_options(self, options: list[dict] | dict | None = None) -> None:
         super().set_options(options)
-        for part, where in zip(self.parts, self._slices(), strict=True):
+        for part, where in zip(self.parts, self.slices, strict=True):
             part.set_options(self._options[where])
 
     def reset(self) -> np.ndarray:
@@ -55,7 +53,7 @@ class ConcatVecEnv(VecEnv):
         return np.concatenate(observations)
 
     def step_async(self, actions: np.ndarray) -> None:
-        for part, where in zip(self.parts, self._slices(), strict=True):
+        for part, where in zip(self.parts, self.slices, strict=True):
             part.step_async(actions[where])
 
     def step_wait(self) -> VecEnvStepReturn:

@@ -196,8 +196,6 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
         base = load_config(algo, path.parent / base_file if base_file else None)
     except ExciteError as exc:
         raise _fail(path, "config", str(exc)) from None
-    if not isinstance(base, dict):
-        raise _fail(path, "config", "the training config is not a mapping")
     seeds = document.get("seeds", [0])
     if not isinstance(seeds, list) or not seeds:
         raise _fail(path, "seeds", f"must be a list of seeds, got {seeds!r}")

@@ -111,6 +111,26 @@ def test_native_vec_env_adapter_resets_in_the_same_step():
     assert not np.array_equal(infos[0]["measurement"], infos[1]["measurement"])
 
 
+def test_native_training_envs_report_episode_statistics():
+    """The native vector env reports what SB3's Monitor would: each ended episode's info
+    carries its return (the sum of the raw rewards) and length, what SB3 logs as
+    ep_rew_mean."""
+    from agents.train import make_training_env
+
+    config = {"env_id": "excite/DiffDriveCalibIdeal-v0", "env_kwargs": {"budget": 3},
+              "vec_env": "native", "normalize": {"norm_reward": False}}
+    venv = make_training_env(config, 2, seed=3)
+    venv.reset()
+    total = np.zeros(2)
+    for _ in range(3):
+        _, _, dones, infos = venv.step(np.full((2, 2), 0.4))
+        total += venv.get_original_reward()
+    assert dones.all()
+    for i, info in enumerate(infos):
+        assert info["episode"]["l"] == 3
+        assert info["episode"]["r"] == pytest.approx(total[i], rel=1e-5)
+
+
 def test_training_over_several_robots_splits_the_envs_and_seeds_them_in_order(tmp_path):
     """config robots: env i is its preset's single env seeded s + i (concatenated in order,
     actions routed to their part); evaluation gets one env per robot; bad splits are errors."""
