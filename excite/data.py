@@ -64,6 +64,8 @@ class Segments:
     their measured increments share that sample's noise (calibration models the correlation).
     sub_dphi_L, sub_dphi_R (N, K): each segment's consecutive encoder sub-increments (rad,
     zero-padded, summing to dphi_L, dphi_R): the motion is their composition, not one arc.
+    sub_count (N,) int: how many of the K sub-steps are the segment's own, equal parts of its
+    time span (the rest is padding); None: all K (see :attr:`substep_counts`).
     """
 
     dphi_L: NDArray[np.float64]
@@ -76,6 +78,7 @@ class Segments:
     chained: NDArray[np.bool_] | None = None
     sub_dphi_L: NDArray[np.float64] | None = None
     sub_dphi_R: NDArray[np.float64] | None = None
+    sub_count: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
         arrays = [np.array(getattr(self, name), dtype=float).reshape(-1) for name in _FIELDS]
@@ -101,6 +104,18 @@ class Segments:
         if (self.sub_dphi_L is None) != (self.sub_dphi_R is None) or (
                 self.sub_dphi_L is not None and self.sub_dphi_L.shape != self.sub_dphi_R.shape):
             raise DataError("sub_dphi_L and sub_dphi_R must be given together, of one shape")
+        if self.sub_count is not None and (self.sub_dphi_L is None or not np.all(
+                (self.sub_count >= 1) & (self.sub_count <= self.sub_dphi_L.shape[1]))):
+            raise DataError("sub_count needs sub-steps, each count in 1..K")
+
+    @property
+    def substep_counts(self) -> NDArray[np.int64] | None:
+        """Each segment's own sub-steps (N,) (None without sub-steps)."""
+        if self.sub_dphi_L is None:
+            return None
+        if self.sub_count is None:
+            return np.full(len(self), self.sub_dphi_L.shape[1], dtype=np.int64)
+        return self.sub_count
 
     @classmethod
     def from_array(cls, rows: ArrayLike) -> Segments:
@@ -123,14 +138,16 @@ class Segments:
         for c in chained:
             c[:1] = False
         subs: list[NDArray | None] = [None, None]
+        counts = None
         if all(p.sub_dphi_L is not None for p in parts):
+            counts = np.concatenate([p.substep_counts for p in parts])
             width = max(p.sub_dphi_L.shape[1] for p in parts)
             subs = [np.concatenate([np.pad(getattr(p, name), ((0, 0), (0, width - getattr(
                 p, name).shape[1]))) for p in parts]) for name in ("sub_dphi_L", "sub_dphi_R")]
         rows = np.concatenate([p.as_array() for p in parts])
         return cls(*rows.T, t_start=joined("t_start"), t_end=joined("t_end"),
                    chained=np.concatenate(chained) if any(p.chained is not None for p in parts)
-                   else None, sub_dphi_L=subs[0], sub_dphi_R=subs[1])
+                   else None, sub_dphi_L=subs[0], sub_dphi_R=subs[1], sub_count=counts)
 
     def as_array(self) -> NDArray[np.float64]:
         """(N, 5) array in CSV column order."""
@@ -159,7 +176,7 @@ class Segments:
 
 
 _OPTIONAL = (("t_start", float, 1), ("t_end", float, 1), ("chained", bool, 1),
-             ("sub_dphi_L", float, 2), ("sub_dphi_R", float, 2))
+             ("sub_dphi_L", float, 2), ("sub_dphi_R", float, 2), ("sub_count", np.int64, 1))
 
 
 def _header_columns(fields: list[str]) -> tuple[str, ...] | None:

@@ -191,8 +191,7 @@ class WheelNoise:
         jac = model.wheel_jacobian(sub_L, sub_R, theta, substeps=True)  # (N, K, 3, 2)
         moving = (sub_L != 0.0) | (sub_R != 0.0)
         k = np.arange(moving.shape[1])
-        # sub-steps are equal parts of the segment: their count is up to the last moving one
-        count = np.max(np.where(moving, k + 1, 1), axis=1)
+        count = segments.substep_counts  # the segment's own sub-steps, equal parts of it
         weight = np.where(moving, ((segments.t_end - segments.t_start) / count)[:, None], 0.0)
         slip = np.einsum("nk,nkaw,nkbw->nab", weight, jac, jac)
         step = (jac[:, :-1] - jac[:, 1:]) * (k[1:] < count[:, None])[:, :, None, None]

@@ -912,11 +912,12 @@ def _increments(ts: TimeSeries, t_pose: FloatArray, start: IntArray, end: IntArr
                             ts.theta[end] - ts.theta[start]])
 
 
-def _substeps(ts: TimeSeries, t_a: FloatArray, t_b: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Each segment's encoder sub-increments (N, K) over K equal sub-intervals of [t_a, t_b]
-    (s, encoder clock), zero-padded to the largest K: sub-intervals of about the (median)
-    encoder period (within one the interpolated rates are constant), at most MAX_SUBSTEPS.
-    They sum to the segment's increments exactly."""
+def _substeps(ts: TimeSeries, t_a: FloatArray, t_b: FloatArray
+              ) -> tuple[FloatArray, FloatArray, IntArray]:
+    """Each segment's encoder sub-increments (N, K) over its own count (N,) of equal
+    sub-intervals of [t_a, t_b] (s, encoder clock), zero-padded to the largest: sub-intervals
+    of about the (median) encoder period (within one the interpolated rates are constant), at
+    most MAX_SUBSTEPS. They sum to the segment's increments exactly."""
     period = float(np.median(np.diff(ts.t_enc)))
     duration = t_b - t_a
     count = np.clip(np.ceil(duration / period - 1e-9), 1, MAX_SUBSTEPS)
@@ -924,8 +925,9 @@ def _substeps(ts: TimeSeries, t_a: FloatArray, t_b: FloatArray) -> tuple[FloatAr
     j = np.arange(int(count.max()) + 1)
     times = t_a[:, None] + duration[:, None] * np.minimum(j / count[:, None], 1.0)
     times[j[None, :] >= count[:, None]] = np.repeat(t_b, j.size - count)  # exactly t_b
-    return tuple(np.diff(np.interp(times, ts.t_enc, phi), axis=1)
-                 for phi in (ts.phi_L, ts.phi_R))  # type: ignore[return-value]
+    sub_L, sub_R = (np.diff(np.interp(times, ts.t_enc, phi), axis=1)
+                    for phi in (ts.phi_L, ts.phi_R))
+    return sub_L, sub_R, count
 
 
 def _drop_reasons(ts: TimeSeries, t_pose: FloatArray, cut: _Cut, rows: FloatArray,
@@ -1037,8 +1039,8 @@ def segment_timeseries(
                         f"at least {MIN_SEGMENTS} are needed (dropped: {report.counts_text()})")
     t_start, t_end = t_pose[start], t_pose[end]
     shares = np.concatenate(([False], start[1:] == end[:-1]))
-    sub_L, sub_R = _substeps(ts, t_start, t_end)
+    sub_L, sub_R, count = _substeps(ts, t_start, t_end)
     segments = Segments(*rows[keep].T, t_start=t_start, t_end=t_end, chained=shares,
-                        sub_dphi_L=sub_L, sub_dphi_R=sub_R)
+                        sub_dphi_L=sub_L, sub_dphi_R=sub_R, sub_count=count)
     return SegmentedLog(segments=segments, t_start=t_start, t_end=t_end,
                         shares_endpoints=shares, report=report)

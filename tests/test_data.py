@@ -301,6 +301,8 @@ def test_concatenate_breaks_chains_between_parts_and_pads_substeps():
     both = Segments.concatenate([a, b])
     assert both.chained.tolist() == [False, True, True, True, False, True, True]
     assert both.sub_dphi_L.shape == (7, 3) and np.all(both.sub_dphi_L[4:, 2] == 0)
+    assert both.substep_counts.tolist() == [3, 3, 3, 3, 2, 2, 2]  # padding is not a sub-step
+    assert both[[5, 1]].sub_count.tolist() == [2, 3]
     plain = Segments.concatenate([a, Segments.from_array(a.as_array())])
     assert plain.sub_dphi_L is None and plain.t_start is None
     assert plain.chained.tolist() == [False, True, True, True, False, False, False, False]
@@ -312,3 +314,6 @@ def test_optional_columns_are_checked():
         Segments(*rows.T, t_start=np.ones(2))
     with pytest.raises(DataError, match="given together"):
         Segments(*rows.T, sub_dphi_L=np.ones((3, 2)))
+    with pytest.raises(DataError, match="sub_count"):
+        Segments(*rows.T, sub_dphi_L=np.ones((3, 2)), sub_dphi_R=np.ones((3, 2)),
+                 sub_count=np.array([1, 2, 3]))

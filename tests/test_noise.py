@@ -209,6 +209,24 @@ def test_slip_covariance_is_the_covariance_of_slipping_wheels():
     assert np.abs(model[3:6, 0:3]).max() < 1e-6 * scale.max() ** 2
 
 
+def test_slip_accrues_only_while_a_wheel_turns():
+    """A 1 s segment of ten 0.1 s sub-steps that moves for 0.5 s and then stands still has
+    the slip covariance of the same motion as a 0.5 s segment of five sub-steps (slip is a
+    random walk in the time a wheel turns), though both are padded to ten sub-steps."""
+    rng = np.random.default_rng(3)
+    theta = np.array([0.05, 0.051, 0.3, 0.1, -0.03, 0.4])
+    motion = rng.normal(0.3, 0.1, (2, 5))
+    sub = np.zeros((2, 2, 10))
+    sub[:, 0, :5] = sub[:, 1, :5] = motion
+    exact = SENSOR_POSE.evaluate(sub[0], sub[1], theta, jacobian=False, substeps=True)[0]
+    segments = Segments(sub[0].sum(1), sub[1].sum(1), *exact, t_start=np.array([0.0, 2.0]),
+                        t_end=np.array([1.0, 2.5]), chained=np.array([False, False]),
+                        sub_dphi_L=sub[0], sub_dphi_R=sub[1], sub_count=np.array([10, 5]))
+    wheels = WheelNoise.of(SENSOR_POSE, segments, theta, None)
+    np.testing.assert_allclose(wheels.slip[0], wheels.slip[1], rtol=1e-12, atol=0)
+    assert np.all(np.diagonal(wheels.slip[0]) > 0)
+
+
 def test_quantization_covariance_of_rounded_encoder_samples():
     """Independent rounding errors (uniform over one tick) on every encoder sample, the
     sub-steps' boundaries: the increments' empirical covariance equals the boundary terms
