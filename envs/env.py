@@ -11,13 +11,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from envs.physics import GRAVITY
+from envs.physics import traction_of
 from envs.recording import Recorder, Recording, RecordingConfig
 from envs.robot import RobotSpec, robot_distribution
 from envs.sensors import RelativePoseSensor
 from envs.simulation import Simulation, SimulationConfig
 from excite import se2
-from excite.contracts import Estimator, EstimatorFactory, RobotKnowledge, Traction
+from excite.contracts import Estimator, EstimatorFactory, RobotKnowledge
 from excite.data import Segments
 from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
 from excite.information import eigen_3x3, information_matrix
@@ -203,9 +203,7 @@ class DiffDriveCalibEnv(gym.Env):
             self.nominal_theta = np.append(self.nominal_theta, self.sensor_ranges.mean(axis=1))
         self.max_wheel_speed = nominal.max_wheel_speed
         self.chassis = nominal.chassis
-        self.traction = Traction(nominal.motor_tau,
-                                 nominal.mu * GRAVITY * nominal.wheel_load_fraction,
-                                 nominal.inertia / (nominal.mass * (0.5 * nominal.b) ** 2))
+        self.traction = traction_of(nominal)
         self.sim = Simulation(SimulationConfig(
             arena_width=cfg["arena_size"], arena_height=cfg["arena_size"],
             physics_hz=cfg["physics_hz"], ideal=bool(cfg["ideal"]),

@@ -33,6 +33,7 @@ import pymunk.batch
 from envs.robot import RobotSpec
 from envs.traction_kernel import PATH_FIELDS, STATE_FIELDS, TRACTION_FIELDS, traction_tick
 from excite.arena import Arena
+from excite.contracts import Traction
 from excite.kinematics import sinc_family
 
 GRAVITY = 9.81  # m/s^2
@@ -40,6 +41,14 @@ WALL_RADIUS = 0.05  # m, half-thickness of the arena's wall segments
 _CHASSIS_TYPE, _WALL_TYPE = 1, 2  # pymunk collision types
 _PHI = slice(STATE_FIELDS.index("phi_L"), STATE_FIELDS.index("phi_R") + 1)  # state columns
 _POSE = slice(STATE_FIELDS.index("x"), STATE_FIELDS.index("theta") + 1)
+
+
+def traction_of(robot: RobotSpec) -> Traction:
+    """What a planner may know of ``robot``'s traction (:class:`excite.contracts.Traction`):
+    its motor lag, its grip mu g (load fraction on the wheels) and its spin inertia
+    I / (m (b/2)^2), the quantities the physics' slip model uses."""
+    return Traction(robot.motor_tau, robot.mu * GRAVITY * robot.wheel_load_fraction,
+                    robot.inertia / (robot.mass * (0.5 * robot.b) ** 2))
 
 
 class Drive(Protocol):

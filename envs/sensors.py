@@ -14,17 +14,16 @@ import numpy as np
 
 
 def relative_pose(pose_start: np.ndarray, pose_end: np.ndarray) -> np.ndarray:
-    """Body-frame increment (dx, dy, dtheta) from `pose_start` to `pose_end` ((3,) or (N, 3)).
+    """Body-frame increment (dx, dy, dtheta) from `pose_start` to `pose_end` (3,): the single
+    env's fast scalar form of :func:`excite.se2.between` (the same bits; math's cos and sin).
 
     dx, dy (m) are the displacement expressed in the body frame at `pose_start` (x forward,
     y left); dtheta (rad) is the continuous heading change theta_end - theta_start.
     """
-    ex = pose_end[..., 0] - pose_start[..., 0]
-    ey = pose_end[..., 1] - pose_start[..., 1]
-    th = pose_start[..., 2]
-    # one pose: math's cos and sin (faster on a scalar; the same bits as numpy's here)
-    c, s = (math.cos(th), math.sin(th)) if np.ndim(th) == 0 else (np.cos(th), np.sin(th))
-    return np.array([c * ex + s * ey, -s * ex + c * ey, pose_end[..., 2] - th]).T
+    ex, ey = pose_end[0] - pose_start[0], pose_end[1] - pose_start[1]
+    th = pose_start[2]
+    c, s = math.cos(th), math.sin(th)
+    return np.array([c * ex + s * ey, -s * ex + c * ey, pose_end[2] - th])
 
 
 class WheelEncoders:

@@ -23,6 +23,7 @@ from envs.physics import (
 )
 from envs.robot import DEFAULT_CHASSIS_SIZE, RobotSpec
 from envs.sensors import RelativePoseSensor, WheelEncoders, relative_pose
+from excite import se2
 
 #: m, minimum distance from a random start position to the walls for the default robot's
 #: 0.36 m chassis; other robots scale it with their chassis (`spawn_margin`).
@@ -300,7 +301,7 @@ class BatchSimulation(_World):
             pose_end, stopped = self.drive.run(np.zeros_like(commands), n_settle)
             collision = collision | stopped
         phi_end = self.drive.wheel_angles
-        true_increment = relative_pose(pose_start, pose_end)
+        true_increment = se2.between(pose_start, pose_end)
         measurement = self._measure(phi_start, phi_end, true_increment, self._rngs)
         return BatchOutcome(measurement, true_increment, collision, pose_start, pose_end)
 
@@ -318,8 +319,3 @@ class BatchSimulation(_World):
     def poses(self) -> np.ndarray:
         """Current world poses (N, 3) of the axle midpoints."""
         return self.drive.poses()
-
-    @property
-    def robots(self) -> list[RobotSpec]:
-        """The hidden robots of the last resets."""
-        return list(self._robots)

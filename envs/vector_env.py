@@ -23,7 +23,6 @@ from envs.env import (
     sense_increments,
     uses_error,
 )
-from envs.robot import RobotSpec
 from envs.simulation import BatchOutcome, BatchSimulation
 from excite.contracts import Estimator, EstimatorFactory
 from excite.information import information_matrices
@@ -107,7 +106,6 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self.budget = self.single.budget
         n, p = self.num_envs, self.model.size
         self._generators: list[np.random.Generator | None] = [None] * n
-        self._robots: list[RobotSpec | None] = [None] * n
         self._sensor_rngs: list[np.random.Generator | None] = [None] * n  # set by reset
         #: the hidden sensor mountings (N, 3) (x, y in m, theta in rad); None on the axle
         self._mounts = None if self.single.sensor_ranges is None else np.zeros((n, 3))
@@ -179,7 +177,6 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         rng = self._generators[i]
         robot, sim_rng, self._sensor_rngs[i], mount = single.draw_episode(rng, options)
         self.sim.reset(i, robot, sim_rng, pose=options.get("pose"))
-        self._robots[i] = robot
         truth = np.array(robot.kinematic_params())
         if mount is not None:
             self._mounts[i] = mount.as_array()

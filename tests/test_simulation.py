@@ -215,6 +215,19 @@ def test_segment_measurement_layout():
         assert not array.flags.writeable
 
 
+def test_relative_pose_is_se2_between_bit_for_bit():
+    """The single env's scalar increment and the batch's se2.between give the same bits (the
+    vector env's robot i equals the single env bit for bit)."""
+    from excite import se2
+
+    rng = np.random.default_rng(5)
+    starts = rng.uniform(-50, 50, (2000, 3))
+    ends = starts + rng.normal(0, 2, (2000, 3))
+    batch = se2.between(starts, ends)
+    single = np.array([relative_pose(a, b) for a, b in zip(starts, ends, strict=True)])
+    np.testing.assert_array_equal(single.view(np.int64), batch.view(np.int64))
+
+
 def test_relative_pose_sensor_statistics():
     sensor = RelativePoseSensor(sigma_xy=2e-3, sigma_theta=1e-3)
     rng = np.random.default_rng(8)

@@ -13,10 +13,10 @@ from agents.compare import make_env
 from agents.motion import safe_actions
 from agents.slip_aware import SlipAwarePlanner, nominal_segment, predicted_bias
 from agents.tuning import candidates
-from envs.physics import GRAVITY, PymunkDrive
+from envs.physics import PymunkDrive, traction_of
 from envs.robot import robot_distribution
 from excite.arena import Arena
-from excite.contracts import RobotKnowledge, Traction
+from excite.contracts import RobotKnowledge
 from excite.kinematics import Params
 from excite.models import AXLE
 from tests.conftest import run_cli
@@ -31,8 +31,7 @@ def _knowledge(spec, pose=(0.0, 0.0, 0.0), arena_size=40.0, traction=True):
         log=np.zeros((0, 5)), pose=np.array(pose, dtype=float), nominal=nominal, sigma=SIGMA,
         max_wheel_speed=spec.max_wheel_speed, segment_duration=1.0, arena_size=arena_size,
         budget=30, chassis=spec.chassis,
-        traction=Traction(spec.motor_tau, spec.mu * GRAVITY * spec.wheel_load_fraction,
-                          spec.inertia / (spec.mass * (0.5 * spec.b) ** 2)) if traction else None)
+        traction=traction_of(spec) if traction else None)
 
 
 def _simulated_error(spec, previous, command):
