@@ -69,6 +69,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -210,19 +211,29 @@ class WheelNoise:
         return float(np.sqrt(np.max(np.mean(np.diagonal(self.slip, axis1=1, axis2=2),
                                             axis=0))))
 
+    @cached_property
+    def _own_samples(self) -> FloatArray:
+        """G_start G_start^T + G_end G_end^T + inner (N, 3, 3): a segment's own encoder samples
+        (fixed for the geometry; the REML search rebuilds whiteners at many levels)."""
+        return (np.einsum("naw,nbw->nab", self.start, self.start)
+                + np.einsum("naw,nbw->nab", self.end, self.end) + self.inner)
+
+    @cached_property
+    def _boundaries(self) -> FloatArray:
+        """G_start,k G_end,k-1^T (N - 1, 3, 3) of every pair of consecutive segments."""
+        return np.einsum("maw,mbw->mab", self.start[1:], self.end[:-1])
+
     def diagonal_blocks(self, slip: float) -> FloatArray:
         """Each segment's own covariance (N, 3, 3) from slip and quantization."""
         blocks = slip * slip * self.slip
         if self.quantization:
-            blocks = blocks + self.quantization * (
-                np.einsum("naw,nbw->nab", self.start, self.start)
-                + np.einsum("naw,nbw->nab", self.end, self.end) + self.inner)
+            blocks = blocks + self.quantization * self._own_samples
         return blocks
 
     def shared_blocks(self, k: NDArray[np.int64]) -> FloatArray:
         """C[rows of segment k, columns of k - 1] (m, 3, 3) for chained segments k: the
         boundary sample's quantization, -q G_start,k G_end,k-1^T."""
-        return -self.quantization * np.einsum("maw,mbw->mab", self.start[k], self.end[k - 1])
+        return -self.quantization * self._boundaries[k - 1]
 
 
 def _perpendicular(segments: Segments) -> tuple[FloatArray, FloatArray]:
