@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
-from scipy.stats import chi2
 
 import excite  # noqa: F401
 from envs.estimator_check import check_estimator
 from excite import calibrate
+from excite.consistency import nees as nees_of
+from excite.noise import chi2_quantile
 
 
 def batch_nees(seeds: int = 100, segments: int = 150) -> np.ndarray:
@@ -22,14 +23,14 @@ def batch_nees(seeds: int = 100, segments: int = 150) -> np.ndarray:
         for _ in range(segments):
             env.step(env.action_space.sample())
         result = calibrate(env.segments, sigma=env.sigma)
-        e = result.params.as_array() - env.true_params.as_array()
-        nees.append(e @ np.linalg.solve(result.covariance, e))
+        nees.append(nees_of(result.params.as_array() - env.true_params.as_array(),
+                            result.covariance))
     return np.array(nees)
 
 
 def main() -> dict:
     nees = batch_nees()
-    inside = float(np.mean(nees <= chi2.ppf(0.95, 3)))
+    inside = float(np.mean(nees <= chi2_quantile(0.95, 3)))
     print(f"ideal env, batch calibrate, 100 seeds x 150 random segments: {100 * inside:.0f}% "
           f"inside the 95% ellipse; mean NEES {nees.mean():.2f} (3 expected)")
     ideal = check_estimator("excite/DiffDriveCalibIdeal-v0", episodes=100, budget=150)
