@@ -275,33 +275,32 @@ class ChainWhitener:
         pxy2, pth2 = levels.pose**2
         jx, jy = _perpendicular(segments)
         # lower band storage: band[i - j, j] = C[i, j] for i >= j, rows/cols 3k + channel
+        # each segment's own block: its channels' noise and its two pose samples
+        own = np.zeros((n, 3, 3))
+        own[:, 0, 0] = sx2 + 2 * pxy2 + pth2 * jx * jx
+        own[:, 1, 1] = sy2 + 2 * pxy2 + pth2 * jy * jy
+        own[:, 2, 2] = st2 + 2 * pth2
+        own[:, 1, 0] = pth2 * jx * jy  # C[y, x]
+        own[:, 2, 1] = pth2 * jy  # C[theta, y]
+        own[:, 2, 0] = pth2 * jx  # C[theta, x]
+        if wheels is not None:
+            own = own + wheels.diagonal_blocks(levels.slip)
+        # lower band storage: band[i - j, j] = C[i, j] for i >= j, rows/cols 3k + channel
         band = np.zeros((_BAND + 1, 3 * n))
-        diag = band[0].reshape(n, 3)
-        diag[:, 0] = sx2 + 2 * pxy2 + pth2 * jx * jx
-        diag[:, 1] = sy2 + 2 * pxy2 + pth2 * jy * jy
-        diag[:, 2] = st2 + 2 * pth2
-        band[1].reshape(n, 3)[:, 0] = pth2 * jx * jy  # C[y, x]
-        band[1].reshape(n, 3)[:, 1] = pth2 * jy  # C[theta, y]
-        band[2].reshape(n, 3)[:, 0] = pth2 * jx  # C[theta, x]
+        _add_diagonal_blocks(band, own)
         chained = _chained(segments)
         if chained.any():
             k = np.flatnonzero(chained)  # block (k, k - 1): rows of segment k, cols of k - 1
             c, s = np.cos(segments.dtheta[k - 1]), np.sin(segments.dtheta[k - 1])
-            # C[(k-1) rows, k cols] = [[-pxy2 R, 0], [-pth2 (J d_k)^T, -pth2]]; store its
-            # transpose C[k rows, (k-1) cols] at offsets i - j = 3 + a - b.
-            zero, c_xy, s_xy = np.zeros(k.size), pxy2 * c, pxy2 * s
-            # entry (a, b) = C[3k + a, 3(k-1) + b] = block C_(k-1)k at (b, a); stored at
-            # band offset i - j = 3 + a - b
-            entries = {(0, 0): -c_xy, (0, 1): -s_xy, (1, 0): s_xy, (1, 1): -c_xy,
-                       (2, 0): zero, (2, 1): zero,
-                       (0, 2): -pth2 * jx[k], (1, 2): -pth2 * jy[k], (2, 2): zero - pth2}
-            for (a, b), value in entries.items():
-                band[3 + a - b, 3 * (k - 1) + b] = value
-        if wheels is not None:
-            _add_diagonal_blocks(band, wheels.diagonal_blocks(levels.slip))
-            if wheels.quantization and chained.any():
-                k = np.flatnonzero(chained)
-                _add_shared_blocks(band, k, wheels.shared_blocks(k))
+            # C[(k-1) rows, k cols] = [[-pxy2 R, 0], [-pth2 (J d_k)^T, -pth2]] (the pose
+            # sample they share); its transpose C[k rows, (k-1) cols]:
+            shared = np.zeros((k.size, 3, 3))
+            shared[:, 0, 0], shared[:, 0, 1] = -pxy2 * c, -pxy2 * s
+            shared[:, 1, 0], shared[:, 1, 1] = pxy2 * s, -pxy2 * c
+            shared[:, 0, 2], shared[:, 1, 2], shared[:, 2, 2] = -pth2 * jx[k], -pth2 * jy[k], -pth2
+            if wheels is not None and wheels.quantization:
+                shared = shared + wheels.shared_blocks(k)
+            _add_shared_blocks(band, k, shared)
         self._factor = cholesky_banded(band, lower=True)
         self.n = n
         self.wheels = wheels
