@@ -416,11 +416,14 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
         except np.linalg.LinAlgError:  # C numerically not positive definite at the bounds
             return 1e300  # finite: the optimiser's difference quotients stay numbers
 
-    def optimum(start_u: FloatArray, fixed: NDArray[np.bool_]) -> tuple[FloatArray, float]:
-        """The minimum of the deviance over the levels not ``fixed`` at their floor."""
+    def optimum(start_u: FloatArray, fixed: NDArray[np.bool_],
+                start_value: float | None = None) -> tuple[FloatArray, float]:
+        """The minimum of the deviance over the levels not ``fixed`` at their floor
+        (``start_value``: the deviance at the start, when known)."""
         u = np.where(fixed, lower, start_u)
         free = np.flatnonzero(~fixed)
-        start_value = deviance(u)
+        if start_value is None:
+            start_value = deviance(u)
 
         def partial(v: FloatArray) -> float:
             full = u.copy()
@@ -448,8 +451,9 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
                 u[5] = max(np.log(max(fraction * float(np.max(rms)), 1e-300) / unit),
                            start_u[5])
             candidates.append(np.minimum(np.maximum(u, lower), upper))
-        return optimum(min(candidates, key=lambda u: deviance(np.where(fixed, lower, u))),
-                       fixed)
+        values = [deviance(np.where(fixed, lower, u)) for u in candidates]
+        best = int(np.argmin(values))
+        return optimum(candidates[best], fixed, values[best])
 
     none = np.zeros(u0.size, dtype=bool)
     u_hat, best = search(u0, none)
