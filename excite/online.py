@@ -255,9 +255,7 @@ def update_batch(model: SegmentModel, q: NDArray[np.float64], info: NDArray[np.f
             q_live, info_live, rows_live, x_live = q[live], info[live], rows[live], x[live]
         theta = chart_to_theta(x_live, units)
         prediction, jac = model.evaluate(rows_live[:, :1], rows_live[:, 1:2], theta)
-        # d theta / d q: the value for a log parameter, else the chart's unit
-        derivative = theta if model.transforms.count("log") == model.size else np.where(
-            np.isnan(units), theta, units)
+        derivative = chart_derivative(theta, units)
         h = jac[..., 0].transpose(2, 0, 1) * derivative[:, None, :]  # (n, 3, P)
         innovation = rows_live[:, 2:] - prediction[..., 0].T
         innovation[:, 2] = _wrap(innovation[:, 2])
@@ -293,6 +291,14 @@ def chart_to_theta(q: NDArray[np.float64], units: NDArray[np.float64]) -> NDArra
     if is_log.all():
         return np.exp(q)
     return np.where(is_log, np.exp(np.where(is_log, q, 0.0)), q * units)
+
+
+def chart_derivative(theta: NDArray[np.float64], units: NDArray[np.float64]
+                     ) -> NDArray[np.float64]:
+    """d theta / d q (N, P) at parameters theta (N, P): the value for a log parameter
+    (``units`` NaN), else the chart's unit (the batch form of
+    ``OnlineEstimator._chart_derivative``)."""
+    return np.where(np.isnan(units), theta, units)
 
 
 def _solve_each(m: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -375,6 +381,6 @@ class BatchOnlineEstimator:
         :attr:`OnlineEstimator.information`."""
         one = self._one
         theta = chart_to_theta(self._q, one._units_array)
-        derivative = np.where(np.isnan(one._units_array), theta, one._units_array)
-        ratio = one.model.column_scale(one._nominal_theta) / derivative
+        ratio = one.model.column_scale(one._nominal_theta) / chart_derivative(
+            theta, one._units_array)
         return (self._info - one._prior) * ratio[:, :, None] * ratio[:, None, :]
