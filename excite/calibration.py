@@ -41,6 +41,7 @@ from excite.starts import (
     sensor_pose_estimate,
 )
 from excite.timeseries import tick_angle
+from excite.wiring import check_wiring
 
 __all__ = ["CalibrationResult", "FitTest", "calibrate", "initial_estimate", "DEFAULT_NOMINAL",
            "chi2_quantile"]
@@ -513,6 +514,7 @@ def calibrate(
         raise ValueError(f"trim must be a fraction in [0, 0.5), got {trim}")
     if not np.any(seg.dphi_L) and not np.any(seg.dphi_R):
         raise DataError("no segment moves: every wheel increment is 0")
+    check_wiring(seg)
     given = None if sigma is None else as_sigma(sigma)
     fallback = DEFAULT_NOMINAL
     if initial is not None:

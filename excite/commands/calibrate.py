@@ -66,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from excite.commands.logs import group_inputs, read_log, segment_inputs
     from excite.data import Segments
     from excite.export import static_transform_command, write_ros2_yaml
+    from excite.wiring import check_wiring
 
     sigma = sigma_arg(args.sigma) if args.sigma else None
     initial = params_arg(args.init) if args.init else None
@@ -74,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--holdout compares with the nominal robot: give --init RL,RR,B (m)")
     used, held = _split_holdout(group_inputs(args.files), args.holdout)
     parts = segment_inputs(args, used)
+    for part in parts:
+        check_wiring(part.segments, part.source.name)
     segments = Segments.concatenate([part.segments for part in parts])
     if len(segments) < MIN_SEGMENTS:
         raise UsageError(f"{len(segments)} segment(s) in total; at least {MIN_SEGMENTS} are "
