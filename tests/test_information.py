@@ -223,3 +223,19 @@ def test_eigen_3x3_propagates_nan_and_inf():
         f[0, 1] = f[1, 0] = bad
         values, vector = I.eigen_3x3(f)
         assert np.isnan(values).all() and np.isnan(vector).all()
+
+
+def test_inverse_information_keeps_weak_but_determined_directions():
+    """Exact data: a heading known to 1e-11 rad beside lengths known to 1e-5 make F's
+    eigenvalues span 14 orders of magnitude; every direction is still determined, so the
+    variances are finite and F^-1's. A direction null up to rounding stays inf."""
+    rng = np.random.default_rng(0)
+    basis = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    f = basis @ np.diag([1.2e22, 5.9e20, 5.8e8]) @ basis.T
+    inverse = I.inverse_information(f)
+    assert np.all(np.isfinite(inverse))
+    exact = basis @ np.diag(1.0 / np.array([1.2e22, 5.9e20, 5.8e8])) @ basis.T
+    np.testing.assert_allclose(inverse, exact, rtol=2e-2)  # rounding: eps x condition
+    null = basis @ np.diag([1.2e22, 5.9e20, 1e22 * 1e-17]) @ basis.T
+    undetermined = np.isinf(np.diag(I.inverse_information(null)))
+    np.testing.assert_array_equal(undetermined, basis[:, 2] ** 2 > 1e-2)  # those in it
