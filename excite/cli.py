@@ -5,7 +5,9 @@ Each subcommand lives in :mod:`excite.commands` (``add_parser`` and ``run``); he
 success; 2 bad input or usage (one line ``excite: error: ...`` on stderr, also when an optional
 extra is missing); 3 when ``calibrate`` finds the data cannot determine all the parameters,
 4 when the model does not fit the data (the report is still printed, with the reason in
-words). A closed stdout (``| head``) is a normal end.
+words). A closed stdout (``| head``) is a normal end. numpy's RuntimeWarnings (overflow,
+invalid values on the way to an error or a rejected trial step) stay off stderr, so an error
+is one line; ``EXCITE_DEBUG=1`` shows them and tracebacks.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 
 from excite import __version__
@@ -74,7 +77,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if handler is None:
             names = ", ".join(c.__name__.rsplit(".", 1)[1] for c in COMMANDS)
             raise UsageError(f"a command is required ({names}); see excite --help")
-        return handler(args)
+        with warnings.catch_warnings():
+            if not os.environ.get("EXCITE_DEBUG"):
+                warnings.simplefilter("ignore", RuntimeWarning)
+            return handler(args)
     except ExciteError as exc:
         print(f"excite: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -1,11 +1,13 @@
 import json
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
 
 from excite import save_segments
+from excite.errors import DataError
 from excite.synthetic import lesson_dataset
 
 from .conftest import TRUTH, assert_one_line_error, run_cli, spin_segments, straight_segments
@@ -243,3 +245,24 @@ def test_closed_stdout_is_a_normal_end(good_csv):
     proc.stdout.close()  # the reader leaves before excite has written anything
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 0 and err == b"", err
+
+
+def test_numpy_warnings_on_the_way_to_an_error_stay_off_stderr(capsys, monkeypatch, tmp_path):
+    """An error is one line even when numpy warned before it (overflow in a rejected trial
+    step, say); EXCITE_DEBUG=1 shows the warnings."""
+    from excite.commands import calibrate as command
+
+    def overflowing(args):
+        np.exp(np.array([1000.0]))  # RuntimeWarning: overflow
+        raise DataError("bad.csv:3: a bad row")
+
+    monkeypatch.setattr(command, "run", overflowing)
+    monkeypatch.delenv("EXCITE_DEBUG", raising=False)
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("always")
+        code, _, err = run_cli(capsys, "calibrate", tmp_path / "bad.csv")
+    assert_one_line_error(code, err, "bad.csv:3")
+    assert not [w for w in shown if issubclass(w.category, RuntimeWarning)]
+    monkeypatch.setenv("EXCITE_DEBUG", "1")
+    with pytest.warns(RuntimeWarning, match="overflow"):
+        run_cli(capsys, "calibrate", tmp_path / "bad.csv")
