@@ -27,6 +27,7 @@ from excite.bags import (  # noqa: E402
 )
 from excite.kinematics import wrap_angle  # noqa: E402
 from excite.timeseries import TimeSeries, segment_timeseries  # noqa: E402
+from tests.conftest import assert_one_line_error, run_cli  # noqa: E402
 from tests.test_timeseries import assert_same, make_log, simulate  # noqa: E402
 
 LEFT, RIGHT = "wheel_left_joint", "wheel_right_joint"
@@ -562,3 +563,19 @@ def test_repeated_messages_are_skipped_and_counted(tmp_path, log, pose_kind):
                            for topic, n in repeats.items()}
     assert all(repeats.values())
 
+
+def test_the_cli_reports_skipped_messages_and_refuses_a_y_up_world(tmp_path, log, capsys):
+    def early(bag: BagWriter):
+        items = log_messages(bag, log, "pose")
+        first = list(wheel_indices(items))[:2]
+        return [(t, received, unset(bag, msg) if k in first else msg)
+                for k, (t, received, msg) in enumerate(items)]
+    options = ["--left-wheel", LEFT, "--right-wheel", RIGHT, "--pose-topic", "/sensor_pose"]
+    path = make_bag(tmp_path / "a", "sqlite3", early)
+    code, out, _ = run_cli(capsys, "segment", path, *options, "--out", tmp_path / "s.csv")
+    assert code == 0
+    assert "; messages skipped: 2 /joint_states stamped 0 before the first stamped message; " \
+        "time offset" in out
+    path = make_bag(tmp_path / "b", "sqlite3", lambda bag: log_messages(bag, log, "pose", y_up))
+    code, _, err = run_cli(capsys, "calibrate", path, *options)
+    assert_one_line_error(code, err, f"{path} /sensor_pose at t = ", "Y-up")
