@@ -118,6 +118,8 @@ class _Stream:
         values) is skipped; two messages with one stamp and different values are an error.
         """
         table = np.array(self.rows, dtype=float).reshape(-1, width)
+        if table.size == 0:
+            return table  # TimeSeries names the stream with too few samples
         unset = table[:, 0] == 0
         if unset.all():
             raise DataError(f"{self.where}: header stamps of zero (the publisher does not set "
@@ -203,8 +205,8 @@ def _headings(where: str, t: np.ndarray, q: np.ndarray) -> np.ndarray:
                         f"({x[i]}, {y[i]}, {z[i]}, {w[i]}) is not a rotation (zero length "
                         "or not finite)")
     tilt = np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y) / norm2, -1.0, 1.0))
-    i = int(np.argmax(tilt))
-    if tilt[i] > MAX_TILT:
+    if np.any(tilt > MAX_TILT):
+        i = int(np.argmax(tilt))
         raise DataError(f"{_at(where, t[i])}: the pose's z axis is tilted "
                         f"{math.degrees(tilt[i]):.1f} degrees from the world z axis (the "
                         f"largest tilt; a ground robot stays within "

@@ -274,6 +274,13 @@ def test_stream_errors(tmp_path, log):
         read_bag(make_bag(tmp_path / "a", "mcap", short), LEFT, RIGHT,
                  pose_topic="/sensor_pose")
 
+    def no_poses(bag: BagWriter):
+        return [item for item in log_messages(bag, log, "pose") if item[0] != "/sensor_pose"]
+    with pytest.raises(DataError, match=r"/sensor_pose: 0 pose sample\(s\); at least 2"):
+        read_bag(make_bag(tmp_path / "e", "sqlite3", no_poses,
+                          topics={"/sensor_pose": "geometry_msgs/msg/PoseStamped"}),
+                 LEFT, RIGHT, pose_topic="/sensor_pose")
+
     def repeated(bag: BagWriter):
         items = log_messages(bag, log, "pose")
         return items + [("/sensor_pose", 9999.0, bag.pose_stamped(log.t_pose[3], 0, 0, 0))]
