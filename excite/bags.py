@@ -6,15 +6,22 @@ extra), imported only when a bag is read.
 
 * Wheel angles: ``sensor_msgs/msg/JointState`` messages on one topic; ``position`` (rad,
   cumulative) of the two wheel joints, found by name in each message (any order; a message
-  lacking either joint is skipped).
+  lacking either joint is left out; one naming both with an empty ``position``, as a
+  velocity-only publisher sends, is skipped and counted).
 * Poses of the external sensor in the world frame: a ``geometry_msgs/msg/PoseStamped``,
   ``geometry_msgs/msg/PoseWithCovarianceStamped`` or ``nav_msgs/msg/Odometry`` topic, or TF:
   the transforms from ``parent`` to ``child`` in ``tf2_msgs/msg/TFMessage`` messages on
   ``/tf``. Only direct parent -> child transforms are used (no chaining through other frames,
   no inversion, not ``/tf_static``); record the transform you need directly. Leading ``/`` of
-  frame ids (ROS 1) are ignored. x, y in m; heading = yaw of the orientation quaternion (rad).
+  frame ids (ROS 1) are ignored. x, y in m; heading = yaw of the orientation quaternion (rad,
+  computed free of the quaternion's length). The world frame must be z-up: an orientation
+  tilted more than MAX_TILT (45 degrees) from it is an error (most often a Y-up motion capture
+  stream); roll and pitch below that (a ramp) are fine.
 * Times are the messages' header stamps (s), not receive times; each stream is put in stamp
-  order.
+  order. Messages stamped zero (not set) before the first stamped message of their topic are
+  skipped and counted (published before the clock ran), as are exact repeats (same stamp,
+  same values); zero stamps after stamped ones, or one stamp with different values, are
+  errors. :func:`read_bag_log` returns the counts beside the log.
 
 Writing (:func:`write_bag`, :class:`BagWriter`): a time-series log as JointState and
 PoseStamped messages, in any of the three storages, readable by :func:`read_bag`.
@@ -26,6 +33,7 @@ import math
 import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +42,8 @@ import numpy as np
 from excite.errors import DataError
 from excite.timeseries import TimeSeries
 
-__all__ = ["POSE_TYPES", "STORAGES", "BagWriter", "is_bag_path", "read_bag", "write_bag"]
+__all__ = ["POSE_TYPES", "STORAGES", "BagLog", "BagWriter", "is_bag_path", "read_bag",
+           "read_bag_log", "write_bag"]
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
@@ -54,6 +63,13 @@ JOINT_STATES = "/joint_states"
 LEFT_WHEEL, RIGHT_WHEEL = "left_wheel_joint", "right_wheel_joint"
 POSE_TOPIC = "/pose"
 WORLD_FRAME = "map"
+#: Quaternions shorter than this are no rotation (an orientation never set is all zeros).
+MIN_QUATERNION_NORM = 1e-3
+#: The largest tilt (rad) of the pose's z axis from the world z axis: a ground robot's sensor
+#: stays near z-up (a ramp tilts it a few degrees); more means another frame convention.
+MAX_TILT = math.radians(45.0)
+#: Why a JointState message naming both wheels is skipped: its position array is empty.
+NO_POSITIONS = "without wheel positions"
 _NEEDS_ROS = "{} bags needs the ros extra: pip install 'excite[ros]'"
 MISSING_EXTRA = _NEEDS_ROS.format("reading")
 MISSING_WRITE_EXTRA = _NEEDS_ROS.format("writing")
@@ -71,40 +87,86 @@ def _stamp(header: Any) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
-def _yaw(q: Any) -> float:
-    """Heading (rad, in (-pi, pi]) of a quaternion: the rotation about z of its ZYX Euler
-    angles."""
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-
-
 def _frame(frame_id: str) -> str:
     return frame_id.lstrip("/")
 
 
-def _columns(rows: list[tuple[float, ...]], width: int, where: str) -> list[np.ndarray]:
-    """Rows (stamp in ns first) as columns in stamp order, the stamp in s."""
-    table = np.array(rows, dtype=float).reshape(-1, width)
-    if np.any(table[:, 0] == 0):
-        raise DataError(f"{where}: header stamps of zero (the publisher does not set them)")
-    table = table[np.argsort(table[:, 0], kind="stable")]
-    table[:, 0] *= 1e-9
-    return list(table.T)
+def _at(where: str, stamp: float) -> str:
+    """A message's place: topic and header stamp (s, as the time-series errors name it)."""
+    return f"{where} at t = {stamp:.6f} s"
 
 
-class _Joints:
+class _Stream:
+    """Rows (header stamp in ns first, then the values read) of one topic in receive order,
+    and the messages skipped, per reason."""
+
+    def __init__(self, where: str) -> None:
+        self.where = where
+        self.rows: list[tuple[float, ...]] = []
+        self.skipped: dict[str, int] = {}
+
+    def skip(self, reason: str, count: int = 1) -> None:
+        if count:
+            self.skipped[reason] = self.skipped.get(reason, 0) + count
+
+    def table(self, width: int) -> np.ndarray:
+        """The rows (n, width) in stamp order, the stamp in s.
+
+        Header stamps of zero (not set) are allowed only before the first stamped message in
+        receive order (published before the clock ran, e.g. before /clock in simulation);
+        those messages are skipped. A message repeating the previous one (same stamp, same
+        values) is skipped; two messages with one stamp and different values are an error.
+        """
+        table = np.array(self.rows, dtype=float).reshape(-1, width)
+        if table.size == 0:
+            return table  # TimeSeries names the stream with too few samples
+        unset = table[:, 0] == 0
+        if unset.all():
+            raise DataError(f"{self.where}: header stamps of zero (the publisher does not set "
+                            "them)")
+        first = int(np.argmax(~unset))
+        if unset[first:].any():
+            later = first + int(np.argmax(unset[first:]))
+            raise DataError(f"{self.where}: a header stamp of zero (not set) after stamped "
+                            f"messages (message {later + 1} of {unset.size}, received after "
+                            f"the one stamped {table[later - 1, 0] * 1e-9:.6f} s)")
+        self.skip("stamped 0 before the first stamped message", first)
+        table = table[first:]
+        table = table[np.argsort(table[:, 0], kind="stable")]
+        table[:, 0] *= 1e-9
+        same_stamp = np.flatnonzero(table[1:, 0] == table[:-1, 0])
+        equal = np.all((table[same_stamp] == table[same_stamp + 1])
+                       | (np.isnan(table[same_stamp]) & np.isnan(table[same_stamp + 1])),
+                       axis=1)
+        if not equal.all():
+            stamp = table[same_stamp[np.argmin(equal)], 0]
+            raise DataError(f"{_at(self.where, stamp)}: two messages with this header stamp "
+                            "and different values")
+        self.skip("repeated (same stamp, same values)", same_stamp.size)
+        return np.delete(table, same_stamp + 1, axis=0)
+
+
+class _Joints(_Stream):
     """Collects (stamp, left angle, right angle) from JointState messages."""
 
     def __init__(self, where: str, left: str, right: str) -> None:
-        self.where, self.left, self.right = where, left, right
-        self.rows: list[tuple[float, ...]] = []
+        super().__init__(where)
+        self.left, self.right = left, right
         self.names: set[str] = set()
 
     def add(self, msg: Any) -> None:
         names = list(msg.name)
         self.names.update(names)
-        if self.left in names and self.right in names:
-            self.rows.append((_stamp(msg.header), msg.position[names.index(self.left)],
-                              msg.position[names.index(self.right)]))
+        if self.left not in names or self.right not in names:
+            return
+        if len(msg.position) == 0:  # velocity or effort only: allowed by JointState
+            self.skip(NO_POSITIONS)
+            return
+        if len(msg.position) != len(names):
+            raise DataError(f"{_at(self.where, _stamp(msg.header) * 1e-9)}: "
+                            f"{len(msg.position)} positions for {len(names)} joint names")
+        self.rows.append((_stamp(msg.header), msg.position[names.index(self.left)],
+                          msg.position[names.index(self.right)]))
 
     def columns(self) -> list[np.ndarray]:
         """[t (s), phi_L, phi_R (rad)]."""
@@ -113,34 +175,78 @@ class _Joints:
                 present = ", ".join(sorted(self.names)) or "none"
                 raise DataError(f"{self.where}: no joint {joint!r}; joints present: {present}")
         if not self.rows:
+            if self.skipped.get(NO_POSITIONS):
+                raise DataError(f"{self.where}: no message has positions for the joints "
+                                f"{self.left!r} and {self.right!r} "
+                                f"({self.skipped[NO_POSITIONS]} name them with an empty "
+                                "position array: velocity or effort only)")
             raise DataError(f"{self.where}: no message has both joints {self.left!r} and "
                             f"{self.right!r}")
-        return _columns(self.rows, 3, self.where)
+        return list(self.table(3).T)
 
 
-class _Poses:
-    """Collects (stamp, x, y, yaw) from pose messages of one supported type."""
+def _headings(where: str, t: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Headings (rad, in (-pi, pi]) of orientation quaternions ``q`` (n, 4: x, y, z, w) stamped
+    ``t`` (s): the rotation about z of their ZYX Euler angles, i.e. the direction of the body
+    x axis projected on the world xy plane. The quaternions need not have unit length (the
+    heading and the tilt are computed free of it).
 
-    def __init__(self, where: str, msgtype: str) -> None:
-        self.where, self.pose_of = where, POSE_TYPES[msgtype]
-        self.rows: list[tuple[float, ...]] = []
+    Raises DataError naming the topic and stamp for a quaternion that is not finite or
+    shorter than MIN_QUATERNION_NORM (an orientation never set is all zeros), and for a body
+    z axis tilted more than MAX_TILT from the world z axis (a ground robot's pose is near
+    z-up; more tilt means another frame convention, most often Y-up from motion capture).
+    """
+    x, y, z, w = q.T
+    norm2 = np.sum(q * q, axis=1)
+    bad = ~(np.isfinite(norm2) & (norm2 >= MIN_QUATERNION_NORM**2))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise DataError(f"{_at(where, t[i])}: the orientation quaternion (x, y, z, w) = "
+                        f"({x[i]}, {y[i]}, {z[i]}, {w[i]}) is not a rotation (zero length "
+                        "or not finite)")
+    tilt = np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y) / norm2, -1.0, 1.0))
+    if np.any(tilt > MAX_TILT):
+        i = int(np.argmax(tilt))
+        raise DataError(f"{_at(where, t[i])}: the pose's z axis is tilted "
+                        f"{math.degrees(tilt[i]):.1f} degrees from the world z axis (the "
+                        f"largest tilt; a ground robot stays within "
+                        f"{math.degrees(MAX_TILT):.0f}): a Y-up frame? Motion capture systems "
+                        "often stream Y-up; convert the poses to Z-up")
+    return np.arctan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
 
-    def add(self, msg: Any) -> None:
-        pose = self.pose_of(msg)
-        self.rows.append((_stamp(msg.header), pose.position.x, pose.position.y,
-                          _yaw(pose.orientation)))
+
+def _planar(position: Any, q: Any) -> tuple[float, ...]:
+    """What a pose row keeps: x, y (m) and the orientation quaternion's x, y, z, w."""
+    return position.x, position.y, q.x, q.y, q.z, q.w
+
+
+class _PoseStream(_Stream):
+    """Rows of (stamp, x, y, quaternion x, y, z, w)."""
 
     def columns(self) -> list[np.ndarray]:
         """[t (s), x, y (m), theta (rad, wrapped)]."""
-        return _columns(self.rows, 4, self.where)
+        t, x, y, *q = self.table(7).T
+        return [t, x, y, _headings(self.where, t, np.column_stack(q))]
 
 
-class _Transforms:
-    """Collects (stamp, x, y, yaw) of the direct parent -> child transforms in TF messages."""
+class _Poses(_PoseStream):
+    """Collects the poses of messages of one supported type."""
+
+    def __init__(self, where: str, msgtype: str) -> None:
+        super().__init__(where)
+        self.pose_of = POSE_TYPES[msgtype]
+
+    def add(self, msg: Any) -> None:
+        pose = self.pose_of(msg)
+        self.rows.append((_stamp(msg.header), *_planar(pose.position, pose.orientation)))
+
+
+class _Transforms(_PoseStream):
+    """Collects the direct parent -> child transforms in TF messages."""
 
     def __init__(self, where: str, parent: str, child: str) -> None:
-        self.where, self.pair = where, (_frame(parent), _frame(child))
-        self.rows: list[tuple[float, ...]] = []
+        super().__init__(where)
+        self.pair = (_frame(parent), _frame(child))
         self.pairs: set[tuple[str, str]] = set()
 
     def add(self, msg: Any) -> None:
@@ -148,8 +254,9 @@ class _Transforms:
             pair = (_frame(transform.header.frame_id), _frame(transform.child_frame_id))
             self.pairs.add(pair)
             if pair == self.pair:
-                t, q = transform.transform.translation, transform.transform.rotation
-                self.rows.append((_stamp(transform.header), t.x, t.y, _yaw(q)))
+                self.rows.append((_stamp(transform.header),
+                                  *_planar(transform.transform.translation,
+                                           transform.transform.rotation)))
 
     def columns(self) -> list[np.ndarray]:
         """[t (s), x, y (m), theta (rad, wrapped)]."""
@@ -157,7 +264,7 @@ class _Transforms:
             present = ", ".join(f"{a} -> {b}" for a, b in sorted(self.pairs)) or "none"
             raise DataError(f"{self.where}: no transform {self.pair[0]} -> {self.pair[1]}; "
                             f"frame pairs present: {present}")
-        return _columns(self.rows, 4, self.where)
+        return super().columns()
 
 
 def _rosbags() -> tuple[Any, Any, tuple[type[Exception], ...]]:
@@ -218,27 +325,53 @@ def _pose_collector(name: str, topics: dict[str, str], pose_topic: str | None,
     return pose_topic, poses, poses.where
 
 
-def read_bag(
+@dataclass(frozen=True)
+class BagLog:
+    """A bag read as a time-series log.
+
+    series: the log (see :func:`read_bag`). skipped: the messages left out and why, as
+    {"topic reason": count} in reading order, e.g. {"/joint_states without wheel
+    positions": 12}; empty when every message of the two streams was used.
+    """
+
+    series: TimeSeries
+    skipped: dict[str, int] = field(default_factory=dict)
+
+    def skipped_text(self) -> str:
+        """The skipped messages in one line, e.g. '12 /joint_states without wheel
+        positions, 3 /pose stamped 0 before the first stamped message', or 'none'."""
+        return ", ".join(f"{n} {what}" for what, n in self.skipped.items()) or "none"
+
+
+def read_bag_log(
     path: str | os.PathLike[str],
     left_wheel: str,
     right_wheel: str,
     pose_topic: str | None = None,
     tf: tuple[str, str] | None = None,
     joint_states: str = JOINT_STATES,
-) -> TimeSeries:
-    """Read wheel angles and sensor poses from a ROS bag (see the module docstring).
+) -> BagLog:
+    """Read wheel angles and sensor poses from a ROS bag (see the module docstring), with
+    what was skipped.
 
     left_wheel, right_wheel: joint names in the JointState messages on ``joint_states``.
     Exactly one pose source: ``pose_topic`` (PoseStamped, PoseWithCovarianceStamped or
     Odometry) or ``tf=(parent, child)`` (the child frame's pose in the parent, world, frame,
-    from /tf). Returns a TimeSeries on the header-stamp clocks (s), theta unwrapped; its source
+    from /tf). The series is on the header-stamp clocks (s), theta unwrapped; its source
     names the bag and topics.
+
+    Skipped, and counted in ``skipped``: JointState messages that name both wheels with an
+    empty position array (velocity or effort only); messages stamped zero (not set) before
+    the first stamped message of their topic, in receive order (published before the clock
+    ran); a message repeating another (same stamp, same values).
 
     Raises DataError (one line) when rosbags is missing, the path is missing or not a bag, the
     bag is empty, a topic is missing (listing the topics and types present) or of an
     unsupported type (listing the supported ones), a joint is unknown (listing the joints
-    present), no transform parent -> child exists (listing the frame pairs present), or a
-    stream is invalid (too few samples, repeated stamps).
+    present) or never has a position, no transform parent -> child exists (listing the frame
+    pairs present), an orientation is no rotation (zero length, not finite) or tilted over
+    MAX_TILT (a Y-up frame), or a stream is invalid (no stamps set, a zero stamp after
+    stamped messages, two messages with one stamp and different values, too few samples).
     """
     name = os.fspath(path)
     if (pose_topic is None) == (tf is None):
@@ -255,8 +388,25 @@ def read_bag(
             collectors[connection.topic].add(reader.deserialize(raw, connection.msgtype))
     t_enc, phi_L, phi_R = joints.columns()
     t_pose, x, y, theta = poses.columns()
-    return TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,
-                      source=(joints.where, pose_source))
+    series = TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,
+                        source=(joints.where, pose_source))
+    skipped = {f"{topic} {reason}": n for topic, stream in ((joint_states, joints),
+                                                             (pose_key, poses))
+               for reason, n in stream.skipped.items()}
+    return BagLog(series, skipped)
+
+
+def read_bag(
+    path: str | os.PathLike[str],
+    left_wheel: str,
+    right_wheel: str,
+    pose_topic: str | None = None,
+    tf: tuple[str, str] | None = None,
+    joint_states: str = JOINT_STATES,
+) -> TimeSeries:
+    """The time-series log of a ROS bag: :func:`read_bag_log` without the account of the
+    skipped messages (same arguments and errors)."""
+    return read_bag_log(path, left_wheel, right_wheel, pose_topic, tf, joint_states).series
 
 
 # --------------------------------------------------------------------------- writing

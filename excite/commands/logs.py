@@ -39,12 +39,14 @@ class Input:
 @dataclass(frozen=True)
 class Log:
     """A time-series log read from an input, with the clock offset used for it (s; pose time
-    + offset = encoder time) and whether that offset was estimated."""
+    + offset = encoder time), whether that offset was estimated, and for a bag the messages
+    the reader skipped, in one line (None for a CSV log)."""
 
     name: str
     series: TimeSeries
     time_offset: float
     offset_estimated: bool
+    skipped: str | None = None
 
 
 def _positive(text: str) -> float:
@@ -156,8 +158,9 @@ def read_log(args: argparse.Namespace, source: Input) -> Log:
     """Read one time-series or bag input and settle its clock offset."""
     from excite.timeseries import estimate_time_offset, read_timeseries
 
+    skipped = None
     if source.kind == "bag":
-        from excite.bags import read_bag
+        from excite.bags import read_bag_log
 
         if not args.left_wheel or not args.right_wheel:
             raise UsageError(f"{source.name}: a bag needs --left-wheel and --right-wheel "
@@ -165,16 +168,17 @@ def read_log(args: argparse.Namespace, source: Input) -> Log:
         if (args.pose_topic is None) == (args.tf is None):
             raise UsageError(f"{source.name}: a bag needs exactly one pose source: "
                              "--pose-topic TOPIC or --tf PARENT:CHILD")
-        series = read_bag(source.paths[0], args.left_wheel, args.right_wheel,
-                          pose_topic=args.pose_topic, tf=args.tf,
-                          joint_states=args.joint_states)
+        bag = read_bag_log(source.paths[0], args.left_wheel, args.right_wheel,
+                           pose_topic=args.pose_topic, tf=args.tf,
+                           joint_states=args.joint_states)
+        series, skipped = bag.series, bag.skipped_text()
     elif source.kind == "timeseries":
         series = read_timeseries(source.paths, ticks_per_rev=args.ticks_per_rev)
     else:
         raise UsageError(f"{source.name}: a segment file, not a time-series log or bag")
     if args.time_offset == "estimate":
-        return Log(source.name, series, estimate_time_offset(series), True)
-    return Log(source.name, series, float(args.time_offset), False)
+        return Log(source.name, series, estimate_time_offset(series), True, skipped)
+    return Log(source.name, series, float(args.time_offset), False, skipped)
 
 
 def segment_log(args: argparse.Namespace, log: Log) -> SegmentedLog:
@@ -197,14 +201,16 @@ class Part:
     cut: SegmentedLog | None = None
 
     def describe(self) -> str:
-        """What was read, in one line (a log: segments kept, dropped and why, time offset)."""
+        """What was read, in one line (a log: segments kept, dropped and why, time offset; a
+        bag also the messages skipped)."""
         if self.cut is None or self.log is None:
             return f"{self.source.name}: {len(self.segments)} segments"
         report = self.cut.report
         offset = (f"; time offset {self.log.time_offset:+.4f} s "
                   f"({'estimated' if self.log.offset_estimated else 'given'})")
+        skipped = "" if self.log.skipped is None else f"; messages skipped: {self.log.skipped}"
         return (f"{self.source.name}: {report.n_segments} segments; dropped: "
-                f"{report.counts_text()}{offset}")
+                f"{report.counts_text()}{skipped}{offset}")
 
 
 def segment_inputs(args: argparse.Namespace, inputs: Sequence[Input]) -> list[Part]:
