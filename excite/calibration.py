@@ -287,12 +287,14 @@ def _fit_model(model: SegmentModel, seg: Segments, start: FloatArray,
     """LM from ``start``; directions the data cannot determine are then held at the start
     instead of drifting to chase noise. With a whitener, sigma must be ones."""
     problem = Problem(model, seg, whitener)
-    fit = levenberg_marquardt(problem, start, sigma, loss, max_iterations, tol)
+    determined = 1.0 / max_relative_std
+    fit = levenberg_marquardt(problem, start, sigma, loss, max_iterations, tol,
+                              determined=determined)
     lam, vec = np.linalg.eigh(fit.system.information)
     weak = lam * max_relative_std**2 < 1.0
     if np.any(weak):
         refit = levenberg_marquardt(problem, start, fit.sigma, loss, max_iterations, tol,
-                                    frozen=vec[:, weak])
+                                    frozen=vec[:, weak], determined=determined)
         refit.iterations += fit.iterations
         fit = refit
     return _ModelFit(model, problem, fit, vec[:, weak])

@@ -30,10 +30,11 @@ Loss = Literal["linear", "huber"]
 HUBER_K = 1.345
 _MAD_TO_STD = 1.482602218505602
 #: Singular values of the weighted Jacobian below this fraction of the largest are treated as
-#: zero in a step (directions the data do not determine do not take steps driven by noise).
+#: zero in a step (directions the data do not determine do not take steps driven by noise),
+#: unless they are above the caller's ``determined`` level (see :func:`damped_step`).
 RCOND = 1e-6
 #: The smallest Levenberg-Marquardt damping (relative to the information's diagonal).
-MIN_DAMPING = 1e-12
+MIN_DAMPING = 1e-30
 #: Noise levels are floored at this fraction of the measured magnitudes (noise-free data).
 SIGMA_FLOOR = 1e-10
 
@@ -121,12 +122,16 @@ def _weights(ev: Evaluation, sigma: FloatArray, loss: Loss) -> FloatArray:
 
 
 def damped_step(ev: Evaluation, sigma: FloatArray, loss: Loss, lam: float,
-                diagonal: FloatArray, basis: FloatArray | None = None) -> FloatArray:
+                diagonal: FloatArray, basis: FloatArray | None = None,
+                determined: float = np.inf) -> FloatArray:
     """The Levenberg–Marquardt step in relative units: the least-squares solution of the
     weighted linearised residuals with damping rows sqrt(lam * diagonal), solved on the
-    Jacobian itself (SVD, singular values below RCOND of the largest dropped) rather than the
-    normal equations. basis: (P, m) orthonormal directions the step is confined
-    to (None: all)."""
+    Jacobian itself (SVD) rather than the normal equations. A direction is left out when its
+    singular value is below RCOND of the largest (numerically undetermined, next to the
+    others) and below ``determined`` (relative, whitened: the data determine it to a relative
+    std of 1 / ``determined``; inf: the relative rule alone): a direction known far less well
+    than the others but well enough still steps (exact data: headings to 1e-11, lengths to
+    1e-5). basis: (P, m) orthonormal directions the step is confined to (None: all)."""
     root = np.sqrt(_weights(ev, sigma, loss))
     p = ev.jac.shape[1]
     rows = (ev.jac * root[:, None, :]).transpose(0, 2, 1).reshape(-1, p)
@@ -135,7 +140,9 @@ def damped_step(ev: Evaluation, sigma: FloatArray, loss: Loss, lam: float,
     if basis is not None:
         lhs = lhs @ basis
     rhs = np.concatenate([-(ev.raw * root).reshape(-1), np.zeros(p)])
-    step = np.linalg.lstsq(lhs, rhs, rcond=RCOND)[0]
+    u, singular, vt = np.linalg.svd(lhs, full_matrices=False)
+    keep = singular > min(RCOND * singular[0], determined)
+    step = vt[keep].T @ ((u[:, keep].T @ rhs) / singular[keep])
     return step if basis is None else basis @ step
 
 
@@ -213,12 +220,15 @@ def levenberg_marquardt(
     max_iterations: int = 100,
     tol: float = 1e-8,
     frozen: FloatArray | None = None,
+    determined: float = np.inf,
 ) -> Fit:
     """Minimise the whitened (Huber-)cost from theta0.
 
     sigma None: re-estimate the noise levels at every iterate (joint iteration), until both
     the relative step and the noise levels settle. frozen: (P, k) orthonormal relative
-    directions the steps must not move along.
+    directions the steps must not move along. determined: the singular value (relative,
+    whitened) above which a direction always steps (:func:`damped_step`; the caller's
+    identifiability level, 1 / max_relative_std).
     """
     model = problem.model
     estimate = sigma is None
@@ -232,7 +242,8 @@ def levenberg_marquardt(
     free = None if frozen is None else complement(frozen)
 
     def step_now(damping: float) -> FloatArray:
-        return damped_step(ev, sigma, loss, damping, np.diag(system.information), free)
+        return damped_step(ev, sigma, loss, damping, np.diag(system.information), free,
+                           determined)
 
 
     for iteration in range(1, max_iterations + 1):
