@@ -151,6 +151,36 @@ def _checked_stream(kind: Stream, source: str, lines: IntArray | None,
     return arrays
 
 
+#: Wheel angles that never leave [-pi, pi] by more than this (rad) may be wrapped: continuous
+#: joints that some drivers report modulo 2 pi.
+WRAP_TOLERANCE = 1e-3
+#: The largest wheel step between encoder samples (rad) that unwrapping trusts. np.unwrap takes
+#: the step within +-pi, right while the wheel turns less than pi per sample; a wheel that sped
+#: up past pi per sample would pass through steps between pi/2 and pi first (unless its step
+#: changed by over pi/2 from one sample to the next), so a step over pi/2 means the stream is
+#: sampled too slowly to unwrap reliably.
+MAX_UNWRAPPED_STEP = 0.5 * math.pi
+
+
+def _unwrapped_wheel(source: str, lines: IntArray | None, t: FloatArray, name: str,
+                     phi: FloatArray) -> FloatArray | None:
+    """The wheel angles unwrapped when they are wrapped (all within [-pi, pi] up to
+    WRAP_TOLERANCE, and some step between samples over pi); None when they are not wrapped.
+    DataError naming the sample when a step after unwrapping exceeds MAX_UNWRAPPED_STEP."""
+    steps = np.abs(np.diff(phi))
+    if np.abs(phi).max() > math.pi + WRAP_TOLERANCE or not (steps > math.pi).any():
+        return None
+    unwrapped = np.unwrap(phi)
+    fast = np.abs(np.diff(unwrapped))
+    i = int(np.argmax(fast))
+    if fast[i] > MAX_UNWRAPPED_STEP:
+        raise DataError(f"{_where(source, lines, t, i + 1)}: the wheel angles {name} are "
+                        f"wrapped to [-pi, pi] and sampled too slowly to unwrap (a step of "
+                        f"{fast[i]:.2f} rad after unwrapping, over pi/2): record them "
+                        "unwrapped or more often")
+    return unwrapped
+
+
 @dataclass(frozen=True, eq=False)
 class TimeSeries:
     """The encoder and pose streams of one recording, validated.
@@ -162,6 +192,9 @@ class TimeSeries:
     source: (encoder source, pose source) for messages: file names, or bag and topic.
     lines: (encoder lines, pose lines): each sample's line in its file, or None (messages then
     name the sample's time).
+    unwrapped_wheels: the wheel columns (of "phi_L", "phi_R") that were wrapped to [-pi, pi]
+    (continuous joints reported modulo 2 pi) and are unwrapped here; DataError when such a
+    stream is sampled too slowly to unwrap (see MAX_UNWRAPPED_STEP).
     """
 
     t_enc: FloatArray
@@ -173,6 +206,7 @@ class TimeSeries:
     theta: FloatArray
     source: tuple[str, str] = ("encoders", "poses")
     lines: tuple[IntArray | None, IntArray | None] = (None, None)
+    unwrapped_wheels: tuple[str, ...] = field(default=(), init=False)
 
     def __post_init__(self) -> None:
         lines = tuple(None if a is None else np.asarray(a, dtype=np.int64).reshape(-1)
@@ -184,6 +218,13 @@ class TimeSeries:
         pose = _checked_stream("pose", self.source[1], lines[1], {
             "t": self.t_pose, "x": self.x, "y": self.y, "theta": self.theta})
         pose[3] = np.unwrap(pose[3])
+        unwrapped = []
+        for k, name in enumerate(ANGLE_COLUMNS, start=1):
+            wheel = _unwrapped_wheel(self.source[0], lines[0], encoder[0], name, encoder[k])
+            if wheel is not None:
+                encoder[k] = wheel
+                unwrapped.append(name)
+        object.__setattr__(self, "unwrapped_wheels", tuple(unwrapped))
         names = ("t_enc", "phi_L", "phi_R", "t_pose", "x", "y", "theta")
         for name, array in zip(names, encoder + pose, strict=True):
             array.setflags(write=False)
@@ -690,7 +731,8 @@ class SegmentationReport:
     stretch). dropped_ranges: the time ranges of those segments per reason (s, encoder clock,
     adjacent ones merged). samples_dropped: pose samples unused, per reason (outside the
     encoder time range, inside an encoder gap). gaps: every gap, in time order. dropouts:
-    missed samples per stream, bridged.
+    missed samples per stream, bridged. unwrapped_wheels: the wheel columns that were wrapped
+    to [-pi, pi] and were unwrapped (TimeSeries.unwrapped_wheels).
     """
 
     n_segments: int
@@ -699,6 +741,13 @@ class SegmentationReport:
     samples_dropped: dict[str, int] = field(default_factory=dict)
     gaps: tuple[Gap, ...] = ()
     dropouts: dict[str, int] = field(default_factory=dict)
+    unwrapped_wheels: tuple[str, ...] = ()
+
+    def unwrapped_text(self) -> str:
+        """'phi_L, phi_R wrapped to [-pi, pi], unwrapped' ('' when no wheel was wrapped)."""
+        if not self.unwrapped_wheels:
+            return ""
+        return f"{', '.join(self.unwrapped_wheels)} wrapped to [-pi, pi], unwrapped"
 
     def counts_text(self) -> str:
         """What was dropped, in one line, e.g. '3 standstill, 1 pose jump; 25 pose samples
@@ -711,6 +760,8 @@ class SegmentationReport:
     def summary(self) -> str:
         """The report in words, one fact per line."""
         lines = [f"{_plural(self.n_segments, 'segment')} kept."]
+        if self.unwrapped_wheels:
+            lines.append(f"Wheel angles {self.unwrapped_text()}.")
         dropped = sum(self.segments_dropped.values())
         if dropped:
             lines.append(f"{_plural(dropped, 'segment')} dropped:")
@@ -964,7 +1015,7 @@ def _merged(ranges: list[tuple[float, float]]) -> tuple[tuple[float, float], ...
 
 def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: int,
             stretches: _Stretches, gaps: list[Gap], encoders: _StreamCheck,
-            poses: _StreamCheck) -> SegmentationReport:
+            poses: _StreamCheck, unwrapped_wheels: tuple[str, ...]) -> SegmentationReport:
     ranges = {reason: [(t_pose[a], t_pose[b]) for a, b in zip(cut.start[mask], cut.end[mask],
                                                               strict=True)]
               for reason, mask in reasons.items()}
@@ -979,6 +1030,7 @@ def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: 
                          INSIDE_ENCODER_GAP: stretches.in_gap},
         gaps=tuple(gaps),
         dropouts={"encoder": encoders.dropouts, "pose": poses.dropouts},
+        unwrapped_wheels=unwrapped_wheels,
     )
 
 
@@ -1033,7 +1085,8 @@ def segment_timeseries(
     reasons = _drop_reasons(ts, t_pose, cut, rows, encoders, poses, limits)
     keep = ~np.logical_or.reduce(list(reasons.values()))
     start, end = cut.start[keep], cut.end[keep]
-    report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses)
+    report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses,
+                     ts.unwrapped_wheels)
     if report.n_segments < MIN_SEGMENTS:
         raise DataError(f"{ts.source[1]}: {report.n_segments} segment(s) after segmentation; "
                         f"at least {MIN_SEGMENTS} are needed (dropped: {report.counts_text()})")

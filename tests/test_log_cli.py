@@ -101,6 +101,8 @@ GOOD_ROWS = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,5,5,0.25,0,0\n1.0,10,10,0
     (GOOD_ROWS + "1.5,nan,15,0.75,0,0\n", [], "log.csv:5: phi_L is not finite"),
     ("t,ticks_L,ticks_R,x,y,theta\n0,0,0,0,0,0\n", [],
      "log.csv:1: encoder ticks (ticks_L, ticks_R) need the encoder resolution"),
+    ("t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,1,1,0.1,0,0\n1.0,-2.5,-2.5,0.2,0,0\n", [],
+     "log.csv:4: the wheel angles phi_L are wrapped to [-pi, pi] and sampled too slowly"),
 ])
 def test_bad_log_files_through_the_cli(capsys, tmp_path, text, extra, fragment):
     path = tmp_path / "log.csv"

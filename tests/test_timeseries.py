@@ -143,11 +143,13 @@ def fmt(values: np.ndarray) -> list[str]:
     return [repr(float(v)) for v in values]
 
 
-def write_combined(path, ts: TimeSeries, encoder_names=("phi_L", "phi_R"), scale=1.0) -> None:
+def write_combined(path, ts: TimeSeries, encoder_names=("phi_L", "phi_R"), scale=1.0,
+                   wheels: tuple[np.ndarray, np.ndarray] | None = None) -> None:
     """One file with header t,<encoder names>,x,y,theta; empty cells where a stream has no
-    sample."""
+    sample. wheels: the wheel columns to write instead of the log's (at its encoder times)."""
     t = np.union1d(ts.t_enc, ts.t_pose)
-    enc = dict(zip(ts.t_enc, zip(fmt(ts.phi_L * scale), fmt(ts.phi_R * scale), strict=True),
+    left, right = wheels if wheels is not None else (ts.phi_L, ts.phi_R)
+    enc = dict(zip(ts.t_enc, zip(fmt(left * scale), fmt(right * scale), strict=True),
                    strict=True))
     pose = dict(zip(ts.t_pose, zip(fmt(ts.x), fmt(ts.y), fmt(ts.theta), strict=True),
                     strict=True))
@@ -221,6 +223,59 @@ def test_wrapped_headings_are_unwrapped(tmp_path, short_log):
     theta = read_timeseries(path).theta
     np.testing.assert_allclose(np.diff(theta), np.diff(spun.theta), atol=1e-12)
     assert -np.pi < theta[0] <= np.pi
+
+
+def write_wrapped(path, ts: TimeSeries) -> tuple[np.ndarray, np.ndarray]:
+    """Write the log with its wheel angles wrapped to [-pi, pi) (continuous joints reported
+    modulo 2 pi); the wrapped angles."""
+    wheels = (np.angle(np.exp(1j * ts.phi_L)), np.angle(np.exp(1j * ts.phi_R)))
+    write_combined(path, ts, wheels=wheels)
+    return wheels
+
+
+@pytest.mark.parametrize("every", [1, 5])
+def test_wrapped_wheel_angles_are_unwrapped_and_reported(tmp_path, sim, every):
+    """Wheels wrapped to [-pi, pi) at 100 Hz and at 20 Hz (a wrap jumps by ~2 pi, as an
+    encoder reset would): read back as the cumulative angles, segmented as the unwrapped log,
+    and the report says so."""
+    ts = make_log(sim, enc_every=every)
+    path = tmp_path / "log.csv"
+    wrapped, _ = write_wrapped(path, ts)
+    assert np.abs(np.diff(wrapped)).max() > 1.5 * np.pi  # it does wrap
+    read = read_timeseries(path)
+    assert read.unwrapped_wheels == ("phi_L", "phi_R")
+    for name in ("phi_L", "phi_R"):
+        np.testing.assert_allclose(np.diff(getattr(read, name)), np.diff(getattr(ts, name)),
+                                   rtol=0, atol=1e-12)
+    log, reference = segment_timeseries(read), segment_timeseries(ts)
+    assert log.report.segments_dropped == reference.report.segments_dropped
+    np.testing.assert_allclose(log.segments.as_array(), reference.segments.as_array(),
+                               rtol=0, atol=1e-9)
+    assert log.report.unwrapped_text() == "phi_L, phi_R wrapped to [-pi, pi], unwrapped"
+    assert "Wheel angles phi_L, phi_R wrapped to [-pi, pi], unwrapped." in log.report.summary()
+    assert reference.report.unwrapped_wheels == () and reference.report.unwrapped_text() == ""
+
+
+def test_wheel_angles_within_pi_that_do_not_wrap_are_kept():
+    """Cumulative wheel angles that stay within [-pi, pi] (no step over pi) are not touched."""
+    t = np.linspace(0.0, 10.0, 1001)
+    wheel = 0.3 * np.sin(t)
+    ts = TimeSeries(t, wheel, -wheel, t, 0 * t, 0 * t, 0.01 * np.sin(t))
+    assert ts.unwrapped_wheels == ()
+    np.testing.assert_array_equal(ts.phi_L, wheel)
+
+
+def test_wrapped_wheels_sampled_too_slowly_are_an_error_naming_the_line(tmp_path, sim):
+    """At 3.3 Hz the wheels turn up to ~3.5 rad (over pi) between samples: unwrapping would
+    guess, so reading refuses, naming the file and line."""
+    ts = make_log(sim, enc_every=30)
+    assert np.abs(np.diff(ts.phi_R)).max() > np.pi
+    path = tmp_path / "log.csv"
+    write_wrapped(path, ts)
+    with pytest.raises(DataError, match=rf"^{path}:\d+: the wheel angles phi_\w are wrapped to "
+                       r"\[-pi, pi\] and sampled too slowly to unwrap") as info:
+        read_timeseries(path)
+    assert "\n" not in str(info.value)
 
 
 def test_is_timeseries_csv(tmp_path):

@@ -203,8 +203,9 @@ class Part:
         report = self.cut.report
         offset = (f"; time offset {self.log.time_offset:+.4f} s "
                   f"({'estimated' if self.log.offset_estimated else 'given'})")
+        unwrapped = f"; {report.unwrapped_text()}" if report.unwrapped_wheels else ""
         return (f"{self.source.name}: {report.n_segments} segments; dropped: "
-                f"{report.counts_text()}{offset}")
+                f"{report.counts_text()}{unwrapped}{offset}")
 
 
 def segment_inputs(args: argparse.Namespace, inputs: Sequence[Input]) -> list[Part]:
