@@ -77,6 +77,22 @@ def test_bad_options_are_one_line_errors(capsys, logs, extra, message):
     assert code == 2 and message in err and err.count("\n") == 1
 
 
+def test_time_offset_estimate_and_its_search_range(capsys, tmp_path):
+    """A 2.5 s clock offset: outside the default search range (+-1 s) a one-line error; found
+    with --max-time-offset 3."""
+    series = synthetic_log(np.random.default_rng(3), 60, TRUTH, SENSOR,
+                           pose_noise=(0.002, 0.002)).series
+    path = tmp_path / "late.csv"
+    write_timeseries(path, dataclasses.replace(series, t_pose=series.t_pose - 2.5))
+    code, out, err = run_cli(capsys, "calibrate", path, "--time-offset", "estimate", "--json")
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "cannot estimate the time offset: it is not within +-1.0 s" in err
+    code, out, _ = run_cli(capsys, "calibrate", path, "--time-offset", "estimate",
+                           "--max-time-offset", "3", "--json")
+    assert code == 0
+    assert "time offset +2.500" in json.loads(out)["inputs"][0]
+
+
 def test_a_lone_stream_file_names_what_is_missing(capsys, tmp_path):
     encoders = tmp_path / "enc.csv"
     encoders.write_text("t,phi_L,phi_R\n0,0,0\n1,1,1\n")

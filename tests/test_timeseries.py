@@ -8,6 +8,7 @@ off-axle sensor at SENSOR in the body frame; encoder and pose samples taken at f
 from __future__ import annotations
 
 import math
+import re
 import time
 from dataclasses import dataclass
 
@@ -480,6 +481,29 @@ def test_estimate_time_offset_refuses_an_offset_beyond_the_search_range(sim):
     with pytest.raises(DataError, match=r"not within \+-1.0 s"):
         estimate_time_offset(make_log(sim, offset=1.5))
     assert abs(estimate_time_offset(make_log(sim, offset=1.5), max_offset=2.0) - 1.5) < 1e-4
+
+
+@pytest.mark.parametrize("offset", [-3.0, -2.0, 2.0, 3.0])
+def test_estimate_time_offset_refuses_an_offset_behind_a_lesser_optimum(sim, offset):
+    """2-3 s away, the fit within +-1 s peaks at a lesser local optimum inside the range (not
+    at its edge: -0.07 to 0.93 s were returned for these logs); lags further out fit clearly
+    better, so it is an error, and a wider search range finds the offset."""
+    ts = make_log(sim, offset=offset, noise=(0.002, 0.002), seed=1)
+    with pytest.raises(DataError, match=re.escape(
+            f"not within +-1.0 s (the streams agree far better near {offset:+.2f} s; widen the "
+            "search range")):
+        estimate_time_offset(ts)
+    assert abs(estimate_time_offset(ts, max_offset=3.5) - offset) < 1e-3
+
+
+@pytest.mark.parametrize("offset", [0.9, -0.95])
+def test_estimate_time_offset_near_the_edge_of_the_range(sim, offset):
+    """Offsets inside the range, near its edge, are still found (the wide scan finds nothing
+    clearly better outside)."""
+    ts = make_log(sim, offset=offset, noise=(0.002, 0.002), seed=1)
+    assert abs(estimate_time_offset(ts) - offset) < 1e-3
+    with pytest.raises(DataError, match="max_offset must be positive"):
+        estimate_time_offset(ts, max_offset=0.0)
 
 
 def test_estimate_time_offset_refuses_without_turning():

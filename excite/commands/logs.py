@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from excite.commands.args import UsageError
 from excite.data import Segments
-from excite.timeseries import SegmentedLog, TimeSeries
+from excite.timeseries import MAX_TIME_OFFSET, SegmentedLog, TimeSeries
 
 __all__ = ["Log", "Input", "Part", "add_log_options", "group_inputs", "read_log",
            "segment_log", "segment_inputs"]
@@ -102,6 +102,9 @@ def add_log_options(parser: argparse.ArgumentParser, segmentation: bool = True) 
     group.add_argument("--time-offset", type=_offset, default=0.0, metavar="S|estimate",
                        help="pose time + S = encoder time (s, default 0), or 'estimate' "
                        "it from the data")
+    group.add_argument("--max-time-offset", type=_positive, default=MAX_TIME_OFFSET,
+                       metavar="S", help="estimated time offsets are searched within +-S s "
+                       f"(default {MAX_TIME_OFFSET:g})")
     group.add_argument("--joint-states", default="/joint_states", metavar="TOPIC",
                        help="bag topic of sensor_msgs/msg/JointState (default /joint_states)")
     group.add_argument("--left-wheel", metavar="NAME", help="left wheel joint name (bags)")
@@ -173,7 +176,8 @@ def read_log(args: argparse.Namespace, source: Input) -> Log:
     else:
         raise UsageError(f"{source.name}: a segment file, not a time-series log or bag")
     if args.time_offset == "estimate":
-        return Log(source.name, series, estimate_time_offset(series), True)
+        return Log(source.name, series,
+                   estimate_time_offset(series, max_offset=args.max_time_offset), True)
     return Log(source.name, series, float(args.time_offset), False)
 
 
