@@ -93,6 +93,30 @@ def test_time_offset_estimate_and_its_search_range(capsys, tmp_path):
     assert "time offset +2.500" in json.loads(out)["inputs"][0]
 
 
+def test_an_unflagged_clock_offset_is_noted_and_changes_nothing(capsys, tmp_path, logs):
+    """Without --time-offset, a log whose clocks are 0.15 s apart gets a one-line note on
+    stderr and the estimate in its JSON description, and is calibrated with offset 0 as
+    before; a log without an offset gets no note and the same result as --time-offset 0."""
+    series = synthetic_log(np.random.default_rng(4), 60, TRUTH, SENSOR,
+                           pose_noise=(0.002, 0.002)).series
+    path = tmp_path / "offset.csv"
+    write_timeseries(path, dataclasses.replace(series, t_pose=series.t_pose - 0.15))
+    code, out, err = run_cli(capsys, "calibrate", path, "--json")
+    assert code in (0, 3, 4)
+    notes = [line for line in err.splitlines() if line.startswith("excite: note:")]
+    assert len(notes) == 1 and str(path) in notes[0] and "offset by +0.15" in notes[0]
+    assert "--time-offset estimate" in notes[0]
+    report = json.loads(out)
+    assert "time offset +0.0000 s (default; the data suggest +0.15" in report["inputs"][0]
+    _, given, _ = run_cli(capsys, "calibrate", path, "--time-offset", "0", "--json")
+    assert json.loads(given)["params"] == report["params"]
+    code, out, err = run_cli(capsys, "calibrate", logs[0], "--json")
+    assert code == 0 and "note" not in err
+    assert json.loads(out)["inputs"][0].endswith("time offset +0.0000 s (default)")
+    _, given, _ = run_cli(capsys, "calibrate", logs[0], "--time-offset", "0", "--json")
+    assert json.loads(given)["params"] == json.loads(out)["params"]
+
+
 def test_a_lone_stream_file_names_what_is_missing(capsys, tmp_path):
     encoders = tmp_path / "enc.csv"
     encoders.write_text("t,phi_L,phi_R\n0,0,0\n1,1,1\n")

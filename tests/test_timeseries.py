@@ -29,6 +29,7 @@ from excite.timeseries import (
     TimeSeries,
     estimate_time_offset,
     is_timeseries_csv,
+    noticeable_time_offset,
     read_timeseries,
     segment_timeseries,
 )
@@ -504,6 +505,29 @@ def test_estimate_time_offset_near_the_edge_of_the_range(sim, offset):
     assert abs(estimate_time_offset(ts) - offset) < 1e-3
     with pytest.raises(DataError, match="max_offset must be positive"):
         estimate_time_offset(ts, max_offset=0.0)
+
+
+@pytest.mark.parametrize("offset, noticed", [(0.0, False), (0.004, False), (-0.004, False),
+                                             (0.15, True), (-0.03, True)])
+def test_noticeable_time_offset(offset, noticed):
+    """Noisy logs (100 Hz encoders, 50 Hz poses: half the coarser period is 10 ms): an offset
+    beyond it is reported with its estimate, none within it, over three noise draws."""
+    sim = simulate(duration=60.0, step=0.01)
+    for seed in range(3):
+        found = noticeable_time_offset(make_log(sim, offset=offset, noise=(0.002, 0.002),
+                                                seed=seed))
+        if noticed:
+            assert found is not None and abs(found - offset) < 1e-3
+        else:
+            assert found is None
+
+
+def test_noticeable_time_offset_is_silent_without_an_estimate():
+    t = np.linspace(0, 30, 3001)
+    straight = TimeSeries(t, 10 * t, 10 * t, t - 0.2, 0.5 * t, 0 * t, 0 * t)
+    assert noticeable_time_offset(straight) is None  # the heading does not vary
+    with pytest.raises(DataError, match="heading does not vary"):
+        estimate_time_offset(straight)
 
 
 def test_estimate_time_offset_refuses_without_turning():

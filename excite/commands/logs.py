@@ -12,8 +12,10 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 from excite.commands.args import UsageError
 from excite.data import Segments
@@ -39,12 +41,24 @@ class Input:
 @dataclass(frozen=True)
 class Log:
     """A time-series log read from an input, with the clock offset used for it (s; pose time
-    + offset = encoder time) and whether that offset was estimated."""
+    + offset = encoder time) and where that offset came from: "given" (--time-offset S),
+    "estimated" (--time-offset estimate) or "default" (none given: 0). With the default,
+    suggested_offset is the offset the data suggest when it is clearly not zero
+    (excite.timeseries.noticeable_time_offset), else None."""
 
     name: str
     series: TimeSeries
     time_offset: float
-    offset_estimated: bool
+    offset_source: Literal["given", "estimated", "default"]
+    suggested_offset: float | None = None
+
+    def offset_text(self) -> str:
+        """The offset and its source, e.g. '+0.0000 s (default; the data suggest -0.1502 s:
+        --time-offset estimate)'."""
+        how = self.offset_source
+        if self.suggested_offset is not None:
+            how += f"; the data suggest {self.suggested_offset:+.4f} s: --time-offset estimate"
+        return f"{self.time_offset:+.4f} s ({how})"
 
 
 def _positive(text: str) -> float:
@@ -99,9 +113,9 @@ def add_log_options(parser: argparse.ArgumentParser, segmentation: bool = True) 
                        help="encoder resolution: converts ticks_L,ticks_R columns to rad, "
                        "and calibrate models the encoders' rounding (one tick) in the noise "
                        "of the segments cut from logs")
-    group.add_argument("--time-offset", type=_offset, default=0.0, metavar="S|estimate",
-                       help="pose time + S = encoder time (s, default 0), or 'estimate' "
-                       "it from the data")
+    group.add_argument("--time-offset", type=_offset, metavar="S|estimate",
+                       help="pose time + S = encoder time (s, default 0; a note tells when "
+                       "the data suggest otherwise), or 'estimate' it from the data")
     group.add_argument("--max-time-offset", type=_positive, default=MAX_TIME_OFFSET,
                        metavar="S", help="estimated time offsets are searched within +-S s "
                        f"(default {MAX_TIME_OFFSET:g})")
@@ -157,7 +171,7 @@ def group_inputs(paths: Sequence[str]) -> list[Input]:
 
 def read_log(args: argparse.Namespace, source: Input) -> Log:
     """Read one time-series or bag input and settle its clock offset."""
-    from excite.timeseries import estimate_time_offset, read_timeseries
+    from excite.timeseries import estimate_time_offset, noticeable_time_offset, read_timeseries
 
     if source.kind == "bag":
         from excite.bags import read_bag
@@ -177,8 +191,15 @@ def read_log(args: argparse.Namespace, source: Input) -> Log:
         raise UsageError(f"{source.name}: a segment file, not a time-series log or bag")
     if args.time_offset == "estimate":
         return Log(source.name, series,
-                   estimate_time_offset(series, max_offset=args.max_time_offset), True)
-    return Log(source.name, series, float(args.time_offset), False)
+                   estimate_time_offset(series, max_offset=args.max_time_offset), "estimated")
+    if args.time_offset is not None:
+        return Log(source.name, series, float(args.time_offset), "given")
+    suggested = noticeable_time_offset(series, max_offset=args.max_time_offset)
+    if suggested is not None:
+        print(f"excite: note: {source.name}: the clocks of the encoder and pose streams seem "
+              f"offset by {suggested:+.4f} s (pose time + offset = encoder time); used "
+              "without an offset, give --time-offset estimate", file=sys.stderr)
+    return Log(source.name, series, 0.0, "default", suggested)
 
 
 def segment_log(args: argparse.Namespace, log: Log) -> SegmentedLog:
@@ -205,8 +226,7 @@ class Part:
         if self.cut is None or self.log is None:
             return f"{self.source.name}: {len(self.segments)} segments"
         report = self.cut.report
-        offset = (f"; time offset {self.log.time_offset:+.4f} s "
-                  f"({'estimated' if self.log.offset_estimated else 'given'})")
+        offset = f"; time offset {self.log.offset_text()}"
         unwrapped = f"; {report.unwrapped_text()}" if report.unwrapped_wheels else ""
         return (f"{self.source.name}: {report.n_segments} segments; dropped: "
                 f"{report.counts_text()}{unwrapped}{offset}")
