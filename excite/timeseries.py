@@ -47,6 +47,10 @@ Detection, never silent averaging (all of it in :class:`SegmentationReport`)
 * Standstills: segments in which neither wheel turned more than ``Limits.still_wheel`` and the
   sensor neither moved ``Limits.still_distance`` nor turned ``Limits.still_heading``; dropped
   (they carry noise, no information about r_L, r_R, b).
+* Carried: segments in which neither wheel turned more than ``Limits.still_wheel`` while the
+  sensor moved or turned far beyond the pose noise (``Limits.carry_sigmas``; the noise is
+  estimated from the pose stream itself): the robot was carried or pushed, or the pose source
+  relocalised; dropped.
 """
 
 from __future__ import annotations
@@ -99,6 +103,7 @@ _SPACE_AROUND_COMMA = re.compile(r"[ \t]*,[ \t]*")
 
 # Drop reasons (SegmentationReport keys).
 POSE_JUMP, ENCODER_JUMP, STANDSTILL = "pose jump", "encoder jump", "standstill"
+CARRIED = "pose moved while the wheels stood still"
 CUT_BY_GAP, END_OF_LOG = "cut by a gap", "end of log"
 OUTSIDE_ENCODERS, INSIDE_ENCODER_GAP = "outside the encoder time range", "inside an encoder gap"
 #: A stream interval over this many median periods has missed samples (a dropout).
@@ -761,6 +766,12 @@ class Limits:
     still_wheel (rad), still_distance (m), still_heading (rad): a segment is a standstill when
         both wheels turned at most still_wheel and the sensor moved at most still_distance and
         turned at most still_heading.
+    carry_sigmas: a segment in which both wheels turned at most still_wheel, but the sensor
+        moved more than carry_sigmas standard deviations of the noise of a difference of two
+        poses (and more than still_distance), or turned likewise (and more than
+        still_heading), was carried: at 5, a still robot's noise passes it in about 4 of a
+        million segments (the Rayleigh tail exp(-5^2 / 2)). The pose noise is estimated from
+        the pose stream (:func:`_pose_noise`).
     """
 
     max_gap: float | None = None
@@ -770,6 +781,7 @@ class Limits:
     still_wheel: float = 0.02
     still_distance: float = 0.01
     still_heading: float = 0.01
+    carry_sigmas: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -872,11 +884,35 @@ class SegmentedLog:
 
 @dataclass(frozen=True)
 class _StreamCheck:
-    """Per-interval flags of one stream: gap (split there), jump; and its dropouts."""
+    """Per-interval flags of one stream: gap (split there), jump; its dropouts; for poses the
+    noise std of a single sample (m, rad)."""
 
     gap: BoolArray
     jump: BoolArray
     dropouts: int
+    noise: tuple[float, float] = (0.0, 0.0)
+
+
+#: The median of |N(0, 1)|: a robust std is the median absolute value / this.
+_MEDIAN_ABS_NORMAL = 0.6744897501960817
+
+
+def _pose_noise(ts: TimeSeries) -> tuple[float, float]:
+    """Robust std of the pose samples' noise (m for x and y pooled, rad for theta): each inner
+    sample minus the linear interpolation of its neighbours (exact for motion at a constant
+    velocity, whatever the spacing) has, with independent noise of std sigma and even
+    spacing, std sigma sqrt(3/2); the median absolute value of those residuals over
+    _MEDIAN_ABS_NORMAL sqrt(3/2) estimates sigma, unmoved by the few samples where the
+    motion changes abruptly. (0, 0) with fewer than 3 samples. Correlated noise reads low."""
+    if ts.t_pose.size < 3:
+        return 0.0, 0.0
+    t = ts.t_pose
+    weight = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
+    residual = [v[1:-1] - ((1.0 - weight) * v[:-2] + weight * v[2:])
+                for v in (ts.x, ts.y, ts.theta)]
+    scale = _MEDIAN_ABS_NORMAL * math.sqrt(1.5)
+    xy = float(np.median(np.abs(np.concatenate(residual[:2])))) / scale
+    return xy, float(np.median(np.abs(residual[2]))) / scale
 
 
 def _gap_flags(t: FloatArray, window: float, max_gap: float | None) -> tuple[BoolArray, int]:
@@ -903,7 +939,7 @@ def _check_poses(ts: TimeSeries, window: float, limits: Limits) -> _StreamCheck:
     moved = np.hypot(np.diff(ts.x), np.diff(ts.y))
     turned = np.abs(np.diff(ts.theta))
     jump = (moved > limits.max_speed * dt) | (turned > limits.max_turn_rate * dt)
-    return _StreamCheck(gap, jump, missed)
+    return _StreamCheck(gap, jump, missed, _pose_noise(ts))
 
 
 def _gaps(ts: TimeSeries, encoders: _StreamCheck, poses: _StreamCheck) -> list[Gap]:
@@ -1061,13 +1097,18 @@ def _drop_reasons(ts: TimeSeries, t_pose: FloatArray, cut: _Cut, rows: FloatArra
     """Per reason, which candidate segments to drop (a segment counts under its first
     reason only)."""
     pose_jumps = np.concatenate(([0], np.cumsum(poses.jump)))
+    wheels_still = np.abs(rows[:, :2]).max(axis=1, initial=0.0) <= limits.still_wheel
+    moved, turned = np.hypot(rows[:, 2], rows[:, 3]), np.abs(rows[:, 4])
+    # a difference of two poses has sqrt(2) times a sample's noise
+    far = max(limits.still_distance, limits.carry_sigmas * math.sqrt(2.0) * poses.noise[0])
+    turned_far = max(limits.still_heading, limits.carry_sigmas * math.sqrt(2.0) * poses.noise[1])
     reasons = {
         POSE_JUMP: pose_jumps[cut.end] > pose_jumps[cut.start],
         ENCODER_JUMP: _flagged_overlaps(ts.t_enc, encoders.jump, t_pose[cut.start],
                                         t_pose[cut.end]) > 0,
-        STANDSTILL: ((np.abs(rows[:, :2]).max(axis=1, initial=0.0) <= limits.still_wheel)
-                     & (np.hypot(rows[:, 2], rows[:, 3]) <= limits.still_distance)
-                     & (np.abs(rows[:, 4]) <= limits.still_heading)),
+        STANDSTILL: (wheels_still & (moved <= limits.still_distance)
+                     & (turned <= limits.still_heading)),
+        CARRIED: wheels_still & ((moved > far) | (turned > turned_far)),
     }
     taken = np.zeros(cut.start.size, dtype=bool)
     for reason, mask in reasons.items():

@@ -18,6 +18,7 @@ import pytest
 from excite import DataError, Params, SensorPose, predict_increment
 from excite.models import body_to_sensor
 from excite.timeseries import (
+    CARRIED,
     CUT_BY_GAP,
     ENCODER_JUMP,
     END_OF_LOG,
@@ -636,6 +637,42 @@ def test_standstills_are_dropped():
     assert report.dropped_ranges[STANDSTILL] == ((T0 + 10.0, T0 + 16.0),)
     assert "6 standstill (t = 1010.000-1016.000 s)" in report.summary()
     assert report.counts_text() == "6 standstill"
+
+
+def carried(ts: TimeSeries, start: float, stop: float, distance: float) -> TimeSeries:
+    """The log with its poses moved by ``distance`` (m, along x and y) between ``start`` and
+    ``stop`` (s, smoothly), the wheels untouched."""
+    s = smoothstep((ts.t_pose - start) / (stop - start))
+    return TimeSeries(ts.t_enc, ts.phi_L, ts.phi_R, ts.t_pose, ts.x + 0.8 * distance * s,
+                      ts.y + 0.6 * distance * s, ts.theta)
+
+
+def test_a_robot_carried_with_idle_wheels_is_dropped():
+    """Wheels still over 10-16 s; over 11-13 s the robot is carried 0.5 m: those two windows
+    are dropped as carried, the other four still ones as standstills (2 mm, 2 mrad noise)."""
+    sim = simulate(duration=30.0, step=0.01, standstill=(10.0, 16.0))
+    ts = carried(make_log(sim, noise=(0.002, 0.002), seed=3), T0 + 11.0, T0 + 13.0, 0.5)
+    report = segment_timeseries(ts, window=1.0).report
+    assert report.segments_dropped[CARRIED] == 2
+    assert report.dropped_ranges[CARRIED] == ((T0 + 11.0, T0 + 13.0),)
+    assert report.segments_dropped[STANDSTILL] == 4
+    assert "2 pose moved while the wheels stood still (t = 1011.000-1013.000 s)" in (
+        report.summary())
+    assert report.counts_text() == "4 standstill, 2 pose moved while the wheels stood still"
+
+
+@pytest.mark.parametrize("noise", [0.002, 0.01])
+def test_noisy_poses_of_a_still_robot_are_not_carried(noise):
+    """A robot standing still for 20 s under pose noise of 2 mm or 1 cm (and as many mrad)
+    loses no segment as carried, over five noise draws; the same log carried 0.3 m in 1 s
+    does."""
+    sim = simulate(duration=40.0, step=0.01, standstill=(10.0, 30.0))
+    for seed in range(5):
+        ts = make_log(sim, noise=(noise, noise), seed=seed)
+        log = segment_timeseries(ts, window=1.0)
+        assert log.report.segments_dropped[CARRIED] == 0
+        moved = carried(ts, T0 + 20.0, T0 + 21.0, 0.3)
+        assert segment_timeseries(moved, window=1.0).report.segments_dropped[CARRIED] == 1
 
 
 def test_pose_samples_outside_the_encoder_range_are_counted(sim):
