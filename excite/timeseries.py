@@ -634,8 +634,9 @@ def _explained(turn: FloatArray, left: FloatArray, right: FloatArray, max_lag: i
 #: at most this fraction of the heading rate's variance that the best lag inside leaves
 #: unexplained. Robot motions often repeat (a protocol's period of a few seconds), so lags a
 #: period apart fit almost equally well (within a few percent in the unexplained variance);
-#: halving it is not chance: on a log of ~100 independent turn-rate changes it is an F ratio
-#: of 2, above F(100, 100)'s 99.9 % quantile (1.9).
+#: halving it is not chance: with ~100 independent samples of the turn rate (a minute of
+#: turning that changes every ~0.5 s) a variance ratio of 2 is beyond F(100, 100)'s 99.9 %
+#: quantile (1.87); on shorter or smoother logs the test is looser.
 CLEARLY_BETTER = 0.5
 
 
