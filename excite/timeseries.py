@@ -655,16 +655,17 @@ def _refuse_better_fit_outside(signals: tuple[FloatArray, FloatArray, FloatArray
     best_inside, best_outside = unexplained[~outside].min(), unexplained[outside].min()
     if not best_outside < CLEARLY_BETTER * best_inside:
         return
-    # where to look: the lags outside not clearly worse than the best there (a repeated motion
-    # fits about as well one period away), the run of them nearest zero, its best lag
+    # where to look: the runs of lags outside not clearly worse than the best there, nearest
+    # zero first; several when the motion repeats (lags a period apart fit about as well)
     near = outside & (CLEARLY_BETTER * unexplained <= best_outside)
     runs = np.flatnonzero(np.diff(np.concatenate(([0], near.astype(np.int8), [0])))).reshape(-1, 2)
-    first, stop = min(runs, key=lambda run: min(abs(run[0] - wide_lag),
-                                                abs(run[1] - 1 - wide_lag)))
-    best = int(first) + int(np.argmin(unexplained[first:stop]))
+    lags = sorted(((int(a) + int(np.argmin(unexplained[a:b])) - wide_lag) * step
+                   for a, b in runs), key=abs)
+    where = " or ".join(f"{lag:+.2f} s" for lag in lags[:3])
+    repeats = "; the motion repeats, so each fits about as well" if len(lags) > 1 else ""
     raise DataError(f"cannot estimate the time offset: it is not within +-{max_offset} s (the "
-                    f"streams agree far better near {(best - wide_lag) * step:+.2f} s; widen "
-                    "the search range: --max-time-offset)")
+                    f"streams agree far better near {where}{repeats}; widen the search range: "
+                    "--max-time-offset)")
 
 
 #: The default search range of estimate_time_offset: +- this (s).

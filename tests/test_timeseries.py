@@ -79,10 +79,14 @@ def smoothstep(u: np.ndarray) -> np.ndarray:
 
 
 def wheel_rates(t: np.ndarray, standstill: tuple[float, float] | None = None,
-                hold: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                hold: float | None = None, repeat: float | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Smooth wheel rates (rad/s): forward speed 0.1-0.4 m/s, turn rate within +-1.3 rad/s,
     optionally zero over ``standstill`` (s) with 1 s ramps, optionally held constant over
-    each interval of ``hold`` s (exact arcs per interval)."""
+    each interval of ``hold`` s (exact arcs per interval), optionally repeating every
+    ``repeat`` s (a motion protocol driven over and over)."""
+    if repeat is not None:
+        t = np.mod(t, repeat)
     if hold is not None:
         t = (np.floor(t / hold) + 0.5) * hold
     v = 0.25 + 0.15 * np.sin(2 * np.pi * t / 7.3)
@@ -496,6 +500,19 @@ def test_estimate_time_offset_refuses_an_offset_behind_a_lesser_optimum(sim, off
             "search range")):
         estimate_time_offset(ts)
     assert abs(estimate_time_offset(ts, max_offset=3.5) - offset) < 1e-3
+
+
+def test_estimate_time_offset_with_a_repeated_motion():
+    """A motion repeating every 6 s fits about as well at lags 6 s apart: an offset inside the
+    range is still found (the repetitions outside are no better), and one outside is an error
+    naming the nearest candidates."""
+    sim = simulate(duration=40.0, step=0.01, repeat=6.0)
+    inside = make_log(sim, offset=0.4, noise=(0.002, 0.002), seed=2)
+    assert abs(estimate_time_offset(inside) - 0.4) < 1e-3
+    outside = make_log(sim, offset=-2.5, noise=(0.002, 0.002), seed=2)
+    with pytest.raises(DataError, match=re.escape(
+            "agree far better near -2.50 s or +3.50 s or -8.50 s; the motion repeats")):
+        estimate_time_offset(outside)
 
 
 @pytest.mark.parametrize("offset", [0.9, -0.95])
