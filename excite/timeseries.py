@@ -668,12 +668,25 @@ def _refuse_better_fit_outside(signals: tuple[FloatArray, FloatArray, FloatArray
                     "--max-time-offset)")
 
 
+def _refined_lag(r2: FloatArray, max_lag: int, step: float) -> float:
+    """The lag (s) of the largest R^2 (index k of lags -max_lag..max_lag, spacing ``step``),
+    refined by a parabola through the three values around it; NaN at the edge."""
+    k = int(np.argmax(r2))
+    if k in (0, r2.size - 1):
+        return math.nan
+    curvature = r2[k - 1] - 2.0 * r2[k] + r2[k + 1]
+    shift = 0.5 * (r2[k - 1] - r2[k + 1]) / curvature if curvature < 0 else 0.0
+    return (k - max_lag + shift) * step
+
+
 #: The default search range of estimate_time_offset: +- this (s).
 MAX_TIME_OFFSET = 1.0
+#: The default least correlation of estimate_time_offset's best fit.
+MIN_CORRELATION = 0.5
 
 
 def estimate_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET,
-                         min_correlation: float = 0.5) -> float:
+                         min_correlation: float = MIN_CORRELATION) -> float:
     """The clock offset (s) with pose time + offset = encoder time.
 
     The heading rate of the poses is a fixed linear combination of the wheel rates,
@@ -702,6 +715,22 @@ def estimate_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET,
     fit's correlation sqrt(R^2) is below ``min_correlation`` (no clear agreement), when the
     best lag is at the edge of the search range, or when a lag outside it fits clearly better.
     """
+    return _estimate(ts, max_offset, min_correlation).offset
+
+
+@dataclass(frozen=True)
+class _OffsetFit:
+    """An estimated offset (s) and what it came from: the rate signals on their grid of
+    spacing ``step`` (s) and the search range in grid steps."""
+
+    offset: float
+    signals: tuple[FloatArray, FloatArray, FloatArray]
+    step: float
+    max_lag: int
+
+
+def _estimate(ts: TimeSeries, max_offset: float, min_correlation: float) -> _OffsetFit:
+    """estimate_time_offset, keeping the signals it fitted."""
     if not 0 < max_offset < math.inf:
         raise DataError(f"max_offset must be positive and finite (s), got {max_offset}")
     step = float(min(np.median(np.diff(ts.t_enc)), np.median(np.diff(ts.t_pose))))
@@ -718,35 +747,68 @@ def estimate_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET,
     if correlation < min_correlation:
         raise DataError(f"cannot estimate the time offset: heading rate and wheel speeds "
                         f"agree poorly (correlation {correlation:.2f} < {min_correlation})")
-    if k in (0, r2.size - 1):
+    offset = _refined_lag(r2, max_lag, step)
+    if math.isnan(offset):
         raise DataError(f"cannot estimate the time offset: it is not within +-{max_offset} s "
                         "(the best fit is at the edge of the search range: --max-time-offset)")
-    curvature = r2[k - 1] - 2.0 * r2[k] + r2[k + 1]
-    shift = 0.5 * (r2[k - 1] - r2[k + 1]) / curvature if curvature < 0 else 0.0
-    return (k - max_lag + shift) * step
+    return _OffsetFit(offset, signals, step, max_lag)
 
 
-#: An estimated clock offset over this many (median) sample periods of the coarser stream is
-#: clearly not zero: on logs recorded without an offset (simulated, 50-100 Hz, noisy, ticks,
-#: a 10 Hz encoder stream under 100 Hz poses) the estimate stayed within 0.08 of that period
-#: (interpolating the coarse stream biases it a little; noise averages down), and an offset of
-#: half a period already shifts the segment ends by a sizeable part of a sample's spacing
-#: (b off by ~1.5 standard deviations on a one-minute log with a 10 ms offset at 50 Hz).
-NOTICEABLE_OFFSET_PERIODS = 0.5
+#: Blocks of the log whose separate offset estimates measure the estimate's uncertainty.
+OFFSET_BLOCKS = 8
+
+
+def _offset_uncertainty(fit: _OffsetFit) -> float:
+    """Standard error (s) of an estimated offset by batch means: the heading rate's compared
+    (central) part split into OFFSET_BLOCKS consecutive blocks, each fitted alone against the
+    wheel rates at every lag (the blocks' comparisons together are the whole estimate's), and
+    the spread of their offsets (1.4826 x the median absolute deviation, robust to one block
+    fooled by a lesser optimum) over sqrt(blocks). Blocks shorter than twice the search range
+    or without turning are left out; inf with fewer than 3 block estimates. On simulated
+    4-minute logs (30 s blocks) it matches the estimates' scatter over noise draws; on 1-minute
+    logs (7.5 s blocks) it reads about twice that (short blocks fit worse): cautious."""
+    size, lag = fit.signals[0].size, fit.max_lag
+    edges = np.linspace(lag, size - lag, OFFSET_BLOCKS + 1).astype(np.int64)
+    lags = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        if b - a > 2 * lag:
+            try:
+                r2 = _explained(*(signal[a - lag: b + lag] for signal in fit.signals), lag)
+            except DataError:  # a block without turning
+                continue
+            lags.append(_refined_lag(r2, lag, fit.step))
+    block = np.asarray(lags)
+    block = block[np.isfinite(block)]
+    if block.size < 3:
+        return math.inf
+    spread = 1.4826 * float(np.median(np.abs(block - np.median(block))))
+    return spread / math.sqrt(block.size)
+
+
+#: An estimated clock offset is clearly not zero when it exceeds both OFFSET_SIGMAS standard
+#: errors (_offset_uncertainty: noise) and NOTICEABLE_OFFSET_PERIODS of the coarser stream's
+#: median sample period (bias: interpolating a coarse stream shifts the estimate a little; on
+#: logs recorded without an offset, simulated at 10-100 Hz with noise and ticks, it stayed
+#: within 0.08 of that period, e.g. -7 ms for 10 Hz encoders under 100 Hz poses, 11 standard
+#: errors). A quarter period matters: on a one-minute log (50 Hz encoders, 100 Hz poses) a 5 ms
+#: offset moved the estimates by up to 1.6 standard deviations, 10 ms by up to 3.3.
+OFFSET_SIGMAS = 3.0
+NOTICEABLE_OFFSET_PERIODS = 0.25
 
 
 def noticeable_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET
                            ) -> float | None:
     """The estimated clock offset (s; pose time + offset = encoder time) when it is clearly
-    not zero: larger than NOTICEABLE_OFFSET_PERIODS of the coarser stream's median sample
-    period; None when it is not, or when it cannot be estimated (too little turning, too short
-    an overlap, or not within +-max_offset s: see :func:`estimate_time_offset`)."""
+    not zero (OFFSET_SIGMAS, NOTICEABLE_OFFSET_PERIODS); None when it is not, or when it
+    cannot be estimated (too little turning, too short an overlap, or not within +-max_offset
+    s: see :func:`estimate_time_offset`)."""
     try:
-        offset = estimate_time_offset(ts, max_offset=max_offset)
+        fit = _estimate(ts, max_offset, MIN_CORRELATION)
     except DataError:
         return None
     period = max(float(np.median(np.diff(ts.t_enc))), float(np.median(np.diff(ts.t_pose))))
-    return offset if abs(offset) > NOTICEABLE_OFFSET_PERIODS * period else None
+    limit = max(NOTICEABLE_OFFSET_PERIODS * period, OFFSET_SIGMAS * _offset_uncertainty(fit))
+    return fit.offset if abs(fit.offset) > limit else None
 
 
 # --------------------------------------------------------------------------- segmentation

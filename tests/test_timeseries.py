@@ -28,6 +28,8 @@ from excite.timeseries import (
     STANDSTILL,
     Limits,
     TimeSeries,
+    _estimate,
+    _offset_uncertainty,
     estimate_time_offset,
     is_timeseries_csv,
     noticeable_time_offset,
@@ -526,10 +528,11 @@ def test_estimate_time_offset_near_the_edge_of_the_range(sim, offset):
 
 
 @pytest.mark.parametrize("offset, noticed", [(0.0, False), (0.004, False), (-0.004, False),
-                                             (0.15, True), (-0.03, True)])
+                                             (0.008, True), (0.15, True), (-0.03, True)])
 def test_noticeable_time_offset(offset, noticed):
-    """Noisy logs (100 Hz encoders, 50 Hz poses: half the coarser period is 10 ms): an offset
-    beyond it is reported with its estimate, none within it, over three noise draws."""
+    """Noisy logs (100 Hz encoders, 50 Hz poses: a quarter of the coarser period is 5 ms, and
+    3 standard errors ~1 ms): an offset beyond them is reported with its estimate, none within,
+    over three noise draws."""
     sim = simulate(duration=60.0, step=0.01)
     for seed in range(3):
         found = noticeable_time_offset(make_log(sim, offset=offset, noise=(0.002, 0.002),
@@ -538,6 +541,21 @@ def test_noticeable_time_offset(offset, noticed):
             assert found is not None and abs(found - offset) < 1e-3
         else:
             assert found is None
+
+
+@pytest.mark.parametrize("duration, low, high", [(240.0, 0.67, 1.5), (60.0, 1.0, 3.0)])
+def test_time_offset_uncertainty_matches_the_scatter_over_noise_draws(duration, low, high):
+    """The batch-means standard error against the rms error of the offset over 12 noise draws
+    (1 cm, 10 mrad): about equal on 4-minute logs, cautious (higher, at most 3x) on 1-minute
+    logs, whose blocks are short."""
+    sim = simulate(duration=duration, step=0.01)
+    errors, reported = [], []
+    for seed in range(12):
+        fit = _estimate(make_log(sim, offset=0.1, noise=(0.01, 0.01), seed=seed), 1.0, 0.5)
+        errors.append(fit.offset - 0.1)
+        reported.append(_offset_uncertainty(fit))
+    ratio = float(np.median(reported)) / math.sqrt(float(np.mean(np.square(errors))))
+    assert low < ratio < high
 
 
 def test_noticeable_time_offset_is_silent_without_an_estimate():
