@@ -4,11 +4,14 @@ into the segments the calibrator takes.
 Streams, clocks and frames
 --------------------------
 * Encoder stream: times ``t_enc`` (s, the encoder clock) and cumulative wheel angles
-  ``phi_L``, ``phi_R`` (rad, positive when the wheel drives the robot forward).
+  ``phi_L``, ``phi_R`` (rad, positive when the wheel drives the robot forward). Angles wrapped
+  to [-pi, pi] (continuous joints that some drivers report modulo 2 pi) are unwrapped and the
+  segmentation report says so; an error when they are sampled too slowly to unwrap.
 * Pose stream: times ``t_pose`` (s, the pose sensor's clock) and the sensor's pose in the
   world frame: ``x``, ``y`` (m) and ``theta`` (rad, unwrapped; a wrapped input is unwrapped).
 * The clocks differ by a constant ``time_offset`` (s): pose time + time_offset = encoder time.
-  :func:`estimate_time_offset` finds it from the data.
+  :func:`estimate_time_offset` finds it from the data; :func:`noticeable_time_offset` tells
+  whether it is clearly not zero.
 
 Synchronisation (one choice, everywhere)
 ----------------------------------------
