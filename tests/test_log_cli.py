@@ -117,6 +117,30 @@ def test_an_unflagged_clock_offset_is_noted_and_changes_nothing(capsys, tmp_path
     assert json.loads(given)["params"] == json.loads(out)["params"]
 
 
+def test_wrapped_wheel_angles_through_the_cli(capsys, tmp_path):
+    """A log whose wheel angles are wrapped to [-pi, pi) calibrates as the cumulative one, and
+    its description says they were unwrapped."""
+    series = synthetic_log(np.random.default_rng(5), 60, TRUTH, SENSOR, encoder_rate=50.0,
+                           pose_rate=50.0, pose_noise=(0.002, 0.002)).series
+    assert np.array_equal(series.t_enc, series.t_pose)
+    wrap = lambda phi: np.angle(np.exp(1j * phi))  # noqa: E731
+    columns = (series.t_enc, wrap(series.phi_L), wrap(series.phi_R), series.x, series.y,
+               series.theta)
+    wrapped, plain = tmp_path / "wrapped.csv", tmp_path / "plain.csv"
+    np.savetxt(wrapped, np.column_stack(columns), delimiter=",", fmt="%.17g",
+               header="t,phi_L,phi_R,x,y,theta", comments="")
+    write_timeseries(plain, series)
+    code, out, _ = run_cli(capsys, "calibrate", wrapped, "--json")
+    assert code == 0
+    report = json.loads(out)
+    assert "phi_L, phi_R wrapped to [-pi, pi], unwrapped" in report["inputs"][0]
+    _, reference, _ = run_cli(capsys, "calibrate", plain, "--json")
+    reference = json.loads(reference)
+    assert "unwrapped" not in reference["inputs"][0]
+    for name, value in reference["params"].items():
+        assert abs(report["params"][name] - value) < 1e-9
+
+
 def test_a_lone_stream_file_names_what_is_missing(capsys, tmp_path):
     encoders = tmp_path / "enc.csv"
     encoders.write_text("t,phi_L,phi_R\n0,0,0\n1,1,1\n")
