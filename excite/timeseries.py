@@ -76,6 +76,8 @@ from excite.errors import DataError
 __all__ = [
     "Gap",
     "Limits",
+    "OffsetHint",
+    "OffsetOutOfRange",
     "SegmentationReport",
     "SegmentedLog",
     "TimeSeries",
@@ -643,6 +645,16 @@ def _explained(turn: FloatArray, left: FloatArray, right: FloatArray, max_lag: i
 CLEARLY_BETTER = 0.5
 
 
+class OffsetOutOfRange(DataError):
+    """The clock offset is not within estimate_time_offset's search range. candidates: the lags
+    (s) outside it that fit far better, nearest zero first (several when the motion repeats);
+    empty when the best fit is merely at the edge of the range."""
+
+    def __init__(self, message: str, candidates: Sequence[float] = ()) -> None:
+        super().__init__(message)
+        self.candidates = tuple(candidates)
+
+
 def _refuse_better_fit_outside(signals: tuple[FloatArray, FloatArray, FloatArray], step: float,
                                max_lag: int, max_offset: float, overlap: float) -> None:
     """DataError when a lag beyond +-max_lag fits clearly better (CLEARLY_BETTER) than every
@@ -666,9 +678,9 @@ def _refuse_better_fit_outside(signals: tuple[FloatArray, FloatArray, FloatArray
                    for a, b in runs), key=abs)
     where = " or ".join(f"{lag:+.2f} s" for lag in lags[:3])
     repeats = "; the motion repeats, so each fits about as well" if len(lags) > 1 else ""
-    raise DataError(f"cannot estimate the time offset: it is not within +-{max_offset} s (the "
-                    f"streams agree far better near {where}{repeats}; widen the search range: "
-                    "--max-time-offset)")
+    raise OffsetOutOfRange(f"cannot estimate the time offset: it is not within +-{max_offset} "
+                           f"s (the streams agree far better near {where}{repeats}; widen the "
+                           "search range: --max-time-offset)", lags)
 
 
 def _refined_lag(r2: FloatArray, max_lag: int, step: float) -> float:
@@ -752,8 +764,9 @@ def _estimate(ts: TimeSeries, max_offset: float, min_correlation: float) -> _Off
                         f"agree poorly (correlation {correlation:.2f} < {min_correlation})")
     offset = _refined_lag(r2, max_lag, step)
     if math.isnan(offset):
-        raise DataError(f"cannot estimate the time offset: it is not within +-{max_offset} s "
-                        "(the best fit is at the edge of the search range: --max-time-offset)")
+        raise OffsetOutOfRange(f"cannot estimate the time offset: it is not within "
+                               f"+-{max_offset} s (the best fit is at the edge of the search "
+                               "range: --max-time-offset)")
     return _OffsetFit(offset, signals, step, max_lag)
 
 
@@ -799,19 +812,42 @@ OFFSET_SIGMAS = 3.0
 NOTICEABLE_OFFSET_PERIODS = 0.25
 
 
+@dataclass(frozen=True)
+class OffsetHint:
+    """A clock offset the data suggest although none was given (s; pose time + offset =
+    encoder time): ``offset``, the estimate, clearly not zero and within the search range
+    +-``max_offset``; or, when the offset lies beyond that range, ``offset`` None and
+    ``beyond`` the lags there that fit far better, nearest zero first (empty when the best
+    fit is merely at the range's edge)."""
+
+    offset: float | None
+    max_offset: float
+    beyond: tuple[float, ...] = ()
+
+    def text(self) -> str:
+        """The hint in words, e.g. 'the data suggest -0.1502 s: --time-offset estimate'."""
+        if self.offset is not None:
+            return f"the data suggest {self.offset:+.4f} s: --time-offset estimate"
+        near = f" (near {' or '.join(f'{lag:+.2f} s' for lag in self.beyond[:3])})"
+        return (f"the data suggest an offset beyond +-{self.max_offset:g} s"
+                f"{near if self.beyond else ''}: --time-offset estimate --max-time-offset S")
+
+
 def noticeable_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET
-                           ) -> float | None:
-    """The estimated clock offset (s; pose time + offset = encoder time) when it is clearly
-    not zero (OFFSET_SIGMAS, NOTICEABLE_OFFSET_PERIODS); None when it is not, or when it
-    cannot be estimated (too little turning, too short an overlap, or not within +-max_offset
-    s: see :func:`estimate_time_offset`)."""
+                           ) -> OffsetHint | None:
+    """What the data say about the clock offset when none was given: a hint when the estimate
+    is clearly not zero (OFFSET_SIGMAS, NOTICEABLE_OFFSET_PERIODS) or lies beyond +-max_offset
+    s; None when it is near zero or cannot be estimated (too little turning, too short an
+    overlap: see :func:`estimate_time_offset`)."""
     try:
         fit = _estimate(ts, max_offset, MIN_CORRELATION)
+    except OffsetOutOfRange as exc:
+        return OffsetHint(None, max_offset, exc.candidates)
     except DataError:
         return None
     period = max(float(np.median(np.diff(ts.t_enc))), float(np.median(np.diff(ts.t_pose))))
     limit = max(NOTICEABLE_OFFSET_PERIODS * period, OFFSET_SIGMAS * _offset_uncertainty(fit))
-    return fit.offset if abs(fit.offset) > limit else None
+    return OffsetHint(fit.offset, max_offset) if abs(fit.offset) > limit else None
 
 
 # --------------------------------------------------------------------------- segmentation

@@ -104,8 +104,8 @@ def test_an_unflagged_clock_offset_is_noted_and_changes_nothing(capsys, tmp_path
     code, out, err = run_cli(capsys, "calibrate", path, "--json")
     assert code in (0, 3, 4)
     notes = [line for line in err.splitlines() if line.startswith("excite: note:")]
-    assert len(notes) == 1 and str(path) in notes[0] and "offset by +0.15" in notes[0]
-    assert "--time-offset estimate" in notes[0]
+    assert len(notes) == 1 and str(path) in notes[0] and "0 is used" in notes[0]
+    assert "the data suggest +0.15" in notes[0] and "--time-offset estimate" in notes[0]
     report = json.loads(out)
     assert "time offset +0.0000 s (default; the data suggest +0.15" in report["inputs"][0]
     _, given, _ = run_cli(capsys, "calibrate", path, "--time-offset", "0", "--json")

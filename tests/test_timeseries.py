@@ -538,7 +538,8 @@ def test_noticeable_time_offset(offset, noticed):
         found = noticeable_time_offset(make_log(sim, offset=offset, noise=(0.002, 0.002),
                                                 seed=seed))
         if noticed:
-            assert found is not None and abs(found - offset) < 1e-3
+            assert found is not None and abs(found.offset - offset) < 1e-3
+            assert found.text() == f"the data suggest {found.offset:+.4f} s: --time-offset estimate"
         else:
             assert found is None
 
@@ -556,6 +557,15 @@ def test_time_offset_uncertainty_matches_the_scatter_over_noise_draws(duration, 
         reported.append(_offset_uncertainty(fit))
     ratio = float(np.median(reported)) / math.sqrt(float(np.mean(np.square(errors))))
     assert low < ratio < high
+
+
+def test_noticeable_time_offset_beyond_the_search_range():
+    """An offset of 2 s, outside +-1 s: the hint names the lag that fits far better."""
+    hint = noticeable_time_offset(make_log(simulate(duration=30.0, step=0.01), offset=2.0,
+                                           noise=(0.002, 0.002), seed=1))
+    assert hint is not None and hint.offset is None and abs(hint.beyond[0] - 2.0) < 0.02
+    assert hint.text() == ("the data suggest an offset beyond +-1 s (near +2.00 s): "
+                           "--time-offset estimate --max-time-offset S")
 
 
 def test_noticeable_time_offset_is_silent_without_an_estimate():

@@ -19,7 +19,7 @@ from typing import Literal
 
 from excite.commands.args import UsageError
 from excite.data import Segments
-from excite.timeseries import MAX_TIME_OFFSET, SegmentedLog, TimeSeries
+from excite.timeseries import MAX_TIME_OFFSET, OffsetHint, SegmentedLog, TimeSeries
 
 __all__ = ["Log", "Input", "Part", "add_log_options", "group_inputs", "read_log",
            "segment_log", "segment_inputs"]
@@ -43,21 +43,19 @@ class Log:
     """A time-series log read from an input, with the clock offset used for it (s; pose time
     + offset = encoder time) and where that offset came from: "given" (--time-offset S),
     "estimated" (--time-offset estimate) or "default" (none given: 0). With the default,
-    suggested_offset is the offset the data suggest when it is clearly not zero
+    hint says what offset the data suggest when it is clearly not zero
     (excite.timeseries.noticeable_time_offset), else None."""
 
     name: str
     series: TimeSeries
     time_offset: float
     offset_source: Literal["given", "estimated", "default"]
-    suggested_offset: float | None = None
+    hint: OffsetHint | None = None
 
     def offset_text(self) -> str:
         """The offset and its source, e.g. '+0.0000 s (default; the data suggest -0.1502 s:
         --time-offset estimate)'."""
-        how = self.offset_source
-        if self.suggested_offset is not None:
-            how += f"; the data suggest {self.suggested_offset:+.4f} s: --time-offset estimate"
+        how = self.offset_source + (f"; {self.hint.text()}" if self.hint is not None else "")
         return f"{self.time_offset:+.4f} s ({how})"
 
 
@@ -194,12 +192,12 @@ def read_log(args: argparse.Namespace, source: Input) -> Log:
                    estimate_time_offset(series, max_offset=args.max_time_offset), "estimated")
     if args.time_offset is not None:
         return Log(source.name, series, float(args.time_offset), "given")
-    suggested = noticeable_time_offset(series, max_offset=args.max_time_offset)
-    if suggested is not None:
+    hint = noticeable_time_offset(series, max_offset=args.max_time_offset)
+    if hint is not None:
         print(f"excite: note: {source.name}: the clocks of the encoder and pose streams seem "
-              f"offset by {suggested:+.4f} s (pose time + offset = encoder time); used "
-              "without an offset, give --time-offset estimate", file=sys.stderr)
-    return Log(source.name, series, 0.0, "default", suggested)
+              f"offset (pose time + offset = encoder time), but none was given and 0 is used; "
+              f"{hint.text()}", file=sys.stderr)
+    return Log(source.name, series, 0.0, "default", hint)
 
 
 def segment_log(args: argparse.Namespace, log: Log) -> SegmentedLog:
