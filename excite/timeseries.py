@@ -4,11 +4,14 @@ into the segments the calibrator takes.
 Streams, clocks and frames
 --------------------------
 * Encoder stream: times ``t_enc`` (s, the encoder clock) and cumulative wheel angles
-  ``phi_L``, ``phi_R`` (rad, positive when the wheel drives the robot forward).
+  ``phi_L``, ``phi_R`` (rad, positive when the wheel drives the robot forward). Angles wrapped
+  to [-pi, pi] (continuous joints that some drivers report modulo 2 pi) are unwrapped and the
+  segmentation report says so; an error when they are sampled too slowly to unwrap.
 * Pose stream: times ``t_pose`` (s, the pose sensor's clock) and the sensor's pose in the
   world frame: ``x``, ``y`` (m) and ``theta`` (rad, unwrapped; a wrapped input is unwrapped).
 * The clocks differ by a constant ``time_offset`` (s): pose time + time_offset = encoder time.
-  :func:`estimate_time_offset` finds it from the data.
+  :func:`estimate_time_offset` finds it from the data; :func:`noticeable_time_offset` tells
+  whether it is clearly not zero.
 
 Synchronisation (one choice, everywhere)
 ----------------------------------------
@@ -47,6 +50,10 @@ Detection, never silent averaging (all of it in :class:`SegmentationReport`)
 * Standstills: segments in which neither wheel turned more than ``Limits.still_wheel`` and the
   sensor neither moved ``Limits.still_distance`` nor turned ``Limits.still_heading``; dropped
   (they carry noise, no information about r_L, r_R, b).
+* Carried: segments in which neither wheel turned more than ``Limits.still_wheel`` while the
+  sensor moved or turned far beyond the pose noise (``Limits.carry_sigmas``; the noise is
+  estimated from the pose stream itself): the robot was carried or pushed, or the pose source
+  relocalised; dropped.
 """
 
 from __future__ import annotations
@@ -69,10 +76,13 @@ from excite.errors import DataError
 __all__ = [
     "Gap",
     "Limits",
+    "OffsetHint",
+    "OffsetOutOfRange",
     "SegmentationReport",
     "SegmentedLog",
     "TimeSeries",
     "estimate_time_offset",
+    "noticeable_time_offset",
     "is_timeseries_csv",
     "tick_angle",
     "timeseries_streams",
@@ -98,6 +108,7 @@ _SPACE_AROUND_COMMA = re.compile(r"[ \t]*,[ \t]*")
 
 # Drop reasons (SegmentationReport keys).
 POSE_JUMP, ENCODER_JUMP, STANDSTILL = "pose jump", "encoder jump", "standstill"
+CARRIED = "pose moved while the wheels stood still"
 CUT_BY_GAP, END_OF_LOG = "cut by a gap", "end of log"
 OUTSIDE_ENCODERS, INSIDE_ENCODER_GAP = "outside the encoder time range", "inside an encoder gap"
 #: A stream interval over this many median periods has missed samples (a dropout).
@@ -151,6 +162,36 @@ def _checked_stream(kind: Stream, source: str, lines: IntArray | None,
     return arrays
 
 
+#: Wheel angles that never leave [-pi, pi] by more than this (rad) may be wrapped: continuous
+#: joints that some drivers report modulo 2 pi.
+WRAP_TOLERANCE = 1e-3
+#: The largest wheel step between encoder samples (rad) that unwrapping trusts. np.unwrap takes
+#: the step within +-pi, right while the wheel turns less than pi per sample; a wheel that sped
+#: up past pi per sample would pass through steps between pi/2 and pi first (unless its step
+#: changed by over pi/2 from one sample to the next), so a step over pi/2 means the stream is
+#: sampled too slowly to unwrap reliably.
+MAX_UNWRAPPED_STEP = 0.5 * math.pi
+
+
+def _unwrapped_wheel(source: str, lines: IntArray | None, t: FloatArray, name: str,
+                     phi: FloatArray) -> FloatArray | None:
+    """The wheel angles unwrapped when they are wrapped (all within [-pi, pi] up to
+    WRAP_TOLERANCE, and some step between samples over pi); None when they are not wrapped.
+    DataError naming the sample when a step after unwrapping exceeds MAX_UNWRAPPED_STEP."""
+    steps = np.abs(np.diff(phi))
+    if np.abs(phi).max() > math.pi + WRAP_TOLERANCE or not (steps > math.pi).any():
+        return None
+    unwrapped = np.unwrap(phi)
+    fast = np.abs(np.diff(unwrapped))
+    i = int(np.argmax(fast))
+    if fast[i] > MAX_UNWRAPPED_STEP:
+        raise DataError(f"{_where(source, lines, t, i + 1)}: the wheel angles {name} are "
+                        f"wrapped to [-pi, pi] and sampled too slowly to unwrap (a step of "
+                        f"{fast[i]:.2f} rad after unwrapping, over pi/2): record them "
+                        "unwrapped or more often")
+    return unwrapped
+
+
 @dataclass(frozen=True, eq=False)
 class TimeSeries:
     """The encoder and pose streams of one recording, validated.
@@ -162,6 +203,9 @@ class TimeSeries:
     source: (encoder source, pose source) for messages: file names, or bag and topic.
     lines: (encoder lines, pose lines): each sample's line in its file, or None (messages then
     name the sample's time).
+    unwrapped_wheels: the wheel columns (of "phi_L", "phi_R") that were wrapped to [-pi, pi]
+    (continuous joints reported modulo 2 pi) and are unwrapped here; DataError when such a
+    stream is sampled too slowly to unwrap (see MAX_UNWRAPPED_STEP).
     """
 
     t_enc: FloatArray
@@ -173,6 +217,7 @@ class TimeSeries:
     theta: FloatArray
     source: tuple[str, str] = ("encoders", "poses")
     lines: tuple[IntArray | None, IntArray | None] = (None, None)
+    unwrapped_wheels: tuple[str, ...] = field(default=(), init=False)
 
     def __post_init__(self) -> None:
         lines = tuple(None if a is None else np.asarray(a, dtype=np.int64).reshape(-1)
@@ -184,6 +229,13 @@ class TimeSeries:
         pose = _checked_stream("pose", self.source[1], lines[1], {
             "t": self.t_pose, "x": self.x, "y": self.y, "theta": self.theta})
         pose[3] = np.unwrap(pose[3])
+        unwrapped = []
+        for k, name in enumerate(ANGLE_COLUMNS, start=1):
+            wheel = _unwrapped_wheel(self.source[0], lines[0], encoder[0], name, encoder[k])
+            if wheel is not None:
+                encoder[k] = wheel
+                unwrapped.append(name)
+        object.__setattr__(self, "unwrapped_wheels", tuple(unwrapped))
         names = ("t_enc", "phi_L", "phi_R", "t_pose", "x", "y", "theta")
         for name, array in zip(names, encoder + pose, strict=True):
             array.setflags(write=False)
@@ -583,8 +635,73 @@ def _explained(turn: FloatArray, left: FloatArray, right: FloatArray, max_lag: i
     return (c0 * c0 * g11 - 2.0 * c0 * c1 * g01 + c1 * c1 * g00) / (g00 * g11 - g01**2) / energy
 
 
-def estimate_time_offset(ts: TimeSeries, max_offset: float = 1.0,
-                         min_correlation: float = 0.5) -> float:
+#: A lag outside the search range fits clearly better than every lag inside it when it leaves
+#: at most this fraction of the heading rate's variance that the best lag inside leaves
+#: unexplained. Robot motions often repeat (a protocol's period of a few seconds), so lags a
+#: period apart fit almost equally well (within a few percent in the unexplained variance);
+#: halving it is not chance: with ~100 independent samples of the turn rate (a minute of
+#: turning that changes every ~0.5 s) a variance ratio of 2 is beyond F(100, 100)'s 99.9 %
+#: quantile (1.87); on shorter or smoother logs the test is looser.
+CLEARLY_BETTER = 0.5
+
+
+class OffsetOutOfRange(DataError):
+    """The clock offset is not within estimate_time_offset's search range. candidates: the lags
+    (s) outside it that fit far better, nearest zero first (several when the motion repeats);
+    empty when the best fit is merely at the edge of the range."""
+
+    def __init__(self, message: str, candidates: Sequence[float] = ()) -> None:
+        super().__init__(message)
+        self.candidates = tuple(candidates)
+
+
+def _refuse_better_fit_outside(signals: tuple[FloatArray, FloatArray, FloatArray], step: float,
+                               max_lag: int, max_offset: float, overlap: float) -> None:
+    """DataError when a lag beyond +-max_lag fits clearly better (CLEARLY_BETTER) than every
+    lag within it: the offset is then outside the search range, and the best lag inside only a
+    lesser local optimum. Lags are scanned as far as the comparison keeps half the overlap
+    (+-overlap / 4)."""
+    wide_lag = int(overlap / 4.0 / step)
+    if wide_lag <= max_lag:
+        return
+    unexplained = 1.0 - _explained(*signals, wide_lag)
+    outside = np.ones(unexplained.size, dtype=bool)
+    outside[wide_lag - max_lag: wide_lag + max_lag + 1] = False
+    best_inside, best_outside = unexplained[~outside].min(), unexplained[outside].min()
+    if not best_outside < CLEARLY_BETTER * best_inside:
+        return
+    # where to look: the runs of lags outside not clearly worse than the best there, nearest
+    # zero first; several when the motion repeats (lags a period apart fit about as well)
+    near = outside & (CLEARLY_BETTER * unexplained <= best_outside)
+    runs = np.flatnonzero(np.diff(np.concatenate(([0], near.astype(np.int8), [0])))).reshape(-1, 2)
+    lags = sorted(((int(a) + int(np.argmin(unexplained[a:b])) - wide_lag) * step
+                   for a, b in runs), key=abs)
+    where = " or ".join(f"{lag:+.2f} s" for lag in lags[:3])
+    repeats = "; the motion repeats, so each fits about as well" if len(lags) > 1 else ""
+    raise OffsetOutOfRange(f"cannot estimate the time offset: it is not within +-{max_offset} "
+                           f"s (the streams agree far better near {where}{repeats}; widen the "
+                           "search range: --max-time-offset)", lags)
+
+
+def _refined_lag(r2: FloatArray, max_lag: int, step: float) -> float:
+    """The lag (s) of the largest R^2 (index k of lags -max_lag..max_lag, spacing ``step``),
+    refined by a parabola through the three values around it; NaN at the edge."""
+    k = int(np.argmax(r2))
+    if k in (0, r2.size - 1):
+        return math.nan
+    curvature = r2[k - 1] - 2.0 * r2[k] + r2[k + 1]
+    shift = 0.5 * (r2[k - 1] - r2[k + 1]) / curvature if curvature < 0 else 0.0
+    return (k - max_lag + shift) * step
+
+
+#: The default search range of estimate_time_offset: +- this (s).
+MAX_TIME_OFFSET = 1.0
+#: The default least correlation of estimate_time_offset's best fit.
+MIN_CORRELATION = 0.5
+
+
+def estimate_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET,
+                         min_correlation: float = MIN_CORRELATION) -> float:
     """The clock offset (s) with pose time + offset = encoder time.
 
     The heading rate of the poses is a fixed linear combination of the wheel rates,
@@ -603,28 +720,134 @@ def estimate_time_offset(ts: TimeSeries, max_offset: float = 1.0,
     over the log: from a noisy 2-minute log (100 Hz encoders, 50 Hz poses with 2 mm / 2 mrad
     noise) the error is at most 0.015 h over five noise draws; the tests require 0.05 h.
 
-    Raises DataError when the heading or the wheel speeds do not vary, when the streams overlap
-    for less than 4 max_offset, when the best fit's correlation sqrt(R^2) is below
-    ``min_correlation`` (no clear agreement), or when the best lag is at the edge of the
-    search range.
+    An offset outside the search range shows as a best lag at its edge or, as often (the fit
+    has local optima), as a lesser optimum inside it: so lags up to +-overlap/4 are scanned as
+    well, and a lag there that fits clearly better (CLEARLY_BETTER) than every lag inside
+    makes it an error.
+
+    Raises DataError when max_offset is not positive and finite, when the heading or the wheel
+    speeds do not vary, when the streams overlap for less than 4 max_offset, when the best
+    fit's correlation sqrt(R^2) is below ``min_correlation`` (no clear agreement), when the
+    best lag is at the edge of the search range, or when a lag outside it fits clearly better.
     """
+    return _estimate(ts, max_offset, min_correlation).offset
+
+
+@dataclass(frozen=True)
+class _OffsetFit:
+    """An estimated offset (s) and what it came from: the rate signals on their grid of
+    spacing ``step`` (s) and the search range in grid steps."""
+
+    offset: float
+    signals: tuple[FloatArray, FloatArray, FloatArray]
+    step: float
+    max_lag: int
+
+
+def _estimate(ts: TimeSeries, max_offset: float, min_correlation: float) -> _OffsetFit:
+    """estimate_time_offset, keeping the signals it fitted."""
+    if not 0 < max_offset < math.inf:
+        raise DataError(f"max_offset must be positive and finite (s), got {max_offset}")
     step = float(min(np.median(np.diff(ts.t_enc)), np.median(np.diff(ts.t_pose))))
     overlap = min(ts.t_enc[-1], ts.t_pose[-1]) - max(ts.t_enc[0], ts.t_pose[0])
     if not overlap > 4 * max_offset:
         raise DataError(f"cannot estimate the time offset: the streams overlap for "
                         f"{max(overlap, 0.0):.3g} s, less than 4 x max_offset ({max_offset} s)")
     max_lag = max(1, int(math.ceil(max_offset / step)))
-    r2 = _explained(*_rate_signals(ts, step), max_lag)
+    signals = _rate_signals(ts, step)
+    r2 = _explained(*signals, max_lag)
+    _refuse_better_fit_outside(signals, step, max_lag, max_offset, overlap)
     k = int(np.argmax(r2))
     correlation = math.sqrt(max(float(r2[k]), 0.0))
     if correlation < min_correlation:
         raise DataError(f"cannot estimate the time offset: heading rate and wheel speeds "
                         f"agree poorly (correlation {correlation:.2f} < {min_correlation})")
-    if k in (0, r2.size - 1):
-        raise DataError(f"cannot estimate the time offset: it is not within +-{max_offset} s")
-    curvature = r2[k - 1] - 2.0 * r2[k] + r2[k + 1]
-    shift = 0.5 * (r2[k - 1] - r2[k + 1]) / curvature if curvature < 0 else 0.0
-    return (k - max_lag + shift) * step
+    offset = _refined_lag(r2, max_lag, step)
+    if math.isnan(offset):
+        raise OffsetOutOfRange(f"cannot estimate the time offset: it is not within "
+                               f"+-{max_offset} s (the best fit is at the edge of the search "
+                               "range: --max-time-offset)")
+    return _OffsetFit(offset, signals, step, max_lag)
+
+
+#: Blocks of the log whose separate offset estimates measure the estimate's uncertainty.
+OFFSET_BLOCKS = 8
+
+
+def _offset_uncertainty(fit: _OffsetFit) -> float:
+    """Standard error (s) of an estimated offset by batch means: the heading rate's compared
+    (central) part split into OFFSET_BLOCKS consecutive blocks, each fitted alone against the
+    wheel rates at every lag (the blocks' comparisons together are the whole estimate's), and
+    the spread of their offsets (1.4826 x the median absolute deviation, robust to one block
+    fooled by a lesser optimum) over sqrt(blocks). Blocks shorter than twice the search range
+    or without turning are left out; inf with fewer than 3 block estimates. On simulated
+    4-minute logs (30 s blocks) it matches the estimates' scatter over noise draws; on 1-minute
+    logs (7.5 s blocks) it reads about twice that (short blocks fit worse): cautious."""
+    size, lag = fit.signals[0].size, fit.max_lag
+    edges = np.linspace(lag, size - lag, OFFSET_BLOCKS + 1).astype(np.int64)
+    lags = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        if b - a > 2 * lag:
+            try:
+                r2 = _explained(*(signal[a - lag: b + lag] for signal in fit.signals), lag)
+            except DataError:  # a block without turning
+                continue
+            lags.append(_refined_lag(r2, lag, fit.step))
+    block = np.asarray(lags)
+    block = block[np.isfinite(block)]
+    if block.size < 3:
+        return math.inf
+    spread = 1.4826 * float(np.median(np.abs(block - np.median(block))))
+    return spread / math.sqrt(block.size)
+
+
+#: An estimated clock offset is clearly not zero when it exceeds both OFFSET_SIGMAS standard
+#: errors (_offset_uncertainty: noise) and NOTICEABLE_OFFSET_PERIODS of the coarser stream's
+#: median sample period (bias: interpolating a coarse stream shifts the estimate a little; on
+#: logs recorded without an offset, simulated at 10-100 Hz with noise and ticks, it stayed
+#: within 0.08 of that period, e.g. -7 ms for 10 Hz encoders under 100 Hz poses, 11 standard
+#: errors). A quarter period matters: on a one-minute log (50 Hz encoders, 100 Hz poses) a 5 ms
+#: offset moved the estimates by up to 1.6 standard deviations, 10 ms by up to 3.3.
+OFFSET_SIGMAS = 3.0
+NOTICEABLE_OFFSET_PERIODS = 0.25
+
+
+@dataclass(frozen=True)
+class OffsetHint:
+    """A clock offset the data suggest although none was given (s; pose time + offset =
+    encoder time): ``offset``, the estimate, clearly not zero and within the search range
+    +-``max_offset``; or, when the offset lies beyond that range, ``offset`` None and
+    ``beyond`` the lags there that fit far better, nearest zero first (empty when the best
+    fit is merely at the range's edge)."""
+
+    offset: float | None
+    max_offset: float
+    beyond: tuple[float, ...] = ()
+
+    def text(self) -> str:
+        """The hint in words, e.g. 'the data suggest -0.1502 s: --time-offset estimate'."""
+        if self.offset is not None:
+            return f"the data suggest {self.offset:+.4f} s: --time-offset estimate"
+        near = f" (near {' or '.join(f'{lag:+.2f} s' for lag in self.beyond[:3])})"
+        return (f"the data suggest an offset beyond +-{self.max_offset:g} s"
+                f"{near if self.beyond else ''}: --time-offset estimate --max-time-offset S")
+
+
+def noticeable_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET
+                           ) -> OffsetHint | None:
+    """What the data say about the clock offset when none was given: a hint when the estimate
+    is clearly not zero (OFFSET_SIGMAS, NOTICEABLE_OFFSET_PERIODS) or lies beyond +-max_offset
+    s; None when it is near zero or cannot be estimated (too little turning, too short an
+    overlap: see :func:`estimate_time_offset`)."""
+    try:
+        fit = _estimate(ts, max_offset, MIN_CORRELATION)
+    except OffsetOutOfRange as exc:
+        return OffsetHint(None, max_offset, exc.candidates)
+    except DataError:
+        return None
+    period = max(float(np.median(np.diff(ts.t_enc))), float(np.median(np.diff(ts.t_pose))))
+    limit = max(NOTICEABLE_OFFSET_PERIODS * period, OFFSET_SIGMAS * _offset_uncertainty(fit))
+    return OffsetHint(fit.offset, max_offset) if abs(fit.offset) > limit else None
 
 
 # --------------------------------------------------------------------------- segmentation
@@ -646,6 +869,12 @@ class Limits:
     still_wheel (rad), still_distance (m), still_heading (rad): a segment is a standstill when
         both wheels turned at most still_wheel and the sensor moved at most still_distance and
         turned at most still_heading.
+    carry_sigmas: a segment in which both wheels turned at most still_wheel, but the sensor
+        moved more than carry_sigmas standard deviations of the noise of a difference of two
+        poses (and more than still_distance), or turned likewise (and more than
+        still_heading), was carried: at 5, a still robot's noise passes it in about 4 of a
+        million segments (the Rayleigh tail exp(-5^2 / 2)). The pose noise is estimated from
+        the pose stream (:func:`_pose_noise`).
     """
 
     max_gap: float | None = None
@@ -655,6 +884,7 @@ class Limits:
     still_wheel: float = 0.02
     still_distance: float = 0.01
     still_heading: float = 0.01
+    carry_sigmas: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -690,7 +920,8 @@ class SegmentationReport:
     stretch). dropped_ranges: the time ranges of those segments per reason (s, encoder clock,
     adjacent ones merged). samples_dropped: pose samples unused, per reason (outside the
     encoder time range, inside an encoder gap). gaps: every gap, in time order. dropouts:
-    missed samples per stream, bridged.
+    missed samples per stream, bridged. unwrapped_wheels: the wheel columns that were wrapped
+    to [-pi, pi] and were unwrapped (TimeSeries.unwrapped_wheels).
     """
 
     n_segments: int
@@ -699,6 +930,13 @@ class SegmentationReport:
     samples_dropped: dict[str, int] = field(default_factory=dict)
     gaps: tuple[Gap, ...] = ()
     dropouts: dict[str, int] = field(default_factory=dict)
+    unwrapped_wheels: tuple[str, ...] = ()
+
+    def unwrapped_text(self) -> str:
+        """'phi_L, phi_R wrapped to [-pi, pi], unwrapped' ('' when no wheel was wrapped)."""
+        if not self.unwrapped_wheels:
+            return ""
+        return f"{', '.join(self.unwrapped_wheels)} wrapped to [-pi, pi], unwrapped"
 
     def counts_text(self) -> str:
         """What was dropped, in one line, e.g. '3 standstill, 1 pose jump; 25 pose samples
@@ -711,6 +949,8 @@ class SegmentationReport:
     def summary(self) -> str:
         """The report in words, one fact per line."""
         lines = [f"{_plural(self.n_segments, 'segment')} kept."]
+        if self.unwrapped_wheels:
+            lines.append(f"Wheel angles {self.unwrapped_text()}.")
         dropped = sum(self.segments_dropped.values())
         if dropped:
             lines.append(f"{_plural(dropped, 'segment')} dropped:")
@@ -747,11 +987,35 @@ class SegmentedLog:
 
 @dataclass(frozen=True)
 class _StreamCheck:
-    """Per-interval flags of one stream: gap (split there), jump; and its dropouts."""
+    """Per-interval flags of one stream: gap (split there), jump; its dropouts; for poses the
+    noise std of a single sample (m, rad)."""
 
     gap: BoolArray
     jump: BoolArray
     dropouts: int
+    noise: tuple[float, float] = (0.0, 0.0)
+
+
+#: The median of |N(0, 1)|: a robust std is the median absolute value / this.
+_MEDIAN_ABS_NORMAL = 0.6744897501960817
+
+
+def _pose_noise(ts: TimeSeries) -> tuple[float, float]:
+    """Robust std of the pose samples' noise (m for x and y pooled, rad for theta): each inner
+    sample minus the linear interpolation of its neighbours (exact for motion at a constant
+    velocity, whatever the spacing) has, with independent noise of std sigma and even
+    spacing, std sigma sqrt(3/2); the median absolute value of those residuals over
+    _MEDIAN_ABS_NORMAL sqrt(3/2) estimates sigma, unmoved by the few samples where the
+    motion changes abruptly. (0, 0) with fewer than 3 samples. Correlated noise reads low."""
+    if ts.t_pose.size < 3:
+        return 0.0, 0.0
+    t = ts.t_pose
+    weight = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
+    residual = [v[1:-1] - ((1.0 - weight) * v[:-2] + weight * v[2:])
+                for v in (ts.x, ts.y, ts.theta)]
+    scale = _MEDIAN_ABS_NORMAL * math.sqrt(1.5)
+    xy = float(np.median(np.abs(np.concatenate(residual[:2])))) / scale
+    return xy, float(np.median(np.abs(residual[2]))) / scale
 
 
 def _gap_flags(t: FloatArray, window: float, max_gap: float | None) -> tuple[BoolArray, int]:
@@ -778,7 +1042,7 @@ def _check_poses(ts: TimeSeries, window: float, limits: Limits) -> _StreamCheck:
     moved = np.hypot(np.diff(ts.x), np.diff(ts.y))
     turned = np.abs(np.diff(ts.theta))
     jump = (moved > limits.max_speed * dt) | (turned > limits.max_turn_rate * dt)
-    return _StreamCheck(gap, jump, missed)
+    return _StreamCheck(gap, jump, missed, _pose_noise(ts))
 
 
 def _gaps(ts: TimeSeries, encoders: _StreamCheck, poses: _StreamCheck) -> list[Gap]:
@@ -936,13 +1200,18 @@ def _drop_reasons(ts: TimeSeries, t_pose: FloatArray, cut: _Cut, rows: FloatArra
     """Per reason, which candidate segments to drop (a segment counts under its first
     reason only)."""
     pose_jumps = np.concatenate(([0], np.cumsum(poses.jump)))
+    wheels_still = np.abs(rows[:, :2]).max(axis=1, initial=0.0) <= limits.still_wheel
+    moved, turned = np.hypot(rows[:, 2], rows[:, 3]), np.abs(rows[:, 4])
+    # a difference of two poses has sqrt(2) times a sample's noise
+    far = max(limits.still_distance, limits.carry_sigmas * math.sqrt(2.0) * poses.noise[0])
+    turned_far = max(limits.still_heading, limits.carry_sigmas * math.sqrt(2.0) * poses.noise[1])
     reasons = {
         POSE_JUMP: pose_jumps[cut.end] > pose_jumps[cut.start],
         ENCODER_JUMP: _flagged_overlaps(ts.t_enc, encoders.jump, t_pose[cut.start],
                                         t_pose[cut.end]) > 0,
-        STANDSTILL: ((np.abs(rows[:, :2]).max(axis=1, initial=0.0) <= limits.still_wheel)
-                     & (np.hypot(rows[:, 2], rows[:, 3]) <= limits.still_distance)
-                     & (np.abs(rows[:, 4]) <= limits.still_heading)),
+        STANDSTILL: (wheels_still & (moved <= limits.still_distance)
+                     & (turned <= limits.still_heading)),
+        CARRIED: wheels_still & ((moved > far) | (turned > turned_far)),
     }
     taken = np.zeros(cut.start.size, dtype=bool)
     for reason, mask in reasons.items():
@@ -964,7 +1233,7 @@ def _merged(ranges: list[tuple[float, float]]) -> tuple[tuple[float, float], ...
 
 def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: int,
             stretches: _Stretches, gaps: list[Gap], encoders: _StreamCheck,
-            poses: _StreamCheck) -> SegmentationReport:
+            poses: _StreamCheck, unwrapped_wheels: tuple[str, ...]) -> SegmentationReport:
     ranges = {reason: [(t_pose[a], t_pose[b]) for a, b in zip(cut.start[mask], cut.end[mask],
                                                               strict=True)]
               for reason, mask in reasons.items()}
@@ -979,6 +1248,7 @@ def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: 
                          INSIDE_ENCODER_GAP: stretches.in_gap},
         gaps=tuple(gaps),
         dropouts={"encoder": encoders.dropouts, "pose": poses.dropouts},
+        unwrapped_wheels=unwrapped_wheels,
     )
 
 
@@ -1033,7 +1303,8 @@ def segment_timeseries(
     reasons = _drop_reasons(ts, t_pose, cut, rows, encoders, poses, limits)
     keep = ~np.logical_or.reduce(list(reasons.values()))
     start, end = cut.start[keep], cut.end[keep]
-    report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses)
+    report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses,
+                     ts.unwrapped_wheels)
     if report.n_segments < MIN_SEGMENTS:
         raise DataError(f"{ts.source[1]}: {report.n_segments} segment(s) after segmentation; "
                         f"at least {MIN_SEGMENTS} are needed (dropped: {report.counts_text()})")

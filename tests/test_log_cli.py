@@ -77,6 +77,70 @@ def test_bad_options_are_one_line_errors(capsys, logs, extra, message):
     assert code == 2 and message in err and err.count("\n") == 1
 
 
+def test_time_offset_estimate_and_its_search_range(capsys, tmp_path):
+    """A 2.5 s clock offset: outside the default search range (+-1 s) a one-line error; found
+    with --max-time-offset 3."""
+    series = synthetic_log(np.random.default_rng(3), 60, TRUTH, SENSOR,
+                           pose_noise=(0.002, 0.002)).series
+    path = tmp_path / "late.csv"
+    write_timeseries(path, dataclasses.replace(series, t_pose=series.t_pose - 2.5))
+    code, out, err = run_cli(capsys, "calibrate", path, "--time-offset", "estimate", "--json")
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "cannot estimate the time offset: it is not within +-1.0 s" in err
+    code, out, _ = run_cli(capsys, "calibrate", path, "--time-offset", "estimate",
+                           "--max-time-offset", "3", "--json")
+    assert code == 0
+    assert "time offset +2.500" in json.loads(out)["inputs"][0]
+
+
+def test_an_unflagged_clock_offset_is_noted_and_changes_nothing(capsys, tmp_path, logs):
+    """Without --time-offset, a log whose clocks are 0.15 s apart gets a one-line note on
+    stderr and the estimate in its JSON description, and is calibrated with offset 0 as
+    before; a log without an offset gets no note and the same result as --time-offset 0."""
+    series = synthetic_log(np.random.default_rng(4), 60, TRUTH, SENSOR,
+                           pose_noise=(0.002, 0.002)).series
+    path = tmp_path / "offset.csv"
+    write_timeseries(path, dataclasses.replace(series, t_pose=series.t_pose - 0.15))
+    code, out, err = run_cli(capsys, "calibrate", path, "--json")
+    assert code in (0, 3, 4)
+    notes = [line for line in err.splitlines() if line.startswith("excite: note:")]
+    assert len(notes) == 1 and str(path) in notes[0] and "0 is used" in notes[0]
+    assert "the data suggest +0.15" in notes[0] and "--time-offset estimate" in notes[0]
+    report = json.loads(out)
+    assert "time offset +0.0000 s (default; the data suggest +0.15" in report["inputs"][0]
+    _, given, _ = run_cli(capsys, "calibrate", path, "--time-offset", "0", "--json")
+    assert json.loads(given)["params"] == report["params"]
+    code, out, err = run_cli(capsys, "calibrate", logs[0], "--json")
+    assert code == 0 and "note" not in err
+    assert json.loads(out)["inputs"][0].endswith("time offset +0.0000 s (default)")
+    _, given, _ = run_cli(capsys, "calibrate", logs[0], "--time-offset", "0", "--json")
+    assert json.loads(given)["params"] == json.loads(out)["params"]
+
+
+def test_wrapped_wheel_angles_through_the_cli(capsys, tmp_path):
+    """A log whose wheel angles are wrapped to [-pi, pi) calibrates as the cumulative one, and
+    its description says they were unwrapped."""
+    series = synthetic_log(np.random.default_rng(5), 60, TRUTH, SENSOR, encoder_rate=50.0,
+                           pose_rate=50.0, pose_noise=(0.002, 0.002)).series
+    assert np.array_equal(series.t_enc, series.t_pose)
+    wrap = lambda phi: np.angle(np.exp(1j * phi))  # noqa: E731
+    columns = (series.t_enc, wrap(series.phi_L), wrap(series.phi_R), series.x, series.y,
+               series.theta)
+    wrapped, plain = tmp_path / "wrapped.csv", tmp_path / "plain.csv"
+    np.savetxt(wrapped, np.column_stack(columns), delimiter=",", fmt="%.17g",
+               header="t,phi_L,phi_R,x,y,theta", comments="")
+    write_timeseries(plain, series)
+    code, out, _ = run_cli(capsys, "calibrate", wrapped, "--json")
+    assert code == 0
+    report = json.loads(out)
+    assert "phi_L, phi_R wrapped to [-pi, pi], unwrapped" in report["inputs"][0]
+    _, reference, _ = run_cli(capsys, "calibrate", plain, "--json")
+    reference = json.loads(reference)
+    assert "unwrapped" not in reference["inputs"][0]
+    for name, value in reference["params"].items():
+        assert abs(report["params"][name] - value) < 1e-9
+
+
 def test_a_lone_stream_file_names_what_is_missing(capsys, tmp_path):
     encoders = tmp_path / "enc.csv"
     encoders.write_text("t,phi_L,phi_R\n0,0,0\n1,1,1\n")
@@ -101,6 +165,8 @@ GOOD_ROWS = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,5,5,0.25,0,0\n1.0,10,10,0
     (GOOD_ROWS + "1.5,nan,15,0.75,0,0\n", [], "log.csv:5: phi_L is not finite"),
     ("t,ticks_L,ticks_R,x,y,theta\n0,0,0,0,0,0\n", [],
      "log.csv:1: encoder ticks (ticks_L, ticks_R) need the encoder resolution"),
+    ("t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,1,1,0.1,0,0\n1.0,-2.5,-2.5,0.2,0,0\n", [],
+     "log.csv:4: the wheel angles phi_L are wrapped to [-pi, pi] and sampled too slowly"),
 ])
 def test_bad_log_files_through_the_cli(capsys, tmp_path, text, extra, fragment):
     path = tmp_path / "log.csv"

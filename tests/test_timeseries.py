@@ -8,6 +8,7 @@ off-axle sensor at SENSOR in the body frame; encoder and pose samples taken at f
 from __future__ import annotations
 
 import math
+import re
 import time
 from dataclasses import dataclass
 
@@ -17,6 +18,7 @@ import pytest
 from excite import DataError, Params, SensorPose, predict_increment
 from excite.models import body_to_sensor
 from excite.timeseries import (
+    CARRIED,
     CUT_BY_GAP,
     ENCODER_JUMP,
     END_OF_LOG,
@@ -26,8 +28,11 @@ from excite.timeseries import (
     STANDSTILL,
     Limits,
     TimeSeries,
+    _estimate,
+    _offset_uncertainty,
     estimate_time_offset,
     is_timeseries_csv,
+    noticeable_time_offset,
     read_timeseries,
     segment_timeseries,
 )
@@ -76,10 +81,14 @@ def smoothstep(u: np.ndarray) -> np.ndarray:
 
 
 def wheel_rates(t: np.ndarray, standstill: tuple[float, float] | None = None,
-                hold: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                hold: float | None = None, repeat: float | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Smooth wheel rates (rad/s): forward speed 0.1-0.4 m/s, turn rate within +-1.3 rad/s,
     optionally zero over ``standstill`` (s) with 1 s ramps, optionally held constant over
-    each interval of ``hold`` s (exact arcs per interval)."""
+    each interval of ``hold`` s (exact arcs per interval), optionally repeating every
+    ``repeat`` s (a motion protocol driven over and over)."""
+    if repeat is not None:
+        t = np.mod(t, repeat)
     if hold is not None:
         t = (np.floor(t / hold) + 0.5) * hold
     v = 0.25 + 0.15 * np.sin(2 * np.pi * t / 7.3)
@@ -143,11 +152,13 @@ def fmt(values: np.ndarray) -> list[str]:
     return [repr(float(v)) for v in values]
 
 
-def write_combined(path, ts: TimeSeries, encoder_names=("phi_L", "phi_R"), scale=1.0) -> None:
+def write_combined(path, ts: TimeSeries, encoder_names=("phi_L", "phi_R"), scale=1.0,
+                   wheels: tuple[np.ndarray, np.ndarray] | None = None) -> None:
     """One file with header t,<encoder names>,x,y,theta; empty cells where a stream has no
-    sample."""
+    sample. wheels: the wheel columns to write instead of the log's (at its encoder times)."""
     t = np.union1d(ts.t_enc, ts.t_pose)
-    enc = dict(zip(ts.t_enc, zip(fmt(ts.phi_L * scale), fmt(ts.phi_R * scale), strict=True),
+    left, right = wheels if wheels is not None else (ts.phi_L, ts.phi_R)
+    enc = dict(zip(ts.t_enc, zip(fmt(left * scale), fmt(right * scale), strict=True),
                    strict=True))
     pose = dict(zip(ts.t_pose, zip(fmt(ts.x), fmt(ts.y), fmt(ts.theta), strict=True),
                     strict=True))
@@ -221,6 +232,59 @@ def test_wrapped_headings_are_unwrapped(tmp_path, short_log):
     theta = read_timeseries(path).theta
     np.testing.assert_allclose(np.diff(theta), np.diff(spun.theta), atol=1e-12)
     assert -np.pi < theta[0] <= np.pi
+
+
+def write_wrapped(path, ts: TimeSeries) -> tuple[np.ndarray, np.ndarray]:
+    """Write the log with its wheel angles wrapped to [-pi, pi) (continuous joints reported
+    modulo 2 pi); the wrapped angles."""
+    wheels = (np.angle(np.exp(1j * ts.phi_L)), np.angle(np.exp(1j * ts.phi_R)))
+    write_combined(path, ts, wheels=wheels)
+    return wheels
+
+
+@pytest.mark.parametrize("every", [1, 5])
+def test_wrapped_wheel_angles_are_unwrapped_and_reported(tmp_path, sim, every):
+    """Wheels wrapped to [-pi, pi) at 100 Hz and at 20 Hz (a wrap jumps by ~2 pi, as an
+    encoder reset would): read back as the cumulative angles, segmented as the unwrapped log,
+    and the report says so."""
+    ts = make_log(sim, enc_every=every)
+    path = tmp_path / "log.csv"
+    wrapped, _ = write_wrapped(path, ts)
+    assert np.abs(np.diff(wrapped)).max() > 1.5 * np.pi  # it does wrap
+    read = read_timeseries(path)
+    assert read.unwrapped_wheels == ("phi_L", "phi_R")
+    for name in ("phi_L", "phi_R"):
+        np.testing.assert_allclose(np.diff(getattr(read, name)), np.diff(getattr(ts, name)),
+                                   rtol=0, atol=1e-12)
+    log, reference = segment_timeseries(read), segment_timeseries(ts)
+    assert log.report.segments_dropped == reference.report.segments_dropped
+    np.testing.assert_allclose(log.segments.as_array(), reference.segments.as_array(),
+                               rtol=0, atol=1e-9)
+    assert log.report.unwrapped_text() == "phi_L, phi_R wrapped to [-pi, pi], unwrapped"
+    assert "Wheel angles phi_L, phi_R wrapped to [-pi, pi], unwrapped." in log.report.summary()
+    assert reference.report.unwrapped_wheels == () and reference.report.unwrapped_text() == ""
+
+
+def test_wheel_angles_within_pi_that_do_not_wrap_are_kept():
+    """Cumulative wheel angles that stay within [-pi, pi] (no step over pi) are not touched."""
+    t = np.linspace(0.0, 10.0, 1001)
+    wheel = 0.3 * np.sin(t)
+    ts = TimeSeries(t, wheel, -wheel, t, 0 * t, 0 * t, 0.01 * np.sin(t))
+    assert ts.unwrapped_wheels == ()
+    np.testing.assert_array_equal(ts.phi_L, wheel)
+
+
+def test_wrapped_wheels_sampled_too_slowly_are_an_error_naming_the_line(tmp_path, sim):
+    """At 3.3 Hz the wheels turn up to ~3.5 rad (over pi) between samples: unwrapping would
+    guess, so reading refuses, naming the file and line."""
+    ts = make_log(sim, enc_every=30)
+    assert np.abs(np.diff(ts.phi_R)).max() > np.pi
+    path = tmp_path / "log.csv"
+    write_wrapped(path, ts)
+    with pytest.raises(DataError, match=rf"^{path}:\d+: the wheel angles phi_\w are wrapped to "
+                       r"\[-pi, pi\] and sampled too slowly to unwrap") as info:
+        read_timeseries(path)
+    assert "\n" not in str(info.value)
 
 
 def test_is_timeseries_csv(tmp_path):
@@ -427,6 +491,91 @@ def test_estimate_time_offset_refuses_an_offset_beyond_the_search_range(sim):
     assert abs(estimate_time_offset(make_log(sim, offset=1.5), max_offset=2.0) - 1.5) < 1e-4
 
 
+@pytest.mark.parametrize("offset", [-3.0, -2.0, 2.0, 3.0])
+def test_estimate_time_offset_refuses_an_offset_behind_a_lesser_optimum(sim, offset):
+    """2-3 s away, the fit within +-1 s peaks at a lesser local optimum inside the range (not
+    at its edge: -0.07 to 0.93 s were returned for these logs); lags further out fit clearly
+    better, so it is an error, and a wider search range finds the offset."""
+    ts = make_log(sim, offset=offset, noise=(0.002, 0.002), seed=1)
+    with pytest.raises(DataError, match=re.escape(
+            f"not within +-1.0 s (the streams agree far better near {offset:+.2f} s; widen the "
+            "search range")):
+        estimate_time_offset(ts)
+    assert abs(estimate_time_offset(ts, max_offset=3.5) - offset) < 1e-3
+
+
+def test_estimate_time_offset_with_a_repeated_motion():
+    """A motion repeating every 6 s fits about as well at lags 6 s apart: an offset inside the
+    range is still found (the repetitions outside are no better), and one outside is an error
+    naming the nearest candidates."""
+    sim = simulate(duration=40.0, step=0.01, repeat=6.0)
+    inside = make_log(sim, offset=0.4, noise=(0.002, 0.002), seed=2)
+    assert abs(estimate_time_offset(inside) - 0.4) < 1e-3
+    outside = make_log(sim, offset=-2.5, noise=(0.002, 0.002), seed=2)
+    with pytest.raises(DataError, match=re.escape(
+            "agree far better near -2.50 s or +3.50 s or -8.50 s; the motion repeats")):
+        estimate_time_offset(outside)
+
+
+@pytest.mark.parametrize("offset", [0.9, -0.95])
+def test_estimate_time_offset_near_the_edge_of_the_range(sim, offset):
+    """Offsets inside the range, near its edge, are still found (the wide scan finds nothing
+    clearly better outside)."""
+    ts = make_log(sim, offset=offset, noise=(0.002, 0.002), seed=1)
+    assert abs(estimate_time_offset(ts) - offset) < 1e-3
+    with pytest.raises(DataError, match="max_offset must be positive"):
+        estimate_time_offset(ts, max_offset=0.0)
+
+
+@pytest.mark.parametrize("offset, noticed", [(0.0, False), (0.004, False), (-0.004, False),
+                                             (0.008, True), (0.15, True), (-0.03, True)])
+def test_noticeable_time_offset(offset, noticed):
+    """Noisy logs (100 Hz encoders, 50 Hz poses: a quarter of the coarser period is 5 ms, and
+    3 standard errors ~1 ms): an offset beyond them is reported with its estimate, none within,
+    over three noise draws."""
+    sim = simulate(duration=60.0, step=0.01)
+    for seed in range(3):
+        found = noticeable_time_offset(make_log(sim, offset=offset, noise=(0.002, 0.002),
+                                                seed=seed))
+        if noticed:
+            assert found is not None and abs(found.offset - offset) < 1e-3
+            assert found.text() == f"the data suggest {found.offset:+.4f} s: --time-offset estimate"
+        else:
+            assert found is None
+
+
+@pytest.mark.parametrize("duration, low, high", [(240.0, 0.67, 1.5), (60.0, 1.0, 3.0)])
+def test_time_offset_uncertainty_matches_the_scatter_over_noise_draws(duration, low, high):
+    """The batch-means standard error against the rms error of the offset over 12 noise draws
+    (1 cm, 10 mrad): about equal on 4-minute logs, cautious (higher, at most 3x) on 1-minute
+    logs, whose blocks are short."""
+    sim = simulate(duration=duration, step=0.01)
+    errors, reported = [], []
+    for seed in range(12):
+        fit = _estimate(make_log(sim, offset=0.1, noise=(0.01, 0.01), seed=seed), 1.0, 0.5)
+        errors.append(fit.offset - 0.1)
+        reported.append(_offset_uncertainty(fit))
+    ratio = float(np.median(reported)) / math.sqrt(float(np.mean(np.square(errors))))
+    assert low < ratio < high
+
+
+def test_noticeable_time_offset_beyond_the_search_range():
+    """An offset of 2 s, outside +-1 s: the hint names the lag that fits far better."""
+    hint = noticeable_time_offset(make_log(simulate(duration=30.0, step=0.01), offset=2.0,
+                                           noise=(0.002, 0.002), seed=1))
+    assert hint is not None and hint.offset is None and abs(hint.beyond[0] - 2.0) < 0.02
+    assert hint.text() == ("the data suggest an offset beyond +-1 s (near +2.00 s): "
+                           "--time-offset estimate --max-time-offset S")
+
+
+def test_noticeable_time_offset_is_silent_without_an_estimate():
+    t = np.linspace(0, 30, 3001)
+    straight = TimeSeries(t, 10 * t, 10 * t, t - 0.2, 0.5 * t, 0 * t, 0 * t)
+    assert noticeable_time_offset(straight) is None  # the heading does not vary
+    with pytest.raises(DataError, match="heading does not vary"):
+        estimate_time_offset(straight)
+
+
 def test_estimate_time_offset_refuses_without_turning():
     t = np.linspace(0, 30, 3001)
     straight = TimeSeries(t, 10 * t, 10 * t, t, 0.5 * t, 0 * t, 0 * t)
@@ -533,6 +682,42 @@ def test_standstills_are_dropped():
     assert report.dropped_ranges[STANDSTILL] == ((T0 + 10.0, T0 + 16.0),)
     assert "6 standstill (t = 1010.000-1016.000 s)" in report.summary()
     assert report.counts_text() == "6 standstill"
+
+
+def carried(ts: TimeSeries, start: float, stop: float, distance: float) -> TimeSeries:
+    """The log with its poses moved by ``distance`` (m, along x and y) between ``start`` and
+    ``stop`` (s, smoothly), the wheels untouched."""
+    s = smoothstep((ts.t_pose - start) / (stop - start))
+    return TimeSeries(ts.t_enc, ts.phi_L, ts.phi_R, ts.t_pose, ts.x + 0.8 * distance * s,
+                      ts.y + 0.6 * distance * s, ts.theta)
+
+
+def test_a_robot_carried_with_idle_wheels_is_dropped():
+    """Wheels still over 10-16 s; over 11-13 s the robot is carried 0.5 m: those two windows
+    are dropped as carried, the other four still ones as standstills (2 mm, 2 mrad noise)."""
+    sim = simulate(duration=30.0, step=0.01, standstill=(10.0, 16.0))
+    ts = carried(make_log(sim, noise=(0.002, 0.002), seed=3), T0 + 11.0, T0 + 13.0, 0.5)
+    report = segment_timeseries(ts, window=1.0).report
+    assert report.segments_dropped[CARRIED] == 2
+    assert report.dropped_ranges[CARRIED] == ((T0 + 11.0, T0 + 13.0),)
+    assert report.segments_dropped[STANDSTILL] == 4
+    assert "2 pose moved while the wheels stood still (t = 1011.000-1013.000 s)" in (
+        report.summary())
+    assert report.counts_text() == "4 standstill, 2 pose moved while the wheels stood still"
+
+
+@pytest.mark.parametrize("noise", [0.002, 0.01])
+def test_noisy_poses_of_a_still_robot_are_not_carried(noise):
+    """A robot standing still for 20 s under pose noise of 2 mm or 1 cm (and as many mrad)
+    loses no segment as carried, over five noise draws; the same log carried 0.3 m in 1 s
+    does."""
+    sim = simulate(duration=40.0, step=0.01, standstill=(10.0, 30.0))
+    for seed in range(5):
+        ts = make_log(sim, noise=(noise, noise), seed=seed)
+        log = segment_timeseries(ts, window=1.0)
+        assert log.report.segments_dropped[CARRIED] == 0
+        moved = carried(ts, T0 + 20.0, T0 + 21.0, 0.3)
+        assert segment_timeseries(moved, window=1.0).report.segments_dropped[CARRIED] == 1
 
 
 def test_pose_samples_outside_the_encoder_range_are_counted(sim):

@@ -12,12 +12,14 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 from excite.commands.args import UsageError
 from excite.data import Segments
-from excite.timeseries import SegmentedLog, TimeSeries
+from excite.timeseries import MAX_TIME_OFFSET, OffsetHint, SegmentedLog, TimeSeries
 
 __all__ = ["Log", "Input", "Part", "add_log_options", "group_inputs", "read_log",
            "segment_log", "segment_inputs"]
@@ -39,14 +41,24 @@ class Input:
 @dataclass(frozen=True)
 class Log:
     """A time-series log read from an input, with the clock offset used for it (s; pose time
-    + offset = encoder time), whether that offset was estimated, and for a bag the messages
+    + offset = encoder time) and where that offset came from: "given" (--time-offset S),
+    "estimated" (--time-offset estimate) or "default" (none given: 0). With the default,
+    hint says what offset the data suggest when it is clearly not zero
+    (excite.timeseries.noticeable_time_offset), else None. skipped: for a bag, the messages
     the reader skipped, in one line (None for a CSV log)."""
 
     name: str
     series: TimeSeries
     time_offset: float
-    offset_estimated: bool
+    offset_source: Literal["given", "estimated", "default"]
+    hint: OffsetHint | None = None
     skipped: str | None = None
+
+    def offset_text(self) -> str:
+        """The offset and its source, e.g. '+0.0000 s (default; the data suggest -0.1502 s:
+        --time-offset estimate)'."""
+        how = self.offset_source + (f"; {self.hint.text()}" if self.hint is not None else "")
+        return f"{self.time_offset:+.4f} s ({how})"
 
 
 def _positive(text: str) -> float:
@@ -101,9 +113,12 @@ def add_log_options(parser: argparse.ArgumentParser, segmentation: bool = True) 
                        help="encoder resolution: converts ticks_L,ticks_R columns to rad, "
                        "and calibrate models the encoders' rounding (one tick) in the noise "
                        "of the segments cut from logs")
-    group.add_argument("--time-offset", type=_offset, default=0.0, metavar="S|estimate",
-                       help="pose time + S = encoder time (s, default 0), or 'estimate' "
-                       "it from the data")
+    group.add_argument("--time-offset", type=_offset, metavar="S|estimate",
+                       help="pose time + S = encoder time (s, default 0; a note tells when "
+                       "the data suggest otherwise), or 'estimate' it from the data")
+    group.add_argument("--max-time-offset", type=_positive, default=MAX_TIME_OFFSET,
+                       metavar="S", help="estimated time offsets are searched within +-S s "
+                       f"(default {MAX_TIME_OFFSET:g})")
     group.add_argument("--joint-states", default="/joint_states", metavar="TOPIC",
                        help="bag topic of sensor_msgs/msg/JointState (default /joint_states)")
     group.add_argument("--left-wheel", metavar="NAME", help="left wheel joint name (bags)")
@@ -156,7 +171,7 @@ def group_inputs(paths: Sequence[str]) -> list[Input]:
 
 def read_log(args: argparse.Namespace, source: Input) -> Log:
     """Read one time-series or bag input and settle its clock offset."""
-    from excite.timeseries import estimate_time_offset, read_timeseries
+    from excite.timeseries import estimate_time_offset, noticeable_time_offset, read_timeseries
 
     skipped = None
     if source.kind == "bag":
@@ -177,8 +192,17 @@ def read_log(args: argparse.Namespace, source: Input) -> Log:
     else:
         raise UsageError(f"{source.name}: a segment file, not a time-series log or bag")
     if args.time_offset == "estimate":
-        return Log(source.name, series, estimate_time_offset(series), True, skipped)
-    return Log(source.name, series, float(args.time_offset), False, skipped)
+        return Log(source.name, series,
+                   estimate_time_offset(series, max_offset=args.max_time_offset), "estimated",
+                   skipped=skipped)
+    if args.time_offset is not None:
+        return Log(source.name, series, float(args.time_offset), "given", skipped=skipped)
+    hint = noticeable_time_offset(series, max_offset=args.max_time_offset)
+    if hint is not None:
+        print(f"excite: note: {source.name}: the clocks of the encoder and pose streams seem "
+              f"offset (pose time + offset = encoder time), but none was given and 0 is used; "
+              f"{hint.text()}", file=sys.stderr)
+    return Log(source.name, series, 0.0, "default", hint, skipped)
 
 
 def segment_log(args: argparse.Namespace, log: Log) -> SegmentedLog:
@@ -206,11 +230,11 @@ class Part:
         if self.cut is None or self.log is None:
             return f"{self.source.name}: {len(self.segments)} segments"
         report = self.cut.report
-        offset = (f"; time offset {self.log.time_offset:+.4f} s "
-                  f"({'estimated' if self.log.offset_estimated else 'given'})")
+        offset = f"; time offset {self.log.offset_text()}"
+        unwrapped = f"; {report.unwrapped_text()}" if report.unwrapped_wheels else ""
         skipped = "" if self.log.skipped is None else f"; messages skipped: {self.log.skipped}"
         return (f"{self.source.name}: {report.n_segments} segments; dropped: "
-                f"{report.counts_text()}{skipped}{offset}")
+                f"{report.counts_text()}{unwrapped}{skipped}{offset}")
 
 
 def segment_inputs(args: argparse.Namespace, inputs: Sequence[Input]) -> list[Part]:
