@@ -158,7 +158,7 @@ def _checked_stream(kind: Stream, source: str, lines: IntArray | None,
     if steps.size:
         i = int(steps[0]) + 1
         raise DataError(f"{_where(source, lines, t, i)}: time does not increase "
-                        f"({t[i]!r} s after {t[i - 1]!r} s)")
+                        f"({float(t[i])!r} s after {float(t[i - 1])!r} s)")
     return arrays
 
 
@@ -547,7 +547,7 @@ def _encoder_cells(series: TimeSeries, ticks_per_rev: float | None
         off = np.flatnonzero(np.abs(ticks - whole) > WHOLE_TICK_TOLERANCE)
         if off.size:
             i = int(off[0])
-            raise DataError(f"{series.location('encoder', i)}: {name} = {angle[i]!r} rad is "
+            raise DataError(f"{series.location('encoder', i)}: {name} = {float(angle[i])!r} rad is "
                             f"not a whole number of ticks of 2 pi / {ticks_per_rev} rad")
         cells.append(list(map(str, whole.astype(np.int64).tolist())))
     return TICK_COLUMNS, cells
@@ -1306,7 +1306,10 @@ def segment_timeseries(
     report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses,
                      ts.unwrapped_wheels)
     if report.n_segments < MIN_SEGMENTS:
-        raise DataError(f"{ts.source[1]}: {report.n_segments} segment(s) after segmentation; "
+        # name the stream behind most of the drops (encoder jumps and standstills: the wheels)
+        worst = max(report.segments_dropped, key=report.segments_dropped.get, default=None)
+        stream = ts.source[0] if worst in (ENCODER_JUMP, STANDSTILL) else ts.source[1]
+        raise DataError(f"{stream}: {report.n_segments} segment(s) after segmentation; "
                         f"at least {MIN_SEGMENTS} are needed (dropped: {report.counts_text()})")
     t_start, t_end = t_pose[start], t_pose[end]
     shares = np.concatenate(([False], start[1:] == end[:-1]))

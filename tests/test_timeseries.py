@@ -7,6 +7,7 @@ off-axle sensor at SENSOR in the body frame; encoder and pose samples taken at f
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import time
@@ -323,7 +324,7 @@ GOOD = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.1,1,1,0.05,0,0\n0.2,2,2,0.1,0,0\
         (GOOD + "0.3,3,abc,0.15,0,0\n", "log.csv:5: phi_R is not a number: 'abc'"),
         (GOOD + "0.3,3,3,nan,0,0\n", "log.csv:5: x is not finite"),
         (GOOD + "0.3,inf,3,,,\n", "log.csv:5: phi_L is not finite"),
-        (GOOD + "0.2,3,3,,,\n", "log.csv:5: time does not increase"),
+        (GOOD + "0.2,3,3,,,\n", "log.csv:5: time does not increase (0.2 s after 0.2 s)"),
         (GOOD + "0.3,,,0.1,0,0\n0.25,,,0.1,0,0\n", "log.csv:6: time does not increase"),
         (GOOD + ",3,3,0.1,0,0\n", "log.csv:5: t is empty"),
         (GOOD + "0.3,3,,0.1,0,0\n", "log.csv:5: phi_R is empty but other"),
@@ -661,6 +662,20 @@ def test_pose_jump_drops_the_affected_segments(sim):
     np.testing.assert_allclose(log.segments.as_array(), exact_rows(sim, log.t_start, log.t_end),
                                rtol=0, atol=1e-12)
     assert not log.shares_endpoints[np.searchsorted(log.t_start, T0 + 13.0)]
+
+
+def test_too_few_segments_names_the_stream_behind_the_drops(sim):
+    """A bag's wheels that jump everywhere (a second JointState publisher sending zeros):
+    the error names the encoder stream, not the poses."""
+    ts = dataclasses.replace(make_log(sim), source=("bag /joint_states", "bag /pose"))
+    noisy = ts.phi_L.copy()
+    noisy[::7] = 0.0  # every 7th sample from another publisher
+    with pytest.raises(DataError, match=r"^bag /joint_states: 0 segment\(s\).*encoder jump"):
+        segment_timeseries(dataclasses.replace(ts, phi_L=noisy), window=1.0)
+    x = ts.x.copy()
+    x[::5] += 1.0  # poses that jump everywhere
+    with pytest.raises(DataError, match=r"^bag /pose: 0 segment\(s\).*pose jump"):
+        segment_timeseries(dataclasses.replace(ts, x=x), window=1.0)
 
 
 def test_encoder_reset_drops_the_affected_segment(sim):
