@@ -172,7 +172,9 @@ class WheelNoise:
         An angle sample at a segment boundary errs by e: the segment ending there by
         G_end e, the one starting there by -G_start e, so chained segments share it (like a
         pose sample). Sub-steps are taken to end at encoder samples (they are one encoder
-        period long, :func:`excite.timeseries.segment_timeseries`).
+        period long, :func:`excite.timeseries.segment_timeseries`; encoders slower than 50 Hz
+        get several per period, and the inner samples' bound then counts each sub-step end as
+        a sample: conservative).
     """
 
     slip: FloatArray
