@@ -63,7 +63,8 @@ def synthetic_source(args: argparse.Namespace, i: int
     encoder resolution (None: not quantised)."""
     log = synthetic_log(np.random.default_rng(args.seed + i), args.duration,
                         sensor_pose=SENSOR, pose_noise=(args.pose_noise, args.pose_noise),
-                        slip=args.slip, ticks_per_rev=args.ticks_per_rev)
+                        slip=args.slip, ticks_per_rev=args.ticks_per_rev,
+                        encoder_rate=args.encoder_rate, pose_rate=args.pose_rate)
     return (log.series, np.append(log.params.as_array(), SENSOR.as_array()),
             (args.pose_noise, args.pose_noise), args.ticks_per_rev)
 
@@ -137,6 +138,8 @@ def main() -> None:
     parser.add_argument("--pose-noise", type=float, default=0.002, help="m and rad (synthetic)")
     parser.add_argument("--slip", type=float, default=0.0,
                         help="rad / sqrt(s) per wheel (synthetic)")
+    parser.add_argument("--encoder-rate", type=float, default=100.0, help="Hz (synthetic)")
+    parser.add_argument("--pose-rate", type=float, default=50.0, help="Hz (synthetic)")
     parser.add_argument("--ticks-per-rev", type=int, default=None,
                         help="(synthetic) encoders count whole ticks of this resolution "
                              "(default: exact angles)")
