@@ -450,7 +450,8 @@ def _describe_weak(weak: FloatArray, theta: FloatArray, seg: Segments,
 
 
 def _trimmed(seg: Segments, model: SegmentModel, start: FloatArray, sigma: FloatArray | None,
-             loss: Loss, trim: float, max_iterations: int, tol: float) -> FloatArray:
+             loss: Loss, trim: float, max_iterations: int, tol: float,
+             max_relative_std: float) -> FloatArray:
     """Mask of the segments kept after dropping the fraction ``trim`` with the largest
     whitened residuals, at most 1% per pass with a refit after each (Censi et al.)."""
     keep = np.ones(len(seg), dtype=bool)
@@ -458,7 +459,7 @@ def _trimmed(seg: Segments, model: SegmentModel, start: FloatArray, sigma: Float
     theta = start
     while (dropped := int(np.sum(~keep))) < target:
         fit = levenberg_marquardt(Problem(model, seg[keep]), theta, sigma, loss,
-                                  max_iterations, tol)
+                                  max_iterations, tol, determined=1.0 / max_relative_std)
         theta = fit.theta
         z2 = np.sum((fit.ev.raw / fit.sigma[:, None]) ** 2, axis=0)
         count = min(max(1, int(math.ceil(TRIM_PASS * len(seg)))), target - dropped)
@@ -534,7 +535,8 @@ def calibrate(
         primary = SENSOR_POSE
         wheels, pose = sensor_pose_estimate(seg, fallback)
         start = np.append(wheels.as_array(), pose.as_array())
-    keep = (_trimmed(seg, primary, start, given, loss, trim, max_iterations, tol) if trim
+    keep = (_trimmed(seg, primary, start, given, loss, trim, max_iterations, tol,
+                     max_relative_std) if trim
             else np.ones(len(seg), dtype=bool))
     data = seg[keep] if trim else seg
     levels, whitener = None, None

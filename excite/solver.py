@@ -140,6 +140,8 @@ def damped_step(ev: Evaluation, sigma: FloatArray, loss: Loss, lam: float,
     if basis is not None:
         lhs = lhs @ basis
     rhs = np.concatenate([-(ev.raw * root).reshape(-1), np.zeros(p)])
+    if lhs.shape[1] == 0:  # every direction frozen: nothing may move
+        return np.zeros(p)
     u, singular, vt = np.linalg.svd(lhs, full_matrices=False)
     keep = singular > min(RCOND * singular[0], determined)
     step = vt[keep].T @ ((u[:, keep].T @ rhs) / singular[keep])
@@ -258,7 +260,8 @@ def levenberg_marquardt(
         if np.max(np.abs(step)) < tol and settled:
             return Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
         while True:
-            trial = model.step(ev.theta, step, ev.scale)
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                trial = model.step(ev.theta, step, ev.scale)  # a wild trial is rejected below
             if np.all(np.isfinite(trial)):
                 ev_trial = problem.evaluate(trial)
                 system_trial = normal_system(ev_trial, sigma, loss)

@@ -256,3 +256,16 @@ def test_a_noise_free_log_is_fitted_to_the_truth(sensor):
     result = calibrate(segment_timeseries(log.series).segments)
     assert result.identifiable and np.all(np.isfinite(result.std))
     np.testing.assert_allclose(result.params.as_array(), TRUTH.as_array(), rtol=1e-5)
+
+
+def test_data_that_determine_nothing_are_reported_not_a_crash():
+    """Small noisy motions: every direction is weak, all are frozen in the refit (an empty
+    step basis), and the result says so instead of failing inside the solver."""
+    from excite.kinematics import predict_increment
+
+    rng = np.random.default_rng(0)
+    phi_L, phi_R = rng.uniform(-0.2, 0.2, 10), rng.uniform(-0.2, 0.2, 10)
+    measured = np.column_stack(predict_increment(phi_L, phi_R, TRUTH))
+    measured += rng.normal(0.0, 0.02, measured.shape)
+    result = calibrate(Segments(phi_L, phi_R, *measured.T))
+    assert not result.identifiable and result.unidentifiable_direction
