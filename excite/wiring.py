@@ -16,9 +16,10 @@ the robot drives forward):
 A ratio counts as negative only when it is below zero beyond doubt (as unlikely as
 ``WIRING_Z`` normal standard errors, by the regression's Student t), so noise or slip never
 trips the check on a robot wired as assumed (whose ratios are hundreds of standard errors above
-zero). When only one combination of the ratios is determined (spins only, or straight only),
-it is tested only if it weighs both positively (spins): driving straight determines
-r_R/b - r_L/b-like combinations whose sign depends on the robot. Fitted anyway,
+zero). Each ratio is tested when both are determined, and so is the best-determined
+combination of the two when it weighs both positively (spins, where it is known far better
+than either ratio); driving straight determines r_R/b - r_L/b-like combinations whose sign
+depends on the robot, which are not tested. Fitted anyway,
 such data give plausible-looking but wrong parameters whose estimated noise levels absorb the
 misfit.
 """
@@ -26,6 +27,7 @@ misfit.
 from __future__ import annotations
 
 import numpy as np
+from scipy.special import ndtr, stdtrit
 
 from excite.data import Segments
 from excite.errors import DataError
@@ -34,8 +36,8 @@ __all__ = ["WIRING_Z", "check_wiring"]
 
 #: Standard errors below zero at which a wheel ratio counts as negative.
 WIRING_Z = 5.0
-#: Largest condition number of the 2x2 regression for which the two ratios are told apart.
-_MAX_CONDITION = 1e8
+#: Eigenvalues of the regression's X^T X below this fraction of the largest are null (rank).
+_RANK_RTOL = 1e-12
 #: A determined combination of the two ratios counts as positive-weighted when its smaller
 #: weight is at least this fraction of the larger.
 _SAME_SIGN = 0.1
@@ -48,56 +50,51 @@ def check_wiring(segments: Segments, source: str = "the data") -> None:
     contradict a differential drive with positive radii (see the module doc); return quietly
     when they agree or cannot tell (too few segments, no turning)."""
     phi_L, phi_R, dtheta = segments.dphi_L, segments.dphi_R, segments.dtheta
-    moved = np.any(phi_L != 0.0) or np.any(phi_R != 0.0)
-    if moved and not np.any(dtheta != 0.0):
-        raise DataError(f"{source}: the pose heading never changes over {len(segments)} "
-                        "segments while the wheels turn; excite needs the sensor's orientation "
-                        "(a position-only source such as UWB, GPS or a single marker cannot "
-                        "be used)")
     if len(segments) < 4:
         return
     design = np.stack([phi_R, -phi_L], axis=1)  # dtheta = design @ (r_R/b, r_L/b)
     lam, vec = np.linalg.eigh(design.T @ design)
     if lam[-1] <= 0.0:
         return
-    if lam[0] > lam[-1] / _MAX_CONDITION:
-        ratios, below = _regression(design, dtheta)
-        right, left = below
-        if right and left:
-            raise DataError(f"{source}: the heading turns against the wheels (r_R/b "
-                            f"{ratios[0]:.3g}, r_L/b {ratios[1]:.3g}, both negative): the left "
-                            "and right wheels look swapped, or both run backwards, or the pose "
-                            f"frame turns clockwise; {_HINT}")
-        if right or left:
-            side, name, ratio = (("right", "r_R", ratios[0]) if right
-                                 else ("left", "r_L", ratios[1]))
-            raise DataError(f"{source}: the {side} wheel's angle runs backwards ({name}/b "
-                            f"{ratio:.3g} < 0 from the heading changes): its sign looks "
-                            f"reversed; {_HINT}")
-        return
-    # One combination u . (r_R/b, r_L/b) is determined. With u's components of one sign (e.g.
-    # spins, u ~ (1, 1)) it is positive for any robot; otherwise (e.g. driving straight, u ~
-    # (1, -1)) its sign says nothing about the wiring.
+    rank = int(np.sum(lam > lam[-1] * _RANK_RTOL))
+    if not np.any(dtheta != 0.0):
+        if rank == 2:  # the wheels' ratio changes (the robot must turn), the heading does not
+            raise DataError(f"{source}: the pose heading never changes over {len(segments)} "
+                            "segments while the wheels turn at changing ratios; excite needs "
+                            "the sensor's orientation (a position-only source such as UWB, GPS "
+                            "or a single marker cannot be used)")
+        return  # straight driving at one wheel ratio: nothing to tell
+    inverse = (vec[:, -rank:] / lam[-rank:]) @ vec[:, -rank:].T  # (X^T X)^+
+    ratios = inverse @ (design.T @ dtheta)
+    residual = dtheta - design @ ratios
+    dof = len(segments) - rank
+    variance = float(residual @ residual) / dof
+    limit = float(stdtrit(dof, ndtr(-WIRING_Z)))  # < 0: the one-sided Student-t quantile
+    wrapped = (" (or dtheta is wrapped: segment increments must be continuous)"
+               if np.any(np.abs(dtheta) > 0.5 * np.pi) else "")
+    swapped = ("the left and right wheels look swapped, or both run backwards, or the pose "
+               f"frame turns clockwise{wrapped}; {_HINT}")
+    # Each ratio on its own (when both are determined): below, or above, zero beyond doubt.
+    se = np.sqrt(variance * np.diag(inverse))
+    below = ratios < limit * se if rank == 2 else np.zeros(2, dtype=bool)
+    above = ratios > -limit * se if rank == 2 else np.zeros(2, dtype=bool)
+    # The best-determined combination u . (r_R/b, r_L/b) (spins: u ~ (1, 1)), far better known
+    # than either ratio when the wheels mostly turn opposite ways. With u's components of one
+    # sign it is positive for any robot; otherwise (driving straight, u ~ (1, -1)) its sign
+    # says nothing about the wiring.
     u = vec[:, -1] * np.sign(vec[:, -1].sum())
-    if u.min() > _SAME_SIGN * u.max():
-        rate, below = _regression(design @ u[:, None], dtheta)
-        if below[0]:
-            raise DataError(f"{source}: the heading turns against the wheels (it turns "
-                            f"{rate[0]:.3g} rad per rad the wheels turn apart, < 0): the left and "
-                            "right wheels look swapped, or both run backwards, or the pose frame "
-                            f"turns clockwise; {_HINT}")
-
-
-def _regression(design: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares coefficients of y ~ design, and which are negative beyond doubt: a
-    t-statistic (coefficient / standard error from the residuals) below the Student-t
-    quantile whose one-sided probability is that of WIRING_Z normal standard errors."""
-    from scipy.stats import norm, t
-
-    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-    dof = len(y) - design.shape[1]
-    residual = y - design @ coef
-    se = np.sqrt(float(residual @ residual) / dof
-                 * np.diag(np.linalg.inv(design.T @ design)))
-    limit = float(t.isf(norm.sf(WIRING_Z), dof))
-    return coef, coef < -limit * se
+    turn = float(u @ ratios)
+    against = (u.min() > _SAME_SIGN * u.max()
+               and turn < limit * np.sqrt(variance / lam[-1]))
+    if below.all():
+        raise DataError(f"{source}: the heading turns against the wheels (r_R/b "
+                        f"{ratios[0]:.3g}, r_L/b {ratios[1]:.3g}, both negative): {swapped}")
+    if below.any() and (above.any() or not against):
+        side, name, ratio = (("right", "r_R", ratios[0]) if below[0]
+                             else ("left", "r_L", ratios[1]))
+        raise DataError(f"{source}: the {side} wheel's angle runs backwards ({name}/b "
+                        f"{ratio:.3g} < 0 from the heading changes): its sign looks "
+                        f"reversed{wrapped}; {_HINT}")
+    if against:
+        raise DataError(f"{source}: the heading turns against the wheels (it turns "
+                        f"{turn:.3g} rad per rad the wheels turn apart, < 0): {swapped}")

@@ -56,15 +56,42 @@ def test_miswired_data_are_named(how, words):
         calibrate(_rewired(seg, how))
 
 
-def test_spins_only_swapped_are_named_from_the_turn_rate():
+@pytest.mark.parametrize("encoder_noise", [0.0, 1e-6, 1e-4, 1e-3, 1e-2])
+def test_spins_only_swapped_are_named_from_the_turn_rate(encoder_noise):
+    """Spins only: the ratios are not told apart (exactly, or nearly when the encoders are a
+    little noisy), but their sum is, far better than either."""
     rng = np.random.default_rng(2)
-    spin = rng.normal(0.0, 0.5, 40)  # only phi_R = -phi_L: the two ratios are not told apart
+    spin = rng.normal(0.0, 5.0, 40)
     theta = np.append(TRUTH.as_array(), SENSOR.as_array())
     measured = SENSOR_POSE.predict(-spin, spin, theta) + rng.normal(0.0, 0.002, (40, 3))
-    seg = Segments(-spin, spin, *measured.T)
+    noisy = rng.normal(0.0, encoder_noise, (2, 40))
+    seg = Segments(-spin + noisy[0], spin + noisy[1], *measured.T)
     check_wiring(seg)
     with pytest.raises(DataError, match="swapped"):
         check_wiring(_rewired(seg, "swapped"))
+
+
+def test_wrapped_headings_are_named_as_a_possible_cause():
+    """Segments turning 1.2-1.8 pi with dtheta wrapped (a contract violation: increments are
+    continuous) look miswired; the message says wrapping may be why."""
+    from excite.kinematics import predict_increment, wrap_angle
+
+    rng = np.random.default_rng(1)
+    turn = rng.uniform(1.2 * np.pi, 1.8 * np.pi, 60) * rng.choice([-1, 1], 60)
+    forward, apart = rng.uniform(-10, 10, 60), turn * TRUTH.b / TRUTH.r_R
+    phi_L, phi_R = forward - apart / 2, forward + apart / 2
+    measured = np.column_stack(predict_increment(phi_L, phi_R, TRUTH))
+    measured += rng.normal(0.0, 1e-3, measured.shape)
+    check_wiring(Segments(phi_L, phi_R, *measured.T))  # continuous: fine
+    with pytest.raises(DataError, match="dtheta is wrapped"):
+        check_wiring(Segments(phi_L, phi_R, measured[:, 0], measured[:, 1],
+                              wrap_angle(measured[:, 2])))
+
+
+def test_exact_straight_driving_is_not_called_orientation_less():
+    phi = np.random.default_rng(5).uniform(1.0, 3.0, 10)
+    measured = np.column_stack([TRUTH.r_L * phi, np.zeros(10), np.zeros(10)])
+    check_wiring(Segments(phi, phi * TRUTH.r_L / TRUTH.r_R, *measured.T))
 
 
 @settings(max_examples=60, deadline=None)
@@ -95,3 +122,14 @@ def test_calibrate_names_the_file_of_a_swapped_log(capsys, tmp_path):
     assert code == 2 and out == ""
     assert err.count("\n") == 1 and err.startswith(f"excite: error: {path}")
     assert "swapped" in err
+
+
+def test_nearly_straight_driving_of_a_lopsided_robot_is_not_called_miswired():
+    """r_L > r_R driven with the right wheel turning 5% more: the robot veers right (dtheta < 0)
+    although phi_R > phi_L. Only the combination r_R/b x 1.05 - r_L/b is determined, of
+    either sign for a correctly wired robot, so it must not be tested."""
+    robot = Params(0.0525, 0.0475, 0.3)
+    rng = np.random.default_rng(6)
+    seg = _sensor_segments(rng, 60, 1e-4, straight=1.05, robot=robot)
+    assert np.all(np.sign(seg.dtheta) == -np.sign(seg.dphi_L))
+    check_wiring(seg)
