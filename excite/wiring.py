@@ -27,7 +27,6 @@ misfit.
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import ndtr, stdtrit
 
 from excite.data import Segments
 from excite.errors import DataError
@@ -49,6 +48,8 @@ def check_wiring(segments: Segments, source: str = "the data") -> None:
     """Raise :class:`~excite.errors.DataError` naming ``source`` when the heading changes
     contradict a differential drive with positive radii (see the module doc); return quietly
     when they agree or cannot tell (too few segments, no turning)."""
+    from scipy.special import ndtr, stdtrit  # not at import: excite imports no scipy
+
     phi_L, phi_R, dtheta = segments.dphi_L, segments.dphi_R, segments.dtheta
     if len(segments) < 4:
         return
