@@ -79,12 +79,16 @@ def scaling_violation(robot: Robot, grid: int = 21) -> float:
     return worst
 
 
-def reach_probability(robot: Robot, budget_k: float, prior: np.ndarray, draws: int,
-                      rng: np.random.Generator) -> float:
-    """P(max |relative error| < TARGET) for the oracle's design of budget ``budget_k``."""
-    design = oracle_design(robot.true_theta, robot.sigma, robot.nominal_theta, budget_k,
+def unit_design_information(robot: Robot) -> np.ndarray:
+    """The relative information (P, P) of the oracle's E-optimal design of one full-speed
+    segment; the LP is homogeneous in the budget, so budget B's is B times it."""
+    design = oracle_design(robot.true_theta, robot.sigma, robot.nominal_theta, 1.0,
                            robot.max_wheel_speed, robot.segment_duration, model=robot.model)
-    fisher = np.einsum("n,nij->ij", design.weights, robot.information(design.commands)) + prior
+    return np.einsum("n,nij->ij", design.weights, robot.information(design.commands))
+
+
+def reach_probability(fisher: np.ndarray, draws: int, rng: np.random.Generator) -> float:
+    """P(max |relative error| < TARGET) for Gaussian errors of information ``fisher``."""
     errors = rng.multivariate_normal(np.zeros(len(fisher)), np.linalg.inv(fisher), draws)
     return float(np.mean(np.max(np.abs(errors), axis=1) < TARGET))
 
@@ -114,13 +118,12 @@ def main() -> None:
     prior = np.eye(robots[0].model.size) / 0.1**2
     print(f"{'s':>5} " + " ".join(f"{k:>6}" for k in range(1, args.max_segments + 1))
           + "   first k with mean P >= 1/2")
+    units = [unit_design_information(robot) for robot in robots]
     for step in (float(s) for s in args.steps.split(",")):
         means = []
         for k in range(1, args.max_segments + 1):
-            probabilities = []
-            for robot in robots:
-                probabilities.append(reach_probability(robot, budget(k, step), prior,
-                                                       args.draws, rng))
+            probabilities = [reach_probability(budget(k, step) * unit + prior, args.draws, rng)
+                             for unit in units]
             means.append(float(np.mean(probabilities)))
         first = next((k for k, p in enumerate(means, 1) if p >= 0.5), None)
         print(f"{step:5.2f} " + " ".join(f"{p:6.3f}" for p in means)
