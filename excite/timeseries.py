@@ -741,17 +741,17 @@ def estimate_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET,
 
 @dataclass(frozen=True)
 class _OffsetFit:
-    """An estimated offset (s) and what it came from: the rate signals on their grid of
-    spacing ``step`` (s) and the search range in grid steps."""
+    """An estimated offset (s) and how well the fit explains the heading rate: R^2 at the best
+    lag and at lag zero, over ``duration`` (s) of compared heading rate."""
 
     offset: float
-    signals: tuple[FloatArray, FloatArray, FloatArray]
-    step: float
-    max_lag: int
+    r2_best: float
+    r2_zero: float
+    duration: float
 
 
 def _estimate(ts: TimeSeries, max_offset: float, min_correlation: float) -> _OffsetFit:
-    """estimate_time_offset, keeping the signals it fitted."""
+    """estimate_time_offset, keeping how well the best lag and lag zero fit."""
     if not 0 < max_offset < math.inf:
         raise DataError(f"max_offset must be positive and finite (s), got {max_offset}")
     step = float(min(np.median(np.diff(ts.t_enc)), np.median(np.diff(ts.t_pose))))
@@ -773,49 +773,24 @@ def _estimate(ts: TimeSeries, max_offset: float, min_correlation: float) -> _Off
         raise OffsetOutOfRange(f"cannot estimate the time offset: it is not within "
                                f"+-{max_offset} s (the best fit is at the edge of the search "
                                "range: --max-time-offset)")
-    return _OffsetFit(offset, signals, step, max_lag)
+    duration = (signals[0].size - 2 * max_lag) * step
+    return _OffsetFit(offset, float(r2[k]), float(r2[max_lag]), duration)
 
 
-#: Blocks of the log whose separate offset estimates measure the estimate's uncertainty.
-OFFSET_BLOCKS = 8
-
-
-def _offset_uncertainty(fit: _OffsetFit) -> float:
-    """Standard error (s) of an estimated offset by batch means: the heading rate's compared
-    (central) part split into OFFSET_BLOCKS consecutive blocks, each fitted alone against the
-    wheel rates at every lag (the blocks' comparisons together are the whole estimate's), and
-    the spread of their offsets (1.4826 x the median absolute deviation, robust to one block
-    fooled by a lesser optimum) over sqrt(blocks). Blocks shorter than twice the search range
-    or without turning are left out; inf with fewer than 3 block estimates. On simulated
-    4-minute logs (30 s blocks) it matches the estimates' scatter over noise draws; on 1-minute
-    logs (7.5 s blocks) it reads about twice that (short blocks fit worse): cautious."""
-    size, lag = fit.signals[0].size, fit.max_lag
-    edges = np.linspace(lag, size - lag, OFFSET_BLOCKS + 1).astype(np.int64)
-    lags = []
-    for a, b in zip(edges[:-1], edges[1:], strict=True):
-        if b - a > 2 * lag:
-            try:
-                r2 = _explained(*(signal[a - lag: b + lag] for signal in fit.signals), lag)
-            except DataError:  # a block without turning
-                continue
-            lags.append(_refined_lag(r2, lag, fit.step))
-    block = np.asarray(lags)
-    block = block[np.isfinite(block)]
-    if block.size < 3:
-        return math.inf
-    spread = 1.4826 * float(np.median(np.abs(block - np.median(block))))
-    return spread / math.sqrt(block.size)
-
-
-#: An estimated clock offset is clearly not zero when it exceeds both OFFSET_SIGMAS standard
-#: errors (_offset_uncertainty: noise) and NOTICEABLE_OFFSET_PERIODS of the coarser stream's
-#: median sample period (bias: interpolating a coarse stream shifts the estimate a little; on
-#: logs recorded without an offset, simulated at 10-100 Hz with noise and ticks, it stayed
-#: within 0.08 of that period, e.g. -7 ms for 10 Hz encoders under 100 Hz poses, 11 standard
-#: errors). A quarter period matters: on a one-minute log (50 Hz encoders, 100 Hz poses) a 5 ms
-#: offset moved the estimates by up to 1.6 standard deviations, 10 ms by up to 3.3.
-OFFSET_SIGMAS = 3.0
-NOTICEABLE_OFFSET_PERIODS = 0.25
+#: s, how long the turn rate takes to change (the motions excite expects turn at rates that
+#: change over ~0.5 s): the compared heading rate holds one independent sample per this.
+TURN_RATE_TIME = 0.5
+#: A clock offset is noticeable when an F test rejects lag zero at this level: the fit of the
+#: heading rate on the wheel rates at lag zero against the fit with the lag as one more free
+#: parameter, F = (u_0 / u_best - 1) (n - 4) over F(1, n - 4)'s quantile, u the unexplained
+#: variances and n = duration / TURN_RATE_TIME independent samples (cautious: the residual is
+#: mostly the differentiated pose noise, far less correlated). Lag zero must then leave over
+#: 9.8 % more variance unexplained than the best lag on a one-minute log, 0.9 % on a
+#: ten-minute one; logs recorded without an offset (one minute, simulated at 10-200 Hz with
+#: ticks and 2 mm / 4 mrad noise) left at most 0.42 % more, though their estimates strayed by
+#: up to ~20 ms. The price: on such noisy one-minute logs offsets up to 30 ms go unnoted (a
+#: quarter period was the old floor), at 200 Hz even 150 ms (the heading rate is mostly noise).
+NOTICEABLE_OFFSET_LEVEL = 1e-3
 
 
 @dataclass(frozen=True)
@@ -841,19 +816,25 @@ class OffsetHint:
 
 def noticeable_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET
                            ) -> OffsetHint | None:
-    """What the data say about the clock offset when none was given: a hint when the estimate
-    is clearly not zero (OFFSET_SIGMAS, NOTICEABLE_OFFSET_PERIODS) or lies beyond +-max_offset
-    s; None when it is near zero or cannot be estimated (too little turning, too short an
+    """What the data say about the clock offset when none was given: a hint when lag zero fits
+    clearly worse than the estimate (NOTICEABLE_OFFSET_LEVEL: an F test on the heading rate's
+    unexplained variance) or the estimate lies beyond +-max_offset s; None when lag zero fits
+    about as well or the offset cannot be estimated (too little turning, too short an
     overlap: see :func:`estimate_time_offset`)."""
+    from scipy.special import fdtri
+
     try:
         fit = _estimate(ts, max_offset, MIN_CORRELATION)
     except OffsetOutOfRange as exc:
         return OffsetHint(None, max_offset, exc.candidates)
     except DataError:
         return None
-    period = max(float(np.median(np.diff(ts.t_enc))), float(np.median(np.diff(ts.t_pose))))
-    limit = max(NOTICEABLE_OFFSET_PERIODS * period, OFFSET_SIGMAS * _offset_uncertainty(fit))
-    return OffsetHint(fit.offset, max_offset) if abs(fit.offset) > limit else None
+    dof = fit.duration / TURN_RATE_TIME - 4.0
+    if dof < 1.0:
+        return None
+    worse = (1.0 - fit.r2_zero) / max(1.0 - fit.r2_best, 1e-300) - 1.0
+    noticeable = worse * dof > fdtri(1.0, dof, 1.0 - NOTICEABLE_OFFSET_LEVEL)
+    return OffsetHint(fit.offset, max_offset) if noticeable else None
 
 
 # --------------------------------------------------------------------------- segmentation
