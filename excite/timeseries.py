@@ -48,13 +48,16 @@ Detection, never silent averaging (all of it in :class:`SegmentationReport`)
   rate over ``Limits.max_turn_rate`` (rad/s), or consecutive encoder samples implying a wheel
   rate over ``Limits.max_wheel_rate`` (rad/s, e.g. a counter reset); segments containing one
   are dropped.
-* Standstills: segments in which neither wheel turned more than ``Limits.still_wheel`` and the
-  sensor neither moved ``Limits.still_distance`` nor turned ``Limits.still_heading``; dropped
-  (they carry noise, no information about r_L, r_R, b).
-* Carried: segments in which neither wheel turned more than ``Limits.still_wheel`` while the
-  sensor moved or turned far beyond the pose noise (``Limits.carry_sigmas``; the noise is
-  estimated from the pose stream itself): the robot was carried or pushed, or the pose source
-  relocalised; dropped.
+* Segments in which neither wheel turned more than ``Limits.still_wheel`` are, by how far the
+  sensor moved and turned, one of three (see :class:`Limits`):
+  - standstills: the sensor stayed within the still limits (``Limits.still_distance``,
+    ``Limits.still_heading``) or within the pose noise (``Limits.carry_sigmas``; the noise is
+    estimated from the pose stream itself); dropped (they carry noise, no information about
+    r_L, r_R, b);
+  - carried: the sensor moved or turned beyond both, and beyond what the wheels' small turns
+    could have made any plausible robot do: it was carried or pushed, or the pose source
+    relocalised; dropped;
+  - otherwise a slow motion (a big-wheeled robot spinning slowly), kept.
 """
 
 from __future__ import annotations
@@ -856,12 +859,20 @@ class Limits:
     still_wheel (rad), still_distance (m), still_heading (rad): a segment is a standstill when
         both wheels turned at most still_wheel and the sensor moved at most still_distance and
         turned at most still_heading.
-    carry_sigmas: a segment in which both wheels turned at most still_wheel, but the sensor
-        moved more than carry_sigmas standard deviations of the noise of a difference of two
-        poses (and more than still_distance), or turned likewise (and more than
-        still_heading), was carried: at 5, a still robot's noise passes it in about 4 of a
-        million segments (the Rayleigh tail exp(-5^2 / 2)). The pose noise is estimated from
-        the pose stream (:func:`_pose_noise`).
+    carry_sigmas: a segment in which both wheels turned at most still_wheel is a standstill
+        too when the sensor moved at most carry_sigmas standard deviations of the noise of a
+        difference of two poses and turned likewise: at 5, a still robot's noise passes it in
+        about 4 of a million segments (the Rayleigh tail exp(-5^2 / 2)). The pose noise is
+        estimated from the pose stream (:func:`_pose_noise`).
+    max_radius_to_track, max_wheel_radius (m), max_sensor_arm (m): the most the wheels' small
+        turns dphi_L, dphi_R (within still_wheel) can move a plausible robot's sensor: a turn of
+        max_radius_to_track (|dphi_L| + |dphi_R|) (rad; r / b is 0.3 on a Husky, under 1 on any
+        differential drive whose wheels are smaller than its track) and a displacement of
+        max_wheel_radius max |dphi| plus max_sensor_arm times that turn (the sensor's lever
+        arm). A segment with wheels this still whose sensor moved beyond that plus the
+        standstill limit above, or turned likewise, was carried. Floors of a few times the
+        still limits would do as well for the presets; this bound instead keeps full
+        sensitivity where the wheels stood exactly still.
     """
 
     max_gap: float | None = None
@@ -872,6 +883,9 @@ class Limits:
     still_distance: float = 0.01
     still_heading: float = 0.01
     carry_sigmas: float = 5.0
+    max_radius_to_track: float = 1.0
+    max_wheel_radius: float = 0.5
+    max_sensor_arm: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -974,13 +988,11 @@ class SegmentedLog:
 
 @dataclass(frozen=True)
 class _StreamCheck:
-    """Per-interval flags of one stream: gap (split there), jump; its dropouts; for poses the
-    noise std of a single sample (m, rad)."""
+    """Per-interval flags of one stream: gap (split there), jump; its dropouts."""
 
     gap: BoolArray
     jump: BoolArray
     dropouts: int
-    noise: tuple[float, float] = (0.0, 0.0)
 
 
 #: The median of |N(0, 1)|: a robust std is the median absolute value / this.
@@ -1029,7 +1041,7 @@ def _check_poses(ts: TimeSeries, window: float, limits: Limits) -> _StreamCheck:
     moved = np.hypot(np.diff(ts.x), np.diff(ts.y))
     turned = np.abs(np.diff(ts.theta))
     jump = (moved > limits.max_speed * dt) | (turned > limits.max_turn_rate * dt)
-    return _StreamCheck(gap, jump, missed, _pose_noise(ts))
+    return _StreamCheck(gap, jump, missed)
 
 
 def _gaps(ts: TimeSeries, encoders: _StreamCheck, poses: _StreamCheck) -> list[Gap]:
@@ -1197,18 +1209,25 @@ def _drop_reasons(ts: TimeSeries, t_pose: FloatArray, cut: _Cut, rows: FloatArra
     """Per reason, which candidate segments to drop (a segment counts under its first
     reason only)."""
     pose_jumps = np.concatenate(([0], np.cumsum(poses.jump)))
-    wheels_still = np.abs(rows[:, :2]).max(axis=1, initial=0.0) <= limits.still_wheel
+    wheel = np.abs(rows[:, :2])
+    wheels_still = wheel.max(axis=1, initial=0.0) <= limits.still_wheel
     moved, turned = np.hypot(rows[:, 2], rows[:, 3]), np.abs(rows[:, 4])
-    # a difference of two poses has sqrt(2) times a sample's noise
-    far = max(limits.still_distance, limits.carry_sigmas * math.sqrt(2.0) * poses.noise[0])
-    turned_far = max(limits.still_heading, limits.carry_sigmas * math.sqrt(2.0) * poses.noise[1])
+    # still: within the still limits or the noise (a difference of two poses has sqrt(2) times
+    # a sample's noise)
+    noise = _pose_noise(ts)
+    near = max(limits.still_distance, limits.carry_sigmas * math.sqrt(2.0) * noise[0])
+    near_heading = max(limits.still_heading, limits.carry_sigmas * math.sqrt(2.0) * noise[1])
+    # carried: beyond that plus what the wheels' small turns could do to any plausible robot
+    could_turn = limits.max_radius_to_track * wheel.sum(axis=1)
+    could_move = limits.max_wheel_radius * wheel.max(axis=1, initial=0.0) + (
+        limits.max_sensor_arm * could_turn)
     reasons = {
         POSE_JUMP: pose_jumps[cut.end] > pose_jumps[cut.start],
         ENCODER_JUMP: _flagged_overlaps(ts.t_enc, encoders.jump, t_pose[cut.start],
                                         t_pose[cut.end]) > 0,
-        STANDSTILL: (wheels_still & (moved <= limits.still_distance)
-                     & (turned <= limits.still_heading)),
-        CARRIED: wheels_still & ((moved > far) | (turned > turned_far)),
+        STANDSTILL: wheels_still & (moved <= near) & (turned <= near_heading),
+        CARRIED: wheels_still & ((moved > near + could_move)
+                                 | (turned > near_heading + could_turn)),
     }
     taken = np.zeros(cut.start.size, dtype=bool)
     for reason, mask in reasons.items():

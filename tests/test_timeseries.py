@@ -723,15 +723,51 @@ def test_a_robot_carried_with_idle_wheels_is_dropped():
 @pytest.mark.parametrize("noise", [0.002, 0.01])
 def test_noisy_poses_of_a_still_robot_are_not_carried(noise):
     """A robot standing still for 20 s under pose noise of 2 mm or 1 cm (and as many mrad)
-    loses no segment as carried, over five noise draws; the same log carried 0.3 m in 1 s
-    does."""
+    loses all 20 still segments as standstills, none as carried, over five noise draws (1 cm
+    of noise moves the sensor beyond the 1 cm still limit: such segments used to stay in the
+    fit); the same log carried 0.3 m in 1 s loses that segment as carried."""
     sim = simulate(duration=40.0, step=0.01, standstill=(10.0, 30.0))
     for seed in range(5):
         ts = make_log(sim, noise=(noise, noise), seed=seed)
         log = segment_timeseries(ts, window=1.0)
         assert log.report.segments_dropped[CARRIED] == 0
+        assert log.report.segments_dropped[STANDSTILL] == 20
         moved = carried(ts, T0 + 20.0, T0 + 21.0, 0.3)
         assert segment_timeseries(moved, window=1.0).report.segments_dropped[CARRIED] == 1
+
+
+def slow_spin(r: float, b: float, rate: float) -> TimeSeries:
+    """30 s at 100 Hz, noise-free, sensor on the axle centre: 20 s of driving on a curve, then
+    10 s of spinning in place with the wheels at -rate and +rate (rad/s)."""
+    t = np.arange(0.0, 30.0, 0.01)
+    rate_L, rate_R = np.where(t < 20, 3.0, -rate), np.where(t < 20, 3.5, rate)
+    dt = np.diff(t)
+    dphi_L, dphi_R = rate_L[:-1] * dt, rate_R[:-1] * dt
+    dx, dy, dth = predict_increment(dphi_L, dphi_R, Params(r, r, b))
+    theta = np.concatenate(([0.0], np.cumsum(dth)))
+    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
+    x = np.concatenate(([0.0], np.cumsum(c * dx - s * dy)))
+    y = np.concatenate(([0.0], np.cumsum(s * dx + c * dy)))
+    return TimeSeries(t, np.concatenate(([0.0], np.cumsum(dphi_L))),
+                      np.concatenate(([0.0], np.cumsum(dphi_R))), t, x, y, theta)
+
+
+def test_a_slow_spin_of_a_big_wheeled_robot_is_not_carried():
+    """r / b = 1/3 (the Husky's is 0.3) spinning at 0.0127 rad/s, its wheels at 0.019 rad/s:
+    per 1 s window the wheels turn under still_wheel (0.02 rad) while the heading turns more
+    than still_heading (0.01 rad). All 10 spin windows are kept, none called carried (9 were,
+    when the carried test compared the heading with the still limit alone); with 2 mm / 2 mrad
+    pose noise the spin hides in the noise: standstills, still not carried."""
+    ts = slow_spin(0.1, 0.3, 0.019)
+    assert abs(ts.theta[-1] - ts.theta[-101]) > 0.01  # the heading turns more than still_heading
+    assert abs(ts.phi_R[-1] - ts.phi_R[-101]) < 0.02  # the wheels less than still_wheel
+    report = segment_timeseries(ts, window=1.0).report
+    assert report.n_segments == 29
+    assert report.segments_dropped[CARRIED] == report.segments_dropped[STANDSTILL] == 0
+    rng = np.random.default_rng(4)
+    noisy = TimeSeries(ts.t_enc, ts.phi_L, ts.phi_R, ts.t_pose,
+                       *(v + rng.normal(0.0, 0.002, v.size) for v in (ts.x, ts.y, ts.theta)))
+    assert segment_timeseries(noisy, window=1.0).report.segments_dropped[CARRIED] == 0
 
 
 def test_pose_samples_outside_the_encoder_range_are_counted(sim):
