@@ -91,6 +91,7 @@ __all__ = [
     "tick_angle",
     "timeseries_streams",
     "read_timeseries",
+    "sample_at",
     "write_timeseries",
     "segment_timeseries",
 ]
@@ -134,11 +135,17 @@ MAX_SUBSTEP = 0.02
 # --------------------------------------------------------------------------- the streams
 
 
+def sample_at(source: str, t: float) -> str:
+    """A sample's place when its line is unknown: 'source at t = ... s' (t in s, to the us);
+    errors about time-series samples and bag messages name them so."""
+    return f"{source} at t = {float(t):.6f} s"
+
+
 def _where(source: str, lines: IntArray | None, t: ArrayLike, index: int) -> str:
     """'file:line' of a sample, or 'source at t = ... s' when lines are unknown."""
     if lines is not None:
         return f"{source}:{lines[index]}"
-    return f"{source} at t = {float(np.asarray(t)[index]):.6f} s"
+    return sample_at(source, np.asarray(t)[index])
 
 
 def _checked_stream(kind: Stream, source: str, lines: IntArray | None,
