@@ -5,8 +5,9 @@ Streams, clocks and frames
 --------------------------
 * Encoder stream: times ``t_enc`` (s, the encoder clock) and cumulative wheel angles
   ``phi_L``, ``phi_R`` (rad, positive when the wheel drives the robot forward). Angles wrapped
-  to [-pi, pi] (continuous joints that some drivers report modulo 2 pi) are unwrapped and the
-  segmentation report says so; an error when they are sampled too slowly to unwrap.
+  to one turn (continuous joints that some drivers report modulo 2 pi, in [-pi, pi) or
+  [0, 2 pi)) are unwrapped and the segmentation report says so; an error when they are
+  sampled too slowly to unwrap.
 * Pose stream: times ``t_pose`` (s, the pose sensor's clock) and the sensor's pose in the
   world frame: ``x``, ``y`` (m) and ``theta`` (rad, unwrapped; a wrapped input is unwrapped).
 * The clocks differ by a constant ``time_offset`` (s): pose time + time_offset = encoder time.
@@ -178,8 +179,9 @@ def _checked_stream(kind: Stream, source: str, lines: IntArray | None,
     return arrays
 
 
-#: Wheel angles that never leave [-pi, pi] by more than this (rad) may be wrapped: continuous
-#: joints that some drivers report modulo 2 pi.
+#: Wheel angles whose range (max - min) exceeds one turn, 2 pi, by at most this (rad) may be
+#: wrapped: continuous joints that some drivers report modulo 2 pi, whether in [-pi, pi) or in
+#: [0, 2 pi).
 WRAP_TOLERANCE = 1e-3
 #: The largest wheel step between encoder samples (rad) that unwrapping trusts. np.unwrap takes
 #: the step within +-pi, right while the wheel turns less than pi per sample; a wheel that sped
@@ -191,18 +193,19 @@ MAX_UNWRAPPED_STEP = 0.5 * math.pi
 
 def _unwrapped_wheel(source: str, lines: IntArray | None, t: FloatArray, name: str,
                      phi: FloatArray) -> FloatArray | None:
-    """The wheel angles unwrapped when they are wrapped (all within [-pi, pi] up to
-    WRAP_TOLERANCE, and some step between samples over pi); None when they are not wrapped.
+    """The wheel angles unwrapped when they are wrapped (all within one turn, a range of at
+    most 2 pi + WRAP_TOLERANCE, and some step between samples over pi); None when they are not
+    wrapped.
     DataError naming the sample when a step after unwrapping exceeds MAX_UNWRAPPED_STEP."""
     steps = np.abs(np.diff(phi))
-    if np.abs(phi).max() > math.pi + WRAP_TOLERANCE or not (steps > math.pi).any():
+    if np.ptp(phi) > 2.0 * math.pi + WRAP_TOLERANCE or not (steps > math.pi).any():
         return None
     unwrapped = np.unwrap(phi)
     fast = np.abs(np.diff(unwrapped))
     i = int(np.argmax(fast))
     if fast[i] > MAX_UNWRAPPED_STEP:
         raise DataError(f"{_where(source, lines, t, i + 1)}: the wheel angles {name} are "
-                        f"wrapped to [-pi, pi] and sampled too slowly to unwrap (a step of "
+                        f"wrapped modulo 2 pi and sampled too slowly to unwrap (a step of "
                         f"{fast[i]:.2f} rad after unwrapping, over pi/2): record them "
                         "unwrapped or more often")
     return unwrapped
@@ -219,7 +222,7 @@ class TimeSeries:
     source: (encoder source, pose source) for messages: file names, or bag and topic.
     lines: (encoder lines, pose lines): each sample's line in its file, or None (messages then
     name the sample's time).
-    unwrapped_wheels: the wheel columns (of "phi_L", "phi_R") that were wrapped to [-pi, pi]
+    unwrapped_wheels: the wheel columns (of "phi_L", "phi_R") that were wrapped to one turn
     (continuous joints reported modulo 2 pi) and are unwrapped here; DataError when such a
     stream is sampled too slowly to unwrap (see MAX_UNWRAPPED_STEP).
     """
@@ -929,7 +932,7 @@ class SegmentationReport:
     adjacent ones merged). samples_dropped: pose samples unused, per reason (outside the
     encoder time range, inside an encoder gap). gaps: every gap, in time order. dropouts:
     missed samples per stream, bridged. unwrapped_wheels: the wheel columns that were wrapped
-    to [-pi, pi] and were unwrapped (TimeSeries.unwrapped_wheels).
+    modulo 2 pi and were unwrapped (TimeSeries.unwrapped_wheels).
     """
 
     n_segments: int
@@ -941,10 +944,10 @@ class SegmentationReport:
     unwrapped_wheels: tuple[str, ...] = ()
 
     def unwrapped_text(self) -> str:
-        """'phi_L, phi_R wrapped to [-pi, pi], unwrapped' ('' when no wheel was wrapped)."""
+        """'phi_L, phi_R wrapped modulo 2 pi, unwrapped' ('' when no wheel was wrapped)."""
         if not self.unwrapped_wheels:
             return ""
-        return f"{', '.join(self.unwrapped_wheels)} wrapped to [-pi, pi], unwrapped"
+        return f"{', '.join(self.unwrapped_wheels)} wrapped modulo 2 pi, unwrapped"
 
     def counts_text(self) -> str:
         """What was dropped, in one line, e.g. '3 standstill, 1 pose jump; 25 pose samples

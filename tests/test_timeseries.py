@@ -233,22 +233,24 @@ def test_wrapped_headings_are_unwrapped(tmp_path, short_log):
     assert -np.pi < theta[0] <= np.pi
 
 
-def write_wrapped(path, ts: TimeSeries) -> tuple[np.ndarray, np.ndarray]:
-    """Write the log with its wheel angles wrapped to [-pi, pi) (continuous joints reported
-    modulo 2 pi); the wrapped angles."""
-    wheels = (np.angle(np.exp(1j * ts.phi_L)), np.angle(np.exp(1j * ts.phi_R)))
+def write_wrapped(path, ts: TimeSeries, low: float = -np.pi) -> tuple[np.ndarray, np.ndarray]:
+    """Write the log with its wheel angles wrapped to [low, low + 2 pi) (continuous joints
+    reported modulo 2 pi); the wrapped angles."""
+    wheels = (low + np.mod(ts.phi_L - low, 2 * np.pi), low + np.mod(ts.phi_R - low, 2 * np.pi))
     write_combined(path, ts, wheels=wheels)
     return wheels
 
 
-@pytest.mark.parametrize("every", [1, 5])
-def test_wrapped_wheel_angles_are_unwrapped_and_reported(tmp_path, sim, every):
-    """Wheels wrapped to [-pi, pi) at 100 Hz and at 20 Hz (a wrap jumps by ~2 pi, as an
-    encoder reset would): read back as the cumulative angles, segmented as the unwrapped log,
-    and the report says so."""
+@pytest.mark.parametrize("every", [1, 5, 10])
+@pytest.mark.parametrize("low", [-np.pi, 0.0])
+def test_wrapped_wheel_angles_are_unwrapped_and_reported(tmp_path, sim, every, low):
+    """Wheels wrapped to [-pi, pi) or [0, 2 pi) at 100, 20 and 10 Hz (a wrap jumps by ~2 pi,
+    as an encoder reset would): read back as the cumulative angles, segmented as the
+    unwrapped log, and the report says so. ([0, 2 pi) went unnoticed while the test was
+    |phi| <= pi: at 10 Hz the wraps were then taken as wheel turns.)"""
     ts = make_log(sim, enc_every=every)
     path = tmp_path / "log.csv"
-    wrapped, _ = write_wrapped(path, ts)
+    wrapped, _ = write_wrapped(path, ts, low)
     assert np.abs(np.diff(wrapped)).max() > 1.5 * np.pi  # it does wrap
     read = read_timeseries(path)
     assert read.unwrapped_wheels == ("phi_L", "phi_R")
@@ -259,13 +261,13 @@ def test_wrapped_wheel_angles_are_unwrapped_and_reported(tmp_path, sim, every):
     assert log.report.segments_dropped == reference.report.segments_dropped
     np.testing.assert_allclose(log.segments.as_array(), reference.segments.as_array(),
                                rtol=0, atol=1e-9)
-    assert log.report.unwrapped_text() == "phi_L, phi_R wrapped to [-pi, pi], unwrapped"
-    assert "Wheel angles phi_L, phi_R wrapped to [-pi, pi], unwrapped." in log.report.summary()
+    assert log.report.unwrapped_text() == "phi_L, phi_R wrapped modulo 2 pi, unwrapped"
+    assert "Wheel angles phi_L, phi_R wrapped modulo 2 pi, unwrapped." in log.report.summary()
     assert reference.report.unwrapped_wheels == () and reference.report.unwrapped_text() == ""
 
 
 def test_wheel_angles_within_pi_that_do_not_wrap_are_kept():
-    """Cumulative wheel angles that stay within [-pi, pi] (no step over pi) are not touched."""
+    """Cumulative wheel angles that stay within one turn (no step over pi) are not touched."""
     t = np.linspace(0.0, 10.0, 1001)
     wheel = 0.3 * np.sin(t)
     ts = TimeSeries(t, wheel, -wheel, t, 0 * t, 0 * t, 0.01 * np.sin(t))
@@ -280,8 +282,8 @@ def test_wrapped_wheels_sampled_too_slowly_are_an_error_naming_the_line(tmp_path
     assert np.abs(np.diff(ts.phi_R)).max() > np.pi
     path = tmp_path / "log.csv"
     write_wrapped(path, ts)
-    with pytest.raises(DataError, match=rf"^{path}:\d+: the wheel angles phi_\w are wrapped to "
-                       r"\[-pi, pi\] and sampled too slowly to unwrap") as info:
+    with pytest.raises(DataError, match=rf"^{path}:\d+: the wheel angles phi_\w are wrapped "
+                       r"modulo 2 pi and sampled too slowly to unwrap") as info:
         read_timeseries(path)
     assert "\n" not in str(info.value)
 
