@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from excite.errors import DataError
-from excite.timeseries import TimeSeries
+from excite.timeseries import TimeSeries, sample_at
 
 __all__ = ["POSE_TYPES", "STORAGES", "BagLog", "BagWriter", "is_bag_path", "read_bag",
            "read_bag_log", "write_bag"]
@@ -91,11 +91,6 @@ def _frame(frame_id: str) -> str:
     return frame_id.lstrip("/")
 
 
-def _at(where: str, stamp: float) -> str:
-    """A message's place: topic and header stamp (s, as the time-series errors name it)."""
-    return f"{where} at t = {stamp:.6f} s"
-
-
 class _Stream:
     """Rows (header stamp in ns first, then the values read) of one topic in receive order,
     and the messages skipped, per reason."""
@@ -140,7 +135,7 @@ class _Stream:
                        axis=1)
         if not equal.all():
             stamp = table[same_stamp[np.argmin(equal)], 0]
-            raise DataError(f"{_at(self.where, stamp)}: two messages with this header stamp "
+            raise DataError(f"{sample_at(self.where, stamp)}: two messages with this header stamp "
                             "and different values")
         self.skip("repeated (same stamp, same values)", same_stamp.size)
         return np.delete(table, same_stamp + 1, axis=0)
@@ -163,7 +158,7 @@ class _Joints(_Stream):
             self.skip(NO_POSITIONS)
             return
         if len(msg.position) != len(names):
-            raise DataError(f"{_at(self.where, _stamp(msg.header) * 1e-9)}: "
+            raise DataError(f"{sample_at(self.where, _stamp(msg.header) * 1e-9)}: "
                             f"{len(msg.position)} positions for {len(names)} joint names")
         self.rows.append((_stamp(msg.header), msg.position[names.index(self.left)],
                           msg.position[names.index(self.right)]))
@@ -201,13 +196,13 @@ def _headings(where: str, t: np.ndarray, q: np.ndarray) -> np.ndarray:
     bad = ~(np.isfinite(norm2) & (norm2 >= MIN_QUATERNION_NORM**2))
     if bad.any():
         i = int(np.argmax(bad))
-        raise DataError(f"{_at(where, t[i])}: the orientation quaternion (x, y, z, w) = "
+        raise DataError(f"{sample_at(where, t[i])}: the orientation quaternion (x, y, z, w) = "
                         f"({x[i]}, {y[i]}, {z[i]}, {w[i]}) is not a rotation (zero length "
                         "or not finite)")
     tilt = np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y) / norm2, -1.0, 1.0))
     if np.any(tilt > MAX_TILT):
         i = int(np.argmax(tilt))
-        raise DataError(f"{_at(where, t[i])}: the pose's z axis is tilted "
+        raise DataError(f"{sample_at(where, t[i])}: the pose's z axis is tilted "
                         f"{math.degrees(tilt[i]):.1f} degrees from the world z axis (the "
                         f"largest tilt; a ground robot stays within "
                         f"{math.degrees(MAX_TILT):.0f}): a Y-up frame? Motion capture systems "

@@ -133,7 +133,7 @@ def test_wrapped_wheel_angles_through_the_cli(capsys, tmp_path):
     code, out, _ = run_cli(capsys, "calibrate", wrapped, "--json")
     assert code == 0
     report = json.loads(out)
-    assert "phi_L, phi_R wrapped to [-pi, pi], unwrapped" in report["inputs"][0]
+    assert "phi_L, phi_R wrapped modulo 2 pi, unwrapped" in report["inputs"][0]
     _, reference, _ = run_cli(capsys, "calibrate", plain, "--json")
     reference = json.loads(reference)
     assert "unwrapped" not in reference["inputs"][0]
@@ -166,7 +166,7 @@ GOOD_ROWS = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,5,5,0.25,0,0\n1.0,10,10,0
     ("t,ticks_L,ticks_R,x,y,theta\n0,0,0,0,0,0\n", [],
      "log.csv:1: encoder ticks (ticks_L, ticks_R) need the encoder resolution"),
     ("t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,1,1,0.1,0,0\n1.0,-2.5,-2.5,0.2,0,0\n", [],
-     "log.csv:4: the wheel angles phi_L are wrapped to [-pi, pi] and sampled too slowly"),
+     "log.csv:4: the wheel angles phi_L are wrapped modulo 2 pi and sampled too slowly"),
 ])
 def test_bad_log_files_through_the_cli(capsys, tmp_path, text, extra, fragment):
     path = tmp_path / "log.csv"
