@@ -801,6 +801,12 @@ MIN_OFFSET_TEST_BLOCKS = 8
 LAG_DIRECTION_SMOOTHING = 0.1
 #: Two-sided level of the test that lag zero fits as well as a small shift (noticeable_time_offset).
 NOTICEABLE_OFFSET_LEVEL = 1e-3
+#: An offset the test finds is noted only beyond this fraction of the coarser stream's median
+#: sample period: comparing rates of a coarse stream interpolated on a fine grid leaves a lag
+#: of its own (up to 0.08 of a period on logs recorded without an offset: -7.3 ms with 10 Hz
+#: encoders under 100 Hz poses, which the test, being about noise, calls significant; a 30 ms
+#: offset there is estimated at ~15 ms, so the floor stays near that bias).
+NOTICEABLE_OFFSET_PERIODS = 0.1
 
 
 def _lag_zero_score(fit: _OffsetFit) -> tuple[float, int]:
@@ -861,9 +867,9 @@ def noticeable_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET
     """What the data say about the clock offset when none was given: a hint when the data
     reject a zero offset (:func:`_lag_zero_score` beyond the two-sided NOTICEABLE_OFFSET_LEVEL
     quantile of Student's t) or the estimate lies beyond +-max_offset s; None when zero fits
-    about as well, the log is too short for the test (under 8 blocks of 2 s), or the offset
-    cannot be estimated (too little turning, too short an overlap: see
-    :func:`estimate_time_offset`).
+    about as well, the estimate is within NOTICEABLE_OFFSET_PERIODS of the coarser stream's
+    period, the log is too short for the test (under 8 blocks of 2 s), or the offset cannot be
+    estimated (too little turning, too short an overlap: see :func:`estimate_time_offset`).
 
     On one-minute simulated logs (12 random paths each; 4096-tick encoders and poses at 10 to
     200 Hz, 2 mm / 4 mrad pose noise) no zero offset was noted (largest |t| 2.5, the quantile
@@ -883,6 +889,9 @@ def noticeable_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET
     score, blocks = _lag_zero_score(fit)
     if blocks == 0 or abs(score) <= stdtrit(blocks - 1, 1.0 - 0.5 * NOTICEABLE_OFFSET_LEVEL):
         return None
+    coarser = max(float(np.median(np.diff(ts.t_enc))), float(np.median(np.diff(ts.t_pose))))
+    if abs(fit.offset) <= NOTICEABLE_OFFSET_PERIODS * coarser:
+        return None  # within the interpolation's own lag (module constant)
     return OffsetHint(fit.offset, max_offset)
 
 
