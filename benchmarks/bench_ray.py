@@ -17,7 +17,14 @@ from pathlib import Path
 import ray
 
 from agents import backends
-from agents.compare import CompareSettings, as_specs, run_comparison, run_episodes
+from agents.compare import (
+    CompareSettings,
+    as_estimator_specs,
+    as_specs,
+    run_comparison,
+    run_episodes,
+)
+from excite.estimators import DEFAULT_ESTIMATOR
 
 PROTOCOLS = ["straight", "spin", "straight_spin", "umbmark", "random", "arcs", "greedy"]
 
@@ -50,7 +57,8 @@ def main(argv: list[str] | None = None) -> dict:
     walls["local again"] = timed(tmp / "local2", args.episodes, workers=2)
     episode = CompareSettings()
     start = time.perf_counter()
-    run_episodes(episode, [(0, as_specs(PROTOCOLS))])
+    (estimator,) = as_estimator_specs([DEFAULT_ESTIMATOR])
+    run_episodes(episode, [(0, [(protocol, estimator) for protocol in as_specs(PROTOCOLS)])])
     cost = time.perf_counter() - start
     first = (tmp / "local" / "segments.csv").read_bytes()
     same = all((tmp / name / "segments.csv").read_bytes() == first
