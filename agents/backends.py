@@ -6,6 +6,8 @@ caller can write finished work at once and an interrupted run loses only unfinis
 
 - ``local``: a pool of worker processes on this machine (``workers``, default all cores).
   Process start-up is paid once per worker and a task costs about a millisecond of overhead.
+  A worker exits within :data:`ORPHAN_CHECK_SECONDS` of its parent's death (a killed
+  ``compare`` leaves no workers behind).
 - ``ray``: Ray tasks, one CPU each. The cluster is found by Ray's own conventions
   (:func:`connect_ray`): ``--address ADDR``, else the ``RAY_ADDRESS`` environment variable,
   else the latest cluster started on this machine by ``ray start``, else a new local Ray. A
@@ -21,6 +23,8 @@ import logging
 import math
 import os
 import socket
+import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
@@ -32,6 +36,21 @@ LOCAL, RAY = BACKENDS = ("local", "ray")
 #: Least work (s) per Ray task, so scheduling and serialisation (milliseconds per task, more
 #: between machines) stay a small fraction of the run.
 RAY_TASK_SECONDS = 1.0
+#: s between a local worker's checks that its parent is alive.
+ORPHAN_CHECK_SECONDS = 1.0
+
+
+def _exit_with_parent() -> None:
+    """Initializer of a local worker: a daemon thread ends the process when its parent is
+    gone (reparented: the parent was killed, so no one will read its results)."""
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(ORPHAN_CHECK_SECONDS)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="excite-orphan-check").start()
 
 
 class BackendError(ExciteError, ValueError):
@@ -167,7 +186,8 @@ def open_backend(name: str = LOCAL, address: str | None = None,
     (Ray schedules by the cluster's CPUs)."""
     check_backend(name, address)
     if name == LOCAL:
-        pool = ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1)
+        pool = ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1,
+                                   initializer=_exit_with_parent)
         executor: Executor = _LocalExecutor(pool)
         try:
             yield executor

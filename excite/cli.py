@@ -14,9 +14,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 
 from excite import __version__
 from excite.commands import (
@@ -68,6 +71,24 @@ def _missing_extra(exc: ModuleNotFoundError, command: str | None) -> str | None:
             f"pip install 'excite[{extra}]'").replace("excite  ", "excite ")
 
 
+@contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM (a job scheduler, ``kill``) ends a command as Ctrl-C does: finished work kept,
+    worker pools shut down, one line on stderr (in the main thread; restored afterwards)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = None
@@ -77,7 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if handler is None:
             names = ", ".join(c.__name__.rsplit(".", 1)[1] for c in COMMANDS)
             raise UsageError(f"a command is required ({names}); see excite --help")
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _terminate_as_interrupt():
             if not os.environ.get("EXCITE_DEBUG"):
                 warnings.simplefilter("ignore", RuntimeWarning)
             return handler(args)

@@ -1,0 +1,68 @@
+"""A killed or terminated compare leaves no worker processes behind (Linux: /proc)."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs /proc")
+
+
+def _children(pid: int) -> set[int]:
+    found = set()
+    for status in Path("/proc").glob("[0-9]*/status"):
+        try:
+            fields = dict(line.split(":\t", 1) for line in status.read_text().splitlines()
+                          if ":\t" in line)
+        except OSError:
+            continue
+        if fields.get("PPid", "").strip() == str(pid):
+            found.add(int(status.parent.name))
+    return found
+
+
+def _alive(pids: set[int]) -> set[int]:
+    alive = set()
+    for pid in pids:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            continue
+        state = Path(f"/proc/{pid}/stat")
+        if state.exists() and state.read_text().split()[2] != "Z":
+            alive.add(pid)
+    return alive
+
+
+def _started_compare(out: Path) -> tuple[subprocess.Popen, set[int]]:
+    proc = subprocess.Popen([sys.executable, "-m", "excite.cli", "compare", "--protocols",
+                             "greedy", "--episodes", "40", "--segments", "30", "--workers",
+                             "2", "--out", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    workers: set[int] = set()
+    while time.monotonic() < deadline and len(workers) < 2:
+        time.sleep(0.5)
+        workers = {p for p in _children(proc.pid)}
+        if proc.poll() is not None:
+            break
+    assert len(workers) >= 2, "the worker pool did not start"
+    return proc, workers
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_workers_end_with_their_parent(tmp_path, sig):
+    proc, workers = _started_compare(tmp_path / "out")
+    time.sleep(2.0)  # some tasks under way
+    proc.send_signal(sig)
+    proc.wait(timeout=60)
+    if sig == signal.SIGTERM:  # as Ctrl-C: one line, finished work kept
+        assert proc.returncode == 130 and "interrupted" in proc.stderr.read()
+    deadline = time.monotonic() + 15
+    while _alive(workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _alive(workers)
