@@ -104,6 +104,10 @@ class ProtocolSpec:
         win); keys the protocol does not declare are errors."""
         return ProtocolSpec.of(self.name, {**defaults, **dict(self.settings)})
 
+    def fingerprint(self) -> str | None:
+        """A digest of the files this spec's settings name (a policy file), or None."""
+        return self.protocol.fingerprint(self.resolved())
+
     def declares(self, key: str) -> bool:
         return any(p.name == key for p in self.protocol.parameters)
 

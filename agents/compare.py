@@ -249,24 +249,69 @@ def _format(value):
     return value
 
 
+#: The key of DIR/config.json that ties each protocol's results to the content of the files
+#: its settings name (:meth:`agents.catalog.ProtocolSpec.fingerprint`: label -> sha256).
+FILES_KEY = "protocol_files"
+
+
+def _read_config(config: Path) -> dict | None:
+    """DIR/config.json's content, None when there is none; CompareError when it is not a
+    comparison's settings."""
+    if not config.exists():
+        return None
+    try:
+        stored = json.loads(config.read_text())
+    except json.JSONDecodeError:
+        raise CompareError(f"{config}: not valid JSON; remove it or choose another --out") from None
+    except IsADirectoryError:
+        raise CompareError(f"{config} is a folder; remove it or choose another --out") from None
+    if not isinstance(stored, dict) or not isinstance(stored.get(FILES_KEY, {}), dict):
+        raise CompareError(f"{config}: not a comparison's settings; remove it or choose "
+                           "another --out")
+    return stored
+
+
 def _check_settings(out_dir: Path, settings: CompareSettings) -> None:
     config = out_dir / "config.json"
-    if config.exists():
-        try:
-            stored = json.loads(config.read_text())
-        except json.JSONDecodeError:
-            raise CompareError(
-                f"{config}: not valid JSON; remove it or choose another --out") from None
-        if not isinstance(stored, dict):
-            raise CompareError(f"{config}: not a comparison's settings; remove it or choose "
-                               "another --out")
-        stored = {**asdict(CompareSettings()), **stored}  # keys added since: their defaults
-        if stored != asdict(settings):
-            raise CompareError(
-                f"{out_dir} holds a comparison with other settings ({stored}); "
-                "use another --out or the same --env, --segments, --seed and --robot")
-    else:
+    stored = _read_config(config)
+    if stored is None:
         config.write_text(json.dumps(asdict(settings), indent=2) + "\n")
+        return
+    stored.pop(FILES_KEY, None)
+    stored = {**asdict(CompareSettings()), **stored}  # keys added since: their defaults
+    if stored != asdict(settings):
+        raise CompareError(
+            f"{out_dir} holds a comparison with other settings ({stored}); "
+            "use another --out or the same --env, --segments, --seed and --robot")
+
+
+def _check_files(out_dir: Path, specs: Sequence[ProtocolSpec], rows: Sequence[dict]) -> None:
+    """Tie each protocol's results in ``out_dir`` to the content of the files its settings
+    name (a learned policy): a protocol whose file changed since its results were made is a
+    CompareError (resuming would mix or silently reuse results of another policy); the
+    digests of the others are recorded in config.json."""
+    config = out_dir / "config.json"
+    stored = _read_config(config) or {}
+    known = dict(stored.get(FILES_KEY, {}))
+    present = {row["protocol"] for row in rows}
+    for spec in specs:
+        digest = spec.fingerprint()
+        if digest is None:
+            continue
+        old = known.get(spec.label)
+        if old is None and spec.label in present:
+            raise CompareError(
+                f"{out_dir} holds results of {spec.label} that are not tied to its files' "
+                "content (made by an older excite): cannot tell whether they came from the "
+                "same policy; use another --out")
+        if old is not None and old != digest:
+            raise CompareError(
+                f"{spec.label}: its files changed since {out_dir} ran it (sha256 "
+                f"{digest[:12]}, was {old[:12]}): its results there are of another policy; "
+                "use another --out")
+        known[spec.label] = digest
+    if known != stored.get(FILES_KEY, {}):
+        config.write_text(json.dumps({**stored, FILES_KEY: known}, indent=2) + "\n")
 
 
 def run_comparison(
@@ -302,6 +347,7 @@ def run_comparison(
     _check_settings(out, settings)
     csv_path = out / "segments.csv"
     rows = read_complete_rows(csv_path, settings.segments, settings.final_only)
+    _check_files(out, specs, rows)
     _write_rows(csv_path, rows, "w")  # rewrite without partial episodes or duplicates
     done = {(r["protocol"], r["estimator"], r["episode"]) for r in rows}
     todo = {e: [(p, m) for p in specs for m in estimator_specs

@@ -7,6 +7,7 @@ files you trust.
 
 from __future__ import annotations
 
+import hashlib
 import pickle
 from collections.abc import Mapping
 from dataclasses import replace
@@ -46,6 +47,18 @@ class LearnedPolicy(Protocol):
             return None
         where = "" if settings["policy"] else " (no policy is shipped; train one with excite train)"
         return f"learned policy file not found: {path}{where}"
+
+    @classmethod
+    def fingerprint(cls, settings: Mapping[str, Value]) -> str | None:
+        """sha256 of the policy file and its observation normalization (missing: none)."""
+        from agents.train import normalization_path
+
+        path = cls.policy_path(settings)
+        digest = hashlib.sha256()
+        for part in (path, normalization_path(path)):
+            digest.update(part.read_bytes() if part.is_file() else b"")
+            digest.update(b"\0")  # the two contents stay apart
+        return digest.hexdigest()
 
     def __init__(self, **settings: Value):
         super().__init__(**settings)

@@ -146,6 +146,13 @@ class Protocol(ABC):
         without building it; None when it can (e.g. a policy file is missing)."""
         return None
 
+    @classmethod
+    def fingerprint(cls, settings: Mapping[str, Value]) -> str | None:
+        """A digest of the content of the files these (resolved) settings name, or None when
+        they name none: a comparison resumed with the same settings but another file content
+        (e.g. a policy retrained at the same path) must not reuse the old results."""
+        return None
+
     def reset(self, rng: np.random.Generator) -> None:
         """Start a new episode (``rng``: the episode's generator for any randomness)."""
         self.rng = rng

@@ -398,3 +398,35 @@ def test_run_comparison_rejects_no_or_repeated_estimators(tmp_path):
         run_comparison(tmp_path, ["spin"], 1, settings, progress=False,
                        estimators=["ekf:prior_std=0.1", estimator_factory("ekf:prior_std=1e-1")])
     assert not (tmp_path / "segments.csv").exists()
+
+
+def test_resume_refuses_results_of_a_policy_file_changed_at_the_same_path(tmp_path):
+    """The label learned:policy=PATH names a path, not a policy: a file retrained at the same
+    path must not reuse the old file's results (the folder ties them to its sha256)."""
+    import shutil
+
+    from agents.learned import SHIPPED_POLICY
+    from agents.train import normalization_path
+
+    policy = tmp_path / "p.zip"
+
+    def install(source):
+        shutil.copy(source, policy)
+        shutil.copy(normalization_path(source), normalization_path(policy))
+
+    install(SHIPPED_POLICY)
+    settings, out = CompareSettings(IDEAL, 2, 0), tmp_path / "run"
+    spec = f"learned:policy={policy}"
+    first = run_comparison(out, [spec], 1, settings, workers=1, progress=False)
+    again = run_comparison(out, [spec, "spin"], 1, settings, workers=1, progress=False)
+    assert [r for r in again if r["protocol"] != "spin"] == first  # same file: reused
+    install(SHIPPED_POLICY.with_name("excite_ppo_robots.zip"))  # retrained at the same path
+    with pytest.raises(CompareError, match="its files changed"):
+        run_comparison(out, [spec], 2, settings, workers=1, progress=False)
+    install(SHIPPED_POLICY)
+    shutil.copy(normalization_path(SHIPPED_POLICY.with_name("excite_ppo_robots.zip")),
+                normalization_path(policy))  # only the normalization differs
+    with pytest.raises(CompareError, match="its files changed"):  # the normalization counts
+        run_comparison(out, [spec], 2, settings, workers=1, progress=False)
+    install(SHIPPED_POLICY)
+    assert len(run_comparison(out, [spec], 2, settings, workers=1, progress=False)) == 2 * 2
