@@ -31,9 +31,16 @@ from tqdm import tqdm
 
 import excite  # noqa: F401  (registers the environment ids in worker processes)
 from agents.backends import LOCAL, chunk_size, open_backend
-from agents.catalog import ProtocolSpec, check_distinct, make_protocol, parse_protocol
+from agents.catalog import (
+    ProtocolSpec,
+    calling,
+    check_distinct,
+    make_protocol,
+    parse_protocol,
+    user_supplied,
+)
 from agents.oracle import oracle_design
-from agents.protocols import Protocol
+from agents.protocols import Protocol, check_action
 from excite.consistency import estimate_error, nees
 from excite.errors import ExciteError
 from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
@@ -93,21 +100,28 @@ def make_env(env_id: str, segments: int, robot: str = "default", **config) -> gy
 
 
 def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int,
-                         options: dict | None = None) -> list[dict]:
+                         options: dict | None = None, label: str | None = None) -> list[dict]:
     """Run one episode of ``protocol`` with the env's estimator (reset with ``seed`` and
-    ``options``); one record per segment (see COLUMNS): ``nees`` is the estimator's NEES
+    ``options``); one record per segment (see COLUMNS). ``label`` names the protocol in
+    errors (default: its class name): an action that is not two finite numbers, or a user's
+    protocol raising, is a ProtocolError naming it. ``nees`` is the estimator's NEES
     against the hidden truth over the ``nees_dof`` parameters it reports a covariance for
     (:func:`excite.consistency.estimate_error`), ``time`` the seconds driven since the
     start."""
+    label = label or type(protocol).__name__
+    user = user_supplied(type(protocol).__module__)
     env.reset(seed=seed, options=options)
     base = env.unwrapped
-    protocol.reset(np.random.default_rng([seed, 1]))
+    with calling(label, "reset", user):
+        protocol.reset(np.random.default_rng([seed, 1]))
     truth, true_theta = base.true_params.as_array(), base.true_theta
     seconds_per_segment = base.segment_duration + float(base.config["settle_time"])
     records, distance, done = [], 0.0, False
     knowledge = base.knowledge()
     while not done:
-        _, _, terminated, truncated, info = env.step(protocol.act(knowledge))
+        with calling(label, "act", user):
+            action = check_action(protocol.act(knowledge))
+        _, _, terminated, truncated, info = env.step(action)
         done = terminated or truncated
         knowledge = base.knowledge()
         distance += base.last_segment_distance
@@ -149,7 +163,11 @@ def incompatible_protocols(protocols: Iterable[ProtocolSpec],
     """Labels of the protocols that cannot run on an env with this observation shape (e.g. a
     policy trained for another observation layout), with the reason in words."""
     shape = tuple(observation_shape)
-    reasons = {spec.label: make_protocol(spec).incompatibility(shape) for spec in protocols}
+    reasons = {}
+    for spec in protocols:
+        protocol = make_protocol(spec)
+        with calling(spec.label, "incompatibility", user_supplied(type(protocol).__module__)):
+            reasons[spec.label] = protocol.incompatibility(shape)
     return {label: reason for label, reason in reasons.items() if reason}
 
 
@@ -178,7 +196,8 @@ def run_episode(settings: CompareSettings, pairs: list[Pair], episode: int) -> l
             oracle = oracle_design(base.true_theta, base.sigma, base.nominal_theta,
                                    settings.segments, base.max_wheel_speed,
                                    base.segment_duration, model=base.model).sigma_min
-        records = run_protocol_episode(env, _worker_protocol(protocol), seed)
+        records = run_protocol_episode(env, _worker_protocol(protocol), seed,
+                                       label=protocol.label)
         for record in records[-1:] if settings.final_only else records:
             rows.append({"protocol": protocol.label, "estimator": estimator.label,
                          "episode": episode, "oracle_sigma_min": oracle, **record})

@@ -66,6 +66,7 @@ class LearnedPolicy(Protocol):
         if reason := self.unavailable(self.settings):
             raise ProtocolError(reason)
         import torch
+        from gymnasium.spaces import Box
         from stable_baselines3 import PPO, SAC
         from stable_baselines3.common.vec_env import VecNormalize
 
@@ -89,6 +90,11 @@ class LearnedPolicy(Protocol):
             raise ProtocolError(f"{norm_path}: cannot load the observation normalization "
                                 f"saved with the policy ({exc})") from None
         self.path = path
+        space = self.model.action_space
+        if not (isinstance(space, Box) and space.shape == (2,)):
+            raise ProtocolError(f"{path}: the policy's actions are {space}, not two wheel-speed "
+                                "commands (a Box of shape (2,)): it was not trained on excite's "
+                                "environments")
         self.observation_shape = tuple(self.model.observation_space.shape)
 
     def incompatibility(self, observation_shape: tuple[int, ...]) -> str | None:

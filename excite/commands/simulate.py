@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     if args.robot_seed not in (None, args.seed):  # that seed's episode's robot and mounting
         env_.reset(seed=args.robot_seed)
         options = {"robot": base.robot, "sensor_pose": base.true_sensor_pose}
-    records = run_protocol_episode(env_, protocol, args.seed, options)
+    records = run_protocol_episode(env_, protocol, args.seed, options, label=spec.label)
     written, what = _write_log(args, out, base)
     mount = base.true_sensor_pose
     truth = {**dict(zip(("r_L", "r_R", "b"), base.true_params.as_array().tolist(), strict=True)),
