@@ -245,17 +245,37 @@ def test_compare_runs_on_the_sensor_env_and_skips_a_policy_of_another_layout(tmp
         (["compare", "--estimators", "tests.test_compare:missing"], "has no 'missing'"),
         (["compare", "--estimators", "no_such_module_x:f"], "cannot import module"),
         (["compare", "--estimators", "tests.test_compare:two_arguments_too_few",
-          "--episodes", "1", "--segments", "2"], "cannot be made"),
+          "--episodes", "1", "--segments", "2"], "its factory raised TypeError"),
         (["compare", "--protocols", "learned", "--episodes", "1"], "learned policy"),
         (["simulate", "--protocol", "zigzag", "--segments", "3", "--out", "x.csv"],
          "unknown protocol"),
         (["simulate", "--protocol", "spin", "--segments", "3"], "required: --out"),
         (["simulate", "--protocol", "spin", "--segments", "3", "--out", "/no/dir/x.csv"],
          "no such directory"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--seed", "-5", "--out",
+          "x.csv"], "--seed: must be at least 0"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--robot-seed", "-1", "--out",
+          "x.csv"], "--robot-seed: must be at least 0"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--out", "adir"],
+         "cannot write adir: it is a folder"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--out", "afile/x.csv"],
+         "afile is a file, not a folder"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--format", "bag", "--out",
+          "afile/bag"], "afile is a file, not a folder"),
+        (["compare", "--out", "afile"], "--out: afile is a file, not a folder"),
+        (["compare", "--out", ""], "--out: is empty"),
+        (["compare", "--protocols", "spin", "--episodes", "1", "--segments", "2", "--out",
+          "adir"], "cannot write adir/summary.json: it is a folder"),
+        (["tune", "--protocols", "spin", "--out", "afile/x.json"],
+         "afile is a file, not a folder"),
+        (["tune", "--protocols", "spin", "--out", "adir/summary.json"],
+         "adir/summary.json: it is a folder"),
     ],
 )
 def test_compare_and_simulate_bad_input(tmp_path, capsys, monkeypatch, argv, fragment):
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("a file, not a folder\n")
+    (tmp_path / "adir" / "summary.json").mkdir(parents=True)
     if argv[:3] == ["compare", "--protocols", "learned"]:
         import agents.learned
 

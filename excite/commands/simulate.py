@@ -26,7 +26,10 @@ from excite.bags import (
 )
 from excite.commands.args import (
     UsageError,
+    check_output_file,
+    check_parent_folder,
     env_id,
+    nonnegative_int,
     pose_noise_arg,
     positive_int,
     robot_preset,
@@ -41,8 +44,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     sim.add_argument("--protocol", required=True, metavar="NAME[:KEY=VALUE...]",
                      help="a protocol with optional settings (see excite protocols)")
     sim.add_argument("--segments", type=positive_int, required=True, metavar="N")
-    sim.add_argument("--seed", type=int, default=0, metavar="S")
-    sim.add_argument("--robot-seed", type=int, metavar="R",
+    sim.add_argument("--seed", type=nonnegative_int, default=0, metavar="S")
+    sim.add_argument("--robot-seed", type=nonnegative_int, metavar="R",
                      help="drive the hidden robot and sensor mounting of seed R's episode "
                      "(default: --seed's): logs with other --seed and one --robot-seed are "
                      "logs of one robot (e.g. held-out logs for excite validate)")
@@ -69,8 +72,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def _check_output(args: argparse.Namespace, out: Path) -> None:
     """One-line UsageError for options that do not fit the format, or an output that cannot
     be written."""
-    if not out.parent.is_dir():
-        raise UsageError(f"cannot write {out}: no such directory {out.parent}")
+    if args.format == "bag":  # a rosbag2 bag is a folder (must not exist, checked below)
+        check_parent_folder(out)
+    else:
+        check_output_file(out)
     if args.storage is not None and args.format != "bag":
         raise UsageError("--storage applies to --format bag")
     if args.pose_noise is not None and args.format == "segments":
