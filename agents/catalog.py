@@ -205,9 +205,9 @@ def check_distinct(specs: Iterable[ProtocolSpec]) -> list[ProtocolSpec]:
 
 def parse_protocols(text: str) -> list[ProtocolSpec]:
     """Comma-separated protocols (``a,b:key=value,...``), each distinct."""
-    parts = [part for part in text.split(",") if part.strip()]
-    if not parts:
-        raise ProtocolError(f"--protocols needs comma-separated protocols, got {text!r}")
+    parts = text.split(",")
+    if not all(part.strip() for part in parts):
+        raise ProtocolError(f"protocols {text!r}: empty name in the list")
     return check_distinct(parse_protocol(part) for part in parts)
 
 
@@ -226,8 +226,16 @@ def make_protocol(spec: str | ProtocolSpec) -> Protocol:
 
 def with_policy(specs: Iterable[ProtocolSpec], policy: str | None) -> list[ProtocolSpec]:
     """``specs`` with ``policy`` (``--policy PATH``) as the ``policy`` setting of each that
-    declares one and does not set it; unchanged when ``policy`` is None."""
-    return [spec.under({"policy": policy}) if policy and spec.declares("policy") else spec
+    declares one and does not set it; unchanged when ``policy`` is None. ProtocolError when
+    none declares one (the policy would be silently ignored)."""
+    specs = list(specs)
+    if not policy:
+        return specs
+    if not any(spec.declares("policy") for spec in specs):
+        raise ProtocolError(f"--policy {policy}: none of the protocols ("
+                            f"{', '.join(spec.label for spec in specs)}) takes a policy; add "
+                            "learned to them or leave --policy out")
+    return [spec.under({"policy": policy}) if spec.declares("policy") else spec
             for spec in specs]
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -66,6 +67,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     sim.add_argument("--out", required=True, metavar="FILE",
                      help="the log (segment CSV, time-series CSV or bag); the hidden truth "
                      "goes to FILE.truth.json")
+    # "--pose-noise -1,0" is a (bad) value, not an unknown option: argparse takes an argument
+    # that starts with "-" for a value only when it matches this pattern (by default a single
+    # number), and simulate has no option that looks like a number
+    sim._negative_number_matcher = re.compile(r"^-\.?\d[\d.,eE+-]*$")
     sim.set_defaults(handler=run)
 
 

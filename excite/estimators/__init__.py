@@ -140,10 +140,17 @@ class CheckedEstimator:
     """A user's estimator (``module:factory``) with every call checked: an exception in
     ``update`` or in reading ``params``, ``covariance`` or ``theta``, params that are not 3
     finite values, or a covariance that is not a finite square matrix is an EstimatorError
-    naming the estimator (``label``), not a failure deep inside the environment."""
+    naming the estimator (``label``), not a failure deep inside the environment. The
+    user's object is ``estimator``; its other attributes read through."""
 
     def __init__(self, label: str, estimator: Estimator) -> None:
         self.label, self.estimator = label, estimator
+
+    def __getattr__(self, name: str) -> object:
+        """Any other attribute is the user's estimator's (``n_segments``, ...)."""
+        if name == "estimator":  # not set yet (unpickling): no endless recursion
+            raise AttributeError(name)
+        return getattr(self.estimator, name)
 
     def _call(self, what: str, function: Callable[[], object]) -> object:
         try:
