@@ -11,6 +11,7 @@ from excite.cli import main
 
 IDEAL = "excite/DiffDriveCalibIdeal-v0"
 PROTOCOLS = '''
+import numpy as np
 from agents.protocols import Parameter, Protocol
 
 class Good(Protocol):
@@ -64,6 +65,7 @@ class BadDefault(Protocol):
         return np.zeros(2)
 '''
 ESTIMATORS = '''
+import numpy as np
 from excite import OnlineEstimator
 
 def good(nominal, sigma):
@@ -133,7 +135,7 @@ def _simulate(tmp_path, protocol, *extra):
     ("NonePlan", ["plan returned None"]),
     ("TextPlan", ["plan returned 'fast'"]),
     ("ThreePlan", ["plan returned array([0.1, 0.2, 0.3])"]),
-    ("ActOverride", ["act returned array([ 5., -5.,  1.])"]),
+    ("ActOverride", ["act returned array([ 5., -5., 1.])"]),
     ("Raises", ["act raised RuntimeError: boom in plan"]),
     ("InitRaises", ["__init__ raised ValueError: bad init"]),
     ("ResetRaises", ["reset raised KeyError: 'in reset'"]),
