@@ -15,14 +15,19 @@ A new protocol (e.g. a slip-aware planner) is one more registry entry, or a call
 from __future__ import annotations
 
 import importlib
-from collections.abc import Iterable, Mapping
+import inspect
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 from agents.protocols import Protocol, ProtocolError, Value, resolve_settings
 
 __all__ = ["PROTOCOLS", "ProtocolError", "ProtocolSpec", "register", "protocol_class",
            "parse_protocol", "parse_protocols", "check_distinct", "make_protocol", "with_policy",
-           "default_protocols"]
+           "default_protocols", "user_supplied", "calling"]
+
+#: The packages of excite's own code: errors raised there are excite's bugs, not bad input.
+EXCITE_PACKAGES = ("agents", "excite", "envs")
 
 #: Registered protocol names and their entry points, in the order they are listed and run.
 PROTOCOLS: dict[str, str] = {
@@ -48,8 +53,32 @@ def register(name: str, entry_point: str) -> None:
     PROTOCOLS[name] = entry_point
 
 
+def user_supplied(module_name: str) -> bool:
+    """Whether a module is a user's (any error its code raises is bad input) rather than
+    excite's own (an error there is a bug of excite, reported as such)."""
+    return module_name.partition(".")[0] not in EXCITE_PACKAGES
+
+
+@contextmanager
+def calling(label: str, what: str, user: bool) -> Iterator[None]:
+    """Run a call into protocol ``label``'s code (``what``: the method): its ProtocolError
+    names the protocol; any other exception does too, as a ProtocolError, when the code is a
+    user's (``user``), and stays an internal error in excite's own protocols."""
+    try:
+        yield
+    except ProtocolError as exc:
+        raise ProtocolError(f"protocol {label}: {exc}") from None
+    except Exception as exc:
+        if not user:
+            raise
+        raise ProtocolError(f"protocol {label}: {what} raised {type(exc).__name__}: "
+                            f"{exc}") from None
+
+
 def protocol_class(name: str) -> type[Protocol]:
-    """The class of a registered name or of a ``module:Class`` entry point."""
+    """The class of a registered name or of a ``module:Class`` entry point: a concrete
+    Protocol subclass whose parameter defaults pass their own checks. A user's module that
+    fails to import is a ProtocolError naming the exception."""
     entry_point = PROTOCOLS.get(name, name)
     if ":" not in entry_point:
         raise ProtocolError(f"unknown protocol {name!r}; choose from {', '.join(PROTOCOLS)} "
@@ -58,13 +87,30 @@ def protocol_class(name: str) -> type[Protocol]:
     try:
         module = importlib.import_module(module_name)
     except ModuleNotFoundError as exc:
-        if exc.name is None or not module_name.startswith(exc.name):
-            raise  # the module exists but needs another one (cli names a missing extra)
-        raise ProtocolError(f"protocol {name!r}: no module named {exc.name!r}") from None
+        if exc.name is not None and module_name.startswith(exc.name):
+            raise ProtocolError(f"protocol {name!r}: no module named {exc.name!r}") from None
+        if not user_supplied(module_name):
+            raise  # excite's module needs another one (cli names a missing extra)
+        raise ProtocolError(f"protocol {name!r}: importing {module_name} raised "
+                            f"{type(exc).__name__}: {exc}") from None
+    except Exception as exc:
+        if not user_supplied(module_name):
+            raise
+        raise ProtocolError(f"protocol {name!r}: importing {module_name} raised "
+                            f"{type(exc).__name__}: {exc}") from None
     cls = getattr(module, attribute, None)
     if not (isinstance(cls, type) and issubclass(cls, Protocol)):
         raise ProtocolError(f"protocol {name!r}: {module_name} has no Protocol subclass "
                             f"named {attribute!r}")
+    if inspect.isabstract(cls):
+        raise ProtocolError(f"protocol {name!r}: {attribute} is abstract (it does not "
+                            f"implement {', '.join(sorted(cls.__abstractmethods__))})")
+    for parameter in cls.parameters:
+        try:
+            parameter.check(parameter.default)
+        except ProtocolError as exc:
+            raise ProtocolError(f"protocol {name!r}: the default of its parameter "
+                                f"{parameter.name} is invalid: {exc}") from None
     return cls
 
 
@@ -103,6 +149,11 @@ class ProtocolSpec:
         """This spec with ``defaults`` added for the keys it does not set (its own settings
         win); keys the protocol does not declare are errors."""
         return ProtocolSpec.of(self.name, {**defaults, **dict(self.settings)})
+
+    def fingerprint(self) -> str | None:
+        """A digest of the files this spec's settings name (a policy file), or None."""
+        with calling(self.label, "fingerprint", user_supplied(self.protocol.__module__)):
+            return self.protocol.fingerprint(self.resolved())
 
     def declares(self, key: str) -> bool:
         return any(p.name == key for p in self.protocol.parameters)
@@ -154,9 +205,9 @@ def check_distinct(specs: Iterable[ProtocolSpec]) -> list[ProtocolSpec]:
 
 def parse_protocols(text: str) -> list[ProtocolSpec]:
     """Comma-separated protocols (``a,b:key=value,...``), each distinct."""
-    parts = [part for part in text.split(",") if part.strip()]
-    if not parts:
-        raise ProtocolError(f"--protocols needs comma-separated protocols, got {text!r}")
+    parts = text.split(",")
+    if not all(part.strip() for part in parts):
+        raise ProtocolError(f"protocols {text!r}: empty name in the list")
     return check_distinct(parse_protocol(part) for part in parts)
 
 
@@ -164,15 +215,27 @@ def make_protocol(spec: str | ProtocolSpec) -> Protocol:
     """Build a protocol from its spec (or its text, ``NAME[:KEY=VALUE...]``)."""
     spec = parse_protocol(spec) if isinstance(spec, str) else spec
     settings = spec.resolved()
-    if reason := spec.protocol.unavailable(settings):
+    user = user_supplied(spec.protocol.__module__)
+    with calling(spec.label, "unavailable", user):
+        reason = spec.protocol.unavailable(settings)
+    if reason:
         raise ProtocolError(reason)
-    return spec.protocol(**settings)
+    with calling(spec.label, "__init__", user):
+        return spec.protocol(**settings)
 
 
 def with_policy(specs: Iterable[ProtocolSpec], policy: str | None) -> list[ProtocolSpec]:
     """``specs`` with ``policy`` (``--policy PATH``) as the ``policy`` setting of each that
-    declares one and does not set it; unchanged when ``policy`` is None."""
-    return [spec.under({"policy": policy}) if policy and spec.declares("policy") else spec
+    declares one and does not set it; unchanged when ``policy`` is None. ProtocolError when
+    none declares one (the policy would be silently ignored)."""
+    specs = list(specs)
+    if not policy:
+        return specs
+    if not any(spec.declares("policy") for spec in specs):
+        raise ProtocolError(f"--policy {policy}: none of the protocols ("
+                            f"{', '.join(spec.label for spec in specs)}) takes a policy; add "
+                            "learned to them or leave --policy out")
+    return [spec.under({"policy": policy}) if spec.declares("policy") else spec
             for spec in specs]
 
 

@@ -31,9 +31,16 @@ from tqdm import tqdm
 
 import excite  # noqa: F401  (registers the environment ids in worker processes)
 from agents.backends import LOCAL, chunk_size, open_backend
-from agents.catalog import ProtocolSpec, check_distinct, make_protocol, parse_protocol
+from agents.catalog import (
+    ProtocolSpec,
+    calling,
+    check_distinct,
+    make_protocol,
+    parse_protocol,
+    user_supplied,
+)
 from agents.oracle import oracle_design
-from agents.protocols import Protocol
+from agents.protocols import Protocol, check_action
 from excite.consistency import estimate_error, nees
 from excite.errors import ExciteError
 from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
@@ -93,21 +100,28 @@ def make_env(env_id: str, segments: int, robot: str = "default", **config) -> gy
 
 
 def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int,
-                         options: dict | None = None) -> list[dict]:
+                         options: dict | None = None, label: str | None = None) -> list[dict]:
     """Run one episode of ``protocol`` with the env's estimator (reset with ``seed`` and
-    ``options``); one record per segment (see COLUMNS): ``nees`` is the estimator's NEES
+    ``options``); one record per segment (see COLUMNS). ``label`` names the protocol in
+    errors (default: its class name): an action that is not two finite numbers, or a user's
+    protocol raising, is a ProtocolError naming it. ``nees`` is the estimator's NEES
     against the hidden truth over the ``nees_dof`` parameters it reports a covariance for
     (:func:`excite.consistency.estimate_error`), ``time`` the seconds driven since the
     start."""
+    label = label or type(protocol).__name__
+    user = user_supplied(type(protocol).__module__)
     env.reset(seed=seed, options=options)
     base = env.unwrapped
-    protocol.reset(np.random.default_rng([seed, 1]))
+    with calling(label, "reset", user):
+        protocol.reset(np.random.default_rng([seed, 1]))
     truth, true_theta = base.true_params.as_array(), base.true_theta
     seconds_per_segment = base.segment_duration + float(base.config["settle_time"])
     records, distance, done = [], 0.0, False
     knowledge = base.knowledge()
     while not done:
-        _, _, terminated, truncated, info = env.step(protocol.act(knowledge))
+        with calling(label, "act", user):
+            action = check_action(protocol.act(knowledge))
+        _, _, terminated, truncated, info = env.step(action)
         done = terminated or truncated
         knowledge = base.knowledge()
         distance += base.last_segment_distance
@@ -149,7 +163,11 @@ def incompatible_protocols(protocols: Iterable[ProtocolSpec],
     """Labels of the protocols that cannot run on an env with this observation shape (e.g. a
     policy trained for another observation layout), with the reason in words."""
     shape = tuple(observation_shape)
-    reasons = {spec.label: make_protocol(spec).incompatibility(shape) for spec in protocols}
+    reasons = {}
+    for spec in protocols:
+        protocol = make_protocol(spec)
+        with calling(spec.label, "incompatibility", user_supplied(type(protocol).__module__)):
+            reasons[spec.label] = protocol.incompatibility(shape)
     return {label: reason for label, reason in reasons.items() if reason}
 
 
@@ -178,7 +196,8 @@ def run_episode(settings: CompareSettings, pairs: list[Pair], episode: int) -> l
             oracle = oracle_design(base.true_theta, base.sigma, base.nominal_theta,
                                    settings.segments, base.max_wheel_speed,
                                    base.segment_duration, model=base.model).sigma_min
-        records = run_protocol_episode(env, _worker_protocol(protocol), seed)
+        records = run_protocol_episode(env, _worker_protocol(protocol), seed,
+                                       label=protocol.label)
         for record in records[-1:] if settings.final_only else records:
             rows.append({"protocol": protocol.label, "estimator": estimator.label,
                          "episode": episode, "oracle_sigma_min": oracle, **record})
@@ -249,24 +268,69 @@ def _format(value):
     return value
 
 
+#: The key of DIR/config.json that ties each protocol's results to the content of the files
+#: its settings name (:meth:`agents.catalog.ProtocolSpec.fingerprint`: label -> sha256).
+FILES_KEY = "protocol_files"
+
+
+def _read_config(config: Path) -> dict | None:
+    """DIR/config.json's content, None when there is none; CompareError when it is not a
+    comparison's settings."""
+    if not config.exists():
+        return None
+    try:
+        stored = json.loads(config.read_text())
+    except json.JSONDecodeError:
+        raise CompareError(f"{config}: not valid JSON; remove it or choose another --out") from None
+    except IsADirectoryError:
+        raise CompareError(f"{config} is a folder; remove it or choose another --out") from None
+    if not isinstance(stored, dict) or not isinstance(stored.get(FILES_KEY, {}), dict):
+        raise CompareError(f"{config}: not a comparison's settings; remove it or choose "
+                           "another --out")
+    return stored
+
+
 def _check_settings(out_dir: Path, settings: CompareSettings) -> None:
     config = out_dir / "config.json"
-    if config.exists():
-        try:
-            stored = json.loads(config.read_text())
-        except json.JSONDecodeError:
-            raise CompareError(
-                f"{config}: not valid JSON; remove it or choose another --out") from None
-        if not isinstance(stored, dict):
-            raise CompareError(f"{config}: not a comparison's settings; remove it or choose "
-                               "another --out")
-        stored = {**asdict(CompareSettings()), **stored}  # keys added since: their defaults
-        if stored != asdict(settings):
-            raise CompareError(
-                f"{out_dir} holds a comparison with other settings ({stored}); "
-                "use another --out or the same --env, --segments, --seed and --robot")
-    else:
+    stored = _read_config(config)
+    if stored is None:
         config.write_text(json.dumps(asdict(settings), indent=2) + "\n")
+        return
+    stored.pop(FILES_KEY, None)
+    stored = {**asdict(CompareSettings()), **stored}  # keys added since: their defaults
+    if stored != asdict(settings):
+        raise CompareError(
+            f"{out_dir} holds a comparison with other settings ({stored}); "
+            "use another --out or the same --env, --segments, --seed and --robot")
+
+
+def _check_files(out_dir: Path, specs: Sequence[ProtocolSpec], rows: Sequence[dict]) -> None:
+    """Tie each protocol's results in ``out_dir`` to the content of the files its settings
+    name (a learned policy): a protocol whose file changed since its results were made is a
+    CompareError (resuming would mix or silently reuse results of another policy); the
+    digests of the others are recorded in config.json."""
+    config = out_dir / "config.json"
+    stored = _read_config(config) or {}
+    known = dict(stored.get(FILES_KEY, {}))
+    present = {row["protocol"] for row in rows}
+    for spec in specs:
+        digest = spec.fingerprint()
+        if digest is None:
+            continue
+        old = known.get(spec.label)
+        if old is None and spec.label in present:
+            raise CompareError(
+                f"{out_dir} holds results of {spec.label} that are not tied to its files' "
+                "content (made by an older excite): cannot tell whether they came from the "
+                "same policy; use another --out")
+        if old is not None and old != digest:
+            raise CompareError(
+                f"{spec.label}: its files changed since {out_dir} ran it (sha256 "
+                f"{digest[:12]}, was {old[:12]}): its results there are of another policy; "
+                "use another --out")
+        known[spec.label] = digest
+    if known != stored.get(FILES_KEY, {}):
+        config.write_text(json.dumps({**stored, FILES_KEY: known}, indent=2) + "\n")
 
 
 def run_comparison(
@@ -302,6 +366,7 @@ def run_comparison(
     _check_settings(out, settings)
     csv_path = out / "segments.csv"
     rows = read_complete_rows(csv_path, settings.segments, settings.final_only)
+    _check_files(out, specs, rows)
     _write_rows(csv_path, rows, "w")  # rewrite without partial episodes or duplicates
     done = {(r["protocol"], r["estimator"], r["episode"]) for r in rows}
     todo = {e: [(p, m) for p in specs for m in estimator_specs

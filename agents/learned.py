@@ -7,6 +7,7 @@ files you trust.
 
 from __future__ import annotations
 
+import hashlib
 import pickle
 from collections.abc import Mapping
 from dataclasses import replace
@@ -47,12 +48,25 @@ class LearnedPolicy(Protocol):
         where = "" if settings["policy"] else " (no policy is shipped; train one with excite train)"
         return f"learned policy file not found: {path}{where}"
 
+    @classmethod
+    def fingerprint(cls, settings: Mapping[str, Value]) -> str | None:
+        """sha256 of the policy file and its observation normalization (missing: none)."""
+        from agents.train import normalization_path
+
+        path = cls.policy_path(settings)
+        digest = hashlib.sha256()
+        for part in (path, normalization_path(path)):
+            digest.update(part.read_bytes() if part.is_file() else b"")
+            digest.update(b"\0")  # the two contents stay apart
+        return digest.hexdigest()
+
     def __init__(self, **settings: Value):
         super().__init__(**settings)
         path = self.policy_path(self.settings)
         if reason := self.unavailable(self.settings):
             raise ProtocolError(reason)
         import torch
+        from gymnasium.spaces import Box
         from stable_baselines3 import PPO, SAC
         from stable_baselines3.common.vec_env import VecNormalize
 
@@ -76,6 +90,11 @@ class LearnedPolicy(Protocol):
             raise ProtocolError(f"{norm_path}: cannot load the observation normalization "
                                 f"saved with the policy ({exc})") from None
         self.path = path
+        space = self.model.action_space
+        if not (isinstance(space, Box) and space.shape == (2,)):
+            raise ProtocolError(f"{path}: the policy's actions are {space}, not two wheel-speed "
+                                "commands (a Box of shape (2,)): it was not trained on excite's "
+                                "environments")
         self.observation_shape = tuple(self.model.observation_space.shape)
 
     def incompatibility(self, observation_shape: tuple[int, ...]) -> str | None:

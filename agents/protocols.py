@@ -146,6 +146,13 @@ class Protocol(ABC):
         without building it; None when it can (e.g. a policy file is missing)."""
         return None
 
+    @classmethod
+    def fingerprint(cls, settings: Mapping[str, Value]) -> str | None:
+        """A digest of the content of the files these (resolved) settings name, or None when
+        they name none: a comparison resumed with the same settings but another file content
+        (e.g. a policy retrained at the same path) must not reuse the old results."""
+        return None
+
     def reset(self, rng: np.random.Generator) -> None:
         """Start a new episode (``rng``: the episode's generator for any randomness)."""
         self.rng = rng
@@ -157,8 +164,8 @@ class Protocol(ABC):
         return None
 
     def act(self, knowledge: RobotKnowledge) -> np.ndarray:
-        """The action for the next segment."""
-        action = np.clip(np.asarray(self.plan(knowledge), dtype=float), -1.0, 1.0)
+        """The action for the next segment (ProtocolError if ``plan`` returns no action)."""
+        action = np.clip(check_action(self.plan(knowledge), "plan"), -1.0, 1.0)
         self.step_index += 1
         return self.guard(action, knowledge)
 
@@ -172,6 +179,22 @@ class Protocol(ABC):
         variants = np.array([action, -action, 0.5 * action, -0.5 * action, 0.25 * action])
         ok = safe_actions(variants, knowledge, self.speed_margin)
         return variants[int(np.argmax(ok))] if ok.any() else turn_to_center(knowledge)
+
+
+def check_action(action: object, what: str = "act") -> np.ndarray:
+    """``action`` as an array of two finite numbers, else ProtocolError saying what ``what``
+    (the method that made it) returned: a NaN or a wrong shape must not reach the wall guard,
+    which would silently replace it by a turn."""
+    try:
+        array = np.asarray(action, dtype=float)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or array.shape != (2,) or not np.isfinite(array).all():
+        shown = " ".join(repr(action).split())
+        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        raise ProtocolError(f"{what} returned {shown}, not an action (two finite wheel-speed "
+                            "fractions, left and right)")
+    return array
 
 
 def resolve_settings(cls: type[Protocol], settings: Mapping[str, object]) -> dict[str, Value]:

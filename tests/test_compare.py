@@ -245,17 +245,45 @@ def test_compare_runs_on_the_sensor_env_and_skips_a_policy_of_another_layout(tmp
         (["compare", "--estimators", "tests.test_compare:missing"], "has no 'missing'"),
         (["compare", "--estimators", "no_such_module_x:f"], "cannot import module"),
         (["compare", "--estimators", "tests.test_compare:two_arguments_too_few",
-          "--episodes", "1", "--segments", "2"], "cannot be made"),
+          "--episodes", "1", "--segments", "2"], "its factory raised TypeError"),
         (["compare", "--protocols", "learned", "--episodes", "1"], "learned policy"),
         (["simulate", "--protocol", "zigzag", "--segments", "3", "--out", "x.csv"],
          "unknown protocol"),
         (["simulate", "--protocol", "spin", "--segments", "3"], "required: --out"),
         (["simulate", "--protocol", "spin", "--segments", "3", "--out", "/no/dir/x.csv"],
          "no such directory"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--seed", "-5", "--out",
+          "x.csv"], "--seed: must be at least 0"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--robot-seed", "-1", "--out",
+          "x.csv"], "--robot-seed: must be at least 0"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--out", "adir"],
+         "cannot write adir: it is a folder"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--out", "afile/x.csv"],
+         "afile is a file, not a folder"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--format", "bag", "--out",
+          "afile/bag"], "afile is a file, not a folder"),
+        (["compare", "--out", "afile"], "--out: afile is a file, not a folder"),
+        (["compare", "--out", ""], "--out: is empty"),
+        (["compare", "--protocols", "spin", "--episodes", "1", "--segments", "2", "--out",
+          "adir"], "cannot write adir/summary.json: it is a folder"),
+        (["compare", "--protocols", "umbmark,,spin"], "empty name in the list"),
+        (["compare", "--protocols", ","], "empty name in the list"),
+        (["compare", "--protocols", "spin,umbmark", "--policy", "afile"],
+         "none of the protocols (spin, umbmark) takes a policy"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--policy", "afile", "--out",
+          "x.csv"], "none of the protocols (spin) takes a policy"),
+        (["simulate", "--protocol", "spin", "--segments", "3", "--format", "timeseries",
+          "--pose-noise", "-1,0", "--out", "x.csv"], "must be SXY,STH: two finite numbers >= 0"),
+        (["tune", "--protocols", "spin", "--out", "afile/x.json"],
+         "afile is a file, not a folder"),
+        (["tune", "--protocols", "spin", "--out", "adir/summary.json"],
+         "adir/summary.json: it is a folder"),
     ],
 )
 def test_compare_and_simulate_bad_input(tmp_path, capsys, monkeypatch, argv, fragment):
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("a file, not a folder\n")
+    (tmp_path / "adir" / "summary.json").mkdir(parents=True)
     if argv[:3] == ["compare", "--protocols", "learned"]:
         import agents.learned
 
@@ -398,3 +426,35 @@ def test_run_comparison_rejects_no_or_repeated_estimators(tmp_path):
         run_comparison(tmp_path, ["spin"], 1, settings, progress=False,
                        estimators=["ekf:prior_std=0.1", estimator_factory("ekf:prior_std=1e-1")])
     assert not (tmp_path / "segments.csv").exists()
+
+
+def test_resume_refuses_results_of_a_policy_file_changed_at_the_same_path(tmp_path):
+    """The label learned:policy=PATH names a path, not a policy: a file retrained at the same
+    path must not reuse the old file's results (the folder ties them to its sha256)."""
+    import shutil
+
+    from agents.learned import SHIPPED_POLICY
+    from agents.train import normalization_path
+
+    policy = tmp_path / "p.zip"
+
+    def install(source):
+        shutil.copy(source, policy)
+        shutil.copy(normalization_path(source), normalization_path(policy))
+
+    install(SHIPPED_POLICY)
+    settings, out = CompareSettings(IDEAL, 2, 0), tmp_path / "run"
+    spec = f"learned:policy={policy}"
+    first = run_comparison(out, [spec], 1, settings, workers=1, progress=False)
+    again = run_comparison(out, [spec, "spin"], 1, settings, workers=1, progress=False)
+    assert [r for r in again if r["protocol"] != "spin"] == first  # same file: reused
+    install(SHIPPED_POLICY.with_name("excite_ppo_robots.zip"))  # retrained at the same path
+    with pytest.raises(CompareError, match="its files changed"):
+        run_comparison(out, [spec], 2, settings, workers=1, progress=False)
+    install(SHIPPED_POLICY)
+    shutil.copy(normalization_path(SHIPPED_POLICY.with_name("excite_ppo_robots.zip")),
+                normalization_path(policy))  # only the normalization differs
+    with pytest.raises(CompareError, match="its files changed"):  # the normalization counts
+        run_comparison(out, [spec], 2, settings, workers=1, progress=False)
+    install(SHIPPED_POLICY)
+    assert len(run_comparison(out, [spec], 2, settings, workers=1, progress=False)) == 2 * 2

@@ -268,11 +268,12 @@ def test_builtin_settings():
 
 
 def test_module_factory():
+    """A user's factory's estimator comes checked (CheckedEstimator), its object inside."""
     est = make_estimator("tests.test_estimators:half_window", NOMINAL, SIGMA)
-    assert isinstance(est, SlidingWindowSmoother) and est.size == 5
+    assert isinstance(est.estimator, SlidingWindowSmoother) and est.size == 5
     np.testing.assert_array_equal(est.sigma, SIGMA / 2)
     nested = make_estimator("tests.test_estimators:Factories.window_of_two", NOMINAL, SIGMA)
-    assert nested.size == 2
+    assert nested.size == 2 and nested.params == nested.estimator.params
 
 
 def test_factories_pickle_and_plug_into_the_environment():

@@ -6,11 +6,13 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
+from pathlib import Path
 
 from excite.errors import ExciteError
 
 __all__ = ["UsageError", "floats", "sigma_arg", "params_arg", "sensor_pose_arg",
-           "fraction_arg", "positive_int", "nonnegative_int", "env_id", "robot_preset"]
+           "fraction_arg", "positive_int", "nonnegative_int", "env_id", "robot_preset",
+           "output_folder", "check_parent_folder", "check_output_file"]
 
 
 class UsageError(ExciteError):
@@ -129,3 +131,30 @@ def robot_preset(text: str) -> str:
     if text not in PRESETS:
         raise UsageError(f"unknown robot preset {text!r}; choose from {', '.join(PRESETS)}")
     return text
+
+
+def output_folder(text: str) -> Path:
+    """--out DIR: a folder that is written (made if missing); not empty, not a file
+    (argparse type)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("is empty; give a folder")
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a file, not a folder")
+    return path
+
+
+def check_parent_folder(out: Path) -> None:
+    """UsageError unless the folder ``out`` goes into exists (a file on the way is named)."""
+    if out.parent.exists() and not out.parent.is_dir():
+        raise UsageError(f"cannot write {out}: {out.parent} is a file, not a folder")
+    if not out.parent.is_dir():
+        raise UsageError(f"cannot write {out}: no such directory {out.parent}")
+
+
+def check_output_file(out: Path) -> None:
+    """UsageError unless ``out`` can be written as a file: its folder exists, and it is not
+    itself a folder."""
+    if out.is_dir():
+        raise UsageError(f"cannot write {out}: it is a folder; give a file name")
+    check_parent_folder(out)

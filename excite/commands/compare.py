@@ -21,6 +21,7 @@ from excite.commands.args import (
     UsageError,
     env_id,
     nonnegative_int,
+    output_folder,
     positive_int,
     robot_preset,
 )
@@ -89,7 +90,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       help="settings from excite tune for the protocols written as tuned; "
                       "auto (default): those shipped for --env and --robot if tuned for these "
                       "segments; none: the declared defaults")
-    cmp_.add_argument("--out", default="excite_compare", metavar="DIR")
+    cmp_.add_argument("--out", type=output_folder, default="excite_compare", metavar="DIR",
+                      help="the results folder (made if missing; re-run with the same "
+                      "settings to finish an interrupted comparison)")
     cmp_.set_defaults(handler=run)
 
 
@@ -199,12 +202,17 @@ def run(args: argparse.Namespace) -> int:
     specs, tuned = tuned_specs(protocol_specs(args), args.tuned, settings, args.episodes)
     specs, arena_size = runnable(specs, settings)
     check_estimators(estimators, settings)
+    out = args.out
+    for name in ("config.json", "segments.csv", "summary.json"):  # before any episode runs
+        if (out / name).is_dir():
+            raise UsageError(f"cannot write {out / name}: it is a folder; remove it or choose "
+                             "another --out")
     try:
-        rows = run_comparison(args.out, specs, args.episodes, settings, args.workers,
+        rows = run_comparison(out, specs, args.episodes, settings, args.workers,
                               estimators=estimators, backend=args.backend,
                               address=args.address)
     except OSError as exc:
-        raise UsageError(f"cannot write to {args.out}: {exc.strerror}") from None
+        raise UsageError(f"cannot write to {exc.filename or out}: {exc.strerror}") from None
     columns = columns_of(rows)
     summary = summarize(columns, seed=args.seed)
     summary["settings"] = {"env": settings.env_id, "segments": args.segments, "seed": args.seed,
@@ -213,9 +221,11 @@ def run(args: argparse.Namespace) -> int:
                            "estimators": [spec.label for spec in estimators],
                            "robot": settings.robot, "tuned": tuned}
     summary["protocol_settings"] = {spec.label: spec.resolved() for spec in specs}
-    out = Path(args.out)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
-    plots = plot_comparison(columns, out, arena_size=arena_size)
+    try:
+        (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        plots = plot_comparison(columns, out, arena_size=arena_size)
+    except OSError as exc:
+        raise UsageError(f"cannot write {exc.filename or out}: {exc.strerror}") from None
     print(format_table(summary))
     print(f"settings: {tuned['note']}")
     print(f"\nresults: {out / 'segments.csv'}, {out / 'summary.json'}")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,10 @@ from excite.bags import (
 )
 from excite.commands.args import (
     UsageError,
+    check_output_file,
+    check_parent_folder,
     env_id,
+    nonnegative_int,
     pose_noise_arg,
     positive_int,
     robot_preset,
@@ -41,8 +45,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     sim.add_argument("--protocol", required=True, metavar="NAME[:KEY=VALUE...]",
                      help="a protocol with optional settings (see excite protocols)")
     sim.add_argument("--segments", type=positive_int, required=True, metavar="N")
-    sim.add_argument("--seed", type=int, default=0, metavar="S")
-    sim.add_argument("--robot-seed", type=int, metavar="R",
+    sim.add_argument("--seed", type=nonnegative_int, default=0, metavar="S")
+    sim.add_argument("--robot-seed", type=nonnegative_int, metavar="R",
                      help="drive the hidden robot and sensor mounting of seed R's episode "
                      "(default: --seed's): logs with other --seed and one --robot-seed are "
                      "logs of one robot (e.g. held-out logs for excite validate)")
@@ -63,14 +67,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     sim.add_argument("--out", required=True, metavar="FILE",
                      help="the log (segment CSV, time-series CSV or bag); the hidden truth "
                      "goes to FILE.truth.json")
+    # "--pose-noise -1,0" is a (bad) value, not an unknown option: argparse takes an argument
+    # that starts with "-" for a value only when it matches this pattern (by default a single
+    # number), and simulate has no option that looks like a number
+    sim._negative_number_matcher = re.compile(r"^-\.?\d[\d.,eE+-]*$")
     sim.set_defaults(handler=run)
 
 
 def _check_output(args: argparse.Namespace, out: Path) -> None:
     """One-line UsageError for options that do not fit the format, or an output that cannot
     be written."""
-    if not out.parent.is_dir():
-        raise UsageError(f"cannot write {out}: no such directory {out.parent}")
+    if args.format == "bag":  # a rosbag2 bag is a folder (must not exist, checked below)
+        check_parent_folder(out)
+    else:
+        check_output_file(out)
     if args.storage is not None and args.format != "bag":
         raise UsageError("--storage applies to --format bag")
     if args.pose_noise is not None and args.format == "segments":
@@ -147,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
     if args.robot_seed not in (None, args.seed):  # that seed's episode's robot and mounting
         env_.reset(seed=args.robot_seed)
         options = {"robot": base.robot, "sensor_pose": base.true_sensor_pose}
-    records = run_protocol_episode(env_, protocol, args.seed, options)
+    records = run_protocol_episode(env_, protocol, args.seed, options, label=spec.label)
     written, what = _write_log(args, out, base)
     mount = base.true_sensor_pose
     truth = {**dict(zip(("r_L", "r_R", "b"), base.true_params.as_array().tolist(), strict=True)),

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from excite.commands.args import UsageError
+from excite.commands.args import UsageError, check_output_file
 from excite.commands.compare import (
     add_episode_options,
     check_backend_options,
@@ -35,10 +35,9 @@ def run(args: argparse.Namespace) -> int:
     from agents.tuning import run_tuning, work_dir
 
     out = Path(args.out)
-    if out.suffix != ".json" or out.is_dir():
+    if out.suffix != ".json":
         raise UsageError(f"--out must name a .json file, got {out}")
-    if not out.parent.is_dir():
-        raise UsageError(f"cannot write {out}: no such directory {out.parent}")
+    check_output_file(out)
     check_backend_options(args)
     settings = episode_settings(args)
     specs, _ = runnable(protocol_specs(args), settings)

@@ -42,6 +42,7 @@ __all__ = [
     "DEFAULT_ESTIMATOR",
     "ESTIMATORS",
     "OPTIONS",
+    "CheckedEstimator",
     "EstimatorSpec",
     "check_distinct",
     "ExtendedKalmanFilter",
@@ -114,7 +115,86 @@ class EstimatorSpec:
         if self.name in ESTIMATORS:
             return ESTIMATORS[self.name](nominal, sigma=sigma, model=model_for(nominal),
                                          **dict(self.settings))
-        return _import_factory(self.name)(nominal, sigma)
+        factory = _import_factory(self.name)
+        try:
+            estimator = factory(nominal, sigma)
+        except Exception as exc:  # a user's code: any failure is bad input, named
+            raise EstimatorError(f"estimator {self.label}: its factory raised "
+                                 f"{type(exc).__name__}: {exc}") from None
+        missing = [name for name in ("update", "params", "covariance")
+                   if not hasattr(estimator, name)]
+        if missing:
+            raise EstimatorError(f"estimator {self.label}: its factory returned "
+                                 f"{_shown(estimator)}, not an estimator (it has no "
+                                 f"{', '.join(missing)})")
+        return CheckedEstimator(self.label, estimator)
+
+
+def _shown(value: object) -> str:
+    """``repr(value)``, cut to one short line."""
+    text = " ".join(repr(value).split())
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+class CheckedEstimator:
+    """A user's estimator (``module:factory``) with every call checked: an exception in
+    ``update`` or in reading ``params``, ``covariance`` or ``theta``, params that are not 3
+    finite values, or a covariance that is not a finite square matrix is an EstimatorError
+    naming the estimator (``label``), not a failure deep inside the environment. The
+    user's object is ``estimator``; its other attributes read through."""
+
+    def __init__(self, label: str, estimator: Estimator) -> None:
+        self.label, self.estimator = label, estimator
+
+    def __getattr__(self, name: str) -> object:
+        """Any other attribute is the user's estimator's (``n_segments``, ...)."""
+        if name == "estimator":  # not set yet (unpickling): no endless recursion
+            raise AttributeError(name)
+        return getattr(self.estimator, name)
+
+    def _call(self, what: str, function: Callable[[], object]) -> object:
+        try:
+            return function()
+        except Exception as exc:
+            raise EstimatorError(f"estimator {self.label}: {what} raised "
+                                 f"{type(exc).__name__}: {exc}") from None
+
+    def update(self, dphi_L: float, dphi_R: float, dx: float, dy: float,
+               dtheta: float) -> None:
+        self._call("update", lambda: self.estimator.update(dphi_L, dphi_R, dx, dy, dtheta))
+
+    @property
+    def params(self) -> Params:
+        value = self._call("params", lambda: self.estimator.params)
+        array = self._call("params", lambda: np.asarray(
+            value.as_array() if isinstance(value, Params) else value, dtype=float))
+        if array.shape != (3,) or not np.isfinite(array).all():
+            raise EstimatorError(f"estimator {self.label}: params is {_shown(value)}, not 3 "
+                                 "finite values (r_L, r_R, b in m)")
+        return value if isinstance(value, Params) else Params.from_array(array)
+
+    @property
+    def covariance(self) -> np.ndarray:
+        value = self._call("covariance", lambda: self.estimator.covariance)
+        array = self._call("covariance", lambda: np.asarray(value, dtype=float))
+        if array.ndim != 2 or array.shape[0] != array.shape[1] or array.shape[0] < 3 or (
+                not np.isfinite(array).all()):
+            raise EstimatorError(f"estimator {self.label}: covariance is {_shown(value)}, "
+                                 "not a finite square matrix over at least the 3 wheel "
+                                 "parameters")
+        return array
+
+    @property
+    def theta(self) -> np.ndarray | None:
+        """The estimator's ``theta`` (all model parameters), None when it has none."""
+        value = self._call("theta", lambda: getattr(self.estimator, "theta", None))
+        if value is None:
+            return None
+        array = self._call("theta", lambda: np.asarray(value, dtype=float))
+        if array.ndim != 1 or not np.isfinite(array).all():
+            raise EstimatorError(f"estimator {self.label}: theta is {_shown(value)}, not "
+                                 "finite values")
+        return array
 
 
 def _import_factory(spec: str) -> Callable[..., Estimator]:
@@ -122,9 +202,9 @@ def _import_factory(spec: str) -> Callable[..., Estimator]:
     module_name, _, path = spec.partition(":")
     try:
         target = importlib.import_module(module_name)
-    except ImportError as exc:
+    except Exception as exc:  # a user's module (built-ins are never imported here)
         raise EstimatorError(f"estimator {spec!r}: cannot import module {module_name!r} "
-                             f"({exc})") from exc
+                             f"({type(exc).__name__}: {exc})") from None
     for attribute in path.split("."):
         if not hasattr(target, attribute):
             raise EstimatorError(f"estimator {spec!r}: module {module_name!r} has no "

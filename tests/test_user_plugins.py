@@ -1,0 +1,222 @@
+"""A user's protocols and estimators (``module:Class``, ``module:factory``) that misbehave:
+each failure is a one-line error naming the plug-in and what went wrong (exit 2), never an
+internal error, and never silently run (a NaN action turned into a wall-guard turn)."""
+
+import shutil
+import sys
+
+import pytest
+
+from excite.cli import main
+
+IDEAL = "excite/DiffDriveCalibIdeal-v0"
+PROTOCOLS = '''
+import numpy as np
+from agents.protocols import Parameter, Protocol
+
+class Good(Protocol):
+    def plan(self, k):
+        return np.array([0.2, 0.3])
+
+class Raises(Protocol):
+    def plan(self, k):
+        raise RuntimeError("boom in plan")
+
+class NaNPlan(Protocol):
+    def plan(self, k):
+        return np.array([np.nan, 0.2])
+
+class NonePlan(Protocol):
+    def plan(self, k):
+        return None
+
+class TextPlan(Protocol):
+    def plan(self, k):
+        return "fast"
+
+class ThreePlan(Protocol):
+    def plan(self, k):
+        return np.array([0.1, 0.2, 0.3])
+
+class ActOverride(Protocol):
+    def act(self, k):
+        return np.array([5.0, -5.0, 1.0])
+    def plan(self, k):
+        return np.zeros(2)
+
+class Abstract(Protocol):
+    pass
+
+class InitRaises(Protocol):
+    def __init__(self, **settings):
+        raise ValueError("bad init")
+    def plan(self, k):
+        return np.zeros(2)
+
+class ResetRaises(Protocol):
+    def reset(self, rng):
+        raise KeyError("in reset")
+    def plan(self, k):
+        return np.zeros(2)
+
+class BadDefault(Protocol):
+    parameters = (Parameter("x", float, 5.0, "out of its range", 0.0, 1.0),)
+    def plan(self, k):
+        return np.zeros(2)
+'''
+ESTIMATORS = '''
+import numpy as np
+from excite import OnlineEstimator
+
+def good(nominal, sigma):
+    return OnlineEstimator(nominal, sigma=sigma)
+
+def raises(nominal, sigma):
+    raise RuntimeError("factory boom")
+
+def returns_none(nominal, sigma):
+    return None
+
+class _Fixed:
+    def __init__(self, nominal, sigma):
+        self.params = np.asarray(nominal.as_array())
+        self.covariance = 1e-4 * np.eye(3)
+    def update(self, *row):
+        pass
+
+class UpdateRaises(_Fixed):
+    def update(self, *row):
+        raise ValueError("update boom")
+
+class NaNParams(_Fixed):
+    def update(self, *row):
+        self.params = np.full(3, np.nan)
+
+class TwoParams(_Fixed):
+    def update(self, *row):
+        self.params = np.array([1.0, 2.0])
+
+class NaNCovariance(_Fixed):
+    def update(self, *row):
+        self.covariance = np.full((3, 3), np.nan)
+'''
+BROKEN = {"plugin_importerror": "raise ImportError('missing dependency xyz')\n",
+          "plugin_zerodivision": "x = 1 / 0\n", "plugin_syntax": "def f(:\n"}
+
+
+@pytest.fixture(scope="module")
+def plugins(tmp_path_factory):
+    """A folder of user modules on the path (of this process and of its worker processes)."""
+    folder = tmp_path_factory.mktemp("plugins")
+    (folder / "plugin_protocols.py").write_text(PROTOCOLS)
+    (folder / "plugin_estimators.py").write_text(ESTIMATORS)
+    for name, text in BROKEN.items():
+        (folder / f"{name}.py").write_text(text)
+    sys.path.insert(0, str(folder))
+    yield folder
+    sys.path.remove(str(folder))
+
+
+def _error(capsys, argv) -> str:
+    code = main(argv)
+    err = [line for line in capsys.readouterr().err.strip().splitlines()
+           if not line.startswith("episodes:")]  # the progress bar
+    assert code == 2 and len(err) == 1 and err[0].startswith("excite: error: "), (code, err)
+    return err[0]
+
+
+def _simulate(tmp_path, protocol, *extra):
+    return ["simulate", "--protocol", protocol, "--segments", "3", "--env", IDEAL,
+            "--out", str(tmp_path / "log.csv"), *extra]
+
+
+@pytest.mark.parametrize(("name", "fragments"), [
+    ("NaNPlan", ["plan returned array([nan, 0.2])", "not an action"]),
+    ("NonePlan", ["plan returned None"]),
+    ("TextPlan", ["plan returned 'fast'"]),
+    ("ThreePlan", ["plan returned array([0.1, 0.2, 0.3])"]),
+    ("ActOverride", ["act returned array([ 5., -5., 1.])"]),
+    ("Raises", ["act raised RuntimeError: boom in plan"]),
+    ("InitRaises", ["__init__ raised ValueError: bad init"]),
+    ("ResetRaises", ["reset raised KeyError: 'in reset'"]),
+    ("Abstract", ["Abstract is abstract", "plan"]),
+    ("BadDefault", ["the default of its parameter x is invalid", "x must be in [0.0, 1.0]"]),
+])
+def test_a_misbehaving_user_protocol_is_a_one_line_error_naming_it(plugins, tmp_path, capsys,
+                                                                   name, fragments):
+    message = _error(capsys, _simulate(tmp_path, f"plugin_protocols:{name}"))
+    assert f"plugin_protocols:{name}" in message
+    for fragment in fragments:
+        assert fragment in message
+
+
+@pytest.mark.parametrize(("module", "fragment"), [
+    ("plugin_importerror", "ImportError: missing dependency xyz"),
+    ("plugin_zerodivision", "ZeroDivisionError: division by zero"),
+    ("plugin_syntax", "SyntaxError: invalid syntax"),
+])
+def test_a_user_module_that_fails_to_import_is_named(plugins, tmp_path, capsys, module,
+                                                     fragment):
+    message = _error(capsys, _simulate(tmp_path, f"{module}:P"))
+    assert f"protocol '{module}:P': importing {module} raised {fragment}" in message
+    message = _error(capsys, ["compare", "--protocols", "spin", "--estimators", f"{module}:f",
+                              "--out", str(tmp_path / "c")])
+    assert f"estimator '{module}:f': cannot import module" in message and fragment in message
+
+
+def test_a_good_user_protocol_and_estimator_run(plugins, tmp_path, capsys):
+    assert main(_simulate(tmp_path, "plugin_protocols:Good")) == 0
+    assert main(["compare", "--protocols", "plugin_protocols:Good", "--estimators",
+                 "plugin_estimators:good", "--episodes", "1", "--segments", "2", "--env",
+                 IDEAL, "--workers", "1", "--out", str(tmp_path / "c")]) == 0
+
+
+def test_a_bad_action_in_a_compare_worker_is_named(plugins, tmp_path, capsys):
+    """The check is where protocols are driven, so it holds in the worker processes too."""
+    message = _error(capsys, ["compare", "--protocols", "spin,plugin_protocols:NaNPlan",
+                              "--episodes", "1", "--segments", "2", "--env", IDEAL,
+                              "--workers", "1", "--out", str(tmp_path / "c")])
+    assert "protocol plugin_protocols:NaNPlan: plan returned array([nan, 0.2])" in message
+
+
+@pytest.mark.parametrize(("factory", "fragment"), [
+    ("raises", "its factory raised RuntimeError: factory boom"),
+    ("returns_none", "its factory returned None, not an estimator"),
+    ("UpdateRaises", "update raised ValueError: update boom"),
+    ("NaNParams", "params is array([nan, nan, nan]), not 3 finite values"),
+    ("TwoParams", "params is array([1., 2.]), not 3 finite values"),
+    ("NaNCovariance", "covariance is array([[nan, nan, nan], [nan, nan, nan], [nan, "),
+])
+def test_a_misbehaving_user_estimator_is_a_one_line_error_naming_it(plugins, tmp_path, capsys,
+                                                                    factory, fragment):
+    message = _error(capsys, ["compare", "--protocols", "spin", "--estimators",
+                              f"plugin_estimators:{factory}", "--episodes", "1",
+                              "--segments", "2", "--env", IDEAL, "--workers", "1",
+                              "--out", str(tmp_path / "c")])
+    assert f"estimator plugin_estimators:{factory}: {fragment}" in message
+
+
+def test_a_learned_policy_with_discrete_actions_is_refused(tmp_path, capsys):
+    from stable_baselines3 import PPO
+
+    from agents.learned import SHIPPED_POLICY
+    from agents.train import normalization_path
+
+    policy = tmp_path / "discrete.zip"
+    PPO("MlpPolicy", "CartPole-v1", device="cpu").save(policy)
+    shutil.copy(normalization_path(SHIPPED_POLICY), normalization_path(policy))
+    message = _error(capsys, _simulate(tmp_path, f"learned:policy={policy}"))
+    assert f"{policy}: the policy's actions are Discrete(2), not two wheel-speed" in message
+
+
+def test_builtin_protocol_bugs_stay_internal_errors(monkeypatch, tmp_path, capsys):
+    """Only a user's code is bad input: an exception in excite's own protocols is a bug,
+    reported as an internal error (exit 1), not blamed on the user."""
+    from agents.protocols import Spin
+
+    def broken(self, knowledge):
+        raise ZeroDivisionError("excite's bug")
+
+    monkeypatch.setattr(Spin, "plan", broken)
+    assert main(_simulate(tmp_path, "spin")) == 1
+    assert "internal error: ZeroDivisionError" in capsys.readouterr().err
