@@ -10,6 +10,17 @@ Layout of the output folder ``DIR``::
     DIR/train_summary.json            timesteps, wall time, fps
     DIR/tensorboard/                  when tensorboard is installed
 
+DIR must be new or empty unless the run is resumed (``excite train`` refuses a used DIR, so
+two runs never mix their checkpoints and best models); a run whose steps hold no evaluation
+(``eval.freq`` beyond them) evaluates once at the end, so DIR/best_model.zip always exists.
+
+A config (``agents/configs/ppo.yaml`` is the reference) is checked before anything is
+written: only the keys of :data:`CONFIG_KEYS` and :data:`SECTION_KEYS` and the algorithm's
+hyperparameters, with values of the right kind; an env or a model that does not build from
+it is an error naming the file. ``extends: NAME`` merges NAME.yaml from the config's folder,
+else from agents/configs. ``algo:`` in a config is used when ``--algo`` is not given; a
+different ``--algo`` is an error.
+
 A policy file is an SB3 zip with its observation normalization beside it
 (``NAME.vecnormalize.pkl``); ``excite compare --policy DIR/best_model.zip`` evaluates it.
 Policy files are pickled code: load only files you trust.
@@ -399,7 +410,8 @@ def train(
 
     checkpoint = latest_checkpoint(out) if resume else None
     if resume and checkpoint is None:
-        raise TrainingError(f"nothing to resume in {out} (no checkpoint yet)")
+        raise TrainingError(f"nothing to resume in {out} (no checkpoint yet); start again in "
+                            "a new or emptied folder")
     tensorboard = str(out / "tensorboard") if importlib.util.find_spec("tensorboard") else None
     venv, eval_env, model = build(config, n_envs, seed, source, tensorboard,
                                   model=not checkpoint)
