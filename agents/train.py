@@ -299,8 +299,15 @@ def build(config: dict, n_envs: int, seed: int, source: Path,
             "seed_offset", 1_000_000), training=False)
     if not model:
         return venv, eval_env, None
-    with _config_errors(source, "policy/policy_kwargs/hyperparams"):
-        return venv, eval_env, make_model(config, venv, seed, tensorboard)
+    # SB3's advice (e.g. on the batch size) only once the model is built, not before an error
+    with warnings.catch_warnings(record=True) as advice:
+        warnings.simplefilter("always")
+        with _config_errors(source, "policy/policy_kwargs/hyperparams"):
+            built = make_model(config, venv, seed, tensorboard)
+    for warning in advice:
+        warnings.warn_explicit(warning.message, warning.category, warning.filename,
+                               warning.lineno)
+    return venv, eval_env, built
 
 
 def check_buildable(config: dict, source: Path) -> None:

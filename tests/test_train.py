@@ -1,6 +1,7 @@
 """Smoke training (a few thousand steps), save, load, evaluate, resume; bad policy files."""
 
 import json
+import warnings
 import zipfile
 
 import numpy as np
@@ -289,9 +290,12 @@ BAD_CONFIGS = [
 def test_bad_training_config_is_a_one_line_error_naming_file_and_key(tmp_path, capsys,
                                                                      lines, fragment):
     path = _yaml(tmp_path, "bad.yaml", "extends: ppo\n" + lines)
-    code, _, err = run_cli(capsys, "train", "--config", path, "--timesteps", 128,
-                           "--n-envs", 2, "--out", tmp_path / "out")
+    with warnings.catch_warnings(record=True) as printed:  # on stderr too, outside pytest
+        warnings.simplefilter("always")
+        code, _, err = run_cli(capsys, "train", "--config", path, "--timesteps", 128,
+                               "--n-envs", 2, "--out", tmp_path / "out")
     assert_one_line_error(code, err, f"{path}: {fragment}")
+    assert not printed, [str(w.message) for w in printed]
     assert not (tmp_path / "out").exists()
 
 
