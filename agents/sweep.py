@@ -12,7 +12,7 @@ training's own evaluation robots (``eval.seed_offset``), never on compare's epis
 
 CONFIG.yaml (example: ``agents/configs/sweep_example.yaml``)::
 
-    algo: ppo                  # ppo | sac (default ppo)
+    algo: ppo                  # ppo | sac (default: the base config's algo, else ppo)
     config: ppo.yaml           # base training config, relative to CONFIG.yaml
                                # (default: agents/configs/ALGO.yaml)
     timesteps: 200000          # per trial, at most (required)
@@ -27,17 +27,21 @@ CONFIG.yaml (example: ``agents/configs/sweep_example.yaml``)::
       hyperparams.n_epochs: {choice: [5, 10]}
       env_kwargs.accuracy_weight: {uniform: [1.0, 3.0]}
     asha:                      # early stopping (timesteps)
-      grace_period: 20000      # no trial stops before this (default timesteps / 8)
+      grace_period: 20000      # no trial stops before this, <= timesteps (default
+                               # timesteps / 8)
       reduction_factor: 3      # keep the best 1/3 at each milestone (default 3)
 
 Distributions: ``uniform: [LOW, HIGH]``, ``loguniform: [LOW, HIGH]``, ``randint: [LOW,
 HIGH]`` (HIGH excluded), ``choice: [A, B, ...]`` (sampled), ``grid: [A, B, ...]`` (every
 value). Dotted keys name a key of the base config's sections (``hyperparams.X`` must be an
-argument of the algorithm).
+argument of the algorithm); the base config with ``set`` applied, and with each value (or
+LOW and HIGH) of the space, is checked as ``excite train`` checks a config
+(:func:`agents.train.check_config`), and its env and model are built once before Ray starts.
 
 Layout of DIR::
 
-    DIR/sweep.yaml           the sweep's config (a re-run with another config is refused)
+    DIR/sweep.yaml           the sweep's config (a re-run with another config is refused
+                             once a trial or Tune's experiment exists)
     DIR/tune/                Ray Tune's experiment (restored when the command is re-run)
     DIR/trials/<TRIAL_ID>/   each trial's training folder (see agents.train)
     DIR/trials.csv           one row per trial
@@ -52,7 +56,6 @@ from __future__ import annotations
 
 import copy
 import csv
-import inspect
 import json
 import math
 import shutil
@@ -71,9 +74,13 @@ from tqdm import tqdm
 from agents.backends import LOCAL, RAY, check_backend, ray_session
 from agents.train import (
     ALGOS,
+    check_buildable,
+    check_config,
+    hyperparameter_names,
     latest_checkpoint,
     load_config,
     normalization_path,
+    read_yaml,
     train,
 )
 from excite.errors import ExciteError
@@ -141,8 +148,7 @@ def _check_dotted(path: Path, section: str, dotted: Any, base: Mapping, algo: st
         raise _fail(path, key, f"{top!r} is not a key of the training config (it has "
                     f"{', '.join(base)})")
     if top == "hyperparams":
-        accepted = inspect.signature(ALGOS[algo].__init__).parameters
-        if len(rest) != 1 or rest[0] not in accepted:
+        if len(rest) != 1 or rest[0] not in hyperparameter_names(algo):
             raise _fail(path, key, f"not an argument of {ALGOS[algo].__name__}")
     elif rest and not isinstance(base[top], dict):
         raise _fail(path, key, f"{top!r} is not a section of the training config")
@@ -167,24 +173,25 @@ def _check_distribution(path: Path, key: str, spec: Any) -> dict[str, list]:
     return {kind: args}
 
 
+def _checked(check, config: dict, where: Path | str) -> None:
+    """Run a training-config check; its error as a SweepError (same one line)."""
+    try:
+        check(config, where)
+    except ExciteError as exc:
+        raise SweepError(str(exc)) from None
+
+
 def load_sweep_config(path: str | Path) -> SweepConfig:
     """Read and check CONFIG.yaml; SweepError names the file and the key that is wrong."""
     path = Path(path)
-    try:
-        document = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise SweepError(f"cannot read sweep config {path}: {exc.strerror}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" (line {mark.line + 1})" if mark is not None else ""
-        raise SweepError(f"{path}: not valid YAML{where}") from None
+    document = read_yaml(path, "sweep config", SweepError)
     if not isinstance(document, dict):
         raise SweepError(f"{path}: a sweep config is a mapping of keys ({', '.join(KEYS)})")
     unknown = [k for k in document if k not in KEYS]
     if unknown:
         raise _fail(path, str(unknown[0]), f"unknown key; the keys are {', '.join(KEYS)}")
-    algo = document.get("algo", "ppo")
-    if algo not in ALGOS:
+    algo = document.get("algo")
+    if algo is not None and algo not in ALGOS:
         raise _fail(path, "algo", f"unknown algorithm {algo!r}; choose from {', '.join(ALGOS)}")
     if "timesteps" not in document:
         raise _fail(path, "timesteps", "required (training steps per trial, at most)")
@@ -196,6 +203,7 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
         base = load_config(algo, path.parent / base_file if base_file else None)
     except ExciteError as exc:
         raise _fail(path, "config", str(exc)) from None
+    algo = base["algo"]
     seeds = document.get("seeds", [0])
     if not isinstance(seeds, list) or not seeds:
         raise _fail(path, "seeds", f"must be a list of seeds, got {seeds!r}")
@@ -208,10 +216,15 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
     for dotted, value in document.get("set", {}).items():
         _check_dotted(path, "set", dotted, base, algo)
         _set_dotted(base, dotted, value)
+    _checked(check_config, base, f"{path}: set")
     space = {}
     for dotted, spec in document.get("space", {}).items():
         _check_dotted(path, "space", dotted, base, algo)
         space[dotted] = _check_distribution(path, f"space.{dotted}", spec)
+        for value in next(iter(space[dotted].values())):  # the values, or LOW and HIGH
+            trial = copy.deepcopy(base)
+            _set_dotted(trial, dotted, value)
+            _checked(check_config, trial, f"{path}: space")
     asha = document.get("asha", {})
     unknown = [k for k in asha if k not in ("grace_period", "reduction_factor")]
     if unknown:
@@ -219,6 +232,9 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
                     "reduction_factor")
     grace = _whole(path, "asha.grace_period",
                    asha.get("grace_period", max(timesteps // 8, 1)), 1)
+    if grace > timesteps:
+        raise _fail(path, "asha.grace_period", f"must be at most timesteps={timesteps} (no "
+                    f"trial stops before it), got {grace}")
     freq = base.get("eval", {}).get("freq") if isinstance(base.get("eval"), dict) else None
     if not (isinstance(freq, int) and 0 < freq <= timesteps):
         raise _fail(path, "set.eval.freq", f"trials report an evaluation every eval.freq "
@@ -227,6 +243,7 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
     cpus = document.get("cpus_per_trial", 1)
     if isinstance(cpus, bool) or not isinstance(cpus, int | float) or not cpus > 0:
         raise _fail(path, "cpus_per_trial", f"must be a positive number, got {cpus!r}")
+    _checked(check_buildable, base, path)
     return SweepConfig(
         base=base, algo=algo, timesteps=timesteps, seeds=tuple(seeds),
         samples=_whole(path, "samples", document.get("samples", 1), 1),
@@ -302,8 +319,12 @@ def _param_space(sweep: SweepConfig) -> dict:
 
 
 def _check_out(out: Path, sweep: SweepConfig) -> None:
+    """Refuse an ``out`` that holds a sweep of another config; record this one in
+    DIR/sweep.yaml. A folder where nothing ran yet (no trial, no Tune experiment: the sweep
+    failed while starting) takes the new config."""
     stored = out / "sweep.yaml"
-    if stored.exists():
+    started = (out / "trials").exists() or tune.Tuner.can_restore(str(out / "tune"))
+    if stored.exists() and started:
         try:
             previous = yaml.safe_load(stored.read_text())
         except yaml.YAMLError:

@@ -10,6 +10,17 @@ Layout of the output folder ``DIR``::
     DIR/train_summary.json            timesteps, wall time, fps
     DIR/tensorboard/                  when tensorboard is installed
 
+DIR must be new or empty unless the run is resumed (``excite train`` refuses a used DIR, so
+two runs never mix their checkpoints and best models); a run whose steps hold no evaluation
+(``eval.freq`` beyond them) evaluates once at the end, so DIR/best_model.zip always exists.
+
+A config (``agents/configs/ppo.yaml`` is the reference) is checked before anything is
+written: only the keys of :data:`CONFIG_KEYS` and :data:`SECTION_KEYS` and the algorithm's
+hyperparameters, with values of the right kind; an env or a model that does not build from
+it is an error naming the file. ``extends: NAME`` merges NAME.yaml from the config's folder,
+else from agents/configs. ``algo:`` in a config is used when ``--algo`` is not given; a
+different ``--algo`` is an error.
+
 A policy file is an SB3 zip with its observation normalization beside it
 (``NAME.vecnormalize.pkl``); ``excite compare --policy DIR/best_model.zip`` evaluates it.
 Policy files are pickled code: load only files you trust.
@@ -18,11 +29,16 @@ Policy files are pickled code: load only files you trust.
 from __future__ import annotations
 
 import importlib.util
+import inspect
 import json
 import time
+import warnings
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import gymnasium
 import torch
 import yaml
 from stable_baselines3 import PPO, SAC
@@ -57,28 +73,158 @@ def normalization_path(policy_path: Path) -> Path:
     return policy_path.with_name(policy_path.stem + ".vecnormalize.pkl")
 
 
-def load_config(algo: str, path: str | Path | None = None) -> dict[str, Any]:
-    if algo not in ALGOS:
-        raise TrainingError(f"unknown algorithm {algo!r}; choose from {', '.join(ALGOS)}")
-    source = Path(path) if path else CONFIG_DIR / f"{algo}.yaml"
+#: The keys of a training config (``extends: NAME`` is merged first) and their types.
+#: ``algo``, ``seed`` and ``n_envs`` may also come from the command line (see :func:`train`).
+CONFIG_KEYS: dict[str, type] = {
+    "algo": str, "seed": int, "env_id": str, "env_kwargs": dict, "robots": list,
+    "n_envs": int, "vec_env": str, "torch_threads": int, "normalize": dict, "policy": str,
+    "policy_kwargs": dict, "hyperparams": dict, "eval": dict, "checkpoint_freq": int,
+}
+#: The keys of the config's sections that train reads itself, with their smallest value
+#: (None: a flag).
+SECTION_KEYS: dict[str, dict[str, int | None]] = {
+    "normalize": {"norm_obs": None, "norm_reward": None, "gamma": 0},
+    "eval": {"freq": 1, "episodes": 1, "seed_offset": 0},
+}
+_WHOLE_KEYS = {"seed": 0, "n_envs": 1, "torch_threads": 1, "checkpoint_freq": 1}
+_TYPE_NAMES = {str: "a name", dict: "a mapping", list: "a list", int: "a whole number"}
+#: make_model's own arguments of the algorithm classes (not hyperparameters).
+_MODEL_ARGS = {"self", "policy", "env", "seed", "device", "policy_kwargs", "verbose",
+               "tensorboard_log", "_init_setup_model"}
+
+
+def read_yaml(path: Path, what: str, error: type[ExciteError]) -> Any:
+    """The YAML document of ``path``; ``error`` with one line naming the file (and the line
+    of a syntax error) when it cannot be read."""
     try:
-        config = yaml.safe_load(source.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise TrainingError(f"cannot read training config {source}: {exc}") from None
+        return yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise error(f"cannot read {what} {path}: {exc.strerror}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1})" if mark is not None else ""
+        raise error(f"{path}: not valid YAML{where}") from None
+
+
+def hyperparameter_names(algo: str) -> set[str]:
+    """The arguments of the algorithm's class that a config's ``hyperparams`` may set."""
+    return set(inspect.signature(ALGOS[algo].__init__).parameters) - _MODEL_ARGS
+
+
+def _is_whole(value: Any, minimum: int) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= minimum
+
+
+def check_config(config: Mapping[str, Any], source: Path | str) -> None:
+    """TrainingError (one line naming ``source`` and the key) unless ``config`` has only
+    known keys (CONFIG_KEYS, SECTION_KEYS, the algorithm's hyperparameters) with values of
+    the right kind. Values the env and the algorithm check themselves (env_kwargs, robots,
+    policy) are checked when they are built (:func:`check_buildable`)."""
+    def fail(key: str, message: str) -> TrainingError:
+        return TrainingError(f"{source}: {key}: {message}")
+
+    for key, value in config.items():
+        kind = CONFIG_KEYS.get(key)
+        if kind is None:
+            raise fail(str(key), f"unknown key; the keys are {', '.join(CONFIG_KEYS)}")
+        if isinstance(value, bool) or not isinstance(value, kind):
+            raise fail(key, f"must be {_TYPE_NAMES[kind]}, got {value!r}")
+        if key in _WHOLE_KEYS and not _is_whole(value, _WHOLE_KEYS[key]):
+            raise fail(key, f"must be a whole number >= {_WHOLE_KEYS[key]}, got {value!r}")
+    if "env_id" not in config:
+        raise fail("env_id", "required (the environment to train on)")
+    algo = config.get("algo", "ppo")
+    if algo not in ALGOS:
+        raise fail("algo", f"unknown algorithm {algo!r}; choose from {', '.join(ALGOS)}")
+    if config.get("vec_env", "native") not in VEC_ENVS:
+        raise fail("vec_env", f"unknown {config['vec_env']!r}; choose from {', '.join(VEC_ENVS)}")
+    if "robots" in config and not config["robots"]:
+        raise fail("robots", "must list at least one robot")
+    for section, keys in SECTION_KEYS.items():
+        for key, value in config.get(section, {}).items():
+            name = f"{section}.{key}"
+            if key not in keys:
+                raise fail(name, f"unknown key; the keys are {', '.join(keys)}")
+            minimum = keys[key]
+            if minimum is None and not isinstance(value, bool):
+                raise fail(name, f"must be true or false, got {value!r}")
+            if key == "gamma" and not (_is_number(value) and 0 <= value <= 1):
+                raise fail(name, f"must be a number in [0, 1], got {value!r}")
+            if minimum is not None and key != "gamma" and not _is_whole(value, minimum):
+                raise fail(name, f"must be a whole number >= {minimum}, got {value!r}")
+    accepted = inspect.signature(ALGOS[algo].__init__).parameters
+    names = hyperparameter_names(algo)
+    for key, value in config.get("hyperparams", {}).items():
+        name = f"hyperparams.{key}"
+        if key not in names:
+            other = [a for a in ALGOS if a != algo and key in hyperparameter_names(a)]
+            hint = f"; a {other[0]} config? give --algo {other[0]}" if other else ""
+            raise fail(name, f"not an argument of {ALGOS[algo].__name__} (algo: {algo}{hint})")
+        default = accepted[key].default
+        if isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise fail(name, f"must be true or false, got {value!r}")
+        elif _is_number(default) and isinstance(value, str | bool):
+            raise fail(name, f"must be a number, got {value!r}")
+        elif isinstance(default, int) and isinstance(value, float):
+            raise fail(name, f"must be a whole number, got {value!r}")
+        if key == "learning_rate" and not (_is_number(value) and value > 0):
+            raise fail(name, f"must be a positive number, got {value!r}")
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _find_base(source: Path, base: Any) -> Path:
+    """The file of ``extends: NAME``: NAME.yaml next to ``source``, else in CONFIG_DIR."""
+    if not isinstance(base, str) or not base:
+        raise TrainingError(f"{source}: extends: must name a config, got {base!r}")
+    folders = list(dict.fromkeys([source.parent, CONFIG_DIR]))
+    for folder in folders:
+        if (folder / f"{base}.yaml").is_file():
+            return folder / f"{base}.yaml"
+    raise TrainingError(f"{source}: extends: no {base}.yaml in "
+                        f"{' or '.join(str(f) for f in folders)}")
+
+
+def _read_config(source: Path, chain: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """The mapping of ``source`` with its ``extends`` chain merged (unchecked)."""
+    config = read_yaml(source, "training config", TrainingError)
+    if config is None:
+        config = {}
     if not isinstance(config, dict):
         raise TrainingError(f"training config {source} must be a mapping")
-    base = config.pop("extends", None)
-    if base is None:
+    chain = (*chain, source.resolve())
+    if "extends" not in config:
         return config
-    # extends: another config (NAME.yaml, relative to this one's folder); this one's keys
-    # replace its keys, its mappings (env_kwargs, hyperparams, ...) merged one level down.
-    if not isinstance(base, str) or not base:
-        raise TrainingError(f"{source}: extends must name a config, got {base!r}")
-    merged = load_config(algo, source.parent / f"{base}.yaml")
+    base = _find_base(source, config.pop("extends"))
+    if base.resolve() in chain:
+        raise TrainingError(f"{source}: extends: {base} is already in the chain (a cycle)")
+    # This config's keys replace the base's keys, its mappings (env_kwargs, hyperparams,
+    # ...) merged one level down.
+    merged = _read_config(base, chain)
     for key, value in config.items():
         both = isinstance(value, dict) and isinstance(merged.get(key), dict)
         merged[key] = {**merged[key], **value} if both else value
     return merged
+
+
+def load_config(algo: str | None = None, path: str | Path | None = None) -> dict[str, Any]:
+    """The checked training config of ``path`` (default: agents/configs/ALGO.yaml), with its
+    ``extends`` chain merged and ``algo`` set: ``algo`` or the config's own ``algo`` (an
+    error when they differ), else ppo. ``extends: NAME`` names NAME.yaml next to the file,
+    else the shipped one in agents/configs."""
+    if algo is not None and algo not in ALGOS:
+        raise TrainingError(f"unknown algorithm {algo!r}; choose from {', '.join(ALGOS)}")
+    source = Path(path) if path else CONFIG_DIR / f"{algo or 'ppo'}.yaml"
+    config = _read_config(source)
+    if algo is not None and config.get("algo", algo) != algo:
+        raise TrainingError(f"{source}: algo: the config is for {config['algo']!r}, not "
+                            f"{algo!r}")
+    config["algo"] = algo or config.get("algo", "ppo")
+    check_config(config, source)
+    return config
 
 
 def make_training_env(config: dict, n_envs: int, seed: int, training: bool = True):
@@ -128,6 +274,52 @@ def make_model(config: dict, venv, seed: int, tensorboard: str | None = None):
                                  **config.get("hyperparams", {}))
 
 
+#: What building an env or a model raises for settings it does not accept.
+_BUILD_ERRORS = (ExciteError, TypeError, ValueError, KeyError, AssertionError,
+                 gymnasium.error.Error)
+
+
+@contextmanager
+def _config_errors(source: Path, keys: str) -> Iterator[None]:
+    """Turns an error building the config's env or model into one line naming the file."""
+    try:
+        yield
+    except _BUILD_ERRORS as exc:
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        raise TrainingError(f"{source}: {keys}: {message}") from None
+
+
+def build(config: dict, n_envs: int, seed: int, source: Path,
+          tensorboard: str | None = None, model: bool = True):
+    """The training env, the evaluation env and (``model``) a new model of ``config``; an
+    error of the env or the algorithm is a TrainingError naming ``source``."""
+    with _config_errors(source, "env_id/env_kwargs/robots"):
+        venv = make_training_env(config, n_envs, seed)
+        eval_env = make_training_env(config, 1, seed + config.get("eval", {}).get(
+            "seed_offset", 1_000_000), training=False)
+    if not model:
+        return venv, eval_env, None
+    # SB3's advice (e.g. on the batch size) only once the model is built, not before an error
+    with warnings.catch_warnings(record=True) as advice:
+        warnings.simplefilter("always")
+        with _config_errors(source, "policy/policy_kwargs/hyperparams"):
+            built = make_model(config, venv, seed, tensorboard)
+    for warning in advice:
+        warnings.warn_explicit(warning.message, warning.category, warning.filename,
+                               warning.lineno)
+    return venv, eval_env, built
+
+
+def check_buildable(config: dict, source: Path) -> None:
+    """TrainingError naming ``source`` unless ``config``'s env and model can be built (one
+    env; the config's own number of envs is checked by :func:`check_config`)."""
+    with warnings.catch_warnings():  # SB3's batch-size advice is about this one env only
+        warnings.simplefilter("ignore")
+        venv, eval_env, _ = build(config, 1, 0, source)
+    venv.close()
+    eval_env.close()
+
+
 class _TqdmProgress(BaseCallback):
     """A tqdm bar over environment steps."""
 
@@ -159,6 +351,17 @@ class _SaveNormalizationOnBest(BaseCallback):
         return True
 
 
+class _EvalAtLeastOnce(EvalCallback):
+    """SB3's EvalCallback, plus one evaluation at the end of training when DIR has no
+    best_model.zip yet (eval.freq beyond the steps trained)."""
+
+    def _on_training_end(self) -> None:
+        if not (Path(self.best_model_save_path) / "best_model.zip").exists():
+            every, self.eval_freq = self.eval_freq, 1  # _on_step evaluates every 1st call
+            self._on_step()
+            self.eval_freq = every
+
+
 def latest_checkpoint(out: Path) -> tuple[Path, Path, int] | None:
     """The newest checkpoint in ``out``: (model zip, its normalization pickle, steps), or None
     when there is none with both files."""
@@ -173,44 +376,52 @@ def latest_checkpoint(out: Path) -> tuple[Path, Path, int] | None:
 
 def train(
     out: str | Path,
-    algo: str = "ppo",
+    algo: str | None = None,
     timesteps: int = 1_000_000,
     n_envs: int | None = None,
-    seed: int = 0,
+    seed: int | None = None,
     resume: bool = False,
     config_path: str | Path | None = None,
     progress: bool = True,
     after_eval: BaseCallback | None = None,
 ) -> dict:
     """Train (or resume) a policy; returns the training summary (also in DIR).
-    ``after_eval`` runs after every evaluation (its ``parent`` is the EvalCallback, with
-    ``last_mean_reward``); returning False stops training."""
+
+    ``algo`` (default: the config's ``algo``, else ppo), ``n_envs`` and ``seed`` (default:
+    the config's, else 1 and 0) set the run; a resumed run keeps DIR/config.yaml's. When no
+    evaluation ran (``eval.freq`` beyond the steps trained), one runs at the end, so DIR
+    always has a best_model.zip. ``after_eval`` runs after every evaluation (its ``parent``
+    is the EvalCallback, with ``last_mean_reward``); returning False stops training."""
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise TrainingError(f"{out} is a file, not a folder")
     if resume:
-        stored = out / "config.yaml"
-        if not stored.exists():
+        source = out / "config.yaml"
+        if not source.exists():
             raise TrainingError(f"nothing to resume in {out} (no config.yaml)")
-        config = yaml.safe_load(stored.read_text())
-        algo, seed, n_envs = config["algo"], config["seed"], config["n_envs"]
+        config = load_config(None, source)
     else:
         config = load_config(algo, config_path)
-        config.update(algo=algo, seed=seed, n_envs=n_envs or config.get("n_envs", 1))
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
-        n_envs = config["n_envs"]
+        source = Path(config_path) if config_path else CONFIG_DIR / f"{config['algo']}.yaml"
+        for key, value in (("seed", seed), ("n_envs", n_envs)):
+            if value is not None and not _is_whole(value, _WHOLE_KEYS[key]):
+                raise TrainingError(f"{key} must be a whole number >= {_WHOLE_KEYS[key]}, "
+                                    f"got {value!r}")
+        config.update(seed=config.get("seed", 0) if seed is None else seed,
+                      n_envs=n_envs or config.get("n_envs", 1))
+    algo, seed, n_envs = config["algo"], config["seed"], config["n_envs"]
     algo_cls = ALGOS[algo]
     # Small MLPs on CPU: one torch thread is fastest, and several oversubscribe the cores the
     # environments need (2-core machines).
     torch.set_num_threads(config.get("torch_threads", 1))
 
-    venv = make_training_env(config, n_envs, seed)
-    eval_cfg = config.get("eval", {})
-    eval_env = make_training_env(config, 1, seed + eval_cfg.get("seed_offset", 1_000_000),
-                                 training=False)
     checkpoint = latest_checkpoint(out) if resume else None
     if resume and checkpoint is None:
-        raise TrainingError(f"nothing to resume in {out} (no checkpoint yet)")
+        raise TrainingError(f"nothing to resume in {out} (no checkpoint yet); start again in "
+                            "a new or emptied folder")
     tensorboard = str(out / "tensorboard") if importlib.util.find_spec("tensorboard") else None
+    venv, eval_env, model = build(config, n_envs, seed, source, tensorboard,
+                                  model=not checkpoint)
     if checkpoint:
         model_path, norm_path, done_steps = checkpoint
         venv = VecNormalize.load(str(norm_path), venv.venv)
@@ -218,17 +429,19 @@ def train(
                               tensorboard_log=tensorboard)
     else:
         done_steps = 0
-        model = make_model(config, venv, seed, tensorboard)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    eval_cfg = config.get("eval", {})
     per_env = max(1, n_envs)
     callbacks = [
         CheckpointCallback(max(config.get("checkpoint_freq", 50_000) // per_env, 1),
                            str(out / "checkpoints"), name_prefix="ckpt",
                            save_vecnormalize=True),
-        EvalCallback(eval_env, best_model_save_path=str(out), log_path=str(out / "eval"),
-                     eval_freq=max(eval_cfg.get("freq", 20_000) // per_env, 1),
-                     n_eval_episodes=eval_cfg.get("episodes", 20), deterministic=True,
-                     callback_on_new_best=_SaveNormalizationOnBest(out),
-                     callback_after_eval=after_eval),
+        _EvalAtLeastOnce(eval_env, best_model_save_path=str(out), log_path=str(out / "eval"),
+                         eval_freq=max(eval_cfg.get("freq", 20_000) // per_env, 1),
+                         n_eval_episodes=eval_cfg.get("episodes", 20), deterministic=True,
+                         callback_on_new_best=_SaveNormalizationOnBest(out),
+                         callback_after_eval=after_eval),
     ]
     remaining = max(timesteps - done_steps, 0)
     if progress:

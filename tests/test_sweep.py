@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 from agents.sweep import TRIAL_COLUMNS, load_sweep_config
+from agents.train import CONFIG_DIR
 from tests.conftest import assert_one_line_error, run_cli
 
 TINY = {
@@ -130,7 +131,20 @@ BAD = [
     ({**TINY, "asha": {"grace": 3}}, "asha.grace: unknown key"),
     ({**TINY, "asha": {"reduction_factor": 1}}, "asha.reduction_factor: must be a whole"),
     ({**TINY, "cpus_per_trial": 0}, "cpus_per_trial: must be a positive number"),
-    ({**TINY, "timesteps": 100}, "set.eval.freq: trials report an evaluation every"),
+    ({**TINY, "timesteps": 100, "asha": {"grace_period": 64}},
+     "set.eval.freq: trials report an evaluation every"),
+    ({**TINY, "asha": {"grace_period": 1024}},
+     "asha.grace_period: must be at most timesteps=512"),
+    # the base config with set and space applied is checked as excite train checks it
+    ({**TINY, "set": {**TINY["set"], "n_envs": -3}},
+     "set: n_envs: must be a whole number >= 1, got -3"),
+    ({**TINY, "set": {**TINY["set"], "env_kwargs.bogus": 1}},
+     "env_id/env_kwargs/robots: unknown config key 'bogus'"),
+    ({**TINY, "space": {"hyperparams.n_steps": {"choice": [64, "lots"]}}},
+     "space: hyperparams.n_steps: must be a number, got 'lots'"),
+    ({**TINY, "config": str(CONFIG_DIR / "sac.yaml")},
+     "config: " + str(CONFIG_DIR / "sac.yaml") + ": hyperparams.buffer_size: not an argument "
+     "of PPO (algo: ppo; a sac config? give --algo sac)"),
 ]
 
 
@@ -160,19 +174,33 @@ def test_bad_sweep_options(tmp_path, capsys, monkeypatch, argv, fragment):
     assert_one_line_error(code, err, fragment)
 
 
-def test_another_config_in_the_same_folder_is_refused(tmp_path):
+def test_another_config_in_the_same_folder_is_refused_once_a_trial_ran(tmp_path):
+    """A sweep that fails while starting (here: no Ray at --address) leaves DIR/sweep.yaml
+    but nothing ran, so another config may use the folder; once a trial folder exists, the
+    folder belongs to its sweep. (Subprocesses: this test process may hold a Ray already.)"""
     from agents.sweep import SweepError, run_sweep
 
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "sweep.yaml").write_text(yaml.safe_dump({**TINY, "samples": 3}))
+    env = {**os.environ, "PYTHONPATH": os.getcwd()}
+
+    def sweep(config):
+        done = subprocess.run([sys.executable, "-m", "excite.cli", "sweep", str(config),
+                               "--out", str(out), "--backend", "ray", "--address",
+                               "127.0.0.1:9"], capture_output=True, text=True, env=env)
+        return done.returncode, done.stderr
+
+    first = _config(tmp_path, TINY, "first.yaml")
+    second = _config(tmp_path, {**TINY, "samples": 3}, "second.yaml")
+    assert_one_line_error(*sweep(first), "cannot connect to Ray at 127.0.0.1:9")
+    assert yaml.safe_load((out / "sweep.yaml").read_text()) == TINY
+    assert_one_line_error(*sweep(second), "cannot connect to Ray at 127.0.0.1:9")
+    assert yaml.safe_load((out / "sweep.yaml").read_text())["samples"] == 3
+    (out / "trials" / "a_trial").mkdir(parents=True)
     with pytest.raises(SweepError, match="holds a sweep of another config"):
-        run_sweep(_config(tmp_path, TINY), out)
+        run_sweep(first, out)  # refused before Ray is touched
 
 
 def test_shipped_example_config_is_valid():
-    from agents.train import CONFIG_DIR
-
     sweep = load_sweep_config(CONFIG_DIR / "sweep_example.yaml")
     assert sweep.base["n_envs"] == 4 and sweep.base["eval"]["freq"] == 10000
     assert sweep.timesteps > sweep.grace_period

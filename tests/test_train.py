@@ -1,6 +1,7 @@
 """Smoke training (a few thousand steps), save, load, evaluate, resume; bad policy files."""
 
 import json
+import warnings
 import zipfile
 
 import numpy as np
@@ -11,6 +12,7 @@ from agents.catalog import ProtocolError, ProtocolSpec, make_protocol
 from agents.compare import make_env
 from agents.train import CONFIG_DIR, TrainingError, normalization_path, train
 from excite.cli import main
+from tests.conftest import assert_one_line_error, run_cli
 
 
 @pytest.fixture
@@ -181,3 +183,144 @@ def test_configs_extend_others_and_bad_configs_are_errors(tmp_path):
     child.write_text("- a list\n")
     with pytest.raises(TrainingError, match="must be a mapping"):
         load_config("ppo", child)
+
+
+def _yaml(tmp_path, name, document):
+    path = tmp_path / name
+    path.write_text(document if isinstance(document, str) else yaml.safe_dump(document))
+    return path
+
+
+def test_training_without_an_evaluation_in_its_steps_evaluates_once_at_the_end(
+        tmp_path, small_config, capsys):
+    """eval.freq (1024) beyond --timesteps: one evaluation at the end, so the printed best
+    policy exists and is loadable."""
+    out = tmp_path / "run"
+    code, printed, _ = run_cli(capsys, "train", "--config", small_config, "--timesteps", 256,
+                               "--n-envs", 2, "--out", out)
+    assert code == 0 and printed.strip().endswith(f"best policy: {out / 'best_model.zip'}")
+    trained = json.loads((out / "train_summary.json").read_text())["timesteps"]
+    assert trained < 1024  # whole rollouts: 512 steps
+    assert np.load(out / "eval" / "evaluations.npz")["timesteps"].tolist() == [trained]
+    assert normalization_path(out / "best_model.zip").exists()
+    make_protocol(ProtocolSpec.of("learned", {"policy": str(out / "best_model.zip")}))
+
+
+def test_a_used_out_folder_needs_resume_and_resume_takes_no_new_settings(
+        tmp_path, small_config, capsys):
+    out = tmp_path / "run"
+    assert run_cli(capsys, "train", "--config", small_config, "--timesteps", 1024,
+                   "--n-envs", 2, "--out", out)[0] == 0
+    before = {p.name: p.read_bytes() for p in out.glob("*.zip")}
+    code, _, err = run_cli(capsys, "train", "--config", small_config, "--timesteps", 256,
+                           "--n-envs", 2, "--seed", 4, "--out", out)
+    assert_one_line_error(code, err, f"--out {out} is not empty", "--resume")
+    assert {p.name: p.read_bytes() for p in out.glob("*.zip")} == before  # nothing mixed in
+    code, _, err = run_cli(capsys, "train", "--config", small_config, "--timesteps", 2048,
+                           "--out", out, "--resume")
+    assert_one_line_error(code, err, "--resume continues the run", "drop --config")
+    (tmp_path / "empty").mkdir()  # an empty folder is a new run's
+    assert run_cli(capsys, "train", "--config", small_config, "--timesteps", 256,
+                   "--n-envs", 2, "--out", tmp_path / "empty")[0] == 0
+
+
+def test_the_config_names_the_algorithm_unless_the_command_line_does(tmp_path, small_config):
+    """A config's algo: is used without --algo; --algo against it is an error; the shipped
+    sac.yaml without algo: is a PPO config with SAC's hyperparameters, named as such."""
+    from agents.train import load_config
+
+    sac = _yaml(tmp_path, "mine.yaml", "extends: sac\nalgo: sac\n")
+    assert load_config(None, sac)["algo"] == "sac"
+    assert load_config("sac", sac)["hyperparams"] == load_config("sac")["hyperparams"]
+    with pytest.raises(TrainingError, match=r"mine.yaml: algo: the config is for 'sac', "
+                                            r"not 'ppo'"):
+        load_config("ppo", sac)
+    with pytest.raises(TrainingError, match=r"sac.yaml: hyperparams.buffer_size: not an "
+                                            r"argument of PPO .*give --algo sac"):
+        load_config(None, CONFIG_DIR / "sac.yaml")
+    config = yaml.safe_load(small_config.read_text())
+    config["env_kwargs"]["budget"] = 10
+    tiny_sac = _yaml(tmp_path, "tiny_sac.yaml", {
+        "extends": "sac", "algo": "sac", "env_kwargs": config["env_kwargs"],
+        "hyperparams": {"learning_starts": 64, "batch_size": 32},
+        "eval": {"freq": 128, "episodes": 1}})
+    summary = train(tmp_path / "run", timesteps=256, config_path=tiny_sac, progress=False)
+    assert summary["algo"] == "sac" and summary["n_envs"] == 2  # sac.yaml's n_envs
+    assert yaml.safe_load((tmp_path / "run" / "config.yaml").read_text())["algo"] == "sac"
+
+
+def test_extends_looks_next_to_the_config_then_in_the_shipped_configs(tmp_path):
+    from agents.train import load_config
+
+    mine = _yaml(tmp_path, "mine.yaml", "extends: ppo\nn_envs: 4\n")
+    assert load_config(None, mine) == {**load_config("ppo"), "n_envs": 4}
+    _yaml(tmp_path, "ppo.yaml", "extends: sac\nalgo: sac\n")  # a user's own ppo.yaml wins
+    assert load_config(None, mine)["algo"] == "sac"
+    missing = _yaml(tmp_path, "missing.yaml", "extends: nowhere\n")
+    with pytest.raises(TrainingError, match=f"extends: no nowhere.yaml in {tmp_path} or "
+                                            f"{CONFIG_DIR}"):
+        load_config(None, missing)
+
+
+BAD_CONFIGS = [
+    ("foo: 1\n", "foo: unknown key; the keys are algo, seed"),
+    ("n_envs: -3\n", "n_envs: must be a whole number >= 1, got -3"),
+    ("n_envs: two\n", "n_envs: must be a whole number, got 'two'"),
+    ("vec_env: fancy\n", "vec_env: unknown 'fancy'"),
+    ("env_kwargs: [1]\n", "env_kwargs: must be a mapping"),
+    ("eval: {freq: 0}\n", "eval.freq: must be a whole number >= 1, got 0"),
+    ("eval: {frequency: 5}\n", "eval.frequency: unknown key"),
+    ("normalize: {norm_obs: 3}\n", "normalize.norm_obs: must be true or false"),
+    ("hyperparams: {n_stepz: 64}\n", "hyperparams.n_stepz: not an argument of PPO"),
+    ("hyperparams: {n_steps: lots}\n", "hyperparams.n_steps: must be a number, got 'lots'"),
+    ("hyperparams: {n_steps: 64.5}\n", "hyperparams.n_steps: must be a whole number"),
+    ("hyperparams: {learning_rate: -1}\n", "hyperparams.learning_rate: must be a positive"),
+    ("algo: sac\n", "hyperparams.n_epochs: not an argument of SAC (algo: sac; a ppo config?"),
+    ("algo: dqn\n", "algo: unknown algorithm 'dqn'"),
+    ("env_id: excite/Nope-v0\n", "env_id/env_kwargs/robots: Environment `Nope` doesn't exist"),
+    ("env_kwargs: {bogus: 3}\n", "env_id/env_kwargs/robots: unknown config key 'bogus'"),
+    ("robots: [marsrover]\n", "env_id/env_kwargs/robots: unknown robot preset 'marsrover'"),
+    ("robots: []\n", "robots: must list at least one robot"),
+    ("policy: NopePolicy\n", "policy/policy_kwargs/hyperparams: Policy NopePolicy unknown"),
+    ("policy_kwargs: {net_arch: big}\n", "policy/policy_kwargs/hyperparams: "),
+]
+
+
+@pytest.mark.parametrize("lines,fragment", BAD_CONFIGS)
+def test_bad_training_config_is_a_one_line_error_naming_file_and_key(tmp_path, capsys,
+                                                                     lines, fragment):
+    path = _yaml(tmp_path, "bad.yaml", "extends: ppo\n" + lines)
+    with warnings.catch_warnings(record=True) as printed:  # on stderr too, outside pytest
+        warnings.simplefilter("always")
+        code, _, err = run_cli(capsys, "train", "--config", path, "--timesteps", 128,
+                               "--n-envs", 2, "--out", tmp_path / "out")
+    assert_one_line_error(code, err, f"{path}: {fragment}")
+    assert not printed, [str(w.message) for w in printed]
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "document,fragment",
+    [
+        ("extends: bad\n", "bad.yaml: extends: {tmp}/bad.yaml is already in the chain"),
+        ("extends: ppo\nhyperparams: [1, 2\n", "bad.yaml: not valid YAML (line 3)"),
+        ("- a list\n", "training config {tmp}/bad.yaml must be a mapping"),
+        ("", "bad.yaml: env_id: required"),
+    ],
+)
+def test_broken_config_files_are_one_line_errors(tmp_path, capsys, document, fragment):
+    path = _yaml(tmp_path, "bad.yaml", document)
+    code, _, err = run_cli(capsys, "train", "--config", path, "--out", tmp_path / "out")
+    assert_one_line_error(code, err, fragment.replace("{tmp}", str(tmp_path)))
+
+
+def test_bad_train_options_are_one_line_errors(tmp_path, capsys):
+    afile = _yaml(tmp_path, "afile", "x")
+    code, _, err = run_cli(capsys, "train", "--seed", "-1", "--out", tmp_path / "o")
+    assert_one_line_error(code, err, "--seed: must be at least 0")
+    code, _, err = run_cli(capsys, "train", "--out", afile)
+    assert_one_line_error(code, err, f"--out {afile} is a file, not a folder")
+    code, _, err = run_cli(capsys, "train", "--out", tmp_path / "o", "--resume")
+    assert_one_line_error(code, err, "nothing to resume")
+    with pytest.raises(TrainingError, match="seed must be a whole number >= 0"):
+        train(tmp_path / "o", seed=-1, progress=False)
