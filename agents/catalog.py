@@ -59,17 +59,29 @@ def user_supplied(module_name: str) -> bool:
     return module_name.partition(".")[0] not in EXCITE_PACKAGES
 
 
+def _through_user_code(exc: BaseException) -> bool:
+    """Whether a user's module is on the exception's traceback (the user's code raised it,
+    or called into excite's with what made it fail)."""
+    tb = exc.__traceback__
+    while tb is not None:
+        if user_supplied(tb.tb_frame.f_globals.get("__name__", "")):
+            return True
+        tb = tb.tb_next
+    return False
+
+
 @contextmanager
 def calling(label: str, what: str, user: bool) -> Iterator[None]:
     """Run a call into protocol ``label``'s code (``what``: the method): its ProtocolError
-    names the protocol; any other exception does too, as a ProtocolError, when the code is a
-    user's (``user``), and stays an internal error in excite's own protocols."""
+    names the protocol; any other exception does too, as a ProtocolError, when the protocol is
+    a user's (``user``) and the user's code is on the traceback; otherwise (excite's own
+    protocols, or excite's code failing under a user's subclass) it stays an internal error."""
     try:
         yield
     except ProtocolError as exc:
         raise ProtocolError(f"protocol {label}: {exc}") from None
     except Exception as exc:
-        if not user:
+        if not (user and _through_user_code(exc)):
             raise
         raise ProtocolError(f"protocol {label}: {what} raised {type(exc).__name__}: "
                             f"{exc}") from None

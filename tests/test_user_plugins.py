@@ -12,11 +12,14 @@ from excite.cli import main
 IDEAL = "excite/DiffDriveCalibIdeal-v0"
 PROTOCOLS = '''
 import numpy as np
-from agents.protocols import Parameter, Protocol
+from agents.protocols import Parameter, Protocol, Spin
 
 class Good(Protocol):
     def plan(self, k):
         return np.array([0.2, 0.3])
+
+class SpinChild(Spin):
+    pass
 
 class Raises(Protocol):
     def plan(self, k):
@@ -220,3 +223,17 @@ def test_builtin_protocol_bugs_stay_internal_errors(monkeypatch, tmp_path, capsy
     monkeypatch.setattr(Spin, "plan", broken)
     assert main(_simulate(tmp_path, "spin")) == 1
     assert "internal error: ZeroDivisionError" in capsys.readouterr().err
+
+
+def test_an_excite_bug_under_a_users_subclass_stays_an_internal_error(plugins, monkeypatch,
+                                                                      tmp_path, capsys):
+    """A user's subclass whose own code is fine, over excite code that fails (the wall guard,
+    here replaced by a C function called with the wrong arguments: no user frame on the
+    traceback): excite's bug, not blamed on the user's protocol."""
+    import math
+
+    import agents.protocols
+
+    monkeypatch.setattr(agents.protocols, "safe_actions", math.sqrt)
+    assert main(_simulate(tmp_path, "plugin_protocols:SpinChild")) == 1
+    assert "internal error: TypeError" in capsys.readouterr().err
