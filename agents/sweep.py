@@ -74,6 +74,7 @@ from tqdm import tqdm
 from agents.backends import LOCAL, RAY, check_backend, ray_session
 from agents.train import (
     ALGOS,
+    CONFIG_KEYS,
     check_buildable,
     check_config,
     hyperparameter_names,
@@ -137,20 +138,20 @@ def _set_dotted(config: dict, dotted: str, value: Any) -> None:
     node[last] = value
 
 
-def _check_dotted(path: Path, section: str, dotted: Any, base: Mapping, algo: str) -> None:
-    """A dotted key names a key of a base-config section (hyperparams: an algorithm
+def _check_dotted(path: Path, section: str, dotted: Any, algo: str) -> None:
+    """A dotted key names a key of the training config (hyperparams: an algorithm
     argument)."""
     key = f"{section}.{dotted}"
     if not isinstance(dotted, str) or not dotted or any(not p for p in dotted.split(".")):
         raise _fail(path, key, "keys are dotted names such as hyperparams.learning_rate")
     top, *rest = dotted.split(".")
-    if top not in base:
-        raise _fail(path, key, f"{top!r} is not a key of the training config (it has "
-                    f"{', '.join(base)})")
+    if top not in CONFIG_KEYS:
+        raise _fail(path, key, f"{top!r} is not a key of the training config (keys: "
+                    f"{', '.join(CONFIG_KEYS)})")
     if top == "hyperparams":
         if len(rest) != 1 or rest[0] not in hyperparameter_names(algo):
             raise _fail(path, key, f"not an argument of {ALGOS[algo].__name__}")
-    elif rest and not isinstance(base[top], dict):
+    elif rest and CONFIG_KEYS[top] is not dict:
         raise _fail(path, key, f"{top!r} is not a section of the training config")
 
 
@@ -214,12 +215,12 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
         if not isinstance(document.get(section, {}), dict):
             raise _fail(path, section, "must be a mapping")
     for dotted, value in document.get("set", {}).items():
-        _check_dotted(path, "set", dotted, base, algo)
+        _check_dotted(path, "set", dotted, algo)
         _set_dotted(base, dotted, value)
     _checked(check_config, base, f"{path}: set")
     space = {}
     for dotted, spec in document.get("space", {}).items():
-        _check_dotted(path, "space", dotted, base, algo)
+        _check_dotted(path, "space", dotted, algo)
         space[dotted] = _check_distribution(path, f"space.{dotted}", spec)
         for value in next(iter(space[dotted].values())):  # the values, or LOW and HIGH
             trial = copy.deepcopy(base)

@@ -204,3 +204,10 @@ def test_shipped_example_config_is_valid():
     sweep = load_sweep_config(CONFIG_DIR / "sweep_example.yaml")
     assert sweep.base["n_envs"] == 4 and sweep.base["eval"]["freq"] == 10000
     assert sweep.timesteps > sweep.grace_period
+
+
+def test_set_may_name_any_training_key_not_only_the_base_configs(tmp_path):
+    """ppo.yaml has no robots: a sweep may still set it (a key of the training config)."""
+    sweep = load_sweep_config(_config(tmp_path, {**TINY, "set": {**TINY["set"],
+                                                                 "robots": ["default"]}}))
+    assert sweep.base["robots"] == ["default"]
