@@ -22,6 +22,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import signal
 import socket
 import threading
 import time
@@ -75,12 +76,17 @@ def connect_ray(address: str | None = None) -> bool:
     if ray.is_initialized():
         return False
     _check_reachable(address or os.environ.get("RAY_ADDRESS"))
+    main = threading.current_thread() is threading.main_thread()
+    on_term = signal.getsignal(signal.SIGTERM) if main else None
     try:
         ray.init(address=address, logging_level=logging.ERROR, include_dashboard=False)
     except (ConnectionError, RuntimeError, ValueError) as exc:
         where = address or os.environ.get("RAY_ADDRESS") or "a local Ray"
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise BackendError(f"cannot connect to Ray at {where}: {message}") from None
+    finally:
+        if main and on_term is not None:  # ray.init's own SIGTERM handler exits at once;
+            signal.signal(signal.SIGTERM, on_term)  # the caller's ends Ray in ray_session
     return True
 
 
