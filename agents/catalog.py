@@ -98,16 +98,12 @@ def protocol_class(name: str) -> type[Protocol]:
     module_name, _, attribute = entry_point.partition(":")
     try:
         module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name is not None and module_name.startswith(exc.name):
+    except Exception as exc:
+        if (isinstance(exc, ModuleNotFoundError) and exc.name is not None
+                and module_name.startswith(exc.name)):
             raise ProtocolError(f"protocol {name!r}: no module named {exc.name!r}") from None
         if not user_supplied(module_name):
-            raise  # excite's module needs another one (cli names a missing extra)
-        raise ProtocolError(f"protocol {name!r}: importing {module_name} raised "
-                            f"{type(exc).__name__}: {exc}") from None
-    except Exception as exc:
-        if not user_supplied(module_name):
-            raise
+            raise  # excite's own (a module it needs is missing: cli names the extra)
         raise ProtocolError(f"protocol {name!r}: importing {module_name} raised "
                             f"{type(exc).__name__}: {exc}") from None
     cls = getattr(module, attribute, None)

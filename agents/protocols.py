@@ -25,7 +25,7 @@ import numpy as np
 
 from agents.motion import MARGIN, SPEED_MARGIN, safe_actions, turn_to_center
 from excite.contracts import RobotKnowledge
-from excite.errors import ExciteError
+from excite.errors import ExciteError, one_line_repr
 
 #: A parameter's value.
 Value = float | int | bool | str
@@ -190,10 +190,8 @@ def check_action(action: object, what: str = "act") -> np.ndarray:
     except (TypeError, ValueError):
         array = None
     if array is None or array.shape != (2,) or not np.isfinite(array).all():
-        shown = " ".join(repr(action).split())
-        shown = shown if len(shown) <= 80 else shown[:77] + "..."
-        raise ProtocolError(f"{what} returned {shown}, not an action (two finite wheel-speed "
-                            "fractions, left and right)")
+        raise ProtocolError(f"{what} returned {one_line_repr(action)}, not an action (two "
+                            "finite wheel-speed fractions, left and right)")
     return array
 
 

@@ -3,7 +3,7 @@ purpose (bad data, bad settings) apart from programming errors."""
 
 from __future__ import annotations
 
-__all__ = ["ExciteError", "DataError", "EstimatorError", "MetricError"]
+__all__ = ["ExciteError", "DataError", "EstimatorError", "MetricError", "one_line_repr"]
 
 
 class ExciteError(Exception):
@@ -22,3 +22,10 @@ class EstimatorError(ExciteError, ValueError):
 
 class MetricError(ExciteError, ValueError):
     """Arrays a metric cannot be computed from (shapes, thresholds, confidence levels)."""
+
+
+def one_line_repr(value: object, width: int = 80) -> str:
+    """``repr(value)`` on one line, cut to ``width`` characters: how error messages show a
+    value a user's code returned."""
+    text = " ".join(repr(value).split())
+    return text if len(text) <= width else text[:width - 3] + "..."

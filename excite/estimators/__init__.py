@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from excite.contracts import Estimator
-from excite.errors import EstimatorError
+from excite.errors import EstimatorError, one_line_repr
 from excite.estimators.ekf import ExtendedKalmanFilter
 from excite.estimators.window import SlidingWindowSmoother
 from excite.kinematics import Params
@@ -125,15 +125,9 @@ class EstimatorSpec:
                    if not hasattr(estimator, name)]
         if missing:
             raise EstimatorError(f"estimator {self.label}: its factory returned "
-                                 f"{_shown(estimator)}, not an estimator (it has no "
+                                 f"{one_line_repr(estimator)}, not an estimator (it has no "
                                  f"{', '.join(missing)})")
         return CheckedEstimator(self.label, estimator)
-
-
-def _shown(value: object) -> str:
-    """``repr(value)``, cut to one short line."""
-    text = " ".join(repr(value).split())
-    return text if len(text) <= 80 else text[:77] + "..."
 
 
 class CheckedEstimator:
@@ -169,7 +163,7 @@ class CheckedEstimator:
         array = self._call("params", lambda: np.asarray(
             value.as_array() if isinstance(value, Params) else value, dtype=float))
         if array.shape != (3,) or not np.isfinite(array).all():
-            raise EstimatorError(f"estimator {self.label}: params is {_shown(value)}, not 3 "
+            raise EstimatorError(f"estimator {self.label}: params is {one_line_repr(value)}, not 3 "
                                  "finite values (r_L, r_R, b in m)")
         return value if isinstance(value, Params) else Params.from_array(array)
 
@@ -179,7 +173,7 @@ class CheckedEstimator:
         array = self._call("covariance", lambda: np.asarray(value, dtype=float))
         if array.ndim != 2 or array.shape[0] != array.shape[1] or array.shape[0] < 3 or (
                 not np.isfinite(array).all()):
-            raise EstimatorError(f"estimator {self.label}: covariance is {_shown(value)}, "
+            raise EstimatorError(f"estimator {self.label}: covariance is {one_line_repr(value)}, "
                                  "not a finite square matrix over at least the 3 wheel "
                                  "parameters")
         return array
@@ -192,7 +186,7 @@ class CheckedEstimator:
             return None
         array = self._call("theta", lambda: np.asarray(value, dtype=float))
         if array.ndim != 1 or not np.isfinite(array).all():
-            raise EstimatorError(f"estimator {self.label}: theta is {_shown(value)}, not "
+            raise EstimatorError(f"estimator {self.label}: theta is {one_line_repr(value)}, not "
                                  "finite values")
         return array
 
