@@ -290,28 +290,26 @@ def _read_config(config: Path) -> dict | None:
     return stored
 
 
-def _check_settings(out_dir: Path, settings: CompareSettings) -> None:
+def _resumable_rows(out_dir: Path, settings: CompareSettings,
+                    specs: Sequence[ProtocolSpec]) -> list[dict]:
+    """The complete rows already in ``out_dir`` that this run may keep, after checking
+    DIR/config.json (read once, written once when it changes): the settings must be the
+    stored ones (a CompareError otherwise), and each protocol's results are tied to the
+    content of the files its settings name (a learned policy): a protocol whose files changed
+    since its results were made is a CompareError (resuming would mix or silently reuse
+    results of another policy); the digests of the others are recorded."""
     config = out_dir / "config.json"
     stored = _read_config(config)
-    if stored is None:
-        config.write_text(json.dumps(asdict(settings), indent=2) + "\n")
-        return
-    stored.pop(FILES_KEY, None)
-    stored = {**asdict(CompareSettings()), **stored}  # keys added since: their defaults
-    if stored != asdict(settings):
-        raise CompareError(
-            f"{out_dir} holds a comparison with other settings ({stored}); "
-            "use another --out or the same --env, --segments, --seed and --robot")
-
-
-def _check_files(out_dir: Path, specs: Sequence[ProtocolSpec], rows: Sequence[dict]) -> None:
-    """Tie each protocol's results in ``out_dir`` to the content of the files its settings
-    name (a learned policy): a protocol whose file changed since its results were made is a
-    CompareError (resuming would mix or silently reuse results of another policy); the
-    digests of the others are recorded in config.json."""
-    config = out_dir / "config.json"
-    stored = _read_config(config) or {}
-    known = dict(stored.get(FILES_KEY, {}))
+    if stored is not None:
+        compared = {**asdict(CompareSettings()), **stored}  # keys added since: defaults
+        compared.pop(FILES_KEY, None)
+        if compared != asdict(settings):
+            raise CompareError(
+                f"{out_dir} holds a comparison with other settings ({compared}); "
+                "use another --out or the same --env, --segments, --seed and --robot")
+    rows = read_complete_rows(out_dir / "segments.csv", settings.segments,
+                              settings.final_only)
+    known = dict((stored or {}).get(FILES_KEY, {}))
     present = {row["protocol"] for row in rows}
     for spec in specs:
         digest = spec.fingerprint()
@@ -329,8 +327,10 @@ def _check_files(out_dir: Path, specs: Sequence[ProtocolSpec], rows: Sequence[di
                 f"{digest[:12]}, was {old[:12]}): its results there are of another policy; "
                 "use another --out")
         known[spec.label] = digest
-    if known != stored.get(FILES_KEY, {}):
-        config.write_text(json.dumps({**stored, FILES_KEY: known}, indent=2) + "\n")
+    if stored is None or known != stored.get(FILES_KEY, {}):
+        content = {**(stored or asdict(settings)), **({FILES_KEY: known} if known else {})}
+        config.write_text(json.dumps(content, indent=2) + "\n")
+    return rows
 
 
 def run_comparison(
@@ -363,10 +363,8 @@ def run_comparison(
         _worker_protocol(spec)  # built (and kept for the episodes run here) or an error now
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    _check_settings(out, settings)
+    rows = _resumable_rows(out, settings, specs)
     csv_path = out / "segments.csv"
-    rows = read_complete_rows(csv_path, settings.segments, settings.final_only)
-    _check_files(out, specs, rows)
     _write_rows(csv_path, rows, "w")  # rewrite without partial episodes or duplicates
     done = {(r["protocol"], r["estimator"], r["episode"]) for r in rows}
     todo = {e: [(p, m) for p in specs for m in estimator_specs
