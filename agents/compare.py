@@ -140,10 +140,16 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int,
     return records
 
 
-@functools.cache
 def _worker_protocol(spec: ProtocolSpec) -> Protocol:
-    """One instance per protocol and process (a learned policy is loaded once, not every
-    episode); run_protocol_episode resets it at the start of each episode."""
+    """One instance per protocol, file content and process (a learned policy is loaded once,
+    not every episode, and loaded again when its file has changed since); run_protocol_episode
+    resets it at the start of each episode."""
+    return _protocol_instance(spec, spec.fingerprint())
+
+
+@functools.cache
+def _protocol_instance(spec: ProtocolSpec, fingerprint: str | None) -> Protocol:
+    """``spec``'s protocol, kept per (spec, digest of the files it names)."""
     return make_protocol(spec)
 
 
@@ -161,11 +167,12 @@ def as_estimator_specs(estimators: Iterable[str | EstimatorSpec]) -> list[Estima
 def incompatible_protocols(protocols: Iterable[ProtocolSpec],
                            observation_shape: tuple[int, ...]) -> dict[str, str]:
     """Labels of the protocols that cannot run on an env with this observation shape (e.g. a
-    policy trained for another observation layout), with the reason in words."""
+    policy trained for another observation layout), with the reason in words. Each is built
+    once and kept for the episodes run in this process."""
     shape = tuple(observation_shape)
     reasons = {}
     for spec in protocols:
-        protocol = make_protocol(spec)
+        protocol = _worker_protocol(spec)
         with calling(spec.label, "incompatibility", user_supplied(type(protocol).__module__)):
             reasons[spec.label] = protocol.incompatibility(shape)
     return {label: reason for label, reason in reasons.items() if reason}

@@ -62,6 +62,18 @@ class ResetRaises(Protocol):
     def plan(self, k):
         return np.zeros(2)
 
+class FromFile(Protocol):
+    """Drives at the speed written in its file (a stand-in for a policy file)."""
+    parameters = (Parameter("path", str, "", "a file holding the speed"),)
+    @classmethod
+    def fingerprint(cls, settings):
+        return open(settings["path"]).read()
+    def __init__(self, **settings):
+        super().__init__(**settings)
+        self.speed = float(open(self.settings["path"]).read())
+    def plan(self, k):
+        return np.array([self.speed, self.speed])
+
 class BadDefault(Protocol):
     parameters = (Parameter("x", float, 5.0, "out of its range", 0.0, 1.0),)
     def plan(self, k):
@@ -237,3 +249,18 @@ def test_an_excite_bug_under_a_users_subclass_stays_an_internal_error(plugins, m
     monkeypatch.setattr(agents.protocols, "safe_actions", math.sqrt)
     assert main(_simulate(tmp_path, "plugin_protocols:SpinChild")) == 1
     assert "internal error: TypeError" in capsys.readouterr().err
+
+
+def test_a_protocol_file_replaced_at_the_same_path_is_loaded_again(plugins, tmp_path):
+    """A long-lived process (a notebook, a test session) keeps one protocol per spec, but not
+    across a change of the file it names (a policy retrained at the same path)."""
+    from agents.catalog import parse_protocol
+    from agents.compare import _worker_protocol
+
+    speed = tmp_path / "speed.txt"
+    speed.write_text("0.2")
+    spec = parse_protocol(f"plugin_protocols:FromFile:path={speed}")
+    first = _worker_protocol(spec)
+    assert _worker_protocol(spec) is first  # loaded once
+    speed.write_text("0.4")
+    assert _worker_protocol(spec).speed == 0.4
