@@ -17,7 +17,9 @@ the synthetic logs' mounting; otherwise each log draws its own hidden robot and 
 Sources of logs:
 
 * ``synthetic`` (excite.synthetic): smooth random curves, an off-axle sensor, 50 Hz pose
-  samples with noise, optional random-walk wheel slip;
+  samples with noise (white, or wandering with ``--pose-noise-time``: first-order
+  Gauss-Markov, as a scan matcher's or visual odometry's error), optional random-walk wheel
+  slip;
 * ``env``: the simulator (``excite simulate --format timeseries``): a hidden robot and sensor
   mounting per log, encoder ticks at the physics rate, a 100 Hz pose stream with noise, driven
   by the arcs protocol at ``--speed`` of the motor limit (gently: the slip env slips little).
@@ -25,6 +27,7 @@ Sources of logs:
     python benchmarks/bench_logs.py --logs 200 --slip 0
     python benchmarks/bench_logs.py --logs 200 --slip 0.01
     python benchmarks/bench_logs.py --logs 200 --slip 0.01 --pose-noise 0   # independent noise
+    python benchmarks/bench_logs.py --logs 200 --pose-noise-time 20          # wandering poses
     python benchmarks/bench_logs.py --source env --env excite/DiffDriveCalibIdeal-v0 --logs 200
     python benchmarks/bench_logs.py --source env --speed 0.1 --logs 200       # slip env, gently
     python benchmarks/bench_logs.py --source env --speed 0.1 --logs 200 --same-robot
@@ -64,6 +67,7 @@ def synthetic_source(args: argparse.Namespace, i: int
     log = synthetic_log(np.random.default_rng(args.seed + i), args.duration,
                         sensor_pose=SENSOR, pose_noise=(args.pose_noise, args.pose_noise),
                         slip=args.slip, ticks_per_rev=args.ticks_per_rev,
+                        pose_noise_time=args.pose_noise_time,
                         encoder_rate=args.encoder_rate, pose_rate=args.pose_rate)
     return (log.series, np.append(log.params.as_array(), SENSOR.as_array()),
             (args.pose_noise, args.pose_noise), args.ticks_per_rev)
@@ -136,6 +140,8 @@ def main() -> None:
     parser.add_argument("--logs", type=int, default=200)
     parser.add_argument("--duration", type=float, default=120.0, help="s per log")
     parser.add_argument("--pose-noise", type=float, default=0.002, help="m and rad (synthetic)")
+    parser.add_argument("--pose-noise-time", type=float, default=0.0,
+                        help="s: correlation time of the pose noise (synthetic; 0: white)")
     parser.add_argument("--slip", type=float, default=0.0,
                         help="rad / sqrt(s) per wheel (synthetic)")
     parser.add_argument("--encoder-rate", type=float, default=100.0, help="Hz (synthetic)")
@@ -162,6 +168,7 @@ def main() -> None:
     args = parser.parse_args()
     source = synthetic_source if args.source == "synthetic" else env_source
     errors, known, distances, reported, covariances, bounds = [], [], [], [], [], []
+    widened = 0
     for i in tqdm(range(args.logs), desc="logs"):
         series, truth, pose_noise, ticks = source(args, i)
         segments = segment_timeseries(series).segments
@@ -173,6 +180,7 @@ def main() -> None:
         distances.append(error @ np.linalg.solve(result.full_covariance, error))
         reported.append(np.diag(result.full_covariance))
         covariances.append(result.full_covariance)
+        widened += result.fit.long_run_bandwidth is not None
         if min(pose_noise) > 0:  # without pose noise there is no pose-noise bound
             bound, theta = pose_noise_fit(segments, truth, estimate, pose_noise)
             bounds.append(bound)
@@ -181,9 +189,11 @@ def main() -> None:
     rmse = np.sqrt(np.mean(errors**2, axis=0))
     driven = f"arcs at {args.speed:g}" if args.protocol is None else args.protocol
     what = (f"{args.env}, {driven}" if args.source == "env" else
-            f"synthetic, pose noise {args.pose_noise:g}, slip {args.slip:g}")
+            f"synthetic, pose noise {args.pose_noise:g} (correlation time "
+            f"{args.pose_noise_time:g} s), slip {args.slip:g}")
     print(f"{args.logs} logs of {args.duration:g} s ({what})")
     print(f"truth inside the 95% ellipse (6 parameters): {np.mean(distances < CHI2_6_95):.3f}")
+    print(f"covariance widened for serially correlated residuals: {widened} of {args.logs} logs")
     print("RMSE", " ".join(f"{n} {v:.3g}" for n, v in zip(NAMES, rmse, strict=True)))
     print(_row("RMSE / mean reported std", rmse / np.sqrt(np.mean(reported, axis=0))))
     if bounds:

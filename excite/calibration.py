@@ -13,12 +13,18 @@ an identifiability verdict in words and the fit verdict in words.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from excite.autocorrelation import (
+    LjungBox,
+    at_least,
+    ljung_box,
+    long_run_covariance,
+)
 from excite.data import Segments
 from excite.errors import DataError
 from excite.information import as_sigma, inverse_information
@@ -82,7 +88,13 @@ class FitTest:
     alternative then fitted only to describe a misfit); None when not tested; the threshold is
     the 99.9% chi-square quantile with 3 degrees of freedom. turn_trend_z: the
     z value of the correlation between the position residuals and |dtheta| (> 3: the residuals
-    grow with the turn rate, the signature of an off-axle sensor).
+    grow with the turn rate, the signature of an off-axle sensor). serial_correlation: for
+    segments cut from a log (noise levels estimated, linear loss), the Ljung-Box test of the
+    whitened residuals over lags of 1..10 segments (:mod:`excite.autocorrelation`; None when
+    not tested). When it rejects "no serial correlation" at the 99.9% level, the reported
+    covariance is widened to the Newey-West covariance where that is larger (over
+    ``long_run_bandwidth`` segments) and the message says so; the verdict ``ok`` is not
+    changed by it.
     """
 
     ok: bool
@@ -92,6 +104,8 @@ class FitTest:
     statistic_name: str | None = None
     threshold: float | None = None
     turn_trend_z: float | None = None
+    serial_correlation: LjungBox | None = None
+    long_run_bandwidth: int | None = None
 
     def to_dict(self) -> dict:
         ratio = None if self.noise_ratio is None else dict(
@@ -99,7 +113,12 @@ class FitTest:
         return {"ok": self.ok, "message": self.message, "noise_ratio": ratio,
                 "statistic": self.statistic, "statistic_name": self.statistic_name,
                 "threshold": self.threshold,
-                "turn_trend_z": self.turn_trend_z}
+                "turn_trend_z": self.turn_trend_z,
+                "serial_correlation": None if self.serial_correlation is None else {
+                    "statistic": self.serial_correlation.statistic,
+                    "lags": self.serial_correlation.lags, "dof": self.serial_correlation.dof,
+                    "p_value": self.serial_correlation.p_value},
+                "long_run_bandwidth": self.long_run_bandwidth}
 
 
 @dataclass(frozen=True)
@@ -591,9 +610,34 @@ def calibrate(
     forced = "" if sensor_pose in ("auto", "estimate") else (
         "axle" if sensor_pose == "axle" else "pose")
     test = _fit_test(chosen, alternative, statistic, name, threshold, given, loss, forced)
+    if whitener is not None and loss == "linear":
+        test = replace(test, serial_correlation=ljung_box(chosen.fit.ev.raw.T))
     slip = None if whitener is None or whitener.wheels is None else levels.slip
     return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
                    len(seg) - len(data), levels, slip)
+
+
+def _serially_correlated(test: FitTest) -> bool:
+    lb = test.serial_correlation
+    return lb is not None and lb.p_value < 1.0 - TEST_LEVEL
+
+
+def _long_run(mf: _ModelFit, covariance: FloatArray, test: FitTest
+              ) -> tuple[FloatArray, FitTest]:
+    """The relative covariance widened for serial correlation of the whitened residuals, and
+    the fit test saying so (both unchanged when the residuals pass the test or a direction is
+    undetermined)."""
+    if not _serially_correlated(test) or not np.all(np.isfinite(covariance)):
+        return covariance, test
+    ev = mf.fit.ev
+    scores = np.einsum("cpk,ck->kp", ev.jac, ev.raw)  # each segment's share of the gradient
+    lb = test.serial_correlation
+    wider = at_least(covariance, long_run_covariance(scores, covariance, lb.lags))
+    message = (f"{test.message}; the whitened residuals are correlated over time (Ljung-Box "
+               f"{lb.statistic:.3g}, {lb.dof} dof, p {lb.p_value:.1e}: errors that persist "
+               f"over segments, e.g. a pose source whose error wanders), so the std allow for "
+               f"it (Newey-West over {lb.lags} segments)")
+    return wider, replace(test, message=message, long_run_bandwidth=lb.lags)
 
 
 def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, loss: Loss,
@@ -647,7 +691,8 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
     s_min = singular[-1]
     condition = singular[0] / s_min if s_min > 0 else float("inf")
     scale = fit.ev.scale
-    full = inverse_information(info_rel) * np.outer(scale, scale)
+    relative, test = _long_run(mf, inverse_information(info_rel), test)
+    full = relative * np.outer(scale, scale)
     identifiable = bool(s_min > 0 and 1.0 / s_min <= max_relative_std)
     direction = vector = None
     if not identifiable:

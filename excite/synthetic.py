@@ -63,6 +63,22 @@ def _smooth_signal(rng: np.random.Generator, t: NDArray[np.float64], mean: float
     return mean + amplitude * wave
 
 
+def _pose_noise(rng: np.random.Generator, t: NDArray[np.float64],
+                correlation_time: float) -> NDArray[np.float64]:
+    """Unit-variance noise (len(t), 3) at times ``t`` (s): white, or first-order Gauss-Markov
+    with ``correlation_time`` (s) when it is > 0 (stationary from the first sample)."""
+    white = rng.normal(size=(len(t), 3))
+    if correlation_time <= 0.0:
+        return white
+    a = np.exp(-np.diff(t) / correlation_time)
+    gain = np.sqrt(1.0 - a**2)
+    noise = np.empty_like(white)
+    noise[0] = white[0]
+    for k in range(1, len(t)):
+        noise[k] = a[k - 1] * noise[k - 1] + gain[k - 1] * white[k]
+    return noise
+
+
 def synthetic_log(
     rng: np.random.Generator,
     duration: float = 60.0,
@@ -76,6 +92,7 @@ def synthetic_log(
     speed: float = 0.25,
     turn_rate: float = 1.0,
     ticks_per_rev: float | None = None,
+    pose_noise_time: float = 0.0,
     step: float = 1e-3,
 ) -> SyntheticLog:
     """A robot driving smooth random curves (exact arcs on a fine grid of ``step`` s), recorded
@@ -84,8 +101,11 @@ def synthetic_log(
     Forward speed varies within speed * (0.4 .. 1.6) m/s and the turn rate within
     +-``turn_rate`` rad/s (random sinusoids of periods 3-11 s). Encoders: cumulative wheel
     angles at ``encoder_rate`` Hz (rad; floored to whole ticks when ``ticks_per_rev`` is
-    given). Poses: the sensor's world pose at ``pose_rate`` Hz, each sample with independent
-    Gaussian noise of std ``pose_noise`` = (sigma_xy [m], sigma_theta [rad]). ``slip``
+    given). Poses: the sensor's world pose at ``pose_rate`` Hz, each sample with Gaussian
+    noise of std ``pose_noise`` = (sigma_xy [m], sigma_theta [rad]), independent between
+    samples, or with ``pose_noise_time`` > 0 (s) correlated in time (first-order Gauss-Markov:
+    correlation exp(-|dt| / pose_noise_time) between samples dt apart, like a scan matcher's
+    or a visual odometry's slowly wandering error). ``slip``
     (rad / sqrt(s)): the wheels' ground contact differs from the encoders by a random walk of
     this intensity per wheel (independent noise on every segment's increments). Rates should
     divide 1 / step so that samples fall on the grid.
@@ -113,8 +133,8 @@ def synthetic_log(
     e = slice(0, None, max(1, int(round(1.0 / (encoder_rate * step)))))
     p = slice(0, None, max(1, int(round(1.0 / (pose_rate * step)))))
     sensor = se2.compose(body[p], pose.as_array())
-    sensor += rng.normal(size=sensor.shape) * np.array([pose_noise[0], pose_noise[0],
-                                                         pose_noise[1]])
+    sensor += _pose_noise(rng, t[p], pose_noise_time) * np.array([pose_noise[0], pose_noise[0],
+                                                                 pose_noise[1]])
     series = TimeSeries(t[e], phi_L[e], phi_R[e], t[p], *sensor.T,
                         source=("synthetic encoders", "synthetic poses"))
     return SyntheticLog(series, params, pose, t, body)
