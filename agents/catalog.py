@@ -21,6 +21,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 from agents.protocols import Protocol, ProtocolError, Value, resolve_settings
+from excite.errors import one_line_repr
 
 __all__ = ["PROTOCOLS", "ProtocolError", "ProtocolSpec", "register", "protocol_class",
            "parse_protocol", "parse_protocols", "check_distinct", "make_protocol", "with_policy",
@@ -161,7 +162,11 @@ class ProtocolSpec:
     def fingerprint(self) -> str | None:
         """A digest of the files this spec's settings name (a policy file), or None."""
         with calling(self.label, "fingerprint", user_supplied(self.protocol.__module__)):
-            return self.protocol.fingerprint(self.resolved())
+            digest = self.protocol.fingerprint(self.resolved())
+        if digest is not None and not isinstance(digest, str):
+            raise ProtocolError(f"protocol {self.label}: fingerprint returned "
+                                f"{one_line_repr(digest)}, not a str or None")
+        return digest
 
     def declares(self, key: str) -> bool:
         return any(p.name == key for p in self.protocol.parameters)

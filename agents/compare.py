@@ -147,7 +147,7 @@ def _worker_protocol(spec: ProtocolSpec) -> Protocol:
     return _protocol_instance(spec, spec.fingerprint())
 
 
-@functools.cache
+@functools.lru_cache(maxsize=64)
 def _protocol_instance(spec: ProtocolSpec, fingerprint: str | None) -> Protocol:
     """``spec``'s protocol, kept per (spec, digest of the files it names)."""
     return make_protocol(spec)

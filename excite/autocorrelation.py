@@ -8,7 +8,8 @@ depends on the maneuver) leave them correlated over time, and the parameters' co
 from the model's information is then too narrow.
 
 * :func:`ljung_box`: the portmanteau test of "no serial correlation" (Ljung & Box 1978),
-  over lags 1..H segments of each of the three whitened channels;
+  over lags 1..H segments of each of the three whitened channels, counting only segments h
+  apart with no gap or part boundary between them;
 * :func:`long_run_covariance`: the covariance of the fitted parameters that holds under
   serial correlation (Newey & West 1987: the scores' long-run covariance with the Bartlett
   kernel, between the inverse information on both sides), over as many lags as the test
@@ -16,8 +17,9 @@ from the model's information is then too narrow.
   a pose error wandering over 20 s, whose lag-1 correlation is small, and widened too little;
   ``benchmarks/bench_logs.py --pose-noise-time``.)
 
-Arrays are batch-free: residuals (N, 3) in time order, scores (N, P) in the same relative
-units as the information (P, P).
+Arrays are one fit's: residuals (N, 3) in time order, scores (N, P) in the same relative
+units as the information (P, P), runs (N,) the index of the unbroken stretch of segments each
+belongs to (:func:`runs_of`).
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ from numpy.typing import NDArray
 
 from excite.noise import chi2_survival
 
-__all__ = ["LJUNG_BOX_LAGS", "LjungBox", "ljung_box", "long_run_covariance", "at_least"]
+__all__ = ["LJUNG_BOX_LAGS", "LjungBox", "ljung_box", "long_run_covariance", "at_least",
+           "runs_of"]
 
 FloatArray = NDArray[np.float64]
 
@@ -39,9 +42,12 @@ LJUNG_BOX_LAGS = 10
 
 @dataclass(frozen=True)
 class LjungBox:
-    """Q = n (n + 2) sum_h sum_c rho_ch^2 / (n - h), h = 1..lags, c = the three channels;
-    chi-square with 3 lags degrees of freedom when the residuals are white. p_value: P(chi2 >
-    Q)."""
+    """Q = sum_h sum_c (n + 2) n_h / n rho_ch^2 over lags h = 1..lags and the channels c, rho_ch
+    the lag-h autocorrelation of channel c over the n_h pairs of segments h apart in one run
+    (Ljung and Box's statistic when the log is one run: n_h = n - h); chi-square with ``dof``
+    = channels times the lags that have pairs when the residuals are white. p_value: P(chi2 >
+    Q). The P fitted parameters are not subtracted from the dof (that correction is for
+    residuals of a fitted ARMA model, not of a regression)."""
 
     statistic: float
     lags: int
@@ -49,35 +55,63 @@ class LjungBox:
     p_value: float
 
 
-def ljung_box(white: FloatArray, lags: int = LJUNG_BOX_LAGS) -> LjungBox | None:
+def runs_of(chained: NDArray[np.bool_] | None, n: int) -> NDArray[np.int64]:
+    """The run index (n,) of segments from their ``chained`` flags (segment k starts where
+    k - 1 ended; :class:`excite.data.Segments`): a new run at every segment not chained."""
+    if chained is None:
+        return np.arange(n, dtype=np.int64)
+    return np.cumsum(~chained).astype(np.int64)
+
+
+def _lag_pairs(runs: NDArray[np.int64], h: int) -> NDArray[np.bool_]:
+    """Which pairs (k, k + h) lie in one run (no gap or part boundary between them)."""
+    return runs[h:] == runs[:-h]
+
+
+def ljung_box(white: FloatArray, runs: NDArray[np.int64] | None = None,
+              lags: int = LJUNG_BOX_LAGS) -> LjungBox | None:
     """The Ljung-Box test of whitened residuals ``white`` (N, C) in time order, each channel's
-    autocorrelations at lags 1..``lags``; None when N < 5 lags (too short to test)."""
+    autocorrelations at lags 1..``lags`` within ``runs`` (N,) (the run of consecutive segments
+    each belongs to: pairs across a gap are not neighbours; None: one run); None when N < 5
+    lags (too short to test) or a channel is constant."""
     n, channels = white.shape
     if n < 5 * lags:
         return None
+    runs = np.zeros(n, dtype=np.int64) if runs is None else runs
     centred = white - white.mean(axis=0)
-    variance = np.sum(centred * centred, axis=0)
+    variance = np.mean(centred * centred, axis=0)
     if np.any(variance <= 0.0):
         return None
-    q = 0.0
+    q, tested = 0.0, 0
     for h in range(1, lags + 1):
-        rho = np.sum(centred[h:] * centred[:-h], axis=0) / variance
-        q += float(np.sum(rho * rho)) / (n - h)
-    q *= n * (n + 2)
-    dof = channels * lags
+        pairs = _lag_pairs(runs, h)
+        count = int(np.count_nonzero(pairs))
+        if count == 0:
+            continue
+        rho = np.sum((centred[h:] * centred[:-h])[pairs], axis=0) / count / variance
+        q += (n + 2.0) * count / n * float(np.sum(rho * rho))
+        tested += 1
+    if tested == 0:
+        return None
+    dof = channels * tested
     return LjungBox(q, lags, dof, chi2_survival(q, dof))
 
 
 def long_run_covariance(scores: FloatArray, inverse_information: FloatArray,
+                        runs: NDArray[np.int64] | None = None,
                         bandwidth: int = LJUNG_BOX_LAGS) -> FloatArray:
     """Newey-West covariance of the fitted parameters, I^-1 S I^-1, from the per-segment scores
     (N, P) (J_k^T r_k: each segment's whitened Jacobian rows times its whitened residuals, at
     the fit) and the inverse information I^-1 (P, P, finite): S = sum over lags |h| <= L of
-    (1 - |h| / (L + 1)) times the lag-h cross products of the scores, L = ``bandwidth``
-    (segments). Same units as ``inverse_information``."""
+    (1 - |h| / (L + 1)) times the cross products of the scores h apart in one of ``runs``
+    (as :func:`ljung_box`), L = ``bandwidth`` (segments). Same units as
+    ``inverse_information``. It allows for correlation over at most L segments; errors that
+    persist longer are under-covered."""
+    runs = np.zeros(len(scores), dtype=np.int64) if runs is None else runs
     s = scores.T @ scores
     for h in range(1, min(bandwidth, len(scores) - 1) + 1):
-        lagged = scores[h:].T @ scores[:-h]
+        pairs = _lag_pairs(runs, h)
+        lagged = scores[h:][pairs].T @ scores[:-h][pairs]
         s += (1.0 - h / (bandwidth + 1.0)) * (lagged + lagged.T)
     covariance = inverse_information @ s @ inverse_information
     return 0.5 * (covariance + covariance.T)

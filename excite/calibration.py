@@ -24,6 +24,7 @@ from excite.autocorrelation import (
     at_least,
     ljung_box,
     long_run_covariance,
+    runs_of,
 )
 from excite.data import Segments
 from excite.errors import DataError
@@ -133,7 +134,9 @@ class CalibrationResult:
     and their joint covariance (6x6 with the sensor pose estimated). model_choice: why this
     model, in words. fit: :class:`FitTest`. singular_values, condition_number: of the whitened,
     relatively scaled Jacobian over all estimated parameters (DESIGN.md), descending.
-    identifiable: whether 1/sigma_min <= max_relative_std. unidentifiable_direction: None, or
+    identifiable: whether 1/sigma_min <= max_relative_std (both judge the model's information,
+    what the driving determines; a covariance widened for serially correlated residuals, see
+    :class:`FitTest`, can be wider than 1/sigma_min says). unidentifiable_direction: None, or
     what is not determined, in words. sigma: noise std per channel (m, m, rad), given or
     estimated. pose_sigma: for segments cut from a log that share pose samples, the noise std
     of each pose sample (xy [m], theta [rad]) estimated with sigma (then sigma is the noise of
@@ -611,7 +614,8 @@ def calibrate(
         "axle" if sensor_pose == "axle" else "pose")
     test = _fit_test(chosen, alternative, statistic, name, threshold, given, loss, forced)
     if whitener is not None and loss == "linear":
-        test = replace(test, serial_correlation=ljung_box(chosen.fit.ev.raw.T))
+        test = replace(test, serial_correlation=ljung_box(
+            chosen.fit.ev.raw.T, runs_of(data.chained, len(data))))
     slip = None if whitener is None or whitener.wheels is None else levels.slip
     return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
                    len(seg) - len(data), levels, slip)
@@ -622,21 +626,26 @@ def _serially_correlated(test: FitTest) -> bool:
     return lb is not None and lb.p_value < 1.0 - TEST_LEVEL
 
 
-def _long_run(mf: _ModelFit, covariance: FloatArray, test: FitTest
-              ) -> tuple[FloatArray, FitTest]:
-    """The relative covariance widened for serial correlation of the whitened residuals, and
-    the fit test saying so (both unchanged when the residuals pass the test or a direction is
+def _long_run(mf: _ModelFit, covariance: FloatArray, test: FitTest,
+              runs: NDArray[np.int64]) -> tuple[FloatArray, FitTest]:
+    """The relative covariance widened for serial correlation of the whitened residuals (of
+    segments in ``runs``, :func:`excite.autocorrelation.runs_of`), and the fit test saying so
+    (the covariance unchanged when the residuals pass the test or a direction is
     undetermined)."""
-    if not _serially_correlated(test) or not np.all(np.isfinite(covariance)):
+    if not _serially_correlated(test):
         return covariance, test
+    lb = test.serial_correlation
+    found = (f"{test.message}; the whitened residuals are correlated over time (Ljung-Box "
+             f"{lb.statistic:.3g}, {lb.dof} dof, p {lb.p_value:.1e}: errors that persist over "
+             f"segments, e.g. a pose source whose error wanders)")
+    if not np.all(np.isfinite(covariance)):
+        return covariance, replace(test, message=f"{found}; the std do not allow for it (a "
+                                   "direction is undetermined)")
     ev = mf.fit.ev
     scores = np.einsum("cpk,ck->kp", ev.jac, ev.raw)  # each segment's share of the gradient
-    lb = test.serial_correlation
-    wider = at_least(covariance, long_run_covariance(scores, covariance, lb.lags))
-    message = (f"{test.message}; the whitened residuals are correlated over time (Ljung-Box "
-               f"{lb.statistic:.3g}, {lb.dof} dof, p {lb.p_value:.1e}: errors that persist "
-               f"over segments, e.g. a pose source whose error wanders), so the std allow for "
-               f"it (Newey-West over {lb.lags} segments)")
+    wider = at_least(covariance, long_run_covariance(
+        scores, covariance, runs, lb.lags))
+    message = f"{found}, so the std allow for it (Newey-West over {lb.lags} segments)"
     return wider, replace(test, message=message, long_run_bandwidth=lb.lags)
 
 
@@ -691,7 +700,8 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
     s_min = singular[-1]
     condition = singular[0] / s_min if s_min > 0 else float("inf")
     scale = fit.ev.scale
-    relative, test = _long_run(mf, inverse_information(info_rel), test)
+    relative, test = _long_run(mf, inverse_information(info_rel), test,
+                               runs_of(seg.chained, len(seg)))
     full = relative * np.outer(scale, scale)
     identifiable = bool(s_min > 0 and 1.0 / s_min <= max_relative_std)
     direction = vector = None

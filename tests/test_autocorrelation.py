@@ -11,7 +11,13 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from excite import calibration
-from excite.autocorrelation import LJUNG_BOX_LAGS, at_least, ljung_box, long_run_covariance
+from excite.autocorrelation import (
+    LJUNG_BOX_LAGS,
+    at_least,
+    ljung_box,
+    long_run_covariance,
+    runs_of,
+)
 from excite.calibration import TEST_LEVEL, calibrate
 from excite.models import SensorPose
 from excite.synthetic import synthetic_log
@@ -38,6 +44,38 @@ def test_ljung_box_has_its_size_on_white_residuals_and_power_on_correlated_ones(
     assert np.mean(p_ar < 1.0 - TEST_LEVEL) > 0.95
 
 
+def test_ljung_box_of_one_run_is_ljung_and_boxs_statistic():
+    """n (n + 2) sum_h rho_h^2 / (n - h), rho_h = sum c_k c_(k+h) / sum c_k^2, per channel."""
+    w = np.random.default_rng(2).normal(size=(80, 3))
+    c = w - w.mean(axis=0)
+    n = len(c)
+    reference = sum(n * (n + 2) * np.sum((np.sum(c[h:] * c[:-h], axis=0)
+                                          / np.sum(c * c, axis=0)) ** 2) / (n - h)
+                    for h in range(1, LJUNG_BOX_LAGS + 1))
+    lb = ljung_box(w)
+    assert np.isclose(lb.statistic, reference) and lb.dof == 3 * LJUNG_BOX_LAGS
+
+
+def test_pairs_across_a_gap_are_not_neighbours():
+    """Runs of 3 white segments where each run starts with a copy of the previous run's last
+    residual: correlated only across the run boundaries. As one run the test rejects; with
+    the runs (from the chained flags) it sees lags 1 and 2 inside runs only and does not."""
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=(600, 3))
+    w[3::3] = w[2:-1:3]
+    chained = np.ones(600, dtype=bool)
+    chained[::3] = False
+    runs = runs_of(chained, 600)
+    assert ljung_box(w).p_value < 1e-6
+    inside = ljung_box(w, runs)
+    assert inside.dof == 3 * 2 and inside.p_value > 1e-3
+    scores = w[:, :2]
+    one_run = long_run_covariance(scores, np.eye(2))
+    assert np.allclose(long_run_covariance(scores, np.eye(2), runs_of(np.zeros(600, bool), 600)),
+                       scores.T @ scores)  # no two segments in one run: no lag terms
+    assert not np.allclose(one_run, scores.T @ scores)
+
+
 def test_ljung_box_is_not_run_on_logs_too_short_or_flat():
     assert ljung_box(np.ones((5 * LJUNG_BOX_LAGS - 1, 3))) is None
     assert ljung_box(np.zeros((100, 3))) is None
@@ -60,7 +98,7 @@ def test_newey_west_matches_the_monte_carlo_covariance_under_autocorrelated_erro
         beta = inverse @ x.T @ e
         residual = e - x @ beta
         estimates.append(beta)
-        variances.append(np.diag(long_run_covariance(x * residual[:, None], inverse, 20)))
+        variances.append(np.diag(long_run_covariance(x * residual[:, None], inverse, bandwidth=20)))
     monte_carlo = np.var(estimates, axis=0)
     assert np.allclose(np.mean(variances, axis=0), monte_carlo, rtol=0.25)
     assert np.all(np.diag(inverse) < 0.5 * monte_carlo)
@@ -104,8 +142,8 @@ def test_calibrate_widens_the_covariance_only_when_the_residuals_are_correlated(
             assert "correlated over time" in result.fit.message
             assert result.fit.ok  # widened, not a misfit
             with monkeypatch.context() as m:  # the same fit without the widening
-                m.setattr(calibration, "_long_run", lambda mf, covariance, test: (covariance,
-                                                                                   test))
+                m.setattr(calibration, "_long_run",
+                          lambda mf, covariance, test, runs: (covariance, test))
                 model = calibrate(_log(seed, 20.0), sensor_pose="estimate")
             assert np.all(np.diag(result.full_covariance)
                           >= np.diag(model.full_covariance) * (1 - 1e-9))

@@ -74,6 +74,11 @@ class FromFile(Protocol):
     def plan(self, k):
         return np.array([self.speed, self.speed])
 
+class ListFingerprint(Good):
+    @classmethod
+    def fingerprint(cls, settings):
+        return ["not", "a", "digest"]
+
 class BadDefault(Protocol):
     parameters = (Parameter("x", float, 5.0, "out of its range", 0.0, 1.0),)
     def plan(self, k):
@@ -264,3 +269,11 @@ def test_a_protocol_file_replaced_at_the_same_path_is_loaded_again(plugins, tmp_
     assert _worker_protocol(spec) is first  # loaded once
     speed.write_text("0.4")
     assert _worker_protocol(spec).speed == 0.4
+
+
+def test_a_fingerprint_that_is_not_text_is_named(plugins):
+    from agents.catalog import ProtocolError, parse_protocol
+    from agents.compare import _worker_protocol
+
+    with pytest.raises(ProtocolError, match=r"ListFingerprint: fingerprint returned \['not'"):
+        _worker_protocol(parse_protocol("plugin_protocols:ListFingerprint"))
