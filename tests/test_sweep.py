@@ -143,8 +143,7 @@ BAD = [
     ({**TINY, "space": {"hyperparams.n_steps": {"choice": [64, "lots"]}}},
      "space: hyperparams.n_steps: must be a number, got 'lots'"),
     ({**TINY, "config": str(CONFIG_DIR / "sac.yaml")},
-     "config: " + str(CONFIG_DIR / "sac.yaml") + ": hyperparams.buffer_size: not an argument "
-     "of PPO (algo: ppo; a sac config? give --algo sac)"),
+     "config: " + str(CONFIG_DIR / "sac.yaml") + ": algo: the config is for 'sac', not 'ppo'"),
 ]
 
 

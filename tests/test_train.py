@@ -225,8 +225,9 @@ def test_a_used_out_folder_needs_resume_and_resume_takes_no_new_settings(
 
 
 def test_the_config_names_the_algorithm_unless_the_command_line_does(tmp_path, small_config):
-    """A config's algo: is used without --algo; --algo against it is an error; the shipped
-    sac.yaml without algo: is a PPO config with SAC's hyperparameters, named as such."""
+    """A config's algo: is used without --algo (the shipped sac.yaml says sac); --algo against
+    it is an error; a config without algo: but with SAC's hyperparameters is a PPO config with
+    SAC's hyperparameters, named as such."""
     from agents.train import load_config
 
     sac = _yaml(tmp_path, "mine.yaml", "extends: sac\nalgo: sac\n")
@@ -235,9 +236,11 @@ def test_the_config_names_the_algorithm_unless_the_command_line_does(tmp_path, s
     with pytest.raises(TrainingError, match=r"mine.yaml: algo: the config is for 'sac', "
                                             r"not 'ppo'"):
         load_config("ppo", sac)
-    with pytest.raises(TrainingError, match=r"sac.yaml: hyperparams.buffer_size: not an "
+    assert load_config(None, CONFIG_DIR / "sac.yaml")["algo"] == "sac"
+    sac_like = _yaml(tmp_path, "sac_like.yaml", "extends: ppo\nhyperparams:\n  buffer_size: 1000\n")
+    with pytest.raises(TrainingError, match=r"sac_like.yaml: hyperparams.buffer_size: not an "
                                             r"argument of PPO .*give --algo sac"):
-        load_config(None, CONFIG_DIR / "sac.yaml")
+        load_config(None, sac_like)
     config = yaml.safe_load(small_config.read_text())
     config["env_kwargs"]["budget"] = 10
     tiny_sac = _yaml(tmp_path, "tiny_sac.yaml", {
