@@ -92,7 +92,8 @@ class FitTest:
     grow with the turn rate, the signature of an off-axle sensor). serial_correlation: for
     segments cut from a log (noise levels estimated, linear loss), the Ljung-Box test of the
     whitened residuals over lags of 1..10 segments (:mod:`excite.autocorrelation`; None when
-    not tested). When it rejects "no serial correlation" at the 99.9% level, the reported
+    not tested; logs of fewer than 50 segments are not tested). When it rejects "no serial
+    correlation" at the 99.9% level and the model passes its own test (``ok``), the reported
     covariance is widened to the Newey-West covariance where that is larger (over
     ``long_run_bandwidth`` segments) and the message says so; the verdict ``ok`` is not
     changed by it.
@@ -630,22 +631,24 @@ def _long_run(mf: _ModelFit, covariance: FloatArray, test: FitTest,
               runs: NDArray[np.int64]) -> tuple[FloatArray, FitTest]:
     """The relative covariance widened for serial correlation of the whitened residuals (of
     segments in ``runs``, :func:`excite.autocorrelation.runs_of`), and the fit test saying so
-    (the covariance unchanged when the residuals pass the test or a direction is
-    undetermined)."""
+    (the covariance unchanged when the residuals pass the test, the model fails its own
+    test or a direction is undetermined)."""
     if not _serially_correlated(test):
         return covariance, test
     lb = test.serial_correlation
-    found = (f"{test.message}; the whitened residuals are correlated over time (Ljung-Box "
-             f"{lb.statistic:.3g}, {lb.dof} dof, p {lb.p_value:.1e}: errors that persist over "
-             f"segments, e.g. a pose source whose error wanders)")
+    if not test.ok:  # the misfit already explains it; widening a wrong model's std is moot
+        return covariance, replace(test, message=f"{test.message} (the residuals are also "
+                                   "correlated over time, as a misfit leaves them)")
+    found = (f"{test.message}; residuals correlated over time (Ljung-Box p "
+             f"{lb.p_value:.1e}: errors that persist, e.g. a wandering pose source)")
     if not np.all(np.isfinite(covariance)):
-        return covariance, replace(test, message=f"{found}; the std do not allow for it (a "
-                                   "direction is undetermined)")
+        return covariance, replace(test, message=f"{found}; std not widened (a direction is "
+                                   "undetermined)")
     ev = mf.fit.ev
     scores = np.einsum("cpk,ck->kp", ev.jac, ev.raw)  # each segment's share of the gradient
     wider = at_least(covariance, long_run_covariance(
         scores, covariance, runs, lb.lags))
-    message = f"{found}, so the std allow for it (Newey-West over {lb.lags} segments)"
+    message = f"{found}: std widened (Newey-West, {lb.lags} segments)"
     return wider, replace(test, message=message, long_run_bandwidth=lb.lags)
 
 

@@ -19,6 +19,7 @@ from excite.autocorrelation import (
     runs_of,
 )
 from excite.calibration import TEST_LEVEL, calibrate
+from excite.data import Segments
 from excite.models import SensorPose
 from excite.synthetic import synthetic_log
 from excite.timeseries import segment_timeseries
@@ -155,3 +156,37 @@ def test_calibrate_widens_the_covariance_only_when_the_residuals_are_correlated(
     assert white.fit.serial_correlation.p_value >= 1.0 - TEST_LEVEL
     assert white.fit.long_run_bandwidth is None
     assert "correlated over time" not in white.fit.message
+
+
+def test_calibrate_counts_neighbours_only_inside_each_log(monkeypatch):
+    """Two logs calibrated as one data set (flagged and widened): the test and Newey-West see
+    two runs."""
+    seen = []
+    real_ljung_box, real_long_run = calibration.ljung_box, calibration.long_run_covariance
+
+    def ljung_box_spy(white, runs=None, *args):
+        seen.append(("test", np.unique(runs).size))
+        return real_ljung_box(white, runs, *args)
+
+    def long_run_spy(scores, inverse, runs=None, *args):
+        seen.append(("widening", np.unique(runs).size))
+        return real_long_run(scores, inverse, runs, *args)
+
+    monkeypatch.setattr(calibration, "ljung_box", ljung_box_spy)
+    monkeypatch.setattr(calibration, "long_run_covariance", long_run_spy)
+    both = Segments.concatenate([_log(4, 20.0), _log(5, 20.0)])  # each flagged alone
+    result = calibrate(both, sensor_pose="estimate")
+    assert ("test", 2) in seen
+    assert result.fit.long_run_bandwidth is not None and ("widening", 2) in seen
+
+
+def test_a_misfit_is_not_blamed_on_serial_correlation():
+    """The axle model forced on an off-axle sensor: its residuals are correlated over time
+    because the model is wrong; the verdict says the model is wrong, the std are not widened,
+    and the message does not suggest a wandering pose source."""
+    result = calibrate(_log(0, 0.0), sensor_pose="axle")
+    assert not result.fit.ok
+    assert result.fit.serial_correlation.p_value < 1.0 - TEST_LEVEL
+    assert result.fit.long_run_bandwidth is None
+    assert "as a misfit leaves them" in result.fit.message
+    assert "wandering" not in result.fit.message
