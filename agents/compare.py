@@ -21,7 +21,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -40,7 +40,7 @@ from agents.catalog import (
     user_supplied,
 )
 from agents.oracle import oracle_design
-from agents.protocols import Protocol, check_action
+from agents.protocols import Protocol, ProtocolError, check_action
 from excite.consistency import estimate_error, nees
 from excite.errors import ExciteError
 from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
@@ -140,11 +140,18 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int,
     return records
 
 
-def _worker_protocol(spec: ProtocolSpec) -> Protocol:
+def _worker_protocol(spec: ProtocolSpec, expected: str | None = None) -> Protocol:
     """One instance per protocol, file content and process (a learned policy is loaded once,
     not every episode, and loaded again when its file has changed since); run_protocol_episode
-    resets it at the start of each episode."""
-    return _protocol_instance(spec, spec.fingerprint())
+    resets it at the start of each episode. ``expected``: the digest of its files when the
+    comparison started (a ProtocolError if they have changed since: one label, one policy)."""
+    digest = spec.fingerprint()
+    if expected is not None and digest != expected:
+        raise ProtocolError(
+            f"protocol {spec.label}: its files changed during the comparison (sha256 "
+            f"{str(digest)[:12]}, was {expected[:12]}); the episodes finished are kept, but "
+            "their results are of the old policy: start again with another --out")
+    return _protocol_instance(spec, digest)
 
 
 @functools.lru_cache(maxsize=64)
@@ -178,17 +185,19 @@ def incompatible_protocols(protocols: Iterable[ProtocolSpec],
     return {label: reason for label, reason in reasons.items() if reason}
 
 
-def run_episodes(settings: CompareSettings,
-                 work: Sequence[tuple[int, list[Pair]]]) -> list[list[dict]]:
+def run_episodes(settings: CompareSettings, work: Sequence[tuple[int, list[Pair]]],
+                 digests: Mapping[str, str] | None = None) -> list[list[dict]]:
     """The rows of :func:`run_episode` of each (episode, pairs) of ``work``: one task of an
     execution backend (:mod:`agents.backends`)."""
-    return [run_episode(settings, pairs, episode) for episode, pairs in work]
+    return [run_episode(settings, pairs, episode, digests) for episode, pairs in work]
 
 
-def run_episode(settings: CompareSettings, pairs: list[Pair], episode: int) -> list[dict]:
+def run_episode(settings: CompareSettings, pairs: list[Pair], episode: int,
+                digests: Mapping[str, str] | None = None) -> list[dict]:
     """All requested (protocol, estimator) pairs on episode ``episode`` (runs in a worker
     process): one env per estimator (its ``estimator_factory``), each reset with the
-    episode's seed, so every pair meets the same hidden robot."""
+    episode's seed, so every pair meets the same hidden robot. ``digests``: protocol label ->
+    the digest of its files when the comparison started (see :func:`_worker_protocol`)."""
     seed = episode_seed(settings.seed, episode, settings.stream)
     envs: dict[str, gym.Env] = {}
     rows, oracle = [], None
@@ -203,7 +212,8 @@ def run_episode(settings: CompareSettings, pairs: list[Pair], episode: int) -> l
             oracle = oracle_design(base.true_theta, base.sigma, base.nominal_theta,
                                    settings.segments, base.max_wheel_speed,
                                    base.segment_duration, model=base.model).sigma_min
-        records = run_protocol_episode(env, _worker_protocol(protocol), seed,
+        expected = None if digests is None else digests.get(protocol.label)
+        records = run_protocol_episode(env, _worker_protocol(protocol, expected), seed,
                                        label=protocol.label)
         for record in records[-1:] if settings.final_only else records:
             rows.append({"protocol": protocol.label, "estimator": estimator.label,
@@ -298,8 +308,9 @@ def _read_config(config: Path) -> dict | None:
 
 
 def _resumable_rows(out_dir: Path, settings: CompareSettings,
-                    specs: Sequence[ProtocolSpec]) -> list[dict]:
-    """The complete rows already in ``out_dir`` that this run may keep, after checking
+                    specs: Sequence[ProtocolSpec]) -> tuple[list[dict], dict[str, str]]:
+    """The complete rows already in ``out_dir`` that this run may keep, and the digests of the
+    protocols' files (label -> sha256, for those that name files), after checking
     DIR/config.json (read once, written once when it changes): the settings must be the
     stored ones (a CompareError otherwise), and each protocol's results are tied to the
     content of the files its settings name (a learned policy): a protocol whose files changed
@@ -337,7 +348,7 @@ def _resumable_rows(out_dir: Path, settings: CompareSettings,
     if stored is None or known != stored.get(FILES_KEY, {}):
         content = {**(stored or asdict(settings)), **({FILES_KEY: known} if known else {})}
         config.write_text(json.dumps(content, indent=2) + "\n")
-    return rows
+    return rows, known
 
 
 def run_comparison(
@@ -370,7 +381,7 @@ def run_comparison(
         _worker_protocol(spec)  # built (and kept for the episodes run here) or an error now
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rows = _resumable_rows(out, settings, specs)
+    rows, digests = _resumable_rows(out, settings, specs)
     csv_path = out / "segments.csv"
     _write_rows(csv_path, rows, "w")  # rewrite without partial episodes or duplicates
     done = {(r["protocol"], r["estimator"], r["episode"]) for r in rows}
@@ -392,11 +403,12 @@ def run_comparison(
             size = 1
             if executor.task_seconds > 0 and work:  # measure an episode to size the tasks
                 started = time.perf_counter()
-                first = run_episodes(settings, work[:1])
+                first = run_episodes(settings, work[:1], digests)
                 size = chunk_size(executor.task_seconds, time.perf_counter() - started)
                 record(first)
                 work = work[1:]
-            tasks = [(settings, work[i:i + size]) for i in range(0, len(work), size)]
+            tasks = [(settings, work[i:i + size], digests)
+                     for i in range(0, len(work), size)]
             for episode_rows in executor.imap_unordered(run_episodes, tasks):
                 record(episode_rows)
         finally:

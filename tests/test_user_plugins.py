@@ -74,6 +74,14 @@ class FromFile(Protocol):
     def plan(self, k):
         return np.array([self.speed, self.speed])
 
+class RetrainedDuringRun(FromFile):
+    """Rewrites its own file at each episode's start, as a policy retrained at the same path
+    while a comparison runs."""
+    def reset(self, rng):
+        super().reset(rng)
+        with open(self.settings["path"], "a") as f:
+            f.write("0")
+
 class ListFingerprint(Good):
     @classmethod
     def fingerprint(cls, settings):
@@ -277,3 +285,17 @@ def test_a_fingerprint_that_is_not_text_is_named(plugins):
 
     with pytest.raises(ProtocolError, match=r"ListFingerprint: fingerprint returned \['not'"):
         _worker_protocol(parse_protocol("plugin_protocols:ListFingerprint"))
+
+
+def test_a_policy_file_changed_during_a_comparison_stops_it(plugins, tmp_path, capsys):
+    """Episodes after the change would run another policy under the same label: a one-line
+    error, and the episode finished before is kept."""
+    speed = tmp_path / "speed.txt"
+    speed.write_text("0.2")
+    message = _error(capsys, ["compare", "--protocols",
+                              f"plugin_protocols:RetrainedDuringRun:path={speed}",
+                              "--episodes", "2", "--segments", "2", "--env", IDEAL,
+                              "--workers", "1", "--out", str(tmp_path / "c")])
+    assert "its files changed during the comparison" in message
+    rows = (tmp_path / "c" / "segments.csv").read_text().splitlines()
+    assert len(rows) == 1 + 2  # the header and episode 0's two segments
