@@ -165,7 +165,12 @@ class _RayExecutor(Executor):
         while self.pending:
             finished, self.pending = ray.wait(self.pending, num_returns=1)
             for ref in finished:
-                yield ray.get(ref)
+                try:
+                    yield ray.get(ref)
+                except ray.exceptions.RayTaskError as exc:  # excite's errors: their own line
+                    if isinstance(exc.cause, ExciteError):
+                        raise exc.cause from None
+                    raise
 
     def cancel(self):
         import ray

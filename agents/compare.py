@@ -148,13 +148,13 @@ def _worker_protocol(spec: ProtocolSpec, expected: str | None = None) -> Protoco
     digest = spec.fingerprint()
     if expected is not None and digest != expected:
         raise ProtocolError(
-            f"protocol {spec.label}: its files changed during the comparison (sha256 "
-            f"{str(digest)[:12]}, was {expected[:12]}); the episodes finished are kept, but "
-            "their results are of the old policy: start again with another --out")
+            f"protocol {spec.label}: its files here differ from those the comparison started "
+            f"with (sha256 {str(digest)[:12]}, was {expected[:12]}: changed since, or another "
+            "copy on this node); the episodes finished are kept: start again with another --out")
     return _protocol_instance(spec, digest)
 
 
-@functools.lru_cache(maxsize=64)
+@functools.lru_cache(maxsize=256)  # tune's default grid has 111 candidates
 def _protocol_instance(spec: ProtocolSpec, fingerprint: str | None) -> Protocol:
     """``spec``'s protocol, kept per (spec, digest of the files it names)."""
     return make_protocol(spec)
@@ -339,7 +339,7 @@ def _resumable_rows(out_dir: Path, settings: CompareSettings,
                 f"{out_dir} holds results of {spec.label} that are not tied to its files' "
                 "content (made by an older excite): cannot tell whether they came from the "
                 "same policy; use another --out")
-        if old is not None and old != digest:
+        if old is not None and old != digest and spec.label in present:
             raise CompareError(
                 f"{spec.label}: its files changed since {out_dir} ran it (sha256 "
                 f"{digest[:12]}, was {old[:12]}): its results there are of another policy; "

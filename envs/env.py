@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import math
+import numbers
 from collections.abc import Sequence
 from typing import Any
 
@@ -189,10 +190,11 @@ class DiffDriveCalibEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         if int(cfg["budget"]) < 1:
             raise ValueError(f"budget must be at least 1 segment, got {cfg['budget']}")
-        if not (math.isfinite(float(cfg["information_scale"]))
-                and float(cfg["information_scale"]) > 0):
+        scale = cfg["information_scale"]
+        if (not isinstance(scale, numbers.Real) or isinstance(scale, bool)
+                or not (math.isfinite(scale) and scale > 0)):
             raise ValueError("information_scale must be a positive number (sigma_min per reward "
-                             f"unit), got {cfg['information_scale']}")
+                             f"unit), got {scale!r}")
         self.config = cfg
         self.render_mode = render_mode
         self.distribution = robot_distribution(cfg["robot"])

@@ -458,3 +458,17 @@ def test_resume_refuses_results_of_a_policy_file_changed_at_the_same_path(tmp_pa
         run_comparison(out, [spec], 2, settings, workers=1, progress=False)
     install(SHIPPED_POLICY)
     assert len(run_comparison(out, [spec], 2, settings, workers=1, progress=False)) == 2 * 2
+    # a folder that recorded the policy's digest but kept none of its rows (killed before its
+    # first episode finished) resumes with the new file, whose digest it then records
+    other = tmp_path / "other"
+    run_comparison(other, [spec, "spin"], 1, settings, workers=1, progress=False)
+    csv = other / "segments.csv"
+    lines = csv.read_text().splitlines()
+    csv.write_text("\n".join([lines[0], *(line for line in lines[1:] if "learned" not in line)])
+                   + "\n")
+    install(SHIPPED_POLICY.with_name("excite_ppo_robots.zip"))
+    rows = run_comparison(other, [spec, "spin"], 1, settings, workers=1, progress=False)
+    assert {r["protocol"] for r in rows} == {spec, "spin"}
+    with pytest.raises(CompareError, match="its files changed"):  # now tied to the new file
+        install(SHIPPED_POLICY)
+        run_comparison(other, [spec], 1, settings, workers=1, progress=False)

@@ -189,7 +189,7 @@ def test_unknown_config_key_and_bad_budget():
         DiffDriveCalibEnv(buget=3)
     with pytest.raises(ValueError, match="budget"):
         DiffDriveCalibEnv(budget=0)
-    for scale in (0.0, -100.0, float("nan")):
+    for scale in (0.0, -100.0, float("nan"), "2.0e2", None, True):
         with pytest.raises(ValueError, match="information_scale must be a positive number"):
             DiffDriveCalibEnv(information_scale=scale)
 

@@ -53,6 +53,19 @@ def test_ray_tasks_yield_results_as_they_finish(ray_cluster, tmp_path):
         assert next(results) == "first submitted"
 
 
+def _fail(message: str) -> None:
+    raise BackendError(message)
+
+
+def test_an_excite_error_in_a_ray_task_is_raised_as_itself(ray_cluster):
+    """Not Ray's wrapper, whose text carries the remote traceback: the CLI prints excite's
+    errors on one line."""
+    with open_backend("ray") as executor, pytest.raises(BackendError) as info:
+        list(executor.imap_unordered(_fail, [("a worker's one-line error",)]))
+    assert type(info.value) is BackendError
+    assert str(info.value) == "a worker's one-line error"
+
+
 def _wait_for(path: str | None, value: str, timeout: float = 60.0) -> str:
     deadline = time.time() + timeout
     while path is not None and not os.path.exists(path):

@@ -296,6 +296,6 @@ def test_a_policy_file_changed_during_a_comparison_stops_it(plugins, tmp_path, c
                               f"plugin_protocols:RetrainedDuringRun:path={speed}",
                               "--episodes", "2", "--segments", "2", "--env", IDEAL,
                               "--workers", "1", "--out", str(tmp_path / "c")])
-    assert "its files changed during the comparison" in message
+    assert "its files here differ from those the comparison started with" in message
     rows = (tmp_path / "c" / "segments.csv").read_text().splitlines()
     assert len(rows) == 1 + 2  # the header and episode 0's two segments
