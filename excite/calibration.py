@@ -13,7 +13,7 @@ an identifiability verdict in words and the fit verdict in words.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -116,10 +116,8 @@ class FitTest:
                 "statistic": self.statistic, "statistic_name": self.statistic_name,
                 "threshold": self.threshold,
                 "turn_trend_z": self.turn_trend_z,
-                "serial_correlation": None if self.serial_correlation is None else {
-                    "statistic": self.serial_correlation.statistic,
-                    "lags": self.serial_correlation.lags, "dof": self.serial_correlation.dof,
-                    "p_value": self.serial_correlation.p_value},
+                "serial_correlation": None if self.serial_correlation is None
+                else asdict(self.serial_correlation),
                 "long_run_bandwidth": self.long_run_bandwidth}
 
 

@@ -190,3 +190,15 @@ def test_a_misfit_is_not_blamed_on_serial_correlation():
     assert result.fit.long_run_bandwidth is None
     assert "as a misfit leaves them" in result.fit.message
     assert "wandering" not in result.fit.message
+
+
+def test_the_report_carries_the_test():
+    """--json's fit: the test's numbers and the Newey-West window (JSON-clean)."""
+    import json
+
+    fit = calibrate(Segments.concatenate([_log(4, 20.0), _log(5, 20.0)]),
+                    sensor_pose="estimate").fit.to_dict()
+    assert set(fit["serial_correlation"]) == {"statistic", "lags", "dof", "p_value"}
+    assert fit["serial_correlation"]["p_value"] < 1.0 - TEST_LEVEL
+    assert fit["long_run_bandwidth"] == LJUNG_BOX_LAGS
+    json.loads(json.dumps(fit, allow_nan=False))
