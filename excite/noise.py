@@ -79,7 +79,7 @@ from excite.models import SegmentModel
 
 __all__ = ["NoiseLevels", "WheelNoise", "ChainWhitener", "moment_noise", "reml_noise",
            "chi2_quantile", "chi2_survival", "chi_bar_square_quantile",
-           "quantization_variance", "SEGMENT_NOISE_TEST_LEVEL"]
+           "quantization_variance", "SEGMENT_NOISE_TEST_LEVEL", "MEDIAN_ABS_NORMAL"]
 
 FloatArray = NDArray[np.float64]
 _BAND = 5  # lower bandwidth of C in segment-major order (x, y, theta per segment)
@@ -89,6 +89,10 @@ SEGMENT_NOISE_TEST_LEVEL = 0.05
 #: Further starts of the REML search (:func:`reml_noise`): the segment levels at these
 #: fractions of the residuals' RMS (a level started far below where it matters stays there).
 START_FRACTIONS = (0.3, 0.03, 0.003)
+
+
+#: The median of |N(0, 1)|: a robust std is the median absolute value / this (MAD).
+MEDIAN_ABS_NORMAL = 0.6744897501960817
 
 
 def chi2_quantile(q: float, dof: float) -> float:

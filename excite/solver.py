@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from excite.data import Segments
 from excite.kinematics import wrap_angle
 from excite.models import SegmentModel
-from excite.noise import ChainWhitener
+from excite.noise import MEDIAN_ABS_NORMAL, ChainWhitener
 
 __all__ = ["Loss", "HUBER_K", "Problem", "Evaluation", "System", "Fit", "solve_psd",
            "complement", "damped_step", "levenberg_marquardt", "normal_system", "estimate_sigma"]
@@ -28,7 +28,6 @@ Loss = Literal["linear", "huber"]
 
 #: Huber threshold on whitened residuals (95% efficiency under Gaussian noise).
 HUBER_K = 1.345
-_MAD_TO_STD = 1.482602218505602
 #: Singular values of the weighted Jacobian below this fraction of the largest are treated as
 #: zero in a step (directions the data do not determine do not take steps driven by noise),
 #: unless they are above the caller's ``determined`` level (see :func:`damped_step`).
@@ -188,7 +187,7 @@ def estimate_sigma(problem: Problem, ev: Evaluation, system: System | None,
     """
     raw = ev.raw
     if loss == "huber":
-        sigma = _MAD_TO_STD * np.median(np.abs(raw), axis=1)
+        sigma = np.median(np.abs(raw), axis=1) / MEDIAN_ABS_NORMAL
     else:
         dof = np.full(3, float(raw.shape[1]))
         if system is not None:

@@ -77,6 +77,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from excite.data import MIN_SEGMENTS, Segments, read_text
 from excite.errors import DataError
+from excite.noise import MEDIAN_ABS_NORMAL
 
 __all__ = [
     "Gap",
@@ -1050,16 +1051,12 @@ class _StreamCheck:
     dropouts: int
 
 
-#: The median of |N(0, 1)|: a robust std is the median absolute value / this.
-_MEDIAN_ABS_NORMAL = 0.6744897501960817
-
-
 def _pose_noise(ts: TimeSeries) -> tuple[float, float]:
     """Robust std of the pose samples' noise (m for x and y pooled, rad for theta): each inner
     sample minus the linear interpolation of its neighbours (exact for motion at a constant
     velocity, whatever the spacing) has, with independent noise of std sigma and even
     spacing, std sigma sqrt(3/2); the median absolute value of those residuals over
-    _MEDIAN_ABS_NORMAL sqrt(3/2) estimates sigma, unmoved by the few samples where the
+    MEDIAN_ABS_NORMAL sqrt(3/2) estimates sigma, unmoved by the few samples where the
     motion changes abruptly. (0, 0) with fewer than 3 samples. Correlated noise reads low."""
     if ts.t_pose.size < 3:
         return 0.0, 0.0
@@ -1067,7 +1064,7 @@ def _pose_noise(ts: TimeSeries) -> tuple[float, float]:
     weight = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
     residual = [v[1:-1] - ((1.0 - weight) * v[:-2] + weight * v[2:])
                 for v in (ts.x, ts.y, ts.theta)]
-    scale = _MEDIAN_ABS_NORMAL * math.sqrt(1.5)
+    scale = MEDIAN_ABS_NORMAL * math.sqrt(1.5)
     xy = float(np.median(np.abs(np.concatenate(residual[:2])))) / scale
     return xy, float(np.median(np.abs(residual[2]))) / scale
 
