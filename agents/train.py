@@ -93,17 +93,34 @@ _MODEL_ARGS = {"self", "policy", "env", "seed", "device", "policy_kwargs", "verb
                "tensorboard_log", "_init_setup_model"}
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, except that a key given twice in one mapping is an error (the
+    safe loader keeps the last value silently, so a config's earlier setting is lost)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r}", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 def read_yaml(path: Path, what: str, error: type[ExciteError]) -> Any:
     """The YAML document of ``path``; ``error`` with one line naming the file (and the line
-    of a syntax error) when it cannot be read."""
+    of a syntax error or of a key given twice) when it cannot be read."""
     try:
-        return yaml.safe_load(path.read_text())
+        return yaml.load(path.read_text(), Loader=_UniqueKeyLoader)  # noqa: S506 (safe)
     except OSError as exc:
         raise error(f"cannot read {what} {path}: {exc.strerror}") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" (line {mark.line + 1})" if mark is not None else ""
-        raise error(f"{path}: not valid YAML{where}") from None
+        problem = getattr(exc, "problem", None) or ""
+        detail = f": {problem}" if problem.startswith("duplicate key") else ""
+        raise error(f"{path}: not valid YAML{where}{detail}") from None
 
 
 def hyperparameter_names(algo: str) -> set[str]:

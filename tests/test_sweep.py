@@ -105,6 +105,7 @@ def test_killed_sweep_resumes_its_trials(ray_cluster, tmp_path):
 
 BAD = [
     ("algo: ppo\ntimesteps: [1\n", "not valid YAML (line 3)"),
+    ("algo: ppo\ntimesteps: 10\nalgo: sac\n", "not valid YAML (line 3): duplicate key 'algo'"),
     ("- 1\n- 2\n", "a sweep config is a mapping"),
     ({**TINY, "timestep": 5}, "timestep: unknown key"),
     ({k: v for k, v in TINY.items() if k != "timesteps"}, "timesteps: required"),

@@ -307,6 +307,8 @@ def test_bad_training_config_is_a_one_line_error_naming_file_and_key(tmp_path, c
     [
         ("extends: bad\n", "bad.yaml: extends: {tmp}/bad.yaml is already in the chain"),
         ("extends: ppo\nhyperparams: [1, 2\n", "bad.yaml: not valid YAML (line 3)"),
+        ("extends: ppo\nhyperparams:\n  gamma: 0.9\n  gamma: 0.99\n",
+         "bad.yaml: not valid YAML (line 4): duplicate key 'gamma'"),
         ("- a list\n", "training config {tmp}/bad.yaml must be a mapping"),
         ("", "bad.yaml: env_id: required"),
     ],
