@@ -22,16 +22,24 @@ than either ratio); driving straight determines r_R/b - r_L/b-like combinations 
 depends on the robot, which are not tested. Fitted anyway,
 such data give plausible-looking but wrong parameters whose estimated noise levels absorb the
 misfit.
+
+The same regression tells when the poses are not external at all: heading changes that the
+wheel increments explain exactly (to ``DERIVED_RTOL`` of their size; a real sensor's heading
+noise is at least ~1e-5 of a segment's turn) were computed from the wheel angles, as wheel
+odometry (``/odom``, TF ``odom -> base_link``) is. Such poses give back the parameters the
+odometry was computed with, with a tiny std (:func:`check_pose_source`).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
 from excite.data import Segments
 from excite.errors import DataError
 
-__all__ = ["WIRING_Z", "check_wiring"]
+__all__ = ["DERIVED_RTOL", "WIRING_Z", "check_pose_source", "check_wiring"]
 
 #: Standard errors below zero at which a wheel ratio counts as negative.
 WIRING_Z = 5.0
@@ -41,7 +49,71 @@ _RANK_RTOL = 1e-12
 #: weight is at least this fraction of the larger.
 _SAME_SIGN = 0.1
 
+#: Heading changes explained by the wheel increments to this fraction of their RMS come from
+#: the wheel angles, not from an external sensor.
+DERIVED_RTOL = 1e-7
+
 _HINT = "check the wheel names / columns (left vs right) and signs"
+
+
+class _Fit(NamedTuple):
+    """The least-squares fit of dtheta_k = a dphi_R,k - c dphi_L,k."""
+
+    design: np.ndarray  # X (N, 2): dtheta = X @ (a, c)
+    lam: np.ndarray  # eigenvalues of X^T X, ascending
+    vec: np.ndarray  # their eigenvectors (columns)
+    rank: int
+    inverse: np.ndarray  # (X^T X)^+
+    ratios: np.ndarray  # (a, c) = (r_R/b, r_L/b)
+    residual: np.ndarray  # (N,) rad
+
+
+def _regression(segments: Segments) -> _Fit | None:
+    """The fit of the heading changes on the wheel increments, or None when the wheels never
+    turn."""
+    phi_L, phi_R, dtheta = segments.dphi_L, segments.dphi_R, segments.dtheta
+    design = np.stack([phi_R, -phi_L], axis=1)  # dtheta = design @ (r_R/b, r_L/b)
+    lam, vec = np.linalg.eigh(design.T @ design)
+    if lam[-1] <= 0.0:
+        return None
+    rank = int(np.sum(lam > lam[-1] * _RANK_RTOL))
+    inverse = (vec[:, -rank:] / lam[-rank:]) @ vec[:, -rank:].T  # (X^T X)^+
+    ratios = inverse @ (design.T @ dtheta)
+    return _Fit(design, lam, vec, rank, inverse, ratios, dtheta - design @ ratios)
+
+
+def check_pose_source(segments: Segments, source: str = "the data",
+                      nominal: tuple[float, float, float] | None = None) -> str | None:
+    """A one-line note when the heading changes are an exact linear function of the wheel
+    increments (to DERIVED_RTOL of their RMS, at least 4 segments, the robot turning at
+    changing wheel ratios): poses computed from these wheel angles (wheel odometry), or
+    simulated ones with exact encoder angles; None otherwise.
+
+    nominal: the robot (r_L, r_R, b; m) the user starts from. When the exact ratios are its
+    r_R/b and r_L/b (to 1e-6), the poses are its dead reckoning and cannot calibrate it:
+    :class:`~excite.errors.DataError` naming ``source``."""
+    if len(segments) < 4 or not np.any(segments.dtheta != 0.0):
+        return None
+    fit = _regression(segments)
+    if fit is None or fit.rank < 2:
+        return None
+    ratios, residual = fit.ratios, fit.residual
+    rms = float(np.sqrt(np.mean(residual**2)))
+    if rms > DERIVED_RTOL * float(np.sqrt(np.mean(segments.dtheta**2))):
+        return None
+    what = (f"the pose headings follow the wheel angles exactly (RMS residual {rms:.2g} rad "
+            f"over {len(segments)} segments, r_R/b {ratios[0]:.9g}, r_L/b {ratios[1]:.9g})")
+    if nominal is not None:
+        r_L, r_R, b = nominal
+        if np.allclose(ratios, (r_R / b, r_L / b), rtol=1e-6, atol=0.0):
+            raise DataError(f"{source}: {what}, with the nominal robot's ratios: the poses are "
+                            "its wheel odometry (dead reckoning of these encoders), which gives "
+                            "back the nominal parameters; use an external pose source (motion "
+                            "capture, a scan matcher), not /odom or odom -> base_link")
+    return (f"{source}: {what}: poses computed from these encoders (wheel odometry such as "
+            "/odom or odom -> base_link) give back the parameters they were computed with, "
+            "whatever the robot's true ones; an external pose source is needed (simulated "
+            "ground truth with exact encoder angles also fits exactly)")
 
 
 def check_wiring(segments: Segments, source: str = "the data") -> None:
@@ -50,14 +122,13 @@ def check_wiring(segments: Segments, source: str = "the data") -> None:
     when they agree or cannot tell (too few segments, no turning)."""
     from scipy.special import ndtr, stdtrit  # not at import: excite imports no scipy
 
-    phi_L, phi_R, dtheta = segments.dphi_L, segments.dphi_R, segments.dtheta
+    dtheta = segments.dtheta
     if len(segments) < 4:
         return
-    design = np.stack([phi_R, -phi_L], axis=1)  # dtheta = design @ (r_R/b, r_L/b)
-    lam, vec = np.linalg.eigh(design.T @ design)
-    if lam[-1] <= 0.0:
+    fit = _regression(segments)
+    if fit is None:
         return
-    rank = int(np.sum(lam > lam[-1] * _RANK_RTOL))
+    design, lam, vec, rank, inverse, ratios, residual = fit
     if not np.any(dtheta != 0.0):
         if rank == 2:  # the wheels' ratio changes (the robot must turn), the heading does not
             raise DataError(f"{source}: the pose heading never changes over {len(segments)} "
@@ -65,9 +136,6 @@ def check_wiring(segments: Segments, source: str = "the data") -> None:
                             "the sensor's orientation (a position-only source such as UWB, GPS "
                             "or a single marker cannot be used)")
         return  # straight driving at one wheel ratio: nothing to tell
-    inverse = (vec[:, -rank:] / lam[-rank:]) @ vec[:, -rank:].T  # (X^T X)^+
-    ratios = inverse @ (design.T @ dtheta)
-    residual = dtheta - design @ ratios
     dof = len(segments) - rank
     variance = float(residual @ residual) / dof
     limit = float(stdtrit(dof, ndtr(-WIRING_Z)))  # < 0: the one-sided Student-t quantile

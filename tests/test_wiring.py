@@ -15,7 +15,7 @@ from excite.kinematics import Params
 from excite.models import SENSOR_POSE, SensorPose
 from excite.synthetic import lesson_dataset, synthetic_log
 from excite.timeseries import write_timeseries
-from excite.wiring import check_wiring
+from excite.wiring import check_pose_source, check_wiring
 
 from .conftest import run_cli
 
@@ -133,3 +133,48 @@ def test_nearly_straight_driving_of_a_lopsided_robot_is_not_called_miswired():
     seg = _sensor_segments(rng, 60, 1e-4, straight=1.05, robot=robot)
     assert np.all(np.sign(seg.dtheta) == -np.sign(seg.dphi_L))
     check_wiring(seg)
+
+
+def test_poses_dead_reckoned_from_the_encoders_are_named():
+    rng = np.random.default_rng(2)
+    dphi = rng.normal(0.0, 0.4, (2, 60))
+    exact = SENSOR_POSE.predict(dphi[0], dphi[1], np.append(TRUTH.as_array(), np.zeros(3)))
+    seg = Segments(dphi[0], dphi[1], *np.moveaxis(exact, -1, 0))
+    note = check_pose_source(seg, "odom.csv")
+    assert note is not None and note.startswith("odom.csv: the pose headings follow the wheel")
+    with pytest.raises(DataError, match="odom.csv: .* wheel odometry"):
+        check_pose_source(seg, "odom.csv", nominal=tuple(TRUTH.as_array()))
+    assert check_pose_source(seg, "odom.csv", nominal=(0.05, 0.05, 0.3)) is not None
+    # an external sensor: even motion-capture heading noise (0.1 mrad) is far from exact
+    for sigma in (1e-4, 1e-5):
+        assert check_pose_source(_sensor_segments(rng, 60, sigma), nominal=(0.05, 0.051, 0.3)) \
+            is None
+    # straight driving at one wheel ratio tells nothing
+    assert check_pose_source(_sensor_segments(rng, 60, 0.0, straight=1.0)) is None
+
+
+def test_calibrate_refuses_the_nominal_robots_wheel_odometry(capsys, tmp_path):
+    """A pose stream dead-reckoned from the log's own encoders with the nominal robot (what
+    /odom is): with --init the nominal robot, an error; without, a note."""
+    rng = np.random.default_rng(5)
+    log = synthetic_log(rng, 40, TRUTH)
+    series = log.series
+    t_enc, t_pose = series.t_enc, series.t_pose
+    phi_L = np.interp(t_pose, t_enc, series.phi_L)
+    phi_R = np.interp(t_pose, t_enc, series.phi_R)
+    r_L, r_R, b = 0.05, 0.05, 0.3
+    dl, dr = np.diff(phi_L) * r_L, np.diff(phi_R) * r_R
+    dth = (dr - dl) / b
+    theta = np.concatenate([[0.0], np.cumsum(dth)])
+    heading = theta[:-1] + dth / 2
+    x = np.concatenate([[0.0], np.cumsum((dl + dr) / 2 * np.cos(heading))])
+    y = np.concatenate([[0.0], np.cumsum((dl + dr) / 2 * np.sin(heading))])
+    odometry = dataclasses.replace(series, t_enc=t_pose, phi_L=phi_L, phi_R=phi_R, x=x, y=y,
+                                   theta=theta)
+    path = tmp_path / "odom.csv"
+    write_timeseries(path, odometry)
+    code, out, err = run_cli(capsys, "calibrate", str(path), "--init", "0.05,0.05,0.3")
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and err.startswith(f"excite: error: {path}: the pose headings")
+    code, out, err = run_cli(capsys, "calibrate", str(path))
+    assert f"excite: note: {path}: the pose headings follow the wheel angles exactly" in err

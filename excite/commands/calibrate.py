@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from excite.commands.args import (
     UsageError,
@@ -66,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     from excite.commands.logs import group_inputs, read_log, segment_inputs
     from excite.data import Segments
     from excite.export import static_transform_command, write_ros2_yaml
-    from excite.wiring import check_wiring
+    from excite.wiring import check_pose_source, check_wiring
 
     sigma = sigma_arg(args.sigma) if args.sigma else None
     initial = params_arg(args.init) if args.init else None
@@ -75,8 +76,13 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--holdout compares with the nominal robot: give --init RL,RR,B (m)")
     used, held = _split_holdout(group_inputs(args.files), args.holdout)
     parts = segment_inputs(args, used)
+    start = None if initial is None else tuple(initial.as_array().tolist())
     for part in parts:
         check_wiring(part.segments, part.source.name)
+        note = (None if part.log is None  # a segment file: most often made, not recorded
+                else check_pose_source(part.segments, part.source.name, start))
+        if note is not None:
+            print(f"excite: note: {note}", file=sys.stderr)
     segments = Segments.concatenate([part.segments for part in parts])
     if len(segments) < MIN_SEGMENTS:
         raise UsageError(f"{len(segments)} segment(s) in total; at least {MIN_SEGMENTS} are "
