@@ -3,13 +3,20 @@
 Reads rosbag2 (sqlite3 or mcap storage: a directory with ``metadata.yaml``, or a single
 ``.db3`` / ``.mcap`` file) and ROS 1 (``.bag``) through the ``rosbags`` library (the ``ros``
 extra), imported only when a bag is read.
+Messages are decoded with the definitions the bag records for the topics read (types it does
+not define: rosbags' ROS 1 Noetic or latest ROS 2 store); other topics' definitions are never
+looked at, so a rosserial bridge's empty definition or a stale custom type elsewhere in the bag
+does not matter. Parts of a bag that cannot be opened as given (``.bag.active``, a rosbag2
+directory without ``metadata.yaml``, its ``metadata.yaml`` or a ``.zstd`` file) are named with
+the way out (:func:`bag_path_problem`).
 
 * Wheel angles: ``sensor_msgs/msg/JointState`` messages on one topic; ``position`` (rad,
   cumulative) of the two wheel joints, found by name in each message (any order; a message
   lacking either joint is left out; one naming both with an empty ``position``, as a
   velocity-only publisher sends, is skipped and counted).
 * Poses of the external sensor in the world frame: a ``geometry_msgs/msg/PoseStamped``,
-  ``geometry_msgs/msg/PoseWithCovarianceStamped`` or ``nav_msgs/msg/Odometry`` topic, or TF:
+  ``geometry_msgs/msg/PoseWithCovarianceStamped`` or ``nav_msgs/msg/Odometry`` topic (several of
+  these types on one topic are fine: publishers of different types), or TF:
   the transforms from ``parent`` to ``child`` in ``tf2_msgs/msg/TFMessage`` messages on
   ``/tf``. Only direct parent -> child transforms are used (no chaining through other frames,
   no inversion, not ``/tf_static``); record the transform you need directly. Leading ``/`` of
@@ -42,8 +49,8 @@ import numpy as np
 from excite.errors import DataError
 from excite.timeseries import TimeSeries, sample_at
 
-__all__ = ["POSE_TYPES", "STORAGES", "BagLog", "BagWriter", "is_bag_path", "read_bag",
-           "read_bag_log", "write_bag"]
+__all__ = ["POSE_TYPES", "STORAGES", "BagLog", "BagWriter", "bag_path_problem", "is_bag_path",
+           "read_bag", "read_bag_log", "write_bag"]
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
@@ -76,10 +83,12 @@ MISSING_WRITE_EXTRA = _NEEDS_ROS.format("writing")
 
 
 def is_bag_path(path: str | os.PathLike[str]) -> bool:
-    """Whether a path looks like a bag: a .bag, .db3 or .mcap file, or a directory holding a
-    rosbag2 metadata.yaml (by name only; read_bag checks the content)."""
+    """Whether a path looks like a bag: a .bag, .db3 or .mcap file, a directory holding a
+    rosbag2 metadata.yaml, or a part of a bag that :func:`bag_path_problem` explains (by name
+    only; read_bag checks the content)."""
     p = Path(path)
-    return p.suffix.lower() in BAG_SUFFIXES or (p / "metadata.yaml").is_file()
+    return (p.suffix.lower() in BAG_SUFFIXES or (p / "metadata.yaml").is_file()
+            or bag_path_problem(p) is not None)
 
 
 def _stamp(header: Any) -> int:
@@ -225,14 +234,11 @@ class _PoseStream(_Stream):
 
 
 class _Poses(_PoseStream):
-    """Collects the poses of messages of one supported type."""
-
-    def __init__(self, where: str, msgtype: str) -> None:
-        super().__init__(where)
-        self.pose_of = POSE_TYPES[msgtype]
+    """Collects the poses of messages of the supported types (one topic may carry several,
+    from publishers of different types)."""
 
     def add(self, msg: Any) -> None:
-        pose = self.pose_of(msg)
+        pose = POSE_TYPES[msg.__msgtype__](msg)
         self.rows.append((_stamp(msg.header), *_planar(pose.position, pose.orientation)))
 
 
@@ -262,51 +268,143 @@ class _Transforms(_PoseStream):
         return super().columns()
 
 
-def _rosbags() -> tuple[Any, Any, tuple[type[Exception], ...]]:
-    """(AnyReader, a default typestore, the reading errors), or DataError without rosbags."""
-    try:
-        from rosbags.highlevel import AnyReader, AnyReaderError
-        from rosbags.rosbag1 import ReaderError as Reader1Error
-        from rosbags.rosbag2 import ReaderError as Reader2Error
-        from rosbags.typesys import Stores, get_typestore
-    except ImportError:
-        raise DataError(MISSING_EXTRA) from None
-    errors = (AnyReaderError, Reader1Error, Reader2Error)
-    return AnyReader, get_typestore(Stores.LATEST), errors
+def bag_path_problem(path: str | os.PathLike[str]) -> str | None:
+    """What is wrong with a path that is part of a ROS bag but not one excite can open (one
+    line with the way out), or None: an unfinished ROS 1 recording (``.bag.active``), a
+    rosbag2 directory without ``metadata.yaml`` (a recording stopped without closing it), the
+    ``metadata.yaml`` or a compressed file (``.zstd``) of a rosbag2 bag given instead of its
+    directory."""
+    p = Path(path)
+    if p.name.endswith(".bag.active"):
+        return (f"{p}: an unfinished ROS 1 recording (.bag.active); `rosbag reindex {p}` "
+                "repairs it, then rename it to .bag")
+    if p.is_dir() and not (p / "metadata.yaml").exists() and any(
+            q.name.endswith(suffix) for q in p.iterdir()
+            for suffix in (".db3", ".mcap", ".db3.zstd", ".mcap.zstd")):
+        return (f"{p}: a rosbag2 directory without metadata.yaml (a recording stopped without "
+                f"closing it?); `ros2 bag reindex {p}` writes it")
+    if p.name == "metadata.yaml":
+        return f"{p}: the metadata of a rosbag2 bag; give the bag's directory {p.parent}"
+    if p.suffix == ".zstd" and Path(p.stem).suffix in (".db3", ".mcap"):
+        return f"{p}: a compressed file of a rosbag2 bag; give the bag's directory {p.parent}"
+    return None
+
+
+class _Bag:
+    """One open bag (rosbags' ROS 1 or rosbag2 reader; the ``ros`` extra): its connections,
+    and the messages of chosen connections decoded with the definitions recorded for those
+    connections only, so that an unused topic's missing, empty or mismatching definition (a
+    rosserial bridge's, a stale custom type) does not matter. Types the bag defines for no
+    chosen connection come from rosbags' typestore of ROS 1 Noetic or of the latest ROS 2."""
+
+    def __init__(self, name: str) -> None:
+        try:
+            from rosbags.rosbag1 import Reader as Reader1
+            from rosbags.rosbag2 import Reader as Reader2
+        except ImportError:
+            raise DataError(MISSING_EXTRA) from None
+        self.name = name
+        self.ros1 = Path(name).suffix == ".bag"
+        try:
+            self.reader = (Reader1 if self.ros1 else Reader2)(Path(name))
+            self.reader.open()
+        except Exception as exc:  # rosbags raises its own errors, and KeyError on odd files
+            raise DataError(f"{name}: not a readable ROS bag ({_why(exc)})") from None
+        self.connections = list(self.reader.connections)
+
+    def close(self) -> None:
+        self.reader.close()
+
+    def messages(self, connections: list[Any]) -> Iterator[tuple[Any, Any]]:
+        """(connection, decoded message) of ``connections`` in receive order; DataError naming
+        the topic for a message its recorded definition cannot decode."""
+        decode = self._decoder(connections)
+        where = ""
+        try:
+            for connection, _, raw in self.reader.messages(connections=connections):
+                where = connection.topic
+                yield connection, decode(raw, connection.msgtype)
+        except DataError:
+            raise
+        except Exception as exc:  # rosbags' errors while reading or decoding
+            hint = ""
+            if Path(self.name).is_file() and (Path(self.name).parent / "metadata.yaml").exists():
+                hint = (f"; if the bag is compressed, give its directory "
+                        f"{Path(self.name).parent}")
+            raise DataError(f"{self.name} {where}: a message cannot be read or decoded "
+                            f"({_why(exc)}){hint}") from None
+
+    def _decoder(self, connections: list[Any]) -> Callable[[bytes, str], Any]:
+        from rosbags.interfaces import MessageDefinitionFormat
+        from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+        default = get_typestore(Stores.ROS1_NOETIC if self.ros1 else Stores.LATEST)
+        types = dict(default.fielddefs)
+        try:
+            for connection in connections:
+                definition = connection.msgdef
+                if definition.format == MessageDefinitionFormat.MSG and definition.data.strip():
+                    types.update(get_types_from_msg(definition.data, connection.msgtype))
+                elif definition.format == MessageDefinitionFormat.IDL and definition.data.strip():
+                    separator = "=" * 80 + "\n"  # several IDL files, each under "IDL: name"
+                    idls = ([part.split("\n", 1)[1]
+                             for part in definition.data.split(separator)[1:]]
+                            if definition.data.startswith(f"{separator}IDL: ")
+                            else [definition.data])
+                    for idl in idls:
+                        types.update(get_types_from_idl(idl))
+        except Exception as exc:  # a definition rosbags cannot parse
+            raise DataError(f"{self.name}: the recorded message definition of "
+                            f"{connection.topic} ({connection.msgtype}) cannot be read "
+                            f"({_why(exc)})") from None
+        store = get_typestore(Stores.EMPTY)
+        store.register(types)
+        return store.deserialize_ros1 if self.ros1 else store.deserialize_cdr
+
+
+def _why(exc: Exception) -> str:
+    """An exception from rosbags in a few words (its message, else its type)."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    if isinstance(exc, KeyError) and text == "'ros1msg'":
+        return "an mcap file of ROS 1 messages; convert it to a ROS 1 .bag"
+    return text if text and not isinstance(exc, KeyError) else f"{type(exc).__name__} {text}"
 
 
 @contextmanager
-def _opened(name: str) -> Iterator[Any]:
-    """An open AnyReader on a bag; DataError (one line) for anything that is not a bag or
-    cannot be read, or an empty bag."""
+def _opened(name: str) -> Iterator[_Bag]:
+    """An open bag; DataError (one line) for anything that is not a bag or cannot be read, or
+    an empty bag."""
     if not os.path.exists(name):
         raise DataError(f"{name}: no such file or directory")
-    any_reader, typestore, errors = _rosbags()
+    problem = bag_path_problem(name)
+    if problem is not None:
+        raise DataError(problem)
+    bag = _Bag(name)
     try:
-        with any_reader([Path(name)], default_typestore=typestore) as reader:
-            if reader.message_count == 0:
-                raise DataError(f"{name}: empty bag (no messages)")
-            yield reader
-    except (*errors, FileNotFoundError) as exc:
-        raise DataError(f"{name}: not a readable ROS bag ({exc})") from None
+        if bag.reader.message_count == 0:
+            raise DataError(f"{name}: empty bag (no messages)")
+        yield bag
+    finally:
+        bag.close()
 
 
-def _topic_list(topics: dict[str, str]) -> str:
-    return ", ".join(f"{topic} ({msgtype})" for topic, msgtype in sorted(topics.items()))
+def _topic_list(topics: dict[str, set[str]]) -> str:
+    return ", ".join(f"{topic} ({', '.join(sorted(msgtypes))})"
+                     for topic, msgtypes in sorted(topics.items()))
 
 
-def _require(name: str, topics: dict[str, str], topic: str, kinds: tuple[str, ...],
-             role: str) -> str:
-    """The message type of a topic that must exist with one of ``kinds``."""
+def _require(name: str, topics: dict[str, set[str]], topic: str, kinds: tuple[str, ...],
+             role: str) -> None:
+    """DataError unless the topic exists and all its message types are among ``kinds``."""
     if topic not in topics:
         raise DataError(f"{name}: no topic {topic} ({role}); the bag has: {_topic_list(topics)}")
-    if topics[topic] not in kinds:
-        raise DataError(f"{name}: topic {topic} has type {topics[topic]}, not supported for "
-                        f"{role}; supported: {', '.join(kinds)}")
-    return topics[topic]
+    unsupported = sorted(topics[topic] - set(kinds))
+    if unsupported:
+        raise DataError(f"{name}: topic {topic} has type {', '.join(unsupported)}, not "
+                        f"supported for {role}; supported: {', '.join(kinds)}")
 
 
-def _pose_collector(name: str, topics: dict[str, str], pose_topic: str | None,
+def _pose_collector(name: str, topics: dict[str, set[str]], pose_topic: str | None,
                     tf: tuple[str, str] | None) -> tuple[str, _Poses | _Transforms, str]:
     """(topic to read, its collector, the pose stream's source label)."""
     if tf is not None:
@@ -315,8 +413,8 @@ def _pose_collector(name: str, topics: dict[str, str], pose_topic: str | None,
         parent, child = transforms.pair
         return TF_TOPIC, transforms, f"{name} {TF_TOPIC} {parent}->{child}"
     assert pose_topic is not None  # read_bag checked that exactly one source is given
-    msgtype = _require(name, topics, pose_topic, tuple(POSE_TYPES), "poses")
-    poses = _Poses(f"{name} {pose_topic}", msgtype)
+    _require(name, topics, pose_topic, tuple(POSE_TYPES), "poses")
+    poses = _Poses(f"{name} {pose_topic}")
     return pose_topic, poses, poses.where
 
 
@@ -371,16 +469,18 @@ def read_bag_log(
     name = os.fspath(path)
     if (pose_topic is None) == (tf is None):
         raise DataError("give exactly one pose source: pose_topic or tf=(parent, child)")
-    with _opened(name) as reader:
-        topics = {c.topic: c.msgtype for c in reader.connections}
+    with _opened(name) as bag:
+        topics: dict[str, set[str]] = {}
+        for connection in bag.connections:
+            topics.setdefault(connection.topic, set()).add(connection.msgtype)
         _require(name, topics, joint_states, (JOINT_STATE,), "wheel joint states")
         joints = _Joints(f"{name} {joint_states}", left_wheel, right_wheel)
         pose_key, poses, pose_source = _pose_collector(name, topics, pose_topic, tf)
         collectors: dict[str, _Joints | _Poses | _Transforms] = {joint_states: joints,
                                                                  pose_key: poses}
-        wanted = [c for c in reader.connections if c.topic in collectors]
-        for connection, _, raw in reader.messages(connections=wanted):
-            collectors[connection.topic].add(reader.deserialize(raw, connection.msgtype))
+        wanted = [c for c in bag.connections if c.topic in collectors]
+        for connection, msg in bag.messages(wanted):
+            collectors[connection.topic].add(msg)
     t_enc, phi_L, phi_R = joints.columns()
     t_pose, x, y, theta = poses.columns()
     series = TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,

@@ -310,11 +310,87 @@ def test_stream_errors(tmp_path, log):
 
 
 def test_without_rosbags_the_error_names_the_extra(monkeypatch, good_bag):
-    monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)
+    monkeypatch.setitem(sys.modules, "rosbags.rosbag1", None)
+    monkeypatch.setitem(sys.modules, "rosbags.rosbag2", None)
     with pytest.raises(DataError) as info:
         read_bag(good_bag, LEFT, RIGHT, tf=("odom", "lidar"))
     assert one_line(info) == MISSING_EXTRA == (
         "reading bags needs the ros extra: pip install 'excite[ros]'")
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap", "ros1"])
+def test_unused_topics_with_unreadable_definitions_do_not_matter(tmp_path, log, storage):
+    """A bag whose unused topics carry definitions rosbags cannot use (a rosserial bridge's
+    empty one, a stale custom type's wrong hash) reads like the clean bag: only the
+    definitions of the topics read are used (rosbags' AnyReader refused the whole bag)."""
+    def messages(bag: BagWriter):
+        ros1 = bag.ros1
+        for topic, msgtype, definition, digest in [
+                ("/arduino/status", "std_msgs/msg/Int8", "", "27ffa0c9c4b8fb8492252bcad9e5c57b"),
+                ("/custom", "my_msgs/msg/Foo", "float64 a\n", "0" * 32)]:
+            key = {"md5sum": digest} if ros1 else {"rihs01": "RIHS01_" + "0" * 64}
+            connection = bag._writer.add_connection(topic, msgtype, msgdef=definition, **key)
+            bag._writer.write(connection, 1, bytes(8) if ros1 else bytes([0, 1, 0, 0]) + bytes(8))
+        return log_messages(bag, log, "pose")
+    clean = read_bag(make_bag(tmp_path / "clean", storage, lambda bag: log_messages(bag, log,
+                                                                                   "pose")),
+                     LEFT, RIGHT, pose_topic="/sensor_pose")
+    assert_same_log(read_bag(make_bag(tmp_path / "odd", storage, messages), LEFT, RIGHT,
+                             pose_topic="/sensor_pose"), clean)
+
+
+def test_one_pose_topic_may_carry_two_supported_types(tmp_path, log):
+    """Two publishers of /sensor_pose, one PoseStamped and one PoseWithCovarianceStamped (a
+    relay), alternating: every sample is read."""
+    def messages(bag: BagWriter):
+        kinds = {}
+        for kind, msgtype in (("pose", "geometry_msgs/msg/PoseStamped"),
+                              ("pose_cov", "geometry_msgs/msg/PoseWithCovarianceStamped")):
+            kinds[kind] = bag._writer.add_connection("/sensor_pose", msgtype,
+                                                     typestore=bag.store, callerid=f"/{kind}")
+        items = [item for item in log_messages(bag, log, "pose") if item[0] != "/sensor_pose"]
+        for j, (t, x, y, theta) in enumerate(zip(log.t_pose, log.x, log.y, log.theta,
+                                                 strict=True)):
+            kind = "pose" if j % 2 else "pose_cov"
+            msg = pose_message(bag, kind, t, x, y, theta)
+            bag._writer.write(kinds[kind], int(t * 1e9) + 5_000_000,
+                              bag.store.serialize_ros1(msg, msg.__msgtype__))
+        return items
+    assert_same_log(read_bag(make_bag(tmp_path, "ros1", messages), LEFT, RIGHT,
+                             pose_topic="/sensor_pose"), log)
+
+
+def test_parts_of_bags_are_named_with_the_way_out(tmp_path, capsys, good_bag):
+    """Paths a user hands over from a bag that excite cannot open as given: one line saying
+    what it is and what to do."""
+    active = tmp_path / "run.bag.active"
+    active.write_bytes(b"#ROSBAG V2.0\n\x00")
+    killed = tmp_path / "killed"
+    killed.mkdir()
+    (killed / "killed_0.mcap").write_bytes(b"\x89MCAP0\r\n")
+    compressed = tmp_path / "zipped" / "zipped_0.db3.zstd"
+    compressed.parent.mkdir()
+    compressed.write_bytes(b"\x28\xb5\x2f\xfd")
+    cases = [(active, "an unfinished ROS 1 recording (.bag.active); `rosbag reindex"),
+             (killed, "a rosbag2 directory without metadata.yaml (a recording stopped "
+                      f"without closing it?); `ros2 bag reindex {killed}` writes it"),
+             (good_bag / "metadata.yaml", f"the metadata of a rosbag2 bag; give the bag's "
+                                          f"directory {good_bag}"),
+             (compressed, f"a compressed file of a rosbag2 bag; give the bag's directory "
+                          f"{compressed.parent}")]
+    for path, fragment in cases:
+        assert is_bag_path(path)
+        with pytest.raises(DataError) as info:
+            read_bag(path, LEFT, RIGHT, pose_topic="/pose")
+        assert one_line(info).startswith(f"{path}: {fragment}")
+        assert_one_line_error(*run_cli(capsys, "calibrate", path)[::2], f"{path}: {fragment}")
+
+
+def test_an_mcap_of_ros1_messages_is_named():
+    from excite.bags import _why
+
+    assert "ROS 1 messages" in _why(KeyError("ros1msg"))
+    assert _why(KeyError("")) == "KeyError ''"
 
 
 def test_is_bag_path(tmp_path, good_bag):

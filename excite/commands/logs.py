@@ -19,6 +19,7 @@ from typing import Literal
 
 from excite.commands.args import UsageError
 from excite.data import Segments
+from excite.errors import DataError
 from excite.timeseries import MAX_TIME_OFFSET, OffsetHint, SegmentedLog, TimeSeries
 
 __all__ = ["Log", "Input", "Part", "add_log_options", "group_inputs", "read_log",
@@ -131,9 +132,12 @@ def add_log_options(parser: argparse.ArgumentParser, segmentation: bool = True) 
 
 
 def _kind(path: str) -> tuple[str, frozenset[str]]:
-    from excite.bags import is_bag_path
+    from excite.bags import bag_path_problem, is_bag_path
     from excite.timeseries import timeseries_streams
 
+    problem = bag_path_problem(path)
+    if problem is not None:
+        raise DataError(problem)
     if is_bag_path(path):
         return "bag", frozenset()
     if not os.path.exists(path):
