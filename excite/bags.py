@@ -157,11 +157,13 @@ class _Joints(_Stream):
         super().__init__(where)
         self.left, self.right = left, right
         self.names: set[str] = set()
+        self.alone: set[str] = set()  # the wheels seen in messages without the other one
 
     def add(self, msg: Any) -> None:
         names = list(msg.name)
         self.names.update(names)
         if self.left not in names or self.right not in names:
+            self.alone.update({self.left, self.right} & set(names))
             return
         if len(msg.position) == 0:  # velocity or effort only: allowed by JointState
             self.skip(NO_POSITIONS)
@@ -184,8 +186,11 @@ class _Joints(_Stream):
                                 f"{self.left!r} and {self.right!r} "
                                 f"({self.skipped[NO_POSITIONS]} name them with an empty "
                                 "position array: velocity or effort only)")
+            apart = (" (they come in separate messages; excite needs both wheels' positions in "
+                     "one message, as joint_state_broadcaster publishes them)"
+                     if self.alone == {self.left, self.right} else "")
             raise DataError(f"{self.where}: no message has both joints {self.left!r} and "
-                            f"{self.right!r}")
+                            f"{self.right!r}{apart}")
         return list(self.table(3).T)
 
 
