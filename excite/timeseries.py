@@ -714,6 +714,11 @@ def _refined_lag(r2: FloatArray, max_lag: int, step: float) -> float:
     return (k - max_lag + shift) * step
 
 
+#: The offset is estimated on a uniform grid of the finer median sample period over the time
+#: both streams cover; when that grid would hold more than this many points per sample, the
+#: log has long gaps (a clock jump, a pause in recording) and the rates are not estimated
+#: across them (the grid's size is then bounded by the samples, not by the time span).
+MAX_GRID_PER_SAMPLE = 4
 #: The default search range of estimate_time_offset: +- this (s).
 MAX_TIME_OFFSET = 1.0
 #: The default least correlation of estimate_time_offset's best fit.
@@ -773,6 +778,11 @@ def _estimate(ts: TimeSeries, max_offset: float, min_correlation: float) -> _Off
     if not overlap > 4 * max_offset:
         raise DataError(f"cannot estimate the time offset: the streams overlap for "
                         f"{max(overlap, 0.0):.3g} s, less than 4 x max_offset ({max_offset} s)")
+    samples = ts.t_enc.size + ts.t_pose.size
+    if overlap / step > MAX_GRID_PER_SAMPLE * samples:
+        raise DataError(f"cannot estimate the time offset: the streams' {samples} samples "
+                        f"span {overlap:.6g} s, {overlap / step:.3g} sample periods "
+                        f"({step:.3g} s): long gaps (or a clock that jumps)")
     max_lag = max(1, int(math.ceil(max_offset / step)))
     signals = _rate_signals(ts, step)
     r2 = _explained(*signals, max_lag)
@@ -820,13 +830,14 @@ def _lag_zero_score(fit: _OffsetFit) -> tuple[float, int]:
     unexplained variance in the lag. It is zero on average when the offset is zero. Its sum
     over blocks of OFFSET_TEST_BLOCK s, mean over the blocks' standard error, is t-distributed
     with blocks - 1 degrees of freedom (batch means: honest for noise correlated over less than
-    a block). (0, 0) when there are fewer than MIN_OFFSET_TEST_BLOCKS blocks.
+    a block). (0, 0) when there are fewer than MIN_OFFSET_TEST_BLOCKS blocks or a block would
+    hold fewer than two samples.
     """
     lag, step = fit.max_lag, fit.step
     turn, left, right = (signal[lag: signal.size - lag] for signal in fit.signals)
     blocks = int(turn.size * step / OFFSET_TEST_BLOCK)
-    if blocks < MIN_OFFSET_TEST_BLOCKS:
-        return 0.0, 0
+    if blocks < MIN_OFFSET_TEST_BLOCKS or 2 * step > OFFSET_TEST_BLOCK:
+        return 0.0, 0  # too short a log, or a block would not hold two samples
     regressors = np.column_stack([left, right, np.ones(turn.size)])
     coefficients = np.linalg.lstsq(regressors, turn, rcond=None)[0]
     residual = turn - regressors @ coefficients
@@ -1321,6 +1332,11 @@ def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: 
     )
 
 
+#: s: a median sample period this long suggests times in other units than seconds (no pose
+#: source for calibration is that slow).
+SLOWEST_PERIOD = 5.0
+
+
 def _check_settings(ts: TimeSeries, window: float, min_distance: float | None,
                     min_angle: float | None, time_offset: float, on_gap: str) -> None:
     if not 0 < window < math.inf:
@@ -1334,8 +1350,10 @@ def _check_settings(ts: TimeSeries, window: float, min_distance: float | None,
         raise DataError(f"on_gap must be 'error' or 'split', got {on_gap!r}")
     period = float(np.median(np.diff(ts.t_pose)))
     if window < period:
+        units = (" (times are in s: are these ms, us or ns?)" if period >= SLOWEST_PERIOD
+                 else "")
         raise DataError(f"{ts.source[1]}: the window ({window:g} s) is shorter than the pose "
-                        f"sample period ({period:.3g} s)")
+                        f"sample period ({period:.3g} s){units}")
 
 
 def segment_timeseries(

@@ -186,6 +186,33 @@ def test_a_gap_longer_than_the_window_is_named(capsys, tmp_path):
     assert err.rstrip().endswith("--split-at-gaps (on_gap='split') cuts the log there instead")
 
 
+def test_a_clock_jump_or_times_in_ns_are_one_line_errors(capsys, tmp_path):
+    """A clock that jumps by a year mid-log (NTP setting a Raspberry Pi's clock), and epoch
+    times written in ns: one line each, not the time-offset check's grid over the whole span
+    (which asked for TiB of memory)."""
+    series = synthetic_log(np.random.default_rng(8), 30.0, pose_noise=(0.002, 0.002)).series
+    jump = 365 * 86400.0
+    jumped = dataclasses.replace(series, t_enc=np.where(series.t_enc > 15, series.t_enc + jump,
+                                                        series.t_enc),
+                                 t_pose=np.where(series.t_pose > 15, series.t_pose + jump,
+                                                 series.t_pose))
+    path = tmp_path / "jump.csv"
+    write_timeseries(path, jumped)
+    code, _, err = run_cli(capsys, "calibrate", path)
+    assert code == 2 and err.count("\n") == 1 and "gap of 31536000" in err
+    code, _, _ = run_cli(capsys, "calibrate", path, "--split-at-gaps")
+    assert code == 0  # each side of the jump calibrates
+    code, _, err = run_cli(capsys, "calibrate", path, "--time-offset", "estimate")
+    assert code == 2 and err.count("\n") == 1 and "long gaps (or a clock that jumps)" in err
+    nanoseconds = dataclasses.replace(series, t_enc=1.763e18 + 1e9 * series.t_enc,
+                                      t_pose=1.763e18 + 1e9 * series.t_pose)
+    path = tmp_path / "ns.csv"
+    write_timeseries(path, nanoseconds)
+    code, _, err = run_cli(capsys, "calibrate", path)
+    assert code == 2 and err.count("\n") == 1
+    assert err.rstrip().endswith("(times are in s: are these ms, us or ns?)")
+
+
 @pytest.fixture(scope="module")
 def bag_log():
     series = synthetic_log(np.random.default_rng(7), 20, TRUTH, SENSOR,
