@@ -74,6 +74,11 @@ NOISE_ROUNDS = 8
 #: The noise levels have settled when no level moves by more than this fraction.
 NOISE_RTOL = 0.01
 _UNIT_SIGMA = np.ones(3)
+#: Segments that share pose samples have their noise levels (five, six with wheel slip)
+#: estimated by REML from the residuals; that needs at least this many residual degrees of
+#: freedom (3 N - parameters) per level. Fewer, and the levels collapse to fit the few
+#: residuals (noise ~1e-10 on 4 segments of a slipping log: r_R 45% off at z = -157).
+MIN_NOISE_DOF_PER_LEVEL = 5
 
 
 @dataclass(frozen=True)
@@ -511,7 +516,9 @@ def calibrate(
         always starts from Censi's closed form (any mounting angle).
     sigma: measurement noise std (sigma_x [m], sigma_y [m], sigma_theta [rad]) or
         (sigma_xy, sigma_theta); None estimates them from the residuals, re-weighting at
-        every iteration until they settle.
+        every iteration until they settle. Segments cut from one log (sharing pose samples)
+        then need MIN_NOISE_DOF_PER_LEVEL residual degrees of freedom per noise level (about
+        12 segments with the sensor pose), else DataError.
     loss: "linear" (Gaussian maximum likelihood) or "huber" (robust to slip outliers; the
         threshold is 1.345 whitened standard deviations).
     sensor_pose: "auto" (default: estimate the sensor pose when the data determine it and it
@@ -562,6 +569,7 @@ def calibrate(
     data = seg[keep] if trim else seg
     levels, whitener = None, None
     if given is None and data.chained is not None and data.chained.any():
+        _refuse_too_few_for_noise(data, start.size)
         tick = None if ticks_per_rev is None else tick_angle(ticks_per_rev)
         levels, whitener, start = _correlated_noise(primary, data, start, loss,
                                                     max_iterations, tol, max_relative_std,
@@ -618,6 +626,20 @@ def calibrate(
     slip = None if whitener is None or whitener.wheels is None else levels.slip
     return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
                    len(seg) - len(data), levels, slip)
+
+
+def _refuse_too_few_for_noise(data: Segments, n_parameters: int) -> None:
+    """DataError unless the segments leave MIN_NOISE_DOF_PER_LEVEL residual degrees of freedom
+    per noise level to estimate (five levels; six for segments cut from a log, with slip)."""
+    n_levels = 6 if data.sub_dphi_L is not None and data.t_start is not None else 5
+    dof = 3 * len(data) - n_parameters
+    needed = MIN_NOISE_DOF_PER_LEVEL * n_levels
+    if dof < needed:
+        segments = math.ceil((needed + n_parameters) / 3)
+        raise DataError(f"{len(data)} segments leave {dof} residual degrees of freedom to "
+                        f"estimate {n_levels} noise levels from; at least {needed} are needed "
+                        f"(about {segments} segments for {n_parameters} parameters): a longer "
+                        "log, a shorter window, or given noise levels (--sigma)")
 
 
 def _serially_correlated(test: FitTest) -> bool:

@@ -186,6 +186,22 @@ def test_a_gap_longer_than_the_window_is_named(capsys, tmp_path):
     assert err.rstrip().endswith("--split-at-gaps (on_gap='split') cuts the log there instead")
 
 
+def test_too_few_segments_to_estimate_the_noise_levels(capsys, tmp_path):
+    """A 6 s log cut into 6 segments: 18 residuals for 6 parameters and 6 noise levels.
+    Estimated anyway, the levels collapsed onto the few residuals (std 10-150x too small,
+    exit 0); now a one-line error naming the way out, and given levels still calibrate."""
+    series = synthetic_log(np.random.default_rng(9), 6.0, Params(0.05, 0.051, 0.3),
+                           SensorPose(0.1, 0.02, 0.1), pose_noise=(0.002, 0.002)).series
+    path = tmp_path / "short.csv"
+    write_timeseries(path, series)
+    code, out, err = run_cli(capsys, "calibrate", path)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert ("6 segments leave 12 residual degrees of freedom to estimate 6 noise levels from; "
+            "at least 30 are needed (about 12 segments for 6 parameters)") in err
+    code, out, _ = run_cli(capsys, "calibrate", path, "--sigma", "0.003,0.003,0.003")
+    assert code in (0, 3) and "r_L" in out
+
+
 def test_a_clock_jump_or_times_in_ns_are_one_line_errors(capsys, tmp_path):
     """A clock that jumps by a year mid-log (NTP setting a Raspberry Pi's clock), and epoch
     times written in ns: one line each, not the time-offset check's grid over the whole span
