@@ -919,8 +919,12 @@ class Limits:
     max_speed (m/s), max_turn_rate (rad/s): sensor speed and turn rate between consecutive pose
         samples above which the step is a jump. Sized for ground robots below ~3.5 m/s and
         3 revolutions per second (the presets reach 2 m/s and, spinning at full speed, up to
-        10.7 rad/s); note the apparent speed includes the pose noise divided by the period
-        (1 cm at 100 Hz reads as ~1.4 m/s).
+        10.7 rad/s). The pose noise adds to the apparent motion (1 cm at 100 Hz reads as
+        ~1.4 m/s), so a step is a jump only beyond these limits plus ``jump_sigmas`` times the
+        noise of a difference of two poses (estimated from the pose stream, as for
+        carry_sigmas).
+    jump_sigmas: at 6, noise alone passes the jump limit once in ~10^8 samples (the Rayleigh
+        tail exp(-6^2 / 2) for the position, twice the normal tail for the heading).
     max_wheel_rate (rad/s): wheel rate between consecutive encoder samples above which the
         step is a jump (a counter reset or overflow).
     still_wheel (rad), still_distance (m), still_heading (rad): a segment is a standstill when
@@ -945,6 +949,7 @@ class Limits:
     max_gap: float | None = None
     max_speed: float = 5.0
     max_turn_rate: float = 6.0 * math.pi
+    jump_sigmas: float = 6.0
     max_wheel_rate: float = 200.0
     still_wheel: float = 0.02
     still_distance: float = 0.01
@@ -1098,12 +1103,18 @@ def _check_encoders(ts: TimeSeries, window: float, limits: Limits) -> _StreamChe
     return _StreamCheck(gap, step > limits.max_wheel_rate * dt, missed)
 
 
-def _check_poses(ts: TimeSeries, window: float, limits: Limits) -> _StreamCheck:
+def _check_poses(ts: TimeSeries, window: float, limits: Limits,
+                 noise: tuple[float, float]) -> _StreamCheck:
+    """Gaps and jumps of the pose stream; a step is a jump when it exceeds the motion limits
+    plus jump_sigmas times the noise of a difference of two poses (``noise``: a sample's std,
+    xy and theta)."""
     gap, missed = _gap_flags(ts.t_pose, window, limits.max_gap)
     dt = np.diff(ts.t_pose)
     moved = np.hypot(np.diff(ts.x), np.diff(ts.y))
     turned = np.abs(np.diff(ts.theta))
-    jump = (moved > limits.max_speed * dt) | (turned > limits.max_turn_rate * dt)
+    spread = limits.jump_sigmas * math.sqrt(2.0)
+    jump = ((moved > limits.max_speed * dt + spread * noise[0])
+            | (turned > limits.max_turn_rate * dt + spread * noise[1]))
     return _StreamCheck(gap, jump, missed)
 
 
@@ -1268,8 +1279,8 @@ def _substeps(ts: TimeSeries, wheels: Callable[[FloatArray], FloatArray], t_a: F
 
 
 def _drop_reasons(ts: TimeSeries, t_pose: FloatArray, cut: _Cut, rows: FloatArray,
-                  encoders: _StreamCheck, poses: _StreamCheck, limits: Limits
-                  ) -> dict[str, BoolArray]:
+                  encoders: _StreamCheck, poses: _StreamCheck, limits: Limits,
+                  noise: tuple[float, float]) -> dict[str, BoolArray]:
     """Per reason, which candidate segments to drop (a segment counts under its first
     reason only)."""
     pose_jumps = np.concatenate(([0], np.cumsum(poses.jump)))
@@ -1278,7 +1289,6 @@ def _drop_reasons(ts: TimeSeries, t_pose: FloatArray, cut: _Cut, rows: FloatArra
     moved, turned = np.hypot(rows[:, 2], rows[:, 3]), np.abs(rows[:, 4])
     # still: within the still limits or the noise (a difference of two poses has sqrt(2) times
     # a sample's noise)
-    noise = _pose_noise(ts)
     near = max(limits.still_distance, limits.carry_sigmas * math.sqrt(2.0) * noise[0])
     near_heading = max(limits.still_heading, limits.carry_sigmas * math.sqrt(2.0) * noise[1])
     # carried: beyond that plus what the wheels' small turns could do to any plausible robot
@@ -1379,7 +1389,9 @@ def segment_timeseries(
     """
     _check_settings(ts, window, min_distance, min_angle, time_offset, on_gap)
     limits = limits or Limits()
-    encoders, poses = _check_encoders(ts, window, limits), _check_poses(ts, window, limits)
+    noise = _pose_noise(ts)
+    encoders, poses = (_check_encoders(ts, window, limits),
+                       _check_poses(ts, window, limits, noise))
     gaps = _gaps(ts, encoders, poses)
     if on_gap == "error":
         _refuse_long_gaps(gaps, window)
@@ -1388,7 +1400,7 @@ def segment_timeseries(
     cut = _cut(ts, t_pose, stretches, window, min_distance, min_angle)
     wheels = _wheel_angles(ts)
     rows = _increments(ts, wheels, t_pose, cut.start, cut.end)
-    reasons = _drop_reasons(ts, t_pose, cut, rows, encoders, poses, limits)
+    reasons = _drop_reasons(ts, t_pose, cut, rows, encoders, poses, limits, noise)
     keep = ~np.logical_or.reduce(list(reasons.values()))
     start, end = cut.start[keep], cut.end[keep]
     report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses,
