@@ -78,6 +78,7 @@ from numpy.typing import ArrayLike, NDArray
 from excite.data import MIN_SEGMENTS, Segments, read_text
 from excite.errors import DataError
 from excite.noise import MEDIAN_ABS_NORMAL
+from excite.wiring import MAX_RADIUS_TO_TRACK
 
 __all__ = [
     "Gap",
@@ -87,6 +88,7 @@ __all__ = [
     "SegmentationReport",
     "SegmentedLog",
     "TimeSeries",
+    "check_continuity",
     "estimate_time_offset",
     "noticeable_time_offset",
     "is_timeseries_csv",
@@ -955,7 +957,7 @@ class Limits:
     still_distance: float = 0.01
     still_heading: float = 0.01
     carry_sigmas: float = 5.0
-    max_radius_to_track: float = 1.0
+    max_radius_to_track: float = MAX_RADIUS_TO_TRACK
     max_wheel_radius: float = 0.5
     max_sensor_arm: float = 1.0
 
@@ -1116,6 +1118,29 @@ def _check_poses(ts: TimeSeries, window: float, limits: Limits,
     jump = ((moved > limits.max_speed * dt + spread * noise[0])
             | (turned > limits.max_turn_rate * dt + spread * noise[1]))
     return _StreamCheck(gap, jump, missed)
+
+
+_ENCODER_JUMP_HINT = ("a counter that overflows or resets? (wheel angles must be cumulative; "
+                      "ticks as counted, with --ticks-per-rev)")
+_POSE_JUMP_HINT = "a relocalisation, or headings in degrees? (theta is in rad)"
+
+
+def check_continuity(ts: TimeSeries, limits: Limits | None = None) -> None:
+    """DataError naming the first jump of either stream (as :func:`segment_timeseries`
+    detects them, with its default ``limits``), for uses that follow the whole log instead of
+    dropping the segments around a jump (dead reckoning in :mod:`excite.validation`)."""
+    limits = limits or Limits()
+    window = math.inf  # gaps are not jumps here
+    checks = (("encoder", _check_encoders(ts, window, limits), _ENCODER_JUMP_HINT,
+               "the wheel angles jump"),
+              ("pose", _check_poses(ts, window, limits, _pose_noise(ts)), _POSE_JUMP_HINT,
+               "the pose jumps"))
+    for stream, check, hint, what in checks:
+        jumps = np.flatnonzero(check.jump)
+        if jumps.size:
+            raise DataError(f"{ts.location(stream, int(jumps[0]) + 1)}: {what} ({jumps.size} "
+                            f"time(s) in the log; the first here), so dead reckoning across it "
+                            f"means nothing: {hint}")
 
 
 def _gaps(ts: TimeSeries, encoders: _StreamCheck, poses: _StreamCheck) -> list[Gap]:
@@ -1409,8 +1434,11 @@ def segment_timeseries(
         # name the stream behind most of the drops (encoder jumps and standstills: the wheels)
         worst = max(report.segments_dropped, key=report.segments_dropped.get, default=None)
         stream = ts.source[0] if worst in (ENCODER_JUMP, STANDSTILL) else ts.source[1]
+        hint = {ENCODER_JUMP: f"; {_ENCODER_JUMP_HINT}",
+                POSE_JUMP: f"; {_POSE_JUMP_HINT}"}.get(worst, "")
         raise DataError(f"{stream}: {report.n_segments} segment(s) after segmentation; "
-                        f"at least {MIN_SEGMENTS} are needed (dropped: {report.counts_text()})")
+                        f"at least {MIN_SEGMENTS} are needed (dropped: {report.counts_text()})"
+                        f"{hint}")
     t_start, t_end = t_pose[start], t_pose[end]
     shares = np.concatenate(([False], start[1:] == end[:-1]))
     sub_L, sub_R, count = _substeps(ts, wheels, t_start, t_end)

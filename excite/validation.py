@@ -73,7 +73,7 @@ from excite.data import read_text
 from excite.errors import DataError
 from excite.kinematics import Params, predict_increment, wrap_angle
 from excite.models import SensorPose
-from excite.timeseries import TimeSeries
+from excite.timeseries import TimeSeries, check_continuity
 
 __all__ = [
     "Loop",
@@ -354,9 +354,11 @@ def validate_log(series: TimeSeries, time_offset: float, calibrated: Robot, nomi
 
     time_offset (s): pose time + time_offset = encoder time. name: the log's name in messages
     and results (default: the pose stream's source). Raises DataError when fewer than 2 pose
-    samples fall within the encoder time range.
+    samples fall within the encoder time range, and (:func:`excite.timeseries.check_continuity`)
+    when either stream jumps.
     """
     name = series.source[1] if name is None else name
+    check_continuity(series)
     used = _used_samples(series, time_offset, name)
     measured = np.column_stack([series.x[used], series.y[used], series.theta[used]])
     t = series.t_pose[used] + time_offset

@@ -11,7 +11,9 @@ the robot drives forward):
   signs reversed, or a clockwise (upside-down) pose frame;
 - exactly one negative: that wheel's angle runs backwards (a motor mounted mirrored and not
   flipped by the driver);
-- the heading never changes at all: the pose source measures no orientation.
+- the heading never changes at all: the pose source measures no orientation;
+- both ratios above MAX_RADIUS_TO_TRACK beyond doubt: no differential drive turns that fast
+  (its wheels are smaller than its track): most often headings in degrees.
 
 A ratio counts as negative only when it is below zero beyond doubt (as unlikely as
 ``WIRING_Z`` normal standard errors, by the regression's Student t), so noise or slip never
@@ -39,7 +41,8 @@ import numpy as np
 from excite.data import Segments
 from excite.errors import DataError
 
-__all__ = ["DERIVED_RTOL", "WIRING_Z", "check_pose_source", "check_wiring"]
+__all__ = ["DERIVED_RTOL", "MAX_RADIUS_TO_TRACK", "WIRING_Z", "check_pose_source",
+           "check_wiring"]
 
 #: Standard errors below zero at which a wheel ratio counts as negative.
 WIRING_Z = 5.0
@@ -49,6 +52,9 @@ _RANK_RTOL = 1e-12
 #: weight is at least this fraction of the larger.
 _SAME_SIGN = 0.1
 
+#: r / b of any differential drive is below this (its wheels are smaller than its track; 0.3
+#: on a Husky): heading changes faster than this per wheel radian are in other units.
+MAX_RADIUS_TO_TRACK = 1.0
 #: Heading changes explained by the wheel increments to this fraction of their RMS come from
 #: the wheel angles, not from an external sensor.
 DERIVED_RTOL = 1e-7
@@ -167,3 +173,8 @@ def check_wiring(segments: Segments, source: str = "the data") -> None:
     if against:
         raise DataError(f"{source}: the heading turns against the wheels (it turns "
                         f"{turn:.3g} rad per rad the wheels turn apart, < 0): {swapped}")
+    if rank == 2 and np.all(ratios - MAX_RADIUS_TO_TRACK > -limit * se):
+        raise DataError(f"{source}: the heading turns {ratios[0]:.3g} and {ratios[1]:.3g} rad "
+                        "per radian of the right and left wheel (r_R/b, r_L/b), more than any "
+                        f"differential drive (r/b < {MAX_RADIUS_TO_TRACK:g}: wheels smaller "
+                        "than the track): headings in degrees? (theta is in rad)")

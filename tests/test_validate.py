@@ -331,3 +331,33 @@ def test_log_without_poses_in_encoder_range_is_an_error(capsys, tmp_path, noisy_
     code, _, err = run_cli(capsys, "validate", *files, "--params", params_file, "--nominal",
                            "0.05,0.05,0.3", "--time-offset", "1000")
     assert_one_line_error(code, err, "log.enc.csv+", "encoder time range")
+
+
+@pytest.mark.parametrize("fault, fragment", [
+    ("counter", "log.enc.csv:{line}: the wheel angles jump (1 time(s) in the log; the first "
+                "here), so dead reckoning across it means nothing: a counter that overflows"),
+    ("relocalised", "log.pose.csv:{line}: the pose jumps (1 time(s) in the log; the first "
+                    "here), so dead reckoning across it means nothing: a relocalisation"),
+])
+def test_a_log_that_jumps_is_not_dead_reckoned(capsys, tmp_path, noisy_log, params_file, fault,
+                                               fragment):
+    """A wheel counter that wraps, or a pose source that relocalises, mid-log: dead reckoning
+    across the jump gave end-point errors of metres and a ratio near 1 (calibration looked
+    useless), exit 0. Now a one-line error at the first jump."""
+    series = noisy_log.series
+    if fault == "counter":
+        k = int(np.searchsorted(series.t_enc, series.t_enc[0] + 20.0))
+        phi_L = series.phi_L.copy()
+        phi_L[k:] -= 65536 * 2 * np.pi / 4096  # an unsigned 16-bit counter wraps
+        series = TimeSeries(series.t_enc, phi_L, series.phi_R, series.t_pose, series.x,
+                            series.y, series.theta)
+    else:
+        k = int(np.searchsorted(series.t_pose, series.t_pose[0] + 20.0))
+        x = series.x.copy()
+        x[k:] += 0.5
+        series = TimeSeries(series.t_enc, series.phi_L, series.phi_R, series.t_pose, x,
+                            series.y, series.theta)
+    files = write_log(tmp_path, "log", series)
+    code, _, err = run_cli(capsys, "validate", *files, "--params", params_file, "--nominal",
+                           "0.05,0.05,0.3")
+    assert_one_line_error(code, err, fragment.format(line=k + 2))

@@ -178,3 +178,14 @@ def test_calibrate_refuses_the_nominal_robots_wheel_odometry(capsys, tmp_path):
     assert err.count("\n") == 1 and err.startswith(f"excite: error: {path}: the pose headings")
     code, out, err = run_cli(capsys, "calibrate", str(path))
     assert f"excite: note: {path}: the pose headings follow the wheel angles exactly" in err
+
+
+def test_headings_in_degrees_are_named():
+    """theta written in degrees: the heading turns ~57 times faster per wheel radian than the
+    robot's r/b, faster than any differential drive can (r/b < 1)."""
+    seg = _sensor_segments(np.random.default_rng(3), 60, 0.002)
+    check_wiring(seg)
+    in_degrees = dataclasses.replace(seg, dtheta=np.degrees(seg.dtheta))
+    with pytest.raises(DataError, match=r"log.csv: the heading turns .* more than any "
+                                        r"differential drive .* headings in degrees\?"):
+        check_wiring(in_degrees, "log.csv")

@@ -98,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
         nominal = (initial, result.sensor_pose)
         validation = summarize([validate_log(log.series, log.time_offset, robot, nominal,
                                              name=log.name)
-                                for log in (read_log(args, source) for source in held)])
+                                for log in (read_log(args, source, whole=True)
+                                            for source in held)])
     estimated_pose = result.sensor_pose if result.sensor_pose_std is not None else None
     if args.json:
         report = result.to_dict()

@@ -173,9 +173,16 @@ def group_inputs(paths: Sequence[str]) -> list[Input]:
     return inputs
 
 
-def read_log(args: argparse.Namespace, source: Input) -> Log:
-    """Read one time-series or bag input and settle its clock offset."""
-    from excite.timeseries import estimate_time_offset, noticeable_time_offset, read_timeseries
+def read_log(args: argparse.Namespace, source: Input, whole: bool = False) -> Log:
+    """Read one time-series or bag input and settle its clock offset. whole: the log will be
+    followed whole (dead reckoning, not segments): a jump in either stream is an error, before
+    anything is said about the clocks."""
+    from excite.timeseries import (
+        check_continuity,
+        estimate_time_offset,
+        noticeable_time_offset,
+        read_timeseries,
+    )
 
     skipped = None
     if source.kind == "bag":
@@ -195,6 +202,8 @@ def read_log(args: argparse.Namespace, source: Input) -> Log:
         series = read_timeseries(source.paths, ticks_per_rev=args.ticks_per_rev)
     else:
         raise UsageError(f"{source.name}: a segment file, not a time-series log or bag")
+    if whole:
+        check_continuity(series)
     if args.time_offset == "estimate":
         return Log(source.name, series,
                    estimate_time_offset(series, max_offset=args.max_time_offset), "estimated",

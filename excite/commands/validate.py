@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     calibrated = (result_file.params, result_file.sensor_pose)
     validations = []
     for source in group_inputs(args.logs):
-        log = read_log(args, source)
+        log = read_log(args, source, whole=True)
         validations.append(validate_log(log.series, log.time_offset, calibrated,
                                         (nominal_params, nominal_pose), name=log.name))
     result = summarize(validations)
