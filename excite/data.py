@@ -36,6 +36,7 @@ __all__ = [
     "Segments",
     "load_segment_files",
     "load_segments",
+    "check_not_utf16",
     "read_text",
     "save_segments",
 ]
@@ -205,6 +206,14 @@ def _parse_line(fields: list[str], where: str, columns: tuple[str, ...] = COLUMN
     return values
 
 
+def check_not_utf16(name: str, start: bytes) -> None:
+    """DataError when a file's first bytes ``start`` are a UTF-16 byte-order mark (text as
+    Windows PowerShell writes it), which excite does not read."""
+    if start[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise DataError(f"{name}: UTF-16 text (as Windows PowerShell writes it); save it as "
+                        "UTF-8")
+
+
 def read_text(name: str, kind: str = "CSV") -> str:
     """The file's text (UTF-8, BOM removed); DataError naming the file (a ``kind`` file) if
     it cannot be read or is not text."""
@@ -217,6 +226,7 @@ def read_text(name: str, kind: str = "CSV") -> str:
         raise DataError(f"{name}: is a directory, not a {kind} file") from None
     except OSError as exc:
         raise DataError(f"{name}: cannot read: {exc.strerror}") from None
+    check_not_utf16(name, raw[:2])
     if b"\x00" in raw:
         raise DataError(f"{name}: binary data, not a {kind} text file")
     try:

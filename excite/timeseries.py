@@ -312,14 +312,23 @@ def _content_lines(text: str) -> tuple[list[int], list[str]]:
 
 
 def _header_names(line: str) -> list[str]:
-    return [field.strip().lower() for field in line.split(",")]
+    """A header's names, lower case, without spaces or the double quotes of a quoted header."""
+    return [field.strip().strip('"').strip().lower() for field in line.split(",")]
+
+
+def _names_timeseries(names: set[str]) -> bool:
+    """Whether a header's names are a time-series CSV's: a ``t`` column, or any wheel or pose
+    column (a time column under another name is then an error naming it, not a segment CSV)."""
+    known = {n.lower() for n in ANGLE_COLUMNS + TICK_COLUMNS + POSE_COLUMNS}
+    return "t" in names or bool(names & known)
 
 
 def _parse_header(line: str, where: str) -> tuple[str, ...]:
     """Canonical column names of a time-series header; DataError for anything else."""
     names = _header_names(line)
     if "t" not in names:
-        raise DataError(f"{where}: not a time-series CSV (expected a header {_EXPECTED})")
+        raise DataError(f"{where}: no time column t (s); the header names "
+                        f"{', '.join(repr(n) for n in names)} (expected {_EXPECTED})")
     for name in names:
         if name not in _CANONICAL:
             raise DataError(f"{where}: unknown column {name!r} (time-series columns: t, "
@@ -439,11 +448,12 @@ def _header_of(path: PathArg) -> set[str] | None:
 
 def timeseries_streams(path: PathArg) -> frozenset[str]:
     """The streams a time-series CSV holds, from its header: a subset of {"encoder", "pose"};
-    empty when the header names no ``t`` column (a segment CSV, header
+    empty when the header names neither a ``t`` column nor a wheel or pose column (a segment
+    CSV, header
     ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none) or the file cannot be read as text.
     Reads only up to the header."""
     names = _header_of(path)
-    if not names or "t" not in names:
+    if not names or not _names_timeseries(names):
         return frozenset()
     wheels = {n.lower() for n in ANGLE_COLUMNS + TICK_COLUMNS}
     return frozenset(kind for kind, columns in (("encoder", wheels), ("pose", set(POSE_COLUMNS)))
@@ -451,11 +461,11 @@ def timeseries_streams(path: PathArg) -> frozenset[str]:
 
 
 def is_timeseries_csv(path: PathArg) -> bool:
-    """Whether a file's header names a ``t`` column: a time-series CSV, as opposed to a segment
-    CSV (header ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none); False when the file cannot
-    be read as text."""
+    """Whether a file's header names a ``t`` column or a wheel or pose column: a time-series
+    CSV, as opposed to a segment CSV (header ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none);
+    False when the file cannot be read as text."""
     names = _header_of(path)
-    return bool(names) and "t" in names
+    return bool(names) and _names_timeseries(names)
 
 
 def _path_list(paths: PathArg | Sequence[PathArg]) -> list[PathArg]:

@@ -266,3 +266,14 @@ def test_numpy_warnings_on_the_way_to_an_error_stay_off_stderr(capsys, monkeypat
     monkeypatch.setenv("EXCITE_DEBUG", "1")
     with pytest.warns(RuntimeWarning, match="overflow"):
         run_cli(capsys, "calibrate", tmp_path / "bad.csv")
+
+
+def test_utf16_files_are_named(capsys, tmp_path):
+    """A CSV saved by Windows PowerShell (UTF-16 with a byte-order mark): one line saying so,
+    from calibrate and from segment (which called it 'a segment file')."""
+    path = tmp_path / "log.csv"
+    path.write_text("t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n", encoding="utf-16")
+    message = f"{path}: UTF-16 text (as Windows PowerShell writes it); save it as UTF-8"
+    assert_one_line_error(*run_cli(capsys, "calibrate", path)[::2], message)
+    assert_one_line_error(*run_cli(capsys, "segment", path, "--out", tmp_path / "s.csv")[::2],
+                          message)

@@ -293,6 +293,8 @@ def test_is_timeseries_csv(tmp_path):
         "combined.csv": ("t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n", True),
         "enc.csv": ("# encoders\n\nT, phi_L, phi_R\n0,0,0\n", True),
         "pose.csv": ("t,x,y,theta\n", True),
+        "quoted.csv": ('"t","x","y","theta"\n', True),
+        "renamed.csv": ("timestamp,phi_L,phi_R,x,y,theta\n", True),  # an error naming it
         "segments.csv": ("dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt\n1,1,0.05,0,0\n", False),
         "bare.csv": ("1,1,0.05,0,0\n", False),
         "empty.csv": ("", False),
@@ -312,8 +314,13 @@ GOOD = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.1,1,1,0.05,0,0\n0.2,2,2,0.1,0,0\
     "text, message",
     [
         ("", "log.csv: empty file"),
-        ("1,1,0.05,0,0\n", "log.csv:1: not a time-series CSV"),
-        ("dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt\n", "log.csv:1: not a time-series CSV"),
+        ("1,1,0.05,0,0\n", "log.csv:1: no time column t (s); the header names '1', '1', "),
+        ("dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt\n", "log.csv:1: no time column t (s)"),
+        ("time,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n",
+         "log.csv:1: no time column t (s); the header names 'time', 'phi_l'"),
+        # a quoted header, a byte-order mark: read (the one row is then too few)
+        ('"t","phi_L","phi_R","x","y","theta"\n0,0,0,0,0,0\n', "log.csv: 1 encoder sample"),
+        ("\ufefft,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n", "log.csv: 1 encoder sample(s)"),
         ("t\n0\n", "log.csv:1: neither encoder (phi_L, phi_R) nor pose"),
         ("t,phi_L,x,y,theta\n", "log.csv:1: missing column phi_R"),
         ("t,phi_L,phi_R,x,theta\n", "log.csv:1: missing column y"),

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from excite.commands.args import UsageError
-from excite.data import Segments
+from excite.data import Segments, check_not_utf16
 from excite.errors import DataError
 from excite.timeseries import MAX_TIME_OFFSET, OffsetHint, SegmentedLog, TimeSeries
 
@@ -142,6 +142,9 @@ def _kind(path: str) -> tuple[str, frozenset[str]]:
         return "bag", frozenset()
     if not os.path.exists(path):
         raise UsageError(f"{path}: no such file")
+    if os.path.isfile(path):
+        with open(path, "rb") as handle:
+            check_not_utf16(path, handle.read(2))
     streams = timeseries_streams(path)
     return ("timeseries" if streams else "segments"), streams
 
