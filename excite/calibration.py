@@ -79,6 +79,9 @@ _UNIT_SIGMA = np.ones(3)
 #: freedom (3 N - parameters) per level. Fewer, and the levels collapse to fit the few
 #: residuals (noise ~1e-10 on 4 segments of a slipping log: r_R 45% off at z = -157).
 MIN_NOISE_DOF_PER_LEVEL = 5
+#: Slip may bias the parameters beyond their std (CalibrationResult.slip_may_bias) when its
+#: share of the wheel turn exceeds this many of their largest relative std.
+SLIP_BIAS_STDS = 3.0
 
 
 @dataclass(frozen=True)
@@ -147,7 +150,11 @@ class CalibrationResult:
     each segment's own, e.g. slip), the covariance accounting for the shared samples; else
     None. slip: for segments cut from a log (with sub-steps), the estimated wheel slip
     intensity (rad / sqrt(s): each wheel's random walk against its encoder, modelled through
-    the wheels, :class:`excite.noise.WheelNoise`); else None. rms_residual: raw residual RMS
+    the wheels, :class:`excite.noise.WheelNoise`); else None. slip_share: with slip, how large
+    it is against the driving: the median over moving segments of slip sqrt(duration) / the
+    larger wheel turn (rad / rad); slip that depends on the driving (speed, turns) biases the
+    parameters by up to about this fraction, which the random-walk model does not state
+    (:attr:`slip_may_bias`). rms_residual: raw residual RMS
     per channel. n_outliers: segments whose whitened
     squared residual exceeds the 99.9% chi2(3) quantile; n_trimmed: segments dropped by
     trimming.
@@ -176,6 +183,7 @@ class CalibrationResult:
     sigma_estimated: bool
     pose_sigma: FloatArray | None
     slip: float | None
+    slip_share: float | None
     loss: str
     converged: bool
     iterations: int
@@ -185,6 +193,15 @@ class CalibrationResult:
     @property
     def sigma_min(self) -> float:
         return float(self.singular_values[-1])
+
+    @property
+    def slip_may_bias(self) -> bool:
+        """Whether the slip is large enough to bias r_L, r_R, b beyond their std: slip_share
+        over SLIP_BIAS_STDS times the largest relative std of the three."""
+        if self.slip_share is None:
+            return False
+        relative = self.std / np.abs(self.params.as_array())
+        return bool(self.slip_share > SLIP_BIAS_STDS * float(np.max(relative)))
 
     def to_dict(self) -> dict:
         """JSON-ready dict (the ``excite calibrate --json`` object); inf becomes None."""
@@ -214,6 +231,8 @@ class CalibrationResult:
                            else dict(zip(("xy", "theta"), map(float, self.pose_sigma),
                                          strict=True))),
             "slip": self.slip,
+            "slip_share": self.slip_share,
+            "slip_may_bias": self.slip_may_bias,
             "loss": self.loss,
             "converged": bool(self.converged),
             "iterations": self.iterations,
@@ -261,7 +280,9 @@ class CalibrationResult:
             + ("" if self.pose_sigma is None else " per segment; pose samples: xy "
                "{:.3e} m, theta {:.3e} rad (shared by consecutive segments)".format(
                    *self.pose_sigma))
-            + ("" if self.slip is None else f"; wheel slip {self.slip:.3e} rad/sqrt(s)"),
+            + ("" if self.slip is None else f"; wheel slip {self.slip:.3e} rad/sqrt(s)")
+            + ("" if self.slip_share is None
+               else f" ({100 * self.slip_share:.2g}% of a segment's wheel turn)"),
             f"  outliers        = {self.n_outliers}"
             + (f"; trimmed {self.n_trimmed}" if self.n_trimmed else ""),
             f"  converged       = {self.converged} after {self.iterations} iterations"
@@ -628,6 +649,19 @@ def calibrate(
                    len(seg) - len(data), levels, slip)
 
 
+def _slip_share(seg: Segments, slip: float) -> float | None:
+    """CalibrationResult.slip_share: the median over moving segments of slip sqrt(duration)
+    / max(|dphi_L|, |dphi_R|); None without segment times or moving segments."""
+    if seg.t_start is None or seg.t_end is None:
+        return None
+    turn = np.maximum(np.abs(seg.dphi_L), np.abs(seg.dphi_R))
+    moving = turn > 0
+    if not moving.any():
+        return None
+    duration = (seg.t_end - seg.t_start)[moving]
+    return float(np.median(slip * np.sqrt(duration) / turn[moving]))
+
+
 def _refuse_too_few_for_noise(data: Segments, n_parameters: int) -> None:
     """DataError unless the segments leave MIN_NOISE_DOF_PER_LEVEL residual degrees of freedom
     per noise level to estimate (five levels; six for segments cut from a log, with slip)."""
@@ -761,6 +795,7 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
         sigma_estimated=sigma_estimated,
         pose_sigma=None if levels is None else levels.pose,
         slip=slip,
+        slip_share=None if slip is None else _slip_share(seg, slip),
         loss=loss,
         converged=fit.converged,
         iterations=fit.iterations,

@@ -202,6 +202,29 @@ def test_too_few_segments_to_estimate_the_noise_levels(capsys, tmp_path):
     assert code in (0, 3) and "r_L" in out
 
 
+@pytest.mark.parametrize("slip", [0.0, 0.05])
+def test_slip_large_against_the_std_is_noted(capsys, tmp_path, slip):
+    """Wheel slip of ~0.8% of the wheel turn per segment (0.05 rad/sqrt(s) on ~6 rad
+    segments) over 4 minutes, against relative std of ~0.2%: slip that depends on the driving
+    would bias the estimates beyond their std (a random slip's std shrinks with the log's
+    length, a systematic slip's bias does not), so calibrate says so (and --json carries
+    slip_share); without slip, nothing."""
+    series = synthetic_log(np.random.default_rng(10), 240.0, Params(0.05, 0.051, 0.3),
+                           pose_noise=(0.001, 0.001), slip=slip).series
+    path = tmp_path / "log.csv"
+    write_timeseries(path, series)
+    code, out, err = run_cli(capsys, "calibrate", path, "--json")
+    report = json.loads(out)
+    assert report["slip_may_bias"] is (slip > 0)
+    assert ("excite: note: the wheels slip by" in err) is (slip > 0)
+    if slip:  # slip sqrt(1 s) over the median wheel turn of a 1 s segment, within 30%
+        speed = np.maximum(np.abs(np.diff(series.phi_L)), np.abs(np.diff(series.phi_R)))
+        turn = np.median(speed / np.diff(series.t_enc))
+        assert report["slip_share"] == pytest.approx(slip / turn, rel=0.3)
+        assert report["slip_share"] > 3 * max(report["std"][k] / report["params"][k]
+                                              for k in ("r_L", "r_R", "b"))
+
+
 def test_a_clock_jump_or_times_in_ns_are_one_line_errors(capsys, tmp_path):
     """A clock that jumps by a year mid-log (NTP setting a Raspberry Pi's clock), and epoch
     times written in ns: one line each, not the time-offset check's grid over the whole span
