@@ -1130,8 +1130,9 @@ def _check_poses(ts: TimeSeries, window: float, limits: Limits,
     return _StreamCheck(gap, jump, missed)
 
 
-_ENCODER_JUMP_HINT = ("a counter that overflows or resets? (wheel angles must be cumulative; "
-                      "ticks as counted, with --ticks-per-rev)")
+_ENCODER_JUMP_HINT = ("a counter that overflows or resets, or a second publisher of the wheel "
+                      "joints? (wheel angles must be cumulative; ticks as counted, with "
+                      "--ticks-per-rev)")
 _POSE_JUMP_HINT = "a relocalisation, or headings in degrees? (theta is in rad)"
 
 
