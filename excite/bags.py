@@ -280,6 +280,13 @@ def bag_path_problem(path: str | os.PathLike[str]) -> str | None:
     ``metadata.yaml`` or a compressed file (``.zstd``) of a rosbag2 bag given instead of its
     directory."""
     p = Path(path)
+    try:
+        return _bag_part(p)
+    except OSError:  # an unreadable directory: opening it says what is wrong
+        return None
+
+
+def _bag_part(p: Path) -> str | None:
     if p.name.endswith(".bag.active"):
         return (f"{p}: an unfinished ROS 1 recording (.bag.active); `rosbag reindex {p}` "
                 "repairs it, then rename it to .bag")
@@ -336,7 +343,8 @@ class _Bag:
             if Path(self.name).is_file() and (Path(self.name).parent / "metadata.yaml").exists():
                 hint = (f"; if the bag is compressed, give its directory "
                         f"{Path(self.name).parent}")
-            raise DataError(f"{self.name} {where}: a message cannot be read or decoded "
+            place = f"{self.name} {where}" if where else self.name
+            raise DataError(f"{place}: a message cannot be read or decoded "
                             f"({_why(exc)}){hint}") from None
 
     def _decoder(self, connections: list[Any]) -> Callable[[bytes, str], Any]:

@@ -79,9 +79,6 @@ _UNIT_SIGMA = np.ones(3)
 #: freedom (3 N - parameters) per level. Fewer, and the levels collapse to fit the few
 #: residuals (noise ~1e-10 on 4 segments of a slipping log: r_R 45% off at z = -157).
 MIN_NOISE_DOF_PER_LEVEL = 5
-#: Slip may bias the parameters beyond their std (CalibrationResult.slip_may_bias) when its
-#: share of the wheel turn exceeds this many of their largest relative std.
-SLIP_BIAS_STDS = 3.0
 
 
 @dataclass(frozen=True)
@@ -152,9 +149,10 @@ class CalibrationResult:
     intensity (rad / sqrt(s): each wheel's random walk against its encoder, modelled through
     the wheels, :class:`excite.noise.WheelNoise`); else None. slip_share: with slip, how large
     it is against the driving: the median over moving segments of slip sqrt(duration) / the
-    larger wheel turn (rad / rad); slip that depends on the driving (speed, turns) biases the
-    parameters by up to about this fraction, which the random-walk model does not state
-    (:attr:`slip_may_bias`). rms_residual: raw residual RMS
+    larger wheel turn (rad / rad). The random walk's part of the std shrinks as the log grows;
+    slip that depends on the driving (speed, turns) instead biases the parameters by up to
+    about this fraction, which the model does not state (calibrate on gentle driving when it is
+    large against the std). rms_residual: raw residual RMS
     per channel. n_outliers: segments whose whitened
     squared residual exceeds the 99.9% chi2(3) quantile; n_trimmed: segments dropped by
     trimming.
@@ -194,14 +192,6 @@ class CalibrationResult:
     def sigma_min(self) -> float:
         return float(self.singular_values[-1])
 
-    @property
-    def slip_may_bias(self) -> bool:
-        """Whether the slip is large enough to bias r_L, r_R, b beyond their std: slip_share
-        over SLIP_BIAS_STDS times the largest relative std of the three."""
-        if self.slip_share is None:
-            return False
-        relative = self.std / np.abs(self.params.as_array())
-        return bool(self.slip_share > SLIP_BIAS_STDS * float(np.max(relative)))
 
     def to_dict(self) -> dict:
         """JSON-ready dict (the ``excite calibrate --json`` object); inf becomes None."""
@@ -232,7 +222,6 @@ class CalibrationResult:
                                          strict=True))),
             "slip": self.slip,
             "slip_share": self.slip_share,
-            "slip_may_bias": self.slip_may_bias,
             "loss": self.loss,
             "converged": bool(self.converged),
             "iterations": self.iterations,
@@ -649,6 +638,12 @@ def calibrate(
                    len(seg) - len(data), levels, slip)
 
 
+def _cut_from_log(data: Segments) -> bool:
+    """Whether segments were cut from a log (sub-steps and times): their noise enters through
+    the wheels too (:class:`excite.noise.WheelNoise`, the slip level)."""
+    return data.sub_dphi_L is not None and data.t_start is not None
+
+
 def _slip_share(seg: Segments, slip: float) -> float | None:
     """CalibrationResult.slip_share: the median over moving segments of slip sqrt(duration)
     / max(|dphi_L|, |dphi_R|); None without segment times or moving segments."""
@@ -665,7 +660,7 @@ def _slip_share(seg: Segments, slip: float) -> float | None:
 def _refuse_too_few_for_noise(data: Segments, n_parameters: int) -> None:
     """DataError unless the segments leave MIN_NOISE_DOF_PER_LEVEL residual degrees of freedom
     per noise level to estimate (five levels; six for segments cut from a log, with slip)."""
-    n_levels = 6 if data.sub_dphi_L is not None and data.t_start is not None else 5
+    n_levels = 6 if _cut_from_log(data) else 5
     dof = 3 * len(data) - n_parameters
     needed = MIN_NOISE_DOF_PER_LEVEL * n_levels
     if dof < needed:
@@ -673,7 +668,7 @@ def _refuse_too_few_for_noise(data: Segments, n_parameters: int) -> None:
         raise DataError(f"{len(data)} segments leave {dof} residual degrees of freedom to "
                         f"estimate {n_levels} noise levels from; at least {needed} are needed "
                         f"(about {segments} segments for {n_parameters} parameters): a longer "
-                        "log, a shorter window, or given noise levels (--sigma)")
+                        "log, a shorter window, or given noise levels (sigma, --sigma)")
 
 
 def _serially_correlated(test: FitTest) -> bool:
@@ -721,7 +716,7 @@ def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, lo
     mf = _fit_model(model, data, start, None, *settings)
     floor = mf.problem.sigma_floor
     levels = moment_noise(data, mf.fit.ev.residual, model.size, floor)
-    in_wheels = data.sub_dphi_L is not None and data.t_start is not None
+    in_wheels = _cut_from_log(data)
 
     def wheels_at(theta: FloatArray) -> WheelNoise | None:
         return WheelNoise.of(model, data, theta, tick) if in_wheels else None

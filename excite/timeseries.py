@@ -727,10 +727,10 @@ def _refined_lag(r2: FloatArray, max_lag: int, step: float) -> float:
 
 
 #: The offset is estimated on a uniform grid of the finer median sample period over the time
-#: both streams cover; when that grid would hold more than this many points per sample, the
-#: log has long gaps (a clock jump, a pause in recording) and the rates are not estimated
-#: across them (the grid's size is then bounded by the samples, not by the time span).
-MAX_GRID_PER_SAMPLE = 4
+#: both streams cover (across gaps too); a grid of more points than this (over a day of 100 Hz
+#: samples: a clock that jumps, times in other units) is refused instead of filling the memory
+#: (a one-year clock jump at 100 Hz asked for 1.3 TiB).
+MAX_OFFSET_GRID = 10_000_000
 #: The default search range of estimate_time_offset: +- this (s).
 MAX_TIME_OFFSET = 1.0
 #: The default least correlation of estimate_time_offset's best fit.
@@ -790,11 +790,12 @@ def _estimate(ts: TimeSeries, max_offset: float, min_correlation: float) -> _Off
     if not overlap > 4 * max_offset:
         raise DataError(f"cannot estimate the time offset: the streams overlap for "
                         f"{max(overlap, 0.0):.3g} s, less than 4 x max_offset ({max_offset} s)")
-    samples = ts.t_enc.size + ts.t_pose.size
-    if overlap / step > MAX_GRID_PER_SAMPLE * samples:
+    if overlap / step > MAX_OFFSET_GRID:
+        samples = ts.t_enc.size + ts.t_pose.size
         raise DataError(f"cannot estimate the time offset: the streams' {samples} samples "
                         f"span {overlap:.6g} s, {overlap / step:.3g} sample periods "
-                        f"({step:.3g} s): long gaps (or a clock that jumps)")
+                        f"({step:.3g} s), more than the {MAX_OFFSET_GRID:.0e} the estimate "
+                        "takes: long gaps (or a clock that jumps)? give --time-offset")
     max_lag = max(1, int(math.ceil(max_offset / step)))
     signals = _rate_signals(ts, step)
     r2 = _explained(*signals, max_lag)
@@ -936,7 +937,10 @@ class Limits:
         noise of a difference of two poses (estimated from the pose stream, as for
         carry_sigmas).
     jump_sigmas: at 6, noise alone passes the jump limit once in ~10^8 samples (the Rayleigh
-        tail exp(-6^2 / 2) for the position, twice the normal tail for the heading).
+        tail exp(-6^2 / 2) for the position, twice the normal tail for the heading). At low
+        pose rates (about 1 Hz) the robust noise estimate also counts the curvature of the
+        motion between samples (0.13 m, 0.15 rad turning at 1 m/s and 1 rad/s), which widens
+        the limit by about 1 m there.
     max_wheel_rate (rad/s): wheel rate between consecutive encoder samples above which the
         step is a jump (a counter reset or overflow).
     still_wheel (rad), still_distance (m), still_heading (rad): a segment is a standstill when

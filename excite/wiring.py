@@ -113,9 +113,10 @@ def check_pose_source(segments: Segments, source: str = "the data",
         r_L, r_R, b = nominal
         if np.allclose(ratios, (r_R / b, r_L / b), rtol=1e-6, atol=0.0):
             raise DataError(f"{source}: {what}, with the nominal robot's ratios: the poses are "
-                            "its wheel odometry (dead reckoning of these encoders), which gives "
-                            "back the nominal parameters; use an external pose source (motion "
-                            "capture, a scan matcher), not /odom or odom -> base_link")
+                            "its dead reckoning (wheel odometry, or a noise-free kinematic "
+                            "simulation of this very robot), which gives back the nominal "
+                            "parameters; use an external pose source (motion capture, a scan "
+                            "matcher), not /odom or odom -> base_link")
     return (f"{source}: {what}: poses computed from these encoders (wheel odometry such as "
             "/odom or odom -> base_link) give back the parameters they were computed with, "
             "whatever the robot's true ones; an external pose source is needed (simulated "
@@ -177,4 +178,5 @@ def check_wiring(segments: Segments, source: str = "the data") -> None:
         raise DataError(f"{source}: the heading turns {ratios[0]:.3g} and {ratios[1]:.3g} rad "
                         "per radian of the right and left wheel (r_R/b, r_L/b), more than any "
                         f"differential drive (r/b < {MAX_RADIUS_TO_TRACK:g}: wheels smaller "
-                        "than the track): headings in degrees? (theta is in rad)")
+                        "than the track): headings in degrees, or wheel angles in "
+                        "revolutions? (theta and the wheel angles are in rad)")

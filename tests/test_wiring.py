@@ -142,7 +142,7 @@ def test_poses_dead_reckoned_from_the_encoders_are_named():
     seg = Segments(dphi[0], dphi[1], *np.moveaxis(exact, -1, 0))
     note = check_pose_source(seg, "odom.csv")
     assert note is not None and note.startswith("odom.csv: the pose headings follow the wheel")
-    with pytest.raises(DataError, match="odom.csv: .* wheel odometry"):
+    with pytest.raises(DataError, match=r"odom.csv: .* dead reckoning \(wheel odometry"):
         check_pose_source(seg, "odom.csv", nominal=tuple(TRUTH.as_array()))
     assert check_pose_source(seg, "odom.csv", nominal=(0.05, 0.05, 0.3)) is not None
     # an external sensor: even motion-capture heading noise (0.1 mrad) is far from exact
@@ -187,5 +187,6 @@ def test_headings_in_degrees_are_named():
     check_wiring(seg)
     in_degrees = dataclasses.replace(seg, dtheta=np.degrees(seg.dtheta))
     with pytest.raises(DataError, match=r"log.csv: the heading turns .* more than any "
-                                        r"differential drive .* headings in degrees\?"):
+                                        r"differential drive .* headings in degrees, or wheel "
+                                        r"angles in revolutions\?"):
         check_wiring(in_degrees, "log.csv")

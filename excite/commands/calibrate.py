@@ -90,11 +90,6 @@ def run(args: argparse.Namespace) -> int:
     result = calibrate(segments, initial=initial, sigma=sigma, loss=args.loss,
                        sensor_pose=sensor_pose, trim=args.trim,
                        ticks_per_rev=args.ticks_per_rev)
-    if result.slip_may_bias:
-        print(f"excite: note: the wheels slip by ~{100 * result.slip_share:.2g}% of their turn "
-              "per segment, more than 3x the estimates' relative std: slip that depends on the "
-              "driving (speed, acceleration, turns) biases r_L, r_R and b beyond their std; "
-              "calibrate on gentler driving", file=sys.stderr)
     validation = None
     if held:
         from excite.validation import summarize, validate_log

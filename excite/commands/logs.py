@@ -142,9 +142,12 @@ def _kind(path: str) -> tuple[str, frozenset[str]]:
         return "bag", frozenset()
     if not os.path.exists(path):
         raise UsageError(f"{path}: no such file")
-    if os.path.isfile(path):
+    try:
         with open(path, "rb") as handle:
-            check_not_utf16(path, handle.read(2))
+            start = handle.read(2)
+    except OSError:
+        start = b""  # a directory or an unreadable file: reading it says what is wrong
+    check_not_utf16(path, start)
     streams = timeseries_streams(path)
     return ("timeseries" if streams else "segments"), streams
 
