@@ -227,7 +227,9 @@ class TimeSeries:
     name the sample's time).
     unwrapped_wheels: the wheel columns (of "phi_L", "phi_R") that were wrapped to one turn
     (continuous joints reported modulo 2 pi) and are unwrapped here; DataError when such a
-    stream is sampled too slowly to unwrap (see MAX_UNWRAPPED_STEP).
+    stream is sampled too slowly to unwrap (see MAX_UNWRAPPED_STEP). unwrapped_counters: the
+    tick columns whose fixed-width counter overflowed and was unwrapped when they were read
+    (e.g. 'ticks_L (16-bit counter)', :func:`read_timeseries`), for the reports.
     """
 
     t_enc: FloatArray
@@ -239,6 +241,7 @@ class TimeSeries:
     theta: FloatArray
     source: tuple[str, str] = ("encoders", "poses")
     lines: tuple[IntArray | None, IntArray | None] = (None, None)
+    unwrapped_counters: tuple[str, ...] = ()
     unwrapped_wheels: tuple[str, ...] = field(default=(), init=False)
 
     def __post_init__(self) -> None:
@@ -505,9 +508,37 @@ def tick_angle(ticks_per_rev: float) -> float:
     return 2.0 * math.pi / ticks_per_rev
 
 
+#: Widths (bits) of the encoder counters whose overflow is unwrapped (:func:`_unwrapped_counter`).
+COUNTER_BITS = (16, 32)
+
+
+def _counter_width(ticks: FloatArray) -> int | None:
+    """The width (bits, of COUNTER_BITS) of a fixed-width counter that wrapped in ``ticks``:
+    whole numbers within an unsigned or a signed range of that width, with a step between
+    samples over half of it (no wheel turns that far between two samples); None otherwise."""
+    if ticks.size < 2 or not np.all(ticks == np.round(ticks)):
+        return None
+    low, high = float(ticks.min()), float(ticks.max())
+    step = float(np.abs(np.diff(ticks)).max())
+    for bits in COUNTER_BITS:
+        span = 2.0**bits
+        fits = (low >= 0 and high < span) or (-span / 2 <= low and high < span / 2)
+        if fits and step > span / 2:
+            return bits
+    return None
+
+
+def _unwrapped_counter(ticks: FloatArray) -> tuple[FloatArray, int | None]:
+    """Encoder ticks with a fixed-width counter's overflows undone (:func:`_counter_width`), as
+    a cumulative count, and the counter's width (None: no counter wrapped, ticks unchanged)."""
+    bits = _counter_width(ticks)
+    return (ticks if bits is None else np.unwrap(ticks, period=2.0**bits)), bits
+
+
 def _encoder_angles(table: _Table, ticks_per_rev: float | None
-                    ) -> tuple[list[FloatArray], IntArray]:
-    """[t, phi_L, phi_R] (s, rad, rad) and lines; ticks become angles."""
+                    ) -> tuple[list[FloatArray], IntArray, tuple[str, ...]]:
+    """[t, phi_L, phi_R] (s, rad, rad), lines, and the tick columns whose counter wrapped (e.g.
+    'ticks_L (16-bit counter)'); ticks become angles."""
     names = table.encoder_columns
     assert names is not None
     (t, left, right), lines = table.stream(names)
@@ -517,12 +548,15 @@ def _encoder_angles(table: _Table, ticks_per_rev: float | None
                             "ticks_R) need the encoder resolution, ticks_per_rev "
                             "(--ticks-per-rev)")
         scale = tick_angle(ticks_per_rev)
-        return [t, left * scale, right * scale], lines
+        (left, left_bits), (right, right_bits) = map(_unwrapped_counter, (left, right))
+        wrapped = tuple(f"{name} ({bits}-bit counter)" for name, bits in
+                        zip(TICK_COLUMNS, (left_bits, right_bits), strict=True) if bits)
+        return [t, left * scale, right * scale], lines, wrapped
     if ticks_per_rev is not None:
         raise DataError(f"{table.name}:{table.header_line}: ticks_per_rev given, but the "
                         "encoder columns are angles in rad (phi_L, phi_R); ticks are columns "
                         "ticks_L, ticks_R")
-    return [t, left, right], lines
+    return [t, left, right], lines, ()
 
 
 def read_timeseries(paths: PathArg | Sequence[PathArg],
@@ -548,10 +582,11 @@ def read_timeseries(paths: PathArg | Sequence[PathArg],
         raise DataError(f"a time-series log is one CSV file or two (encoders and poses), "
                         f"got {len(files)} files")
     encoders, poses = _pick_streams([_read_table(p) for p in files])
-    (t_enc, phi_L, phi_R), enc_lines = _encoder_angles(encoders, ticks_per_rev)
+    (t_enc, phi_L, phi_R), enc_lines, counters = _encoder_angles(encoders, ticks_per_rev)
     (t_pose, x, y, theta), pose_lines = poses.stream(POSE_COLUMNS)
     return TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,
-                      source=(encoders.name, poses.name), lines=(enc_lines, pose_lines))
+                      source=(encoders.name, poses.name), lines=(enc_lines, pose_lines),
+                      unwrapped_counters=counters)
 
 
 # --------------------------------------------------------------------------- CSV writing
@@ -1020,12 +1055,17 @@ class SegmentationReport:
     gaps: tuple[Gap, ...] = ()
     dropouts: dict[str, int] = field(default_factory=dict)
     unwrapped_wheels: tuple[str, ...] = ()
+    unwrapped_counters: tuple[str, ...] = ()
 
     def unwrapped_text(self) -> str:
-        """'phi_L, phi_R wrapped modulo 2 pi, unwrapped' ('' when no wheel was wrapped)."""
-        if not self.unwrapped_wheels:
-            return ""
-        return f"{', '.join(self.unwrapped_wheels)} wrapped modulo 2 pi, unwrapped"
+        """'phi_L, phi_R wrapped modulo 2 pi, unwrapped' and/or 'ticks_L (16-bit counter)
+        overflowed, unwrapped' ('' when nothing was wrapped)."""
+        parts = []
+        if self.unwrapped_wheels:
+            parts.append(f"{', '.join(self.unwrapped_wheels)} wrapped modulo 2 pi, unwrapped")
+        if self.unwrapped_counters:
+            parts.append(f"{', '.join(self.unwrapped_counters)} overflowed, unwrapped")
+        return "; ".join(parts)
 
     def counts_text(self) -> str:
         """What was dropped, in one line, e.g. '3 standstill, 1 pose jump; 25 pose samples
@@ -1038,7 +1078,7 @@ class SegmentationReport:
     def summary(self) -> str:
         """The report in words, one fact per line."""
         lines = [f"{_plural(self.n_segments, 'segment')} kept."]
-        if self.unwrapped_wheels:
+        if self.unwrapped_text():
             lines.append(f"Wheel angles {self.unwrapped_text()}.")
         dropped = sum(self.segments_dropped.values())
         if dropped:
@@ -1363,7 +1403,7 @@ def _merged(ranges: list[tuple[float, float]]) -> tuple[tuple[float, float], ...
 
 def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: int,
             stretches: _Stretches, gaps: list[Gap], encoders: _StreamCheck,
-            poses: _StreamCheck, unwrapped_wheels: tuple[str, ...]) -> SegmentationReport:
+            poses: _StreamCheck, ts: TimeSeries) -> SegmentationReport:
     ranges = {reason: [(t_pose[a], t_pose[b]) for a, b in zip(cut.start[mask], cut.end[mask],
                                                               strict=True)]
               for reason, mask in reasons.items()}
@@ -1378,7 +1418,8 @@ def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: 
                          INSIDE_ENCODER_GAP: stretches.in_gap},
         gaps=tuple(gaps),
         dropouts={"encoder": encoders.dropouts, "pose": poses.dropouts},
-        unwrapped_wheels=unwrapped_wheels,
+        unwrapped_wheels=ts.unwrapped_wheels,
+        unwrapped_counters=ts.unwrapped_counters,
     )
 
 
@@ -1444,7 +1485,7 @@ def segment_timeseries(
     keep = ~np.logical_or.reduce(list(reasons.values()))
     start, end = cut.start[keep], cut.end[keep]
     report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses,
-                     ts.unwrapped_wheels)
+                     ts)
     if report.n_segments < MIN_SEGMENTS:
         # name the stream behind most of the drops (encoder jumps and standstills: the wheels)
         worst = max(report.segments_dropped, key=report.segments_dropped.get, default=None)

@@ -34,6 +34,7 @@ from excite.timeseries import (
     noticeable_time_offset,
     read_timeseries,
     segment_timeseries,
+    write_timeseries,
 )
 
 TRUTH = Params(0.050, 0.051, 0.300)
@@ -264,6 +265,39 @@ def test_wrapped_wheel_angles_are_unwrapped_and_reported(tmp_path, sim, every, l
     assert log.report.unwrapped_text() == "phi_L, phi_R wrapped modulo 2 pi, unwrapped"
     assert "Wheel angles phi_L, phi_R wrapped modulo 2 pi, unwrapped." in log.report.summary()
     assert reference.report.unwrapped_wheels == () and reference.report.unwrapped_text() == ""
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_encoder_counters_that_overflow_are_unwrapped(tmp_path, signed):
+    """Ticks from a 16-bit counter (a microcontroller's), 16384 ticks per revolution: it wraps
+    every 4 turns, and each wrap was an encoder jump (21 of 40 segments dropped). Read as the
+    cumulative count, and reported."""
+    from excite.synthetic import synthetic_log
+
+    ts = synthetic_log(np.random.default_rng(11), 40.0, pose_noise=(0.001, 0.001),
+                       ticks_per_rev=16384).series
+    path, wrapped_path = tmp_path / "log.csv", tmp_path / "wrapped.csv"
+    write_timeseries(path, ts, ticks_per_rev=16384)
+    lines = path.read_text().splitlines()
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        for k in (1, 2):
+            if cells[k]:
+                tick = int(cells[k]) % 65536
+                cells[k] = str(tick - 65536 if signed and tick >= 32768 else tick)
+        out.append(",".join(cells))
+    wrapped_path.write_text("\n".join(out) + "\n")
+    read = read_timeseries(wrapped_path, ticks_per_rev=16384)
+    assert read.unwrapped_counters == ("ticks_L (16-bit counter)", "ticks_R (16-bit counter)")
+    for name in ("phi_L", "phi_R"):
+        np.testing.assert_allclose(np.diff(getattr(read, name)), np.diff(getattr(ts, name)),
+                                   rtol=0, atol=1e-9)
+    log = segment_timeseries(read)
+    assert log.report.segments_dropped == segment_timeseries(ts).report.segments_dropped
+    assert log.report.unwrapped_text() == ("ticks_L (16-bit counter), ticks_R (16-bit counter) "
+                                           "overflowed, unwrapped")
+    assert read_timeseries(path, ticks_per_rev=16384).unwrapped_counters == ()
 
 
 def test_wheel_angles_within_pi_that_do_not_wrap_are_kept():

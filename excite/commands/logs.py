@@ -250,7 +250,7 @@ class Part:
             return f"{self.source.name}: {len(self.segments)} segments"
         report = self.cut.report
         offset = f"; time offset {self.log.offset_text()}"
-        unwrapped = f"; {report.unwrapped_text()}" if report.unwrapped_wheels else ""
+        unwrapped = f"; {report.unwrapped_text()}" if report.unwrapped_text() else ""
         skipped = "" if self.log.skipped is None else f"; messages skipped: {self.log.skipped}"
         return (f"{self.source.name}: {report.n_segments} segments; dropped: "
                 f"{report.counts_text()}{unwrapped}{skipped}{offset}")
