@@ -508,15 +508,15 @@ def tick_angle(ticks_per_rev: float) -> float:
     return 2.0 * math.pi / ticks_per_rev
 
 
-#: Widths (bits) of the encoder counters whose overflow is unwrapped (:func:`_unwrapped_counter`).
+#: Widths (bits) of the encoder counters whose overflows are undone (_unwrapped_counter).
 COUNTER_BITS = (16, 32)
 
 
 def _counter_width(ticks: FloatArray) -> int | None:
-    """The width (bits, of COUNTER_BITS) of a fixed-width counter that wrapped in ``ticks``:
-    whole numbers within an unsigned or a signed range of that width, with a step between
-    samples over half of it (no wheel turns that far between two samples); None otherwise."""
-    if ticks.size < 2 or not np.all(ticks == np.round(ticks)):
+    """The width (bits, of COUNTER_BITS) of a fixed-width counter that may have wrapped in
+    ``ticks``: whole numbers within an unsigned or a signed range of that width, with a step
+    between samples over half of it; None otherwise."""
+    if ticks.size < 3 or not np.all(ticks == np.round(ticks)):
         return None
     low, high = float(ticks.min()), float(ticks.max())
     step = float(np.abs(np.diff(ticks)).max())
@@ -528,11 +528,34 @@ def _counter_width(ticks: FloatArray) -> int | None:
     return None
 
 
+#: An overflow is undone only where the step it leaves is at most this many times the larger
+#: of its neighbouring steps (plus OVERFLOW_SLACK ticks): a wheel turning on as before. A
+#: counter reset (a reboot: 65300 -> 0) leaves a step unlike its neighbours and stays a jump.
+OVERFLOW_STEP_RATIO = 2.0
+OVERFLOW_SLACK = 2.0
+
+
 def _unwrapped_counter(ticks: FloatArray) -> tuple[FloatArray, int | None]:
-    """Encoder ticks with a fixed-width counter's overflows undone (:func:`_counter_width`), as
-    a cumulative count, and the counter's width (None: no counter wrapped, ticks unchanged)."""
+    """Encoder ticks with a fixed-width counter's overflows undone, as a cumulative count, and
+    the counter's width (None: no overflow undone, ticks unchanged). A step over half the
+    counter's range (:func:`_counter_width`) is an overflow when, taken modulo the range, it
+    continues the neighbouring steps (OVERFLOW_STEP_RATIO); other big steps are left alone
+    (jumps, which segmentation drops and validation refuses)."""
     bits = _counter_width(ticks)
-    return (ticks if bits is None else np.unwrap(ticks, period=2.0**bits)), bits
+    if bits is None:
+        return ticks, None
+    span = 2.0**bits
+    steps = np.diff(ticks)
+    big = np.abs(steps) > span / 2
+    wrapped = steps - span * np.round(steps / span)
+    small = np.where(big, 0.0, np.abs(steps))
+    neighbours = np.maximum(np.concatenate(([0.0], small[:-1])),
+                            np.concatenate((small[1:], [0.0])))
+    overflow = big & (np.abs(wrapped) <= OVERFLOW_STEP_RATIO * neighbours + OVERFLOW_SLACK)
+    if not overflow.any():
+        return ticks, None
+    fixed = np.where(overflow, wrapped, steps)
+    return ticks[0] + np.concatenate(([0.0], np.cumsum(fixed))), bits
 
 
 def _encoder_angles(table: _Table, ticks_per_rev: float | None
@@ -762,10 +785,10 @@ def _refined_lag(r2: FloatArray, max_lag: int, step: float) -> float:
 
 
 #: The offset is estimated on a uniform grid of the finer median sample period over the time
-#: both streams cover (across gaps too); a grid of more points than this (over a day of 100 Hz
-#: samples: a clock that jumps, times in other units) is refused instead of filling the memory
-#: (a one-year clock jump at 100 Hz asked for 1.3 TiB).
-MAX_OFFSET_GRID = 10_000_000
+#: both streams cover; a grid of more points than this many per sample means long gaps (a
+#: clock that jumps, a pause between sessions), over which the rates cannot be compared, and
+#: is refused (a one-year clock jump at 100 Hz asked for 1.3 TiB; a 20 h one for 1 GB).
+MAX_GRID_PER_SAMPLE = 4
 #: The default search range of estimate_time_offset: +- this (s).
 MAX_TIME_OFFSET = 1.0
 #: The default least correlation of estimate_time_offset's best fit.
@@ -825,12 +848,12 @@ def _estimate(ts: TimeSeries, max_offset: float, min_correlation: float) -> _Off
     if not overlap > 4 * max_offset:
         raise DataError(f"cannot estimate the time offset: the streams overlap for "
                         f"{max(overlap, 0.0):.3g} s, less than 4 x max_offset ({max_offset} s)")
-    if overlap / step > MAX_OFFSET_GRID:
-        samples = ts.t_enc.size + ts.t_pose.size
+    samples = ts.t_enc.size + ts.t_pose.size
+    if overlap / step > MAX_GRID_PER_SAMPLE * samples:
         raise DataError(f"cannot estimate the time offset: the streams' {samples} samples "
                         f"span {overlap:.6g} s, {overlap / step:.3g} sample periods "
-                        f"({step:.3g} s), more than the {MAX_OFFSET_GRID:.0e} the estimate "
-                        "takes: long gaps (or a clock that jumps)? give --time-offset")
+                        f"({step:.3g} s): long gaps (or a clock that jumps); give "
+                        "--time-offset, or estimate it on each part of the log")
     max_lag = max(1, int(math.ceil(max_offset / step)))
     signals = _rate_signals(ts, step)
     r2 = _explained(*signals, max_lag)

@@ -300,6 +300,27 @@ def test_encoder_counters_that_overflow_are_unwrapped(tmp_path, signed):
     assert read_timeseries(path, ticks_per_rev=16384).unwrapped_counters == ()
 
 
+def test_a_counter_reset_near_the_top_stays_a_jump(tmp_path):
+    """A 16-bit counter that resets to 0 from 65300 (a microcontroller reboot), not an
+    overflow: modulo 2^16 the step would be +236 ticks, unlike the wheel's steps around it,
+    so it stays an encoder jump instead of becoming a plausible step."""
+    t = np.arange(0.0, 30.0, 0.01)
+    ticks = np.round(64000.0 + 120.0 * t)  # 120 ticks/s, up to 67600 without the reset
+    reset = int(np.searchsorted(ticks, 65300.0))
+    ticks[reset:] = np.round(120.0 * (t[reset:] - t[reset]))
+    assert ticks.max() < 65536 and ticks[reset - 1] > 65290 and ticks[reset] == 0
+    phi = ticks * (2 * np.pi / 1024)
+    theta = 0.3 * np.sin(0.5 * t)
+    lines = ["t,ticks_L,ticks_R,x,y,theta"] + [
+        f"{a:.2f},{int(b)},{int(b)},{0.01 * a:.6f},0,{c:.6f}" for a, b, c in zip(t, ticks, theta,
+                                                                             strict=True)]
+    path = tmp_path / "reset.csv"
+    path.write_text("\n".join(lines) + "\n")
+    read = read_timeseries(path, ticks_per_rev=1024)
+    assert read.unwrapped_counters == ()
+    np.testing.assert_allclose(read.phi_L, phi, rtol=0, atol=1e-9)
+
+
 def test_wheel_angles_within_pi_that_do_not_wrap_are_kept():
     """Cumulative wheel angles that stay within one turn (no step over pi) are not touched."""
     t = np.linspace(0.0, 10.0, 1001)
