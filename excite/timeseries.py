@@ -93,6 +93,7 @@ __all__ = [
     "noticeable_time_offset",
     "is_timeseries_csv",
     "tick_angle",
+    "unwrapped_words",
     "timeseries_streams",
     "read_timeseries",
     "sample_at",
@@ -212,6 +213,17 @@ def _unwrapped_wheel(source: str, lines: IntArray | None, t: FloatArray, name: s
                         f"{fast[i]:.2f} rad after unwrapping, over pi/2): record them "
                         "unwrapped or more often")
     return unwrapped
+
+
+def unwrapped_words(wheels: tuple[str, ...], counters: tuple[str, ...]) -> str:
+    """The wheel columns unwrapped (TimeSeries.unwrapped_wheels, .unwrapped_counters) in
+    words, e.g. 'phi_L wrapped modulo 2 pi, unwrapped'; '' when there are none."""
+    parts = []
+    if wheels:
+        parts.append(f"{', '.join(wheels)} wrapped modulo 2 pi, unwrapped")
+    if counters:
+        parts.append(f"{', '.join(counters)} overflowed, unwrapped")
+    return "; ".join(parts)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1083,12 +1095,7 @@ class SegmentationReport:
     def unwrapped_text(self) -> str:
         """'phi_L, phi_R wrapped modulo 2 pi, unwrapped' and/or 'ticks_L (16-bit counter)
         overflowed, unwrapped' ('' when nothing was wrapped)."""
-        parts = []
-        if self.unwrapped_wheels:
-            parts.append(f"{', '.join(self.unwrapped_wheels)} wrapped modulo 2 pi, unwrapped")
-        if self.unwrapped_counters:
-            parts.append(f"{', '.join(self.unwrapped_counters)} overflowed, unwrapped")
-        return "; ".join(parts)
+        return unwrapped_words(self.unwrapped_wheels, self.unwrapped_counters)
 
     def counts_text(self) -> str:
         """What was dropped, in one line, e.g. '3 standstill, 1 pose jump; 25 pose samples

@@ -267,6 +267,21 @@ def test_wrapped_wheel_angles_are_unwrapped_and_reported(tmp_path, sim, every, l
     assert reference.report.unwrapped_wheels == () and reference.report.unwrapped_text() == ""
 
 
+def write_16_bit_counters(path, ts: TimeSeries, ticks_per_rev: float, signed: bool) -> None:
+    """The log as a ticks CSV whose tick columns a 16-bit counter (unsigned or signed) read."""
+    write_timeseries(path, ts, ticks_per_rev=ticks_per_rev)
+    lines = path.read_text().splitlines()
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        for k in (1, 2):
+            if cells[k]:
+                tick = int(cells[k]) % 65536
+                cells[k] = str(tick - 65536 if signed and tick >= 32768 else tick)
+        out.append(",".join(cells))
+    path.write_text("\n".join(out) + "\n")
+
+
 @pytest.mark.parametrize("signed", [False, True])
 def test_encoder_counters_that_overflow_are_unwrapped(tmp_path, signed):
     """Ticks from a 16-bit counter (a microcontroller's), 16384 ticks per revolution: it wraps
@@ -278,16 +293,7 @@ def test_encoder_counters_that_overflow_are_unwrapped(tmp_path, signed):
                        ticks_per_rev=16384).series
     path, wrapped_path = tmp_path / "log.csv", tmp_path / "wrapped.csv"
     write_timeseries(path, ts, ticks_per_rev=16384)
-    lines = path.read_text().splitlines()
-    out = [lines[0]]
-    for line in lines[1:]:
-        cells = line.split(",")
-        for k in (1, 2):
-            if cells[k]:
-                tick = int(cells[k]) % 65536
-                cells[k] = str(tick - 65536 if signed and tick >= 32768 else tick)
-        out.append(",".join(cells))
-    wrapped_path.write_text("\n".join(out) + "\n")
+    write_16_bit_counters(wrapped_path, ts, 16384, signed)
     read = read_timeseries(wrapped_path, ticks_per_rev=16384)
     assert read.unwrapped_counters == ("ticks_L (16-bit counter)", "ticks_R (16-bit counter)")
     for name in ("phi_L", "phi_R"):

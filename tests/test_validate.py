@@ -361,3 +361,19 @@ def test_a_log_that_jumps_is_not_dead_reckoned(capsys, tmp_path, noisy_log, para
     code, _, err = run_cli(capsys, "validate", *files, "--params", params_file, "--nominal",
                            "0.05,0.05,0.3")
     assert_one_line_error(code, err, fragment.format(line=k + 2))
+
+
+def test_a_counter_that_overflows_is_unwrapped_and_said_so(capsys, tmp_path, params_file):
+    """validate follows a 16-bit tick counter through its overflows (as calibrate does) and says
+    so on stderr, since it prints no segmentation report."""
+    from tests.test_timeseries import write_16_bit_counters
+
+    series = synthetic_log(np.random.default_rng(12), 40.0, TRUTH, SENSOR,
+                           pose_noise=(0.002, 0.002), ticks_per_rev=16384).series
+    path = tmp_path / "counters.csv"
+    write_16_bit_counters(path, series, 16384, signed=False)
+    code, out, err = run_cli(capsys, "validate", path, "--params", params_file, "--nominal",
+                             "0.05,0.05,0.3", "--ticks-per-rev", "16384", "--time-offset", "0")
+    assert code == 0 and "excite validation" in out
+    assert err == (f"excite: note: {path}: ticks_L (16-bit counter), ticks_R (16-bit counter) "
+                   "overflowed, unwrapped\n")

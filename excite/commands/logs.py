@@ -188,6 +188,7 @@ def read_log(args: argparse.Namespace, source: Input, whole: bool = False) -> Lo
         estimate_time_offset,
         noticeable_time_offset,
         read_timeseries,
+        unwrapped_words,
     )
 
     skipped = None
@@ -210,6 +211,9 @@ def read_log(args: argparse.Namespace, source: Input, whole: bool = False) -> Lo
         raise UsageError(f"{source.name}: a segment file, not a time-series log or bag")
     if whole:
         check_continuity(series)
+        unwrapped = unwrapped_words(series.unwrapped_wheels, series.unwrapped_counters)
+        if unwrapped:  # segmenting commands say so in their report of the segments
+            print(f"excite: note: {source.name}: {unwrapped}", file=sys.stderr)
     if args.time_offset == "estimate":
         return Log(source.name, series,
                    estimate_time_offset(series, max_offset=args.max_time_offset), "estimated",
