@@ -192,7 +192,6 @@ class CalibrationResult:
     def sigma_min(self) -> float:
         return float(self.singular_values[-1])
 
-
     def to_dict(self) -> dict:
         """JSON-ready dict (the ``excite calibrate --json`` object); inf becomes None."""
 
