@@ -101,7 +101,12 @@ class FitTest:
     correlation" at the 99.9% level and the model passes its own test (``ok``), the reported
     covariance is widened to the Newey-West covariance where that is larger (over
     ``long_run_bandwidth`` segments) and the message says so; the verdict ``ok`` is not
-    changed by it.
+    changed by it. driving_statistic / driving_dof: for segments cut from a log (noise levels
+    estimated), Rao's score test that r_L, r_R and b are the same in the segments whose wheels
+    speed up or slow down the most (above the median change of wheel speed) as in the others
+    (:func:`_driving_score`); slip that grows with acceleration makes them differ, and a
+    statistic above the 99.9% chi-square quantile fails the fit (``ok`` False); None when not
+    tested.
     """
 
     ok: bool
@@ -113,6 +118,8 @@ class FitTest:
     turn_trend_z: float | None = None
     serial_correlation: LjungBox | None = None
     long_run_bandwidth: int | None = None
+    driving_statistic: float | None = None
+    driving_dof: int | None = None
 
     def to_dict(self) -> dict:
         ratio = None if self.noise_ratio is None else dict(
@@ -123,7 +130,8 @@ class FitTest:
                 "turn_trend_z": self.turn_trend_z,
                 "serial_correlation": None if self.serial_correlation is None
                 else asdict(self.serial_correlation),
-                "long_run_bandwidth": self.long_run_bandwidth}
+                "long_run_bandwidth": self.long_run_bandwidth,
+                "driving_statistic": self.driving_statistic, "driving_dof": self.driving_dof}
 
 
 @dataclass(frozen=True)
@@ -632,9 +640,67 @@ def calibrate(
     if whitener is not None and loss == "linear":
         test = replace(test, serial_correlation=ljung_box(
             chosen.fit.ev.raw.T, runs_of(data.chained, len(data))))
+        test = _driving_test(test, data, chosen, whitener)
     slip = None if whitener is None or whitener.wheels is None else levels.slip
     return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
                    len(seg) - len(data), levels, slip)
+
+
+def _driving_score(data: Segments, mf: _ModelFit, whitener: ChainWhitener
+                   ) -> tuple[float, int] | None:
+    """Rao's score statistic (and its degrees of freedom) of the alternative "r_L, r_R, b
+    differ by a constant in the segments whose wheel speeds change the most" at the fitted
+    parameters: the segments above the median of |change of each wheel's speed| summed over
+    the wheels (first to last sub-step, rad/s) get three extra parameters, the score and
+    information of the augmented model are whitened like the fit's; chi-square with ``dof``
+    (the extra directions the data determine) when slip does not depend on the acceleration.
+    None without sub-steps or with too few segments to split."""
+    count = data.sub_count
+    if data.sub_dphi_L is None or data.sub_dphi_R is None or count is None \
+            or data.t_start is None or data.t_end is None or len(data) < 8:
+        return None
+    rows = np.arange(len(data))
+    last = np.maximum(count, 1) - 1
+    change = (np.abs(data.sub_dphi_L[rows, last] - data.sub_dphi_L[:, 0])
+              + np.abs(data.sub_dphi_R[rows, last] - data.sub_dphi_R[:, 0]))
+    rate = change * np.maximum(count, 1) / np.maximum(data.t_end - data.t_start, 1e-12)
+    changing = rate > np.median(rate)
+    if not changing.any() or changing.all():
+        return None
+    ev = Problem(mf.model, data).evaluate(mf.theta)  # unwhitened: whiten the augmented rows
+    augmented = np.concatenate([ev.jac, ev.jac[:, :3, :] * changing[None, None, :]], axis=1)
+    white, jac = whitener.whiten(ev.raw, augmented)
+    assert jac is not None
+    gradient = np.einsum("cpn,cn->p", jac, white)
+    information = np.einsum("cpn,cqn->pq", jac, jac)
+    p = mf.theta.size
+
+    def rank(a: FloatArray) -> int:
+        lam = np.linalg.eigvalsh(a)
+        return int(np.sum(lam > max(lam[-1], 0.0) * 1e-10))
+
+    dof = rank(information) - rank(information[:p, :p])
+    if dof <= 0:
+        return None
+    return float(gradient @ np.linalg.pinv(information, hermitian=True) @ gradient), dof
+
+
+def _driving_test(test: FitTest, data: Segments, mf: _ModelFit,
+                  whitener: ChainWhitener) -> FitTest:
+    """The fit test with :func:`_driving_score` added; a rejection fails the fit."""
+    score = _driving_score(data, mf, whitener)
+    if score is None:
+        return test
+    statistic, dof = score
+    test = replace(test, driving_statistic=statistic, driving_dof=dof)
+    threshold = chi2_quantile(TEST_LEVEL, dof)
+    if not test.ok or statistic <= threshold:
+        return test
+    return replace(test, ok=False, message=(
+        f"r_L, r_R and b differ between the segments whose wheels speed up or slow down and "
+        f"the steadier ones (score {statistic:.3g} > {threshold:.3g}, {dof} dof): the wheels "
+        "slip more when they accelerate, which biases the estimates beyond their std; "
+        "calibrate on gentler driving (smaller steps of the wheel speeds)"))
 
 
 def _cut_from_log(data: Segments) -> bool:

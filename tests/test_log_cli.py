@@ -288,3 +288,38 @@ def test_an_empty_bag_through_the_cli(capsys, tmp_path, storage):
     code, _, err = run_cli(capsys, "calibrate", path, "--left-wheel", "l", "--right-wheel", "r",
                            "--pose-topic", "/pose")
     assert code == 2 and err.count("\n") == 1 and "empty bag (no messages)" in err
+
+
+def test_the_driving_test_holds_its_size_on_random_slip():
+    """Logs whose only errors are pose noise and random wheel slip (the model's): the score
+    statistic of "r_L, r_R, b differ where the wheels speed up or slow down" is chi-square
+    with 3 dof, so over 30 logs its mean stays near 3 (std of the mean 0.45) and the fit
+    passes."""
+    from excite.calibration import calibrate
+    from excite.timeseries import segment_timeseries
+
+    statistics = []
+    for seed in range(30):
+        series = synthetic_log(np.random.default_rng(2000 + seed), 60.0,
+                               Params(0.05, 0.051, 0.3), SensorPose(0.1, -0.03, 0.2),
+                               pose_noise=(0.002, 0.002), slip=0.01 * (seed % 2)).series
+        result = calibrate(segment_timeseries(series).segments)
+        assert result.fit.driving_dof == 3 and result.fit.ok, result.fit.message
+        statistics.append(result.fit.driving_statistic)
+    assert 1.5 < np.mean(statistics) < 4.5
+
+
+@pytest.mark.parametrize("protocol, code", [("random", 4), ("arcs:speed=0.1", 0)])
+def test_slip_that_grows_with_acceleration_fails_the_fit(capsys, tmp_path, protocol, code):
+    """The slip env driven by `random` (a new wheel speed every segment): its wheels slip more
+    while they speed up, which biased r_L, r_R by 2-7% (z -3 to -6) beside 'fit ok'; the
+    driving test fails the fit (exit 4). Gentle arcs pass."""
+    path = tmp_path / "log.csv"
+    assert run_cli(capsys, "simulate", "--protocol", protocol, "--segments", 60, "--seed", 1,
+                   "--format", "timeseries", "--out", path)[0] == 0
+    got, out, _ = run_cli(capsys, "calibrate", path, "--ticks-per-rev", 4096, "--json")
+    fit = json.loads(out)["fit"]
+    assert got == code and fit["driving_dof"] == 3
+    if code:
+        assert fit["message"].startswith("r_L, r_R and b differ between the segments whose "
+                                         "wheels speed up or slow down")
