@@ -336,8 +336,6 @@ class _Bag:
             for connection, _, raw in self.reader.messages(connections=connections):
                 where = connection.topic
                 yield connection, decode(raw, connection.msgtype)
-        except DataError:
-            raise
         except Exception as exc:  # rosbags' errors while reading or decoding
             hint = ""
             if Path(self.name).is_file() and (Path(self.name).parent / "metadata.yaml").exists():

@@ -658,9 +658,10 @@ def _driving_score(data: Segments, mf: _ModelFit, whitener: ChainWhitener
     (relative differences of r_L, r_R, b, changing minus steady). None without sub-steps or
     with too few segments to split."""
     count = data.sub_count
-    if data.sub_dphi_L is None or data.sub_dphi_R is None or count is None \
-            or data.t_start is None or data.t_end is None or len(data) < 8:
+    if not _cut_from_log(data) or count is None or len(data) < 8:
         return None
+    assert data.sub_dphi_L is not None and data.sub_dphi_R is not None
+    assert data.t_start is not None and data.t_end is not None
     rows = np.arange(len(data))
     last = np.maximum(count, 1) - 1
     change = (np.abs(data.sub_dphi_L[rows, last] - data.sub_dphi_L[:, 0])

@@ -15,6 +15,7 @@ from excite.kinematics import Params
 from excite.models import SENSOR_POSE, SensorPose
 from excite.synthetic import lesson_dataset, synthetic_log
 from excite.timeseries import write_timeseries
+from excite.validation import dead_reckon
 from excite.wiring import check_pose_source, check_wiring
 
 from .conftest import run_cli
@@ -162,15 +163,9 @@ def test_calibrate_refuses_the_nominal_robots_wheel_odometry(capsys, tmp_path):
     t_enc, t_pose = series.t_enc, series.t_pose
     phi_L = np.interp(t_pose, t_enc, series.phi_L)
     phi_R = np.interp(t_pose, t_enc, series.phi_R)
-    r_L, r_R, b = 0.05, 0.05, 0.3
-    dl, dr = np.diff(phi_L) * r_L, np.diff(phi_R) * r_R
-    dth = (dr - dl) / b
-    theta = np.concatenate([[0.0], np.cumsum(dth)])
-    heading = theta[:-1] + dth / 2
-    x = np.concatenate([[0.0], np.cumsum((dl + dr) / 2 * np.cos(heading))])
-    y = np.concatenate([[0.0], np.cumsum((dl + dr) / 2 * np.sin(heading))])
-    odometry = dataclasses.replace(series, t_enc=t_pose, phi_L=phi_L, phi_R=phi_R, x=x, y=y,
-                                   theta=theta)
+    encoders = dataclasses.replace(series, t_enc=t_pose, phi_L=phi_L, phi_R=phi_R)
+    x, y, theta = dead_reckon(encoders, 0.0, Params(0.05, 0.05, 0.3)).T
+    odometry = dataclasses.replace(encoders, x=x, y=y, theta=theta)
     path = tmp_path / "odom.csv"
     write_timeseries(path, odometry)
     code, out, err = run_cli(capsys, "calibrate", str(path), "--init", "0.05,0.05,0.3")
