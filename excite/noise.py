@@ -63,6 +63,9 @@ alone" against slip plus white (three components): slip through the wheels is ke
 the white levels are needed too. Every search also starts the segment levels at fractions of
 the residuals' RMS, because a level at its floor has no slope in the deviance and would stay
 there.
+
+A pose source whose heading error wanders over seconds (correlated between samples, not
+independent) is modelled on top of this chain by :mod:`excite.wander`.
 """
 
 from __future__ import annotations
@@ -77,9 +80,10 @@ from numpy.typing import NDArray
 from excite.data import Segments
 from excite.models import SegmentModel
 
-__all__ = ["NoiseLevels", "WheelNoise", "ChainWhitener", "moment_noise", "reml_noise",
-           "chi2_quantile", "chi2_survival", "chi_bar_square_quantile",
-           "quantization_variance", "SEGMENT_NOISE_TEST_LEVEL", "MEDIAN_ABS_NORMAL"]
+__all__ = ["NoiseLevels", "WheelNoise", "ChainWhitener", "chain_band", "level_bounds",
+           "moment_noise", "reml_noise", "chi2_quantile", "chi2_survival",
+           "chi_bar_square_quantile", "quantization_variance", "SEGMENT_NOISE_TEST_LEVEL",
+           "MEDIAN_ABS_NORMAL"]
 
 FloatArray = NDArray[np.float64]
 _BAND = 5  # lower bandwidth of C in segment-major order (x, y, theta per segment)
@@ -141,6 +145,16 @@ class NoiseLevels:
     sigma: FloatArray
     pose: FloatArray
     slip: float = 0.0
+
+    def vector(self, with_slip: bool) -> FloatArray:
+        """The levels as one vector: sigma (3), pose (2) and, ``with_slip``, slip."""
+        values = np.concatenate([self.sigma, self.pose])
+        return np.append(values, self.slip) if with_slip else values
+
+    @classmethod
+    def from_vector(cls, values: FloatArray) -> NoiseLevels:
+        """The inverse of :meth:`vector` (5 or 6 values; slip 0 without the sixth)."""
+        return cls(values[:3], values[3:5], float(values[5]) if values.size > 5 else 0.0)
 
     def close_to(self, other: NoiseLevels, rtol: float, slip_scale: float = 0.0) -> bool:
         """Whether every level is within ``rtol`` of ``other``'s, or within 1e-3 of the
@@ -210,6 +224,11 @@ class WheelNoise:
         return cls(slip, jac[:, 0], end, inner,
                    0.0 if tick is None else quantization_variance(tick))
 
+    def take(self, index: NDArray[np.int64]) -> WheelNoise:
+        """The wheel-space noise of the segments at ``index`` (consecutive, in order)."""
+        return WheelNoise(self.slip[index], self.start[index], self.end[index],
+                          self.inner[index], self.quantization)
+
     @property
     def scale(self) -> float:
         """The typical std of an increment per unit slip level: sqrt of the largest channel's
@@ -267,48 +286,56 @@ def _add_shared_blocks(band: FloatArray, k: NDArray[np.int64], blocks: FloatArra
             band[3 + a - b, 3 * (k - 1) + b] += blocks[:, a, b]
 
 
+def chain_band(segments: Segments, levels: NoiseLevels,
+               wheels: WheelNoise | None = None) -> FloatArray:
+    """The covariance C of the stacked increments (see the module doc) in lower band storage
+    (_BAND + 1, 3N): ``band[i - j, j] = C[i, j]`` for i >= j, rows and columns 3k + channel
+    (x, y, theta of segment k); ``wheels`` adds the noise that enters through the wheels (slip
+    at ``levels.slip``, encoder quantization), :class:`WheelNoise`. C is linear in the
+    variances (the squared levels)."""
+    n = len(segments)
+    sx2, sy2, st2 = levels.sigma**2
+    pxy2, pth2 = levels.pose**2
+    jx, jy = _perpendicular(segments)
+    # each segment's own block: its channels' noise and its two pose samples
+    own = np.zeros((n, 3, 3))
+    own[:, 0, 0] = sx2 + 2 * pxy2 + pth2 * jx * jx
+    own[:, 1, 1] = sy2 + 2 * pxy2 + pth2 * jy * jy
+    own[:, 2, 2] = st2 + 2 * pth2
+    own[:, 1, 0] = pth2 * jx * jy  # C[y, x]
+    own[:, 2, 1] = pth2 * jy  # C[theta, y]
+    own[:, 2, 0] = pth2 * jx  # C[theta, x]
+    if wheels is not None:
+        own = own + wheels.diagonal_blocks(levels.slip)
+    band = np.zeros((_BAND + 1, 3 * n))
+    _add_diagonal_blocks(band, own)
+    chained = _chained(segments)
+    if chained.any():
+        k = np.flatnonzero(chained)  # block (k, k - 1): rows of segment k, cols of k - 1
+        c, s = np.cos(segments.dtheta[k - 1]), np.sin(segments.dtheta[k - 1])
+        # C[(k-1) rows, k cols] = [[-pxy2 R, 0], [-pth2 (J d_k)^T, -pth2]] (the pose
+        # sample they share); its transpose C[k rows, (k-1) cols]:
+        shared = np.zeros((k.size, 3, 3))
+        shared[:, 0, 0], shared[:, 0, 1] = -pxy2 * c, -pxy2 * s
+        shared[:, 1, 0], shared[:, 1, 1] = pxy2 * s, -pxy2 * c
+        shared[:, 0, 2], shared[:, 1, 2], shared[:, 2, 2] = -pth2 * jx[k], -pth2 * jy[k], -pth2
+        if wheels is not None and wheels.quantization:
+            shared = shared + wheels.shared_blocks(k)
+        _add_shared_blocks(band, k, shared)
+    return band
+
+
 class ChainWhitener:
-    """Whitening by the Cholesky factor of the covariance C of the stacked increments (see
-    the module doc), for given noise levels; ``wheels`` adds the noise that enters through
-    the wheels (slip at ``levels.slip``, encoder quantization), :class:`WheelNoise`."""
+    """Whitening by the Cholesky factor of the covariance C of the stacked increments
+    (:func:`chain_band`), for given noise levels; ``wheels`` adds the noise that enters
+    through the wheels (slip at ``levels.slip``, encoder quantization), :class:`WheelNoise`."""
 
     def __init__(self, segments: Segments, levels: NoiseLevels,
                  wheels: WheelNoise | None = None):
         from scipy.linalg import cholesky_banded
 
-        n = len(segments)
-        sx2, sy2, st2 = levels.sigma**2
-        pxy2, pth2 = levels.pose**2
-        jx, jy = _perpendicular(segments)
-        # lower band storage: band[i - j, j] = C[i, j] for i >= j, rows/cols 3k + channel
-        # each segment's own block: its channels' noise and its two pose samples
-        own = np.zeros((n, 3, 3))
-        own[:, 0, 0] = sx2 + 2 * pxy2 + pth2 * jx * jx
-        own[:, 1, 1] = sy2 + 2 * pxy2 + pth2 * jy * jy
-        own[:, 2, 2] = st2 + 2 * pth2
-        own[:, 1, 0] = pth2 * jx * jy  # C[y, x]
-        own[:, 2, 1] = pth2 * jy  # C[theta, y]
-        own[:, 2, 0] = pth2 * jx  # C[theta, x]
-        if wheels is not None:
-            own = own + wheels.diagonal_blocks(levels.slip)
-        # lower band storage: band[i - j, j] = C[i, j] for i >= j, rows/cols 3k + channel
-        band = np.zeros((_BAND + 1, 3 * n))
-        _add_diagonal_blocks(band, own)
-        chained = _chained(segments)
-        if chained.any():
-            k = np.flatnonzero(chained)  # block (k, k - 1): rows of segment k, cols of k - 1
-            c, s = np.cos(segments.dtheta[k - 1]), np.sin(segments.dtheta[k - 1])
-            # C[(k-1) rows, k cols] = [[-pxy2 R, 0], [-pth2 (J d_k)^T, -pth2]] (the pose
-            # sample they share); its transpose C[k rows, (k-1) cols]:
-            shared = np.zeros((k.size, 3, 3))
-            shared[:, 0, 0], shared[:, 0, 1] = -pxy2 * c, -pxy2 * s
-            shared[:, 1, 0], shared[:, 1, 1] = pxy2 * s, -pxy2 * c
-            shared[:, 0, 2], shared[:, 1, 2], shared[:, 2, 2] = -pth2 * jx[k], -pth2 * jy[k], -pth2
-            if wheels is not None and wheels.quantization:
-                shared = shared + wheels.shared_blocks(k)
-            _add_shared_blocks(band, k, shared)
-        self._factor = cholesky_banded(band, lower=True)
-        self.n = n
+        self._factor = cholesky_banded(chain_band(segments, levels, wheels), lower=True)
+        self.n = len(segments)
         self.wheels = wheels
 
     @property
@@ -333,6 +360,12 @@ class ChainWhitener:
         if jac is None:
             return white, None
         return white, out[:, 1:].reshape(n, 3, -1).transpose(1, 2, 0)
+
+    def solve(self, rows: FloatArray) -> FloatArray:
+        """C^-1 ``rows`` for (3N, m) rows in the stacked order (3k + channel)."""
+        from scipy.linalg import cho_solve_banded
+
+        return cho_solve_banded((self._factor, True), rows, check_finite=False)
 
 
 def moment_noise(segments: Segments, residual: FloatArray, n_parameters: int,
@@ -377,6 +410,23 @@ def _restricted_deviance(segments: Segments, levels: NoiseLevels, residual: Floa
             + float(w @ w - projected @ projected))
 
 
+def level_bounds(residual: FloatArray, floor: FloatArray, wheels: WheelNoise | None = None
+                 ) -> tuple[FloatArray, FloatArray]:
+    """The bounds of the logs of the noise levels a REML search moves in: each level at
+    least its floor (``floor`` (3,) = (position, position, heading) floors the segment
+    levels, (position, heading) the pose levels; the slip floor is the heading floor over
+    the slip's scale, :attr:`WheelNoise.scale`) and at most 10 times the largest residual
+    (3, N) (over the slip's scale for slip). Five levels, six with ``wheels``."""
+    spread = float(np.max(np.abs(residual))) if residual.size else 1.0
+    lower = np.log(np.concatenate([floor, floor[[0, 2]]]))
+    upper = np.full(5, np.log(max(10.0 * spread, 1e-300)))
+    if wheels is not None:
+        unit = max(wheels.scale, 1e-300)
+        lower = np.append(lower, np.log(floor[2] / unit))
+        upper = np.append(upper, np.log(max(10.0 * spread / unit, 1e-300)))
+    return lower, upper
+
+
 def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
                start: NoiseLevels, floor: FloatArray,
                test_level: float = SEGMENT_NOISE_TEST_LEVEL,
@@ -399,22 +449,16 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
     """
     from scipy.optimize import minimize
 
-    spread = float(np.max(np.abs(residual))) if residual.size else 1.0
-    lower = np.log(np.concatenate([floor, floor[[0, 2]]]))
-    upper = np.full(5, np.log(max(10.0 * spread, 1e-300)))
-    first = np.concatenate([start.sigma, start.pose])
+    lower, upper = level_bounds(residual, floor, wheels)
+    first = start.vector(with_slip=wheels is not None)
     segment = [0, 1, 2]  # the levels of segment noise (tested together)
     if wheels is not None:
         unit = max(wheels.scale, 1e-300)
-        lower = np.append(lower, np.log(floor[2] / unit))
-        upper = np.append(upper, np.log(max(10.0 * spread / unit, 1e-300)))
-        first = np.append(first, start.slip)
         segment.append(5)
     u0 = np.minimum(np.maximum(np.log(np.maximum(first, 1e-300)), lower), upper)
 
     def levels_of(u: FloatArray) -> NoiseLevels:
-        sigma = np.exp(u)
-        return NoiseLevels(sigma[:3], sigma[3:5], float(sigma[5]) if sigma.size > 5 else 0.0)
+        return NoiseLevels.from_vector(np.exp(u))
 
     def deviance(u: FloatArray) -> float:
         try:
