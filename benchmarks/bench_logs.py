@@ -168,7 +168,7 @@ def main() -> None:
     args = parser.parse_args()
     source = synthetic_source if args.source == "synthetic" else env_source
     errors, known, distances, reported, covariances, bounds = [], [], [], [], [], []
-    widened = driving = 0
+    widened = driving = wandering = 0
     for i in tqdm(range(args.logs), desc="logs"):
         series, truth, pose_noise, ticks = source(args, i)
         segments = segment_timeseries(series).segments
@@ -182,6 +182,7 @@ def main() -> None:
         covariances.append(result.full_covariance)
         widened += result.fit.long_run_bandwidth is not None
         driving += result.fit.driving_statistic is not None and not result.fit.ok
+        wandering += result.fit.heading_wander is not None
         if min(pose_noise) > 0:  # without pose noise there is no pose-noise bound
             bound, theta = pose_noise_fit(segments, truth, estimate, pose_noise)
             bounds.append(bound)
@@ -195,10 +196,13 @@ def main() -> None:
     print(f"{args.logs} logs of {args.duration:g} s ({what})")
     print(f"truth inside the 95% ellipse (6 parameters): {np.mean(distances < CHI2_6_95):.3f}")
     print(f"covariance widened for serially correlated residuals: {widened} of {args.logs} logs")
+    print(f"pose heading error found to wander: {wandering} of {args.logs} logs")
     print(f"fit failed by the driving test (slip growing with acceleration): {driving} of "
           f"{args.logs} logs")
     print("RMSE", " ".join(f"{n} {v:.3g}" for n, v in zip(NAMES, rmse, strict=True)))
     print(_row("RMSE / mean reported std", rmse / np.sqrt(np.mean(reported, axis=0))))
+    print(_row("RMS of error / reported std (z; 1 when honest)",
+               np.sqrt(np.mean(errors**2 / np.array(reported), axis=0))))
     if bounds:
         crlb = np.sqrt(np.diag(np.mean(bounds, axis=0)))
         print(_row("RMSE / CRLB of the pose noise", rmse / crlb))

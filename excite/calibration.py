@@ -48,6 +48,7 @@ from excite.starts import (
     sensor_pose_estimate,
 )
 from excite.timeseries import tick_angle
+from excite.wander import HeadingWander, estimate_wander, wander_covariance
 from excite.wiring import check_wiring
 
 __all__ = ["CalibrationResult", "FitTest", "calibrate", "initial_estimate", "DEFAULT_NOMINAL",
@@ -106,7 +107,14 @@ class FitTest:
     speed up or slow down the most (above the median change of wheel speed) as in the others
     (:func:`_driving_score`); slip that grows with acceleration makes them differ, and a
     statistic above the 99.9% chi-square quantile fails the fit (``ok`` False) when the
-    difference also exceeds the parameters' own std; None when not tested.
+    difference also exceeds the parameters' own std; None when not tested. heading_wander: for
+    segments cut from a log (noise levels estimated, linear loss, at least 50 segments, the
+    model passing its own test), the pose samples' heading error that wanders over seconds
+    (a first-order Gauss-Markov error, std in rad, correlation time in s,
+    :class:`excite.wander.HeadingWander`) when a likelihood-ratio test at the 5% level finds
+    one; the reported covariance is then the fit's under the model with it (an estimated
+    mounting angle carries the log's mean heading error) and the message says so; None when
+    not found or not tested.
     """
 
     ok: bool
@@ -120,6 +128,7 @@ class FitTest:
     long_run_bandwidth: int | None = None
     driving_statistic: float | None = None
     driving_dof: int | None = None
+    heading_wander: HeadingWander | None = None
 
     def to_dict(self) -> dict:
         ratio = None if self.noise_ratio is None else dict(
@@ -131,7 +140,12 @@ class FitTest:
                 "serial_correlation": None if self.serial_correlation is None
                 else asdict(self.serial_correlation),
                 "long_run_bandwidth": self.long_run_bandwidth,
-                "driving_statistic": self.driving_statistic, "driving_dof": self.driving_dof}
+                "driving_statistic": self.driving_statistic, "driving_dof": self.driving_dof,
+                "heading_wander": None if self.heading_wander is None else {
+                    "std": self.heading_wander.std,
+                    "correlation_time": self.heading_wander.correlation_time,
+                    "statistic": self.heading_wander.statistic,
+                    "at_bound": self.heading_wander.at_bound}}
 
 
 @dataclass(frozen=True)
@@ -641,9 +655,13 @@ def calibrate(
         test = replace(test, serial_correlation=ljung_box(
             chosen.fit.ev.raw.T, runs_of(data.chained, len(data))))
         test = _driving_test(test, data, chosen, whitener)
+        if test.ok:  # a misfit would be taken for a wander
+            assert levels is not None
+            test = replace(test, heading_wander=_heading_wander(data, chosen, levels,
+                                                                whitener))
     slip = None if whitener is None or whitener.wheels is None else levels.slip
     return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
-                   len(seg) - len(data), levels, slip)
+                   len(seg) - len(data), levels, slip, whitener)
 
 
 def _driving_score(data: Segments, mf: _ModelFit, whitener: ChainWhitener
@@ -717,6 +735,39 @@ def _driving_test(test: FitTest, data: Segments, mf: _ModelFit,
         "calibrate on gentler driving (smaller steps of the wheel speeds)"))
 
 
+def _heading_wander(data: Segments, mf: _ModelFit, levels: NoiseLevels,
+                    whitener: ChainWhitener) -> HeadingWander | None:
+    """The pose samples' wandering heading error (:func:`excite.wander.estimate_wander`) from
+    the fit's unwhitened residuals, in the directions the data determine."""
+    ev = Problem(mf.model, data).evaluate(mf.theta)
+    free = np.einsum("cpn,pm->cmn", ev.jac, complement(mf.weak))
+    return estimate_wander(data, ev.raw, free, levels, mf.problem.sigma_floor,
+                           whitener.wheels)
+
+
+def _wandering(seg: Segments, mf: _ModelFit, covariance: FloatArray, test: FitTest,
+               whitener: ChainWhitener | None) -> tuple[FloatArray, FitTest]:
+    """The relative covariance of the fit when the pose heading error wanders
+    (``test.heading_wander``, :func:`excite.wander.wander_covariance`), and the message
+    saying so; unchanged without one or when a direction is undetermined."""
+    wander = test.heading_wander
+    if wander is None or whitener is None:
+        return covariance, test
+    bound = " (or slower: at its bound, the log's longest stretch)" if wander.at_bound else ""
+    found = (f"{test.message}; the pose heading error wanders (std {wander.std:.2g} rad over "
+             f"{wander.correlation_time:.3g} s{bound}, likelihood ratio "
+             f"{wander.statistic:.3g})")
+    if not np.all(np.isfinite(covariance)):
+        return covariance, replace(test, message=f"{found}; std not changed (a direction is "
+                                   "undetermined)")
+    jac = Problem(mf.model, seg).evaluate(mf.theta).jac
+    wider = wander_covariance(seg, whitener, jac, covariance, wander)
+    why = (" (the sensor's mounting angle carries the log's mean heading error)"
+           if mf.model is SENSOR_POSE else "")
+    return wider, replace(test, message=f"{found}: the std are the fit's under a model with "
+                          f"it{why}")
+
+
 def _cut_from_log(data: Segments) -> bool:
     """Whether segments were cut from a log (sub-steps and times): their noise enters through
     the wheels too (:class:`excite.noise.WheelNoise`, the slip level)."""
@@ -755,12 +806,13 @@ def _serially_correlated(test: FitTest) -> bool:
     return lb is not None and lb.p_value < 1.0 - TEST_LEVEL
 
 
-def _long_run(mf: _ModelFit, covariance: FloatArray, test: FitTest,
+def _long_run(mf: _ModelFit, inverse: FloatArray, covariance: FloatArray, test: FitTest,
               runs: NDArray[np.int64]) -> tuple[FloatArray, FitTest]:
-    """The relative covariance widened for serial correlation of the whitened residuals (of
-    segments in ``runs``, :func:`excite.autocorrelation.runs_of`), and the fit test saying so
-    (the covariance unchanged when the residuals pass the test, the model fails its own
-    test or a direction is undetermined)."""
+    """The relative covariance ``covariance`` widened for serial correlation of the whitened
+    residuals (of segments in ``runs``, :func:`excite.autocorrelation.runs_of`) to the
+    Newey-West covariance around the model's inverse information ``inverse``, and the fit
+    test saying so (the covariance unchanged when the residuals pass the test, the model
+    fails its own test or a direction is undetermined)."""
     if not _serially_correlated(test):
         return covariance, test
     lb = test.serial_correlation
@@ -774,8 +826,7 @@ def _long_run(mf: _ModelFit, covariance: FloatArray, test: FitTest,
                                    "undetermined)")
     ev = mf.fit.ev
     scores = np.einsum("cpk,ck->kp", ev.jac, ev.raw)  # each segment's share of the gradient
-    wider = at_least(covariance, long_run_covariance(
-        scores, covariance, runs, lb.lags))
+    wider = at_least(covariance, long_run_covariance(scores, inverse, runs, lb.lags))
     message = f"{found}: std widened (Newey-West, {lb.lags} segments)"
     return wider, replace(test, message=message, long_run_bandwidth=lb.lags)
 
@@ -823,7 +874,8 @@ def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, lo
 def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
             max_relative_std: float, choice: str, test: FitTest,
             n_trimmed: int, levels: NoiseLevels | None = None,
-            slip: float | None = None) -> CalibrationResult:
+            slip: float | None = None,
+            whitener: ChainWhitener | None = None) -> CalibrationResult:
     fit = mf.fit
     theta, info_rel = fit.theta, fit.system.information
     lam, vec = np.linalg.eigh(info_rel)
@@ -831,8 +883,9 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
     s_min = singular[-1]
     condition = singular[0] / s_min if s_min > 0 else float("inf")
     scale = fit.ev.scale
-    relative, test = _long_run(mf, inverse_information(info_rel), test,
-                               runs_of(seg.chained, len(seg)))
+    inverse = inverse_information(info_rel)
+    relative, test = _wandering(seg, mf, inverse, test, whitener)
+    relative, test = _long_run(mf, inverse, relative, test, runs_of(seg.chained, len(seg)))
     full = relative * np.outer(scale, scale)
     identifiable = bool(s_min > 0 and 1.0 / s_min <= max_relative_std)
     direction = vector = None

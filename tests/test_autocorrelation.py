@@ -144,7 +144,7 @@ def test_calibrate_widens_the_covariance_only_when_the_residuals_are_correlated(
             assert result.fit.ok  # widened, not a misfit
             with monkeypatch.context() as m:  # the same fit without the widening
                 m.setattr(calibration, "_long_run",
-                          lambda mf, covariance, test, runs: (covariance, test))
+                          lambda mf, inverse, covariance, test, runs: (covariance, test))
                 model = calibrate(_log(seed, 20.0), sensor_pose="estimate")
             assert np.all(np.diag(result.full_covariance)
                           >= np.diag(model.full_covariance) * (1 - 1e-9))
