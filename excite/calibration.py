@@ -108,10 +108,10 @@ class FitTest:
     (:func:`_driving_score`); slip that grows with acceleration makes them differ, and a
     statistic above the 99.9% chi-square quantile fails the fit (``ok`` False) when the
     difference also exceeds the parameters' own std; None when not tested. heading_wander: for
-    segments cut from a log (noise levels estimated, linear loss, at least 50 segments, the
-    model passing its own test), the pose samples' heading error that wanders over seconds
-    (a first-order Gauss-Markov error, std in rad, correlation time in s,
-    :class:`excite.wander.HeadingWander`) when a likelihood-ratio test at the 5% level finds
+    segments with times that share pose samples (noise levels estimated, linear loss, at
+    least 50 segments, the model passing its own test), the pose samples' heading error
+    that wanders over seconds (a first-order Gauss-Markov error, std in rad, correlation time
+    in s, :class:`excite.wander.HeadingWander`) when a likelihood-ratio test at the 5% level finds
     one; the reported covariance is then the fit's under the model with it (an estimated
     mounting angle carries the log's mean heading error) and the message says so; None when
     not found or not tested.
@@ -753,7 +753,8 @@ def _wandering(seg: Segments, mf: _ModelFit, covariance: FloatArray, test: FitTe
     wander = test.heading_wander
     if wander is None or whitener is None:
         return covariance, test
-    bound = " (or slower: at its bound, the log's longest stretch)" if wander.at_bound else ""
+    bound = (" (or slower: at its bound, the log's longest unbroken stretch)" if wander.at_bound
+             else "")
     found = (f"{test.message}; the pose heading error wanders (std {wander.std:.2g} rad over "
              f"{wander.correlation_time:.3g} s{bound}, likelihood ratio "
              f"{wander.statistic:.3g})")

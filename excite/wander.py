@@ -19,7 +19,8 @@ error. The model states that uncertainty instead of hiding it: its level and tim
 are identified by how the error varies within the log, and the mean over the log that this
 implies enters the parameters' covariance. (A time constant far beyond the log's length
 cannot be told from a heading random walk; it is bounded by the longest unbroken stretch of
-the log, and ``HeadingWander.at_bound`` says when it sits there.) The position part of such
+chained segments, no gap between them, and ``HeadingWander.at_bound`` says when it sits
+there; from below by the median segment duration.) The position part of such
 an error is not modelled: its differences nearly cancel along the log.
 
 * :func:`estimate_wander`: restricted maximum likelihood (as :func:`excite.noise.reml_noise`)
@@ -44,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from excite.autocorrelation import runs_of
 from excite.data import Segments
 from excite.noise import (
     ChainWhitener,
@@ -126,15 +128,16 @@ class _Samples:
         return cls(inverse[:n], inverse[n:], unique[:, 1], unique[:, 0].astype(np.int64))
 
     def correlation(self, time: float) -> tuple[FloatArray, FloatArray]:
-        """R (M, M): exp(-|t_i - t_j| / time) on one clock, 0 across clocks; and dR / d log
-        time = R |t_i - t_j| / time."""
+        """R (M, M) for the correlation ``time`` (s): exp(-|t_i - t_j| / time) on one clock,
+        0 across clocks; and dR / d log time = R |t_i - t_j| / time."""
         lag = np.abs(self.times[:, None] - self.times[None, :])
         same = self.clock[:, None] == self.clock[None, :]
         r = np.where(same, np.exp(-lag / time), 0.0)
         return r, r * lag / time
 
     def apply_correlation(self, time: float, h: FloatArray) -> FloatArray:
-        """R h for h (M, P) in O(M P): the forward and backward first-order recursions."""
+        """R h for h (M, P) and the correlation ``time`` (s), in O(M P): the forward and
+        backward first-order recursions."""
         gap = np.diff(self.times)
         a = np.where(np.diff(self.clock) == 0, np.exp(-np.maximum(gap, 0.0) / time), 0.0)
         forward, backward = h.copy(), h.copy()
@@ -157,6 +160,17 @@ class _Samples:
         np.add.at(out, self.start, segments.dy[:, None] * x - segments.dx[:, None] * y - th)
         np.add.at(out, self.end, th)
         return out
+
+
+def _longest_stretch(segments: Segments) -> float:
+    """The longest unbroken stretch of chained segments (s): from the first one's start to
+    the last one's end, with no gap or part boundary between (0 without times)."""
+    if segments.t_start is None or segments.t_end is None:
+        return 0.0
+    runs = runs_of(segments.chained, len(segments))
+    first = np.flatnonzero(np.diff(runs, prepend=-1) != 0)
+    last = np.append(first[1:], len(segments)) - 1
+    return float(np.max(segments.t_end[last] - segments.t_start[first]))
 
 
 def _dense(band: FloatArray) -> FloatArray:
@@ -252,7 +266,8 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
         k = dk = None
         if wander:
             r, dr = c.samples.correlation(time)
-            k, dk = _sandwiched(c.design, r), _sandwiched(c.design, dr)
+            k = _sandwiched(c.design, r)
+            dk = _sandwiched(c.design, dr) if with_gradient else None
             cov += std2 * k
         cov[np.diag_indices_from(cov)] *= 1.0 + JITTER
         factor, _ = cho_factor(cov, lower=True, check_finite=False)
@@ -321,30 +336,21 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
     start = np.clip(np.log(np.maximum(levels.vector(wheels is not None), 1e-300)), lower,
                     upper)
 
-    def deviance(u: FloatArray, wander: bool) -> tuple[float, FloatArray]:
+    def deviance(u: FloatArray, wander: bool, with_gradient: bool = True
+                 ) -> tuple[float, FloatArray]:
         try:
-            value, gradient = _deviance(chunks, u, n_levels, wander)
+            value, gradient = _deviance(chunks, u, n_levels, wander, with_gradient)
         except np.linalg.LinAlgError:  # not positive definite at the bounds
             return UNDEFINED, np.zeros(u.size)
-        assert gradient is not None
-        return value, gradient
-
-    def value_at(u: FloatArray) -> float:
-        try:
-            return _deviance(chunks, u, n_levels, True, with_gradient=False)[0]
-        except np.linalg.LinAlgError:
-            return UNDEFINED
+        return value, np.zeros(u.size) if gradient is None else gradient
 
     def fitted(u0: FloatArray, lo: FloatArray, hi: FloatArray, wander: bool
                ) -> tuple[FloatArray, float]:
-        def objective(u: FloatArray) -> tuple[float, FloatArray]:
-            return deviance(u, wander)
-
         # L-BFGS-B stops early in the deviance's curved valleys (its line search gives up):
         # it restarts from where it stopped until a restart gains less than RESTART_GAIN
         u, value = u0, math.inf
         for _ in range(MAX_RESTARTS):
-            result = minimize(objective, u, jac=True, method="L-BFGS-B",
+            result = minimize(deviance, u, args=(wander,), jac=True, method="L-BFGS-B",
                               bounds=list(zip(lo, hi, strict=True)),
                               options={"ftol": FTOL, "maxfun": MAX_EVALUATIONS})
             gain = value - float(result.fun)
@@ -354,23 +360,22 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
                 break
         return u, value
 
-    step = float(np.median(segments.t_end - segments.t_start))
-    whole = _Samples.of(segments)
-    longest = max(float(np.ptp(whole.times[whole.clock == k])) for k in np.unique(whole.clock))
-    if not longest > 2.0 * step:  # no stretch long enough to see an error wander
+    step = float(np.median(segments.t_end - segments.t_start))  # s
+    longest = _longest_stretch(segments)  # s
+    if not step > 0.0 or not longest > 2.0 * step:  # nothing long enough to see a wander
         return None
     _, null = fitted(start, lower, upper, wander=False)
     if null >= UNDEFINED:
         return None
-    heading = max(float(np.max(np.abs(residual[2]))), floor[2])  # rad
+    largest_heading = max(float(np.max(np.abs(residual[2]))), floor[2])  # rad
     w_lower = np.append(lower, [math.log(floor[2]), math.log(step)])
-    w_upper = np.append(upper, [math.log(10.0 * heading), math.log(longest)])
+    w_upper = np.append(upper, [math.log(10.0 * largest_heading), math.log(longest)])
     # start the search at the best of a few time constants (the deviance can have a local
     # minimum at a short one, mimicking white noise, and one at a long one)
-    level = max(levels.pose[1], levels.sigma[2], floor[2])
+    first_std = max(levels.pose[1], levels.sigma[2], floor[2])  # rad: the chain's heading level
     starts = [np.clip(np.append(start, [math.log(std), math.log(tau)]), w_lower, w_upper)
-              for tau in step * np.array(START_TIMES) for std in (level, 3.0 * level)]
-    values = [value_at(u0) for u0 in starts]
+              for tau in step * np.array(START_TIMES) for std in (first_std, 3.0 * first_std)]
+    values = [deviance(u0, True, with_gradient=False)[0] for u0 in starts]
     best_u, best = fitted(starts[int(np.argmin(values))], w_lower, w_upper, wander=True)
     statistic = null - best
     if statistic <= chi_bar_square_quantile(1.0 - test_level, 1):

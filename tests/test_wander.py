@@ -27,6 +27,7 @@ from excite.wander import (
     _chunk_ranges,
     _dense,
     _deviance,
+    _longest_stretch,
     _Samples,
     _sandwiched,
     estimate_wander,
@@ -244,3 +245,39 @@ def test_a_misfit_is_not_taken_for_a_wander():
     result = calibrate(_segments(1003, 8.0), sensor_pose="axle")
     assert not result.fit.ok
     assert result.fit.heading_wander is None and "wanders" not in result.fit.message
+
+
+def test_the_time_constant_is_bounded_by_the_longest_unbroken_stretch():
+    """Gaps and part boundaries break a stretch; idle time between them does not count
+    (review: the bound once spanned the gaps)."""
+    seg = _log(9, 30.0)
+    assert _longest_stretch(seg) == pytest.approx(seg.t_end[-1] - seg.t_start[0])
+    keep = np.ones(len(seg), dtype=bool)
+    keep[10] = False  # a gap after the first 10 segments
+    broken = seg[keep]
+    expected = max(seg.t_end[9] - seg.t_start[0], seg.t_end[-1] - seg.t_start[11])
+    assert _longest_stretch(broken) == pytest.approx(expected)
+    later = Segments.concatenate([seg[:10], seg[11:]])
+    assert _longest_stretch(later) == pytest.approx(expected)
+
+
+def test_segments_with_times_but_no_sub_steps_are_searched_too(tmp_path, monkeypatch):
+    """A segment CSV with time columns (no sub-steps: five noise levels, no slip) goes
+    through the same search (the chain's five levels)."""
+    from excite import wander as wander_module
+    from excite.data import load_segments, save_segments
+
+    path = tmp_path / "segments.csv"
+    save_segments(path, _segments(1003, 8.0))
+    seg = load_segments(path)
+    assert seg.sub_dphi_L is None and seg.chained is not None and seg.chained[1:].all()
+    seen = []
+    real = wander_module._Chunk.of
+
+    def spy(segments, wheels, *args):
+        seen.append(wheels)
+        return real(segments, wheels, *args)
+
+    monkeypatch.setattr(wander_module._Chunk, "of", spy)
+    calibrate(seg, sensor_pose="estimate")
+    assert seen and all(w is None for w in seen)
