@@ -314,7 +314,8 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
                     levels: NoiseLevels, floor: FloatArray, wheels: WheelNoise | None = None,
                     test_level: float = WANDER_TEST_LEVEL) -> HeadingWander | None:
     """The wandering heading error of the pose samples (module doc), or None when the data do
-    not show one (or the log is shorter than MIN_WANDER_SEGMENTS). residual (3, N) (predicted
+    not show one (or the log is shorter than MIN_WANDER_SEGMENTS, has no times, or no
+    unbroken stretch longer than two segment durations). residual (3, N) (predicted
     - measured) and jac (3, P, N) (the directions the data determine) of the fit at the
     chain's noise ``levels`` (the start of the search; ``wheels``: its wheel-space noise);
     ``floor`` (3,): the (position, position, heading) floor of the levels, as reml_noise."""
@@ -322,6 +323,10 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
 
     n = len(segments)
     if n < MIN_WANDER_SEGMENTS or segments.t_start is None or segments.t_end is None:
+        return None
+    step = float(np.median(segments.t_end - segments.t_start))  # s
+    longest = _longest_stretch(segments)  # s
+    if not step > 0.0 or not longest > 2.0 * step:  # nothing long enough to see a wander
         return None
     n_levels = 6 if wheels is not None else 5
     e = residual.T.reshape(-1)
@@ -360,10 +365,6 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
                 break
         return u, value
 
-    step = float(np.median(segments.t_end - segments.t_start))  # s
-    longest = _longest_stretch(segments)  # s
-    if not step > 0.0 or not longest > 2.0 * step:  # nothing long enough to see a wander
-        return None
     _, null = fitted(start, lower, upper, wander=False)
     if null >= UNDEFINED:
         return None
