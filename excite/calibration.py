@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, replace
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -40,7 +41,15 @@ from excite.noise import (
     moment_noise,
     reml_noise,
 )
-from excite.solver import Fit, Loss, Problem, complement, levenberg_marquardt, normal_system
+from excite.solver import (
+    Evaluation,
+    Fit,
+    Loss,
+    Problem,
+    complement,
+    levenberg_marquardt,
+    normal_system,
+)
 from excite.starts import (
     DEFAULT_NOMINAL,
     body_frame_estimate,
@@ -328,6 +337,13 @@ class _ModelFit:
     @property
     def identifiable(self) -> bool:
         return self.weak.shape[1] == 0
+
+    @cached_property
+    def unwhitened(self) -> Evaluation:
+        """The evaluation at the fit, not whitened: raw residuals and relative Jacobian rows
+        (the driving test and the wandering heading error whiten or weight them their own
+        way)."""
+        return self.problem.evaluate(self.theta, whiten=False)
 
     @property
     def channel_std(self) -> FloatArray:
@@ -688,7 +704,7 @@ def _driving_score(data: Segments, mf: _ModelFit, whitener: ChainWhitener
     changing = rate > np.median(rate)
     if not changing.any() or changing.all():
         return None
-    ev = Problem(mf.model, data).evaluate(mf.theta)  # unwhitened: whiten the augmented rows
+    ev = mf.unwhitened  # whiten the augmented rows
     augmented = np.concatenate([ev.jac, ev.jac[:, :3, :] * changing[None, None, :]], axis=1)
     white, jac = whitener.whiten(ev.raw, augmented)
     assert jac is not None
@@ -739,7 +755,7 @@ def _heading_wander(data: Segments, mf: _ModelFit, levels: NoiseLevels,
                     whitener: ChainWhitener) -> HeadingWander | None:
     """The pose samples' wandering heading error (:func:`excite.wander.estimate_wander`) from
     the fit's unwhitened residuals, in the directions the data determine."""
-    ev = Problem(mf.model, data).evaluate(mf.theta)
+    ev = mf.unwhitened
     free = np.einsum("cpn,pm->cmn", ev.jac, complement(mf.weak))
     return estimate_wander(data, ev.raw, free, levels, mf.problem.sigma_floor,
                            whitener.wheels)
@@ -761,8 +777,7 @@ def _wandering(seg: Segments, mf: _ModelFit, covariance: FloatArray, test: FitTe
     if not np.all(np.isfinite(covariance)):
         return covariance, replace(test, message=f"{found}; std not changed (a direction is "
                                    "undetermined)")
-    jac = Problem(mf.model, seg).evaluate(mf.theta).jac
-    wider = wander_covariance(seg, whitener, jac, covariance, wander)
+    wider = wander_covariance(seg, whitener, mf.unwhitened.jac, covariance, wander)
     why = (" (the sensor's mounting angle carries the log's mean heading error)"
            if mf.model is SENSOR_POSE else "")
     return wider, replace(test, message=f"{found}: the std are the fit's under a model with "

@@ -80,14 +80,15 @@ class Problem:
         floor = SIGMA_FLOOR * np.array([position, position, heading])
         self.sigma_floor = np.where(floor > 0, floor, 1e-300)
 
-    def evaluate(self, theta: FloatArray) -> Evaluation:
+    def evaluate(self, theta: FloatArray, whiten: bool = True) -> Evaluation:
+        """The evaluation at ``theta``; whitened by the whitener unless ``whiten`` is False."""
         prediction, jac = self.model.evaluate(self.phi_L, self.phi_R, theta,
                                               substeps=self.substeps)
         raw = prediction - self.measured
         raw[2] = wrap_angle(raw[2])
         scale = self.model.column_scale(theta)
         jac *= scale[None, :, None]
-        if self.whitener is None:
+        if self.whitener is None or not whiten:
             return Evaluation(theta, scale, raw, jac)
         white, white_jac = self.whitener.whiten(raw, jac)
         return Evaluation(theta, scale, white, white_jac, residual=raw)

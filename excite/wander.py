@@ -147,17 +147,12 @@ class _Samples:
             backward[i] += a[i] * backward[i + 1]
         return forward + backward - h
 
-    def design(self, segments: Segments) -> tuple[IntArray, IntArray, FloatArray]:
-        """A (3N, M), the increments' error per unit heading error at each sample, by its
-        entries: each segment's first and last sample and -J d (N, 2) (m/rad): its x and y
-        rows are -J d at the first sample, its theta row -1 there and +1 at the last."""
-        return self.start, self.end, np.stack([segments.dy, -segments.dx], axis=1)
-
     def transpose_design(self, segments: Segments, rows: FloatArray) -> FloatArray:
         """A^T ``rows`` (M, P) for rows (3N, P) in O(N P)."""
         x, y, th = rows[0::3], rows[1::3], rows[2::3]
+        lever = _lever(segments)
         out = np.zeros((len(self.times), rows.shape[1]))
-        np.add.at(out, self.start, segments.dy[:, None] * x - segments.dx[:, None] * y - th)
+        np.add.at(out, self.start, lever[:, :1] * x + lever[:, 1:] * y - th)
         np.add.at(out, self.end, th)
         return out
 
@@ -212,7 +207,7 @@ class _Chunk:
     fixed: FloatArray
     units: list[FloatArray]
     samples: _Samples
-    design: tuple[IntArray, IntArray, FloatArray]
+    lever: FloatArray
     residual: FloatArray
     jac: FloatArray
 
@@ -228,12 +223,19 @@ class _Chunk:
             units.append(chain_band(segments, NoiseLevels.from_vector(unit), wheels)
                          - fixed)
         samples = _Samples.of(segments)
-        return cls(fixed, units, samples, samples.design(segments), residual, jac)
+        return cls(fixed, units, samples, _lever(segments), residual, jac)
 
 
-def _sandwiched(design: tuple[IntArray, IntArray, FloatArray], r: FloatArray) -> FloatArray:
-    """A R A^T (3n, 3n) for A given by its entries (:meth:`_Samples.design`) and R (M, M)."""
-    first, last, a = design
+def _lever(segments: Segments) -> FloatArray:
+    """-J d (N, 2) (m/rad): each segment's x and y error per unit heading error at its first
+    sample (its theta row is -1 there and +1 at its last: the design A of the module doc)."""
+    return np.stack([segments.dy, -segments.dx], axis=1)
+
+
+def _sandwiched(samples: _Samples, lever: FloatArray, r: FloatArray) -> FloatArray:
+    """A R A^T (3n, 3n) for the design A of ``samples`` and ``lever`` (:func:`_lever`) and
+    R (M, M)."""
+    first, last, a = samples.start, samples.end, lever
     ss, se, ee = r[np.ix_(first, first)], r[np.ix_(first, last)], r[np.ix_(last, last)]
     n = len(first)
     out = np.empty((n, 3, n, 3))
@@ -266,8 +268,8 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
         k = dk = None
         if wander:
             r, dr = c.samples.correlation(time)
-            k = _sandwiched(c.design, r)
-            dk = _sandwiched(c.design, dr) if with_gradient else None
+            k = _sandwiched(c.samples, c.lever, r)
+            dk = _sandwiched(c.samples, c.lever, dr) if with_gradient else None
             cov += std2 * k
         cov[np.diag_indices_from(cov)] *= 1.0 + JITTER
         factor, _ = cho_factor(cov, lower=True, check_finite=False)
