@@ -28,6 +28,8 @@ Sources of logs:
     python benchmarks/bench_logs.py --logs 200 --slip 0.01
     python benchmarks/bench_logs.py --logs 200 --slip 0.01 --pose-noise 0   # independent noise
     python benchmarks/bench_logs.py --logs 200 --pose-noise-time 20          # wandering poses
+    python benchmarks/bench_logs.py --logs 200 --pose-noise 0.0001 --ticks-per-rev 4096 \
+        --encoder-jitter 0.002                                 # encoder timing errors
     python benchmarks/bench_logs.py --source env --env excite/DiffDriveCalibIdeal-v0 --logs 200
     python benchmarks/bench_logs.py --source env --speed 0.1 --logs 200       # slip env, gently
     python benchmarks/bench_logs.py --source env --speed 0.1 --logs 200 --same-robot
@@ -68,6 +70,7 @@ def synthetic_source(args: argparse.Namespace, i: int
                         sensor_pose=SENSOR, pose_noise=(args.pose_noise, args.pose_noise),
                         slip=args.slip, ticks_per_rev=args.ticks_per_rev,
                         pose_noise_time=args.pose_noise_time,
+                        encoder_jitter=args.encoder_jitter,
                         encoder_rate=args.encoder_rate, pose_rate=args.pose_rate)
     return (log.series, np.append(log.params.as_array(), SENSOR.as_array()),
             (args.pose_noise, args.pose_noise), args.ticks_per_rev)
@@ -97,11 +100,23 @@ def env_source(args: argparse.Namespace, i: int
     sigma = base.recording.sigma
     recording = base.recording
     series = recording.series
-    if args.encoders == "dithered":  # the true angles plus independent rounding errors
+    if args.encoders == "dithered" or args.encoder_jitter:
         tick = tick_angle(recording.ticks_per_rev)
         rng = np.random.default_rng(args.seed + i)
-        angles = recording.true_wheel_angles + tick * rng.uniform(
-            -0.5, 0.5, recording.true_wheel_angles.shape)
+        angles = recording.true_wheel_angles
+        if args.encoder_jitter:
+            # read off a smooth path through the simulator's samples, as a real wheel turns
+            # (its path is linear between physics steps: a kink at every sample, where a late
+            # read errs with a mean that no zero-mean timing error describes)
+            from scipy.interpolate import CubicSpline
+
+            t = series.t_enc
+            read = np.clip(t + args.encoder_jitter * rng.normal(size=t.size), t[0], t[-1])
+            angles = CubicSpline(t, angles, axis=0)(read)
+        if args.encoders == "dithered":  # plus independent rounding errors
+            angles = angles + tick * rng.uniform(-0.5, 0.5, angles.shape)
+        else:
+            angles = np.floor(angles / tick) * tick
         series = TimeSeries(series.t_enc, *angles.T, series.t_pose, series.x, series.y,
                             series.theta, source=series.source)
     return series, truth, (float(sigma[0]), float(sigma[2])), recording.ticks_per_rev
@@ -164,11 +179,14 @@ def main() -> None:
                         help="(env) the recorded whole-tick angles, or the true angles plus "
                              "independent uniform errors of one tick (dithered encoders: "
                              "what the quantization model assumes)")
+    parser.add_argument("--encoder-jitter", type=float, default=0.0, metavar="SECONDS",
+                        help="each encoder sample read at its stamp plus a Gaussian time "
+                             "error of this std (s; both wheels at once)")
     parser.add_argument("--seed", type=int, default=1000)
     args = parser.parse_args()
     source = synthetic_source if args.source == "synthetic" else env_source
     errors, known, distances, reported, covariances, bounds = [], [], [], [], [], []
-    widened = driving = wandering = 0
+    widened = driving = wandering = late = 0
     for i in tqdm(range(args.logs), desc="logs"):
         series, truth, pose_noise, ticks = source(args, i)
         segments = segment_timeseries(series).segments
@@ -183,6 +201,7 @@ def main() -> None:
         widened += result.fit.long_run_bandwidth is not None
         driving += result.fit.driving_statistic is not None and not result.fit.ok
         wandering += result.fit.heading_wander is not None
+        late += bool(result.timing)
         if min(pose_noise) > 0:  # without pose noise there is no pose-noise bound
             bound, theta = pose_noise_fit(segments, truth, estimate, pose_noise)
             bounds.append(bound)
@@ -197,6 +216,7 @@ def main() -> None:
     print(f"truth inside the 95% ellipse (6 parameters): {np.mean(distances < CHI2_6_95):.3f}")
     print(f"covariance widened for serially correlated residuals: {widened} of {args.logs} logs")
     print(f"pose heading error found to wander: {wandering} of {args.logs} logs")
+    print(f"encoder timing error found: {late} of {args.logs} logs")
     print(f"fit failed by the driving test (slip growing with acceleration): {driving} of "
           f"{args.logs} logs")
     print("RMSE", " ".join(f"{n} {v:.3g}" for n, v in zip(NAMES, rmse, strict=True)))

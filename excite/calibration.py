@@ -84,7 +84,8 @@ NOISE_ROUNDS = 8
 #: The noise levels have settled when no level moves by more than this fraction.
 NOISE_RTOL = 0.01
 _UNIT_SIGMA = np.ones(3)
-#: Segments that share pose samples have their noise levels (five, six with wheel slip)
+#: Segments that share pose samples have their noise levels (five; seven with wheel slip and
+#: encoder timing)
 #: estimated by REML from the residuals; that needs at least this many residual degrees of
 #: freedom (3 N - parameters) per level. Fewer, and the levels collapse to fit the few
 #: residuals (noise ~1e-10 on 4 segments of a slipping log: r_R 45% off at z = -157).
@@ -183,7 +184,9 @@ class CalibrationResult:
     larger wheel turn (rad / rad). The random walk's part of the std shrinks as the log grows;
     slip that depends on the driving (speed, turns) instead biases the parameters by up to
     about this fraction, which the model does not state (calibrate on gentle driving when it is
-    large against the std). rms_residual: raw residual RMS
+    large against the std). timing: for segments cut from a log, the estimated std of each
+    encoder sample's time against the pose stream (s; 0 unless the data show one,
+    :func:`excite.noise.reml_noise`); else None. rms_residual: raw residual RMS
     per channel. n_outliers: segments whose whitened
     squared residual exceeds the 99.9% chi2(3) quantile; n_trimmed: segments dropped by
     trimming.
@@ -213,6 +216,7 @@ class CalibrationResult:
     pose_sigma: FloatArray | None
     slip: float | None
     slip_share: float | None
+    timing: float | None
     loss: str
     converged: bool
     iterations: int
@@ -252,6 +256,7 @@ class CalibrationResult:
                                          strict=True))),
             "slip": self.slip,
             "slip_share": self.slip_share,
+            "timing": self.timing,
             "loss": self.loss,
             "converged": bool(self.converged),
             "iterations": self.iterations,
@@ -301,7 +306,8 @@ class CalibrationResult:
                    *self.pose_sigma))
             + ("" if self.slip is None else f"; wheel slip {self.slip:.3e} rad/sqrt(s)")
             + ("" if self.slip_share is None
-               else f" ({100 * self.slip_share:.2g}% of a segment's wheel turn)"),
+               else f" ({100 * self.slip_share:.2g}% of a segment's wheel turn)")
+            + ("" if not self.timing else f"; encoder timing {1e3 * self.timing:.2g} ms"),
             f"  outliers        = {self.n_outliers}"
             + (f"; trimmed {self.n_trimmed}" if self.n_trimmed else ""),
             f"  converged       = {self.converged} after {self.iterations} iterations"
@@ -805,8 +811,9 @@ def _slip_share(seg: Segments, slip: float) -> float | None:
 
 def _refuse_too_few_for_noise(data: Segments, n_parameters: int) -> None:
     """DataError unless the segments leave MIN_NOISE_DOF_PER_LEVEL residual degrees of freedom
-    per noise level to estimate (five levels; six for segments cut from a log, with slip)."""
-    n_levels = 6 if _cut_from_log(data) else 5
+    per noise level to estimate (five levels; seven for segments cut from a log, with slip
+    and encoder timing)."""
+    n_levels = 7 if _cut_from_log(data) else 5
     dof = 3 * len(data) - n_parameters
     needed = MIN_NOISE_DOF_PER_LEVEL * n_levels
     if dof < needed:
@@ -855,7 +862,8 @@ def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, lo
     rounds of (restricted maximum likelihood of the levels at the fit, linearised; refit
     whitened) until the levels settle. Segments cut from a log (with sub-steps) also carry
     wheel-space noise: slip (its level estimated with the others, started where it explains
-    the heading's segment noise) and, with ``tick`` (rad), encoder quantization; its geometry
+    the heading's segment noise), encoder timing (kept when the data show it) and, with
+    ``tick`` (rad), encoder quantization; its geometry
     follows the parameters from round to round. Returns the levels, their whitener and the
     last fit's parameters (the start of the final fit)."""
     settings = (loss, max_iterations, tol, max_relative_std)
@@ -877,7 +885,8 @@ def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, lo
         free = complement(mf.weak)
         new = reml_noise(data, ev.raw, np.einsum("cpn,pm->cmn", ev.jac, free), levels, floor,
                          wheels=wheels)
-        settled = new.close_to(levels, NOISE_RTOL, 0.0 if wheels is None else wheels.scale)
+        settled = (new.close_to(levels, NOISE_RTOL) if wheels is None else
+                   new.close_to(levels, NOISE_RTOL, wheels.scale, wheels.timing_scale))
         levels = new
         mf = _fit_model(model, data, mf.theta, _UNIT_SIGMA, *settings,
                         ChainWhitener(data, levels, wheels))
@@ -939,6 +948,7 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
         pose_sigma=None if levels is None else levels.pose,
         slip=slip,
         slip_share=None if slip is None else _slip_share(seg, slip),
+        timing=None if slip is None or levels is None else levels.timing,
         loss=loss,
         converged=fit.converged,
         iterations=fit.iterations,

@@ -71,6 +71,7 @@ independent) is modelled on top of this chain by :mod:`excite.wander`.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -94,6 +95,11 @@ SEGMENT_NOISE_TEST_LEVEL = 0.05
 #: fractions of the residuals' RMS (a level started far below where it matters stays there).
 START_FRACTIONS = (0.3, 0.03, 0.003)
 
+
+#: The encoder timing level is at most this fraction of the encoder period (s): an error of a
+#: few std then stays within half a period, so the samples stay in their stamps' order (a
+#: larger level would take up misfit instead, e.g. slip that grows with acceleration).
+TIMING_PERIOD_FRACTION = 0.25
 
 #: The median of |N(0, 1)|: a robust std is the median absolute value / this (MAD).
 MEDIAN_ABS_NORMAL = 0.6744897501960817
@@ -139,30 +145,40 @@ def quantization_variance(tick: float) -> float:
 class NoiseLevels:
     """sigma: white segment noise std (x [m], y [m], theta [rad]); pose: pose-sample noise
     std (xy [m], theta [rad]); slip: wheel slip intensity (rad / sqrt(s): each wheel's ground
-    contact drifts from its encoder by a random walk, variance slip^2 per second of motion;
-    used with a :class:`WheelNoise`)."""
+    contact drifts from its encoder by a random walk, variance slip^2 per second of motion);
+    timing: std of each encoder sample's time against the pose stream (s: the sample was read
+    earlier or later than its stamp says, both wheels at once). slip and timing are used with
+    a :class:`WheelNoise`."""
 
     sigma: FloatArray
     pose: FloatArray
     slip: float = 0.0
+    timing: float = 0.0
 
-    def vector(self, with_slip: bool) -> FloatArray:
-        """The levels as one vector: sigma (3), pose (2) and, ``with_slip``, slip."""
+    def vector(self, with_wheels: bool) -> FloatArray:
+        """The levels as one vector: sigma (3), pose (2) and, ``with_wheels``, slip and
+        timing."""
         values = np.concatenate([self.sigma, self.pose])
-        return np.append(values, self.slip) if with_slip else values
+        return np.append(values, [self.slip, self.timing]) if with_wheels else values
 
     @classmethod
     def from_vector(cls, values: FloatArray) -> NoiseLevels:
-        """The inverse of :meth:`vector` (5 or 6 values; slip 0 without the sixth)."""
-        return cls(values[:3], values[3:5], float(values[5]) if values.size > 5 else 0.0)
+        """The inverse of :meth:`vector` (5 or 7 values; slip and timing 0 with 5)."""
+        if values.size > 5:
+            return cls(values[:3], values[3:5], float(values[5]), float(values[6]))
+        return cls(values[:3], values[3:5])
 
-    def close_to(self, other: NoiseLevels, rtol: float, slip_scale: float = 0.0) -> bool:
+    def close_to(self, other: NoiseLevels, rtol: float, slip_scale: float = 0.0,
+                 timing_scale: float = 0.0) -> bool:
         """Whether every level is within ``rtol`` of ``other``'s, or within 1e-3 of the
-        largest level (levels near 0 need not settle relatively); the slip level counts in
-        the increments' units, times ``slip_scale`` (the std of an increment per unit of
-        slip, :attr:`WheelNoise.scale`)."""
-        a = np.concatenate([self.sigma, self.pose, [self.slip * slip_scale]])
-        b = np.concatenate([other.sigma, other.pose, [other.slip * slip_scale]])
+        largest level (levels near 0 need not settle relatively); the slip and timing levels
+        count in the increments' units, times ``slip_scale`` and ``timing_scale`` (the std
+        of an increment per unit of each, :attr:`WheelNoise.scale` and
+        :attr:`WheelNoise.timing_scale`)."""
+        a = np.concatenate([self.sigma, self.pose,
+                            [self.slip * slip_scale, self.timing * timing_scale]])
+        b = np.concatenate([other.sigma, other.pose,
+                            [other.slip * slip_scale, other.timing * timing_scale]])
         return bool(np.all(np.abs(a - b) <= rtol * np.maximum(np.abs(b), 1e-300)
                            + 1e-3 * np.max(np.abs(b))))
 
@@ -193,6 +209,20 @@ class WheelNoise:
         period long, :func:`excite.timeseries.segment_timeseries`; encoders slower than 50 Hz
         get several per period, and the inner samples' bound then counts each sub-step end as
         a sample: conservative).
+    rate_start, rate_end (N, 2, 3): how the increment errs per second that its first and
+        last encoder sample's time errs (m/s, m/s, rad/s). A sample read dt later than its
+        stamp errs by w dt in both wheels at once, w the wheels' rates (rad/s) of the
+        sub-step after it (before it when dt < 0: the segment model's wheels turn at a
+        constant rate per sub-step), so its error's covariance is dt^2 (w_b w_b^T +
+        w_a w_a^T) / 2: the two rows are G w_b / sqrt(2) and G w_a / sqrt(2), G the
+        sample's wheel Jacobian (G_start, G_end). Chained segments share the sample as they
+        share its rounding; a chain's first and last sample use their own sub-step's rate.
+    rate_inner (N, 3, 3): sum_j D_j (w_j w_j^T + w_(j+1) w_(j+1)^T) D_j^T / 2 over the
+        samples inside the segment (between sub-steps j and j + 1): their timing errors are
+        independent, unlike their rounding.
+    period: the median sub-step (encoder period) duration (s); a sample's time error is at
+        most a fraction of it (TIMING_PERIOD_FRACTION), else the samples would not be in the
+        order their stamps say.
     """
 
     slip: FloatArray
@@ -200,6 +230,10 @@ class WheelNoise:
     end: FloatArray
     inner: FloatArray
     quantization: float
+    rate_start: FloatArray
+    rate_end: FloatArray
+    rate_inner: FloatArray
+    period: float
 
     @classmethod
     def of(cls, model: SegmentModel, segments: Segments, theta: FloatArray,
@@ -220,20 +254,48 @@ class WheelNoise:
         # (sum_j D_j e_j)(sum_j D_j e_j)^T <= (K - 1) sum_j e_j^2 D_j D_j^T
         inner = np.maximum(count - 1, 1)[:, None, None] * np.einsum("nkaw,nkbw->nab", step,
                                                                      step)
-        end = jac[np.arange(len(segments)), count - 1]
+        rows = np.arange(len(segments))
+        end = jac[rows, count - 1]
+        duration = (segments.t_end - segments.t_start) / count  # s per sub-step
+        per_second = np.divide(1.0, duration, out=np.zeros_like(duration),
+                               where=duration > 0)
+        rate = np.stack([sub_L, sub_R], axis=-1) * per_second[:, None, None]  # (N, K, 2)
+        # a sample read early errs at the rate of the sub-step before it, late at the one
+        # after: halves of variance 1/2 each (a chain's first and last sample: its own rate)
+        first, last = rate[:, 0], rate[rows, count - 1]  # (N, 2)
+        before, after = first.copy(), last.copy()
+        shared = np.flatnonzero(_chained(segments))
+        before[shared], after[shared - 1] = last[shared - 1], first[shared]
+        at_start = math.sqrt(0.5) * np.stack([before, first], axis=1)  # (N, 2 halves, 2)
+        at_end = math.sqrt(0.5) * np.stack([last, after], axis=1)
+        early = np.einsum("nkaw,nkw->nka", step, rate[:, :-1])
+        late = np.einsum("nkaw,nkw->nka", step, rate[:, 1:])
         return cls(slip, jac[:, 0], end, inner,
-                   0.0 if tick is None else quantization_variance(tick))
+                   0.0 if tick is None else quantization_variance(tick),
+                   np.einsum("naw,nhw->nha", jac[:, 0], at_start),
+                   np.einsum("naw,nhw->nha", end, at_end),
+                   0.5 * (np.einsum("nka,nkb->nab", early, early)
+                          + np.einsum("nka,nkb->nab", late, late)),
+                   float(np.median(duration)))
 
     def take(self, index: NDArray[np.int64]) -> WheelNoise:
         """The wheel-space noise of the segments at ``index`` (consecutive, in order)."""
         return WheelNoise(self.slip[index], self.start[index], self.end[index],
-                          self.inner[index], self.quantization)
+                          self.inner[index], self.quantization, self.rate_start[index],
+                          self.rate_end[index], self.rate_inner[index], self.period)
 
     @property
     def scale(self) -> float:
         """The typical std of an increment per unit slip level: sqrt of the largest channel's
         mean slip covariance (m or rad per rad / sqrt(s))."""
         return float(np.sqrt(np.max(np.mean(np.diagonal(self.slip, axis1=1, axis2=2),
+                                            axis=0))))
+
+    @property
+    def timing_scale(self) -> float:
+        """The typical std of an increment per unit timing level: sqrt of the largest
+        channel's mean timing covariance (m/s or rad/s)."""
+        return float(np.sqrt(np.max(np.mean(np.diagonal(self._own_timing, axis1=1, axis2=2),
                                             axis=0))))
 
     @cached_property
@@ -244,21 +306,38 @@ class WheelNoise:
                 + np.einsum("naw,nbw->nab", self.end, self.end) + self.inner)
 
     @cached_property
+    def _own_timing(self) -> FloatArray:
+        """The covariance of a segment's increment (N, 3, 3) from its own encoder samples'
+        timing errors, per unit timing variance (rate_start, rate_end, rate_inner)."""
+        return (np.einsum("nha,nhb->nab", self.rate_start, self.rate_start)
+                + np.einsum("nha,nhb->nab", self.rate_end, self.rate_end) + self.rate_inner)
+
+    @cached_property
     def _boundaries(self) -> FloatArray:
         """G_start,k G_end,k-1^T (N - 1, 3, 3) of every pair of consecutive segments."""
         return np.einsum("maw,mbw->mab", self.start[1:], self.end[:-1])
 
-    def diagonal_blocks(self, slip: float) -> FloatArray:
-        """Each segment's own covariance (N, 3, 3) from slip and quantization."""
+    @cached_property
+    def _timing_boundaries(self) -> FloatArray:
+        """sum over the halves of rate_start,k rate_end,k-1^T (N - 1, 3, 3) of every pair of
+        consecutive segments."""
+        return np.einsum("mha,mhb->mab", self.rate_start[1:], self.rate_end[:-1])
+
+    def diagonal_blocks(self, slip: float, timing: float) -> FloatArray:
+        """Each segment's own covariance (N, 3, 3) from slip, quantization and timing."""
         blocks = slip * slip * self.slip
         if self.quantization:
             blocks = blocks + self.quantization * self._own_samples
+        if timing:
+            blocks = blocks + timing * timing * self._own_timing
         return blocks
 
-    def shared_blocks(self, k: NDArray[np.int64]) -> FloatArray:
+    def shared_blocks(self, k: NDArray[np.int64], timing: float) -> FloatArray:
         """C[rows of segment k, columns of k - 1] (m, 3, 3) for chained segments k: the
-        boundary sample's quantization, -q G_start,k G_end,k-1^T."""
-        return -self.quantization * self._boundaries[k - 1]
+        boundary sample's quantization and timing error, -q G_start,k G_end,k-1^T
+        - timing^2 sum_h rate_start,k,h rate_end,k-1,h^T."""
+        return (-self.quantization * self._boundaries[k - 1]
+                - timing * timing * self._timing_boundaries[k - 1])
 
 
 def _perpendicular(segments: Segments) -> tuple[FloatArray, FloatArray]:
@@ -291,7 +370,8 @@ def chain_band(segments: Segments, levels: NoiseLevels,
     """The covariance C of the stacked increments (see the module doc) in lower band storage
     (_BAND + 1, 3N): ``band[i - j, j] = C[i, j]`` for i >= j, rows and columns 3k + channel
     (x, y, theta of segment k); ``wheels`` adds the noise that enters through the wheels (slip
-    at ``levels.slip``, encoder quantization), :class:`WheelNoise`. C is linear in the
+    at ``levels.slip``, encoder quantization, encoder timing at ``levels.timing``),
+    :class:`WheelNoise`. C is linear in the
     variances (the squared levels)."""
     n = len(segments)
     sx2, sy2, st2 = levels.sigma**2
@@ -306,7 +386,7 @@ def chain_band(segments: Segments, levels: NoiseLevels,
     own[:, 2, 1] = pth2 * jy  # C[theta, y]
     own[:, 2, 0] = pth2 * jx  # C[theta, x]
     if wheels is not None:
-        own = own + wheels.diagonal_blocks(levels.slip)
+        own = own + wheels.diagonal_blocks(levels.slip, levels.timing)
     band = np.zeros((_BAND + 1, 3 * n))
     _add_diagonal_blocks(band, own)
     chained = _chained(segments)
@@ -319,8 +399,8 @@ def chain_band(segments: Segments, levels: NoiseLevels,
         shared[:, 0, 0], shared[:, 0, 1] = -pxy2 * c, -pxy2 * s
         shared[:, 1, 0], shared[:, 1, 1] = pxy2 * s, -pxy2 * c
         shared[:, 0, 2], shared[:, 1, 2], shared[:, 2, 2] = -pth2 * jx[k], -pth2 * jy[k], -pth2
-        if wheels is not None and wheels.quantization:
-            shared = shared + wheels.shared_blocks(k)
+        if wheels is not None and (wheels.quantization or levels.timing):
+            shared = shared + wheels.shared_blocks(k, levels.timing)
         _add_shared_blocks(band, k, shared)
     return band
 
@@ -328,7 +408,8 @@ def chain_band(segments: Segments, levels: NoiseLevels,
 class ChainWhitener:
     """Whitening by the Cholesky factor of the covariance C of the stacked increments
     (:func:`chain_band`), for given noise levels; ``wheels`` adds the noise that enters
-    through the wheels (slip at ``levels.slip``, encoder quantization), :class:`WheelNoise`."""
+    through the wheels (slip at ``levels.slip``, encoder quantization, encoder timing at
+    ``levels.timing``), :class:`WheelNoise`."""
 
     def __init__(self, segments: Segments, levels: NoiseLevels,
                  wheels: WheelNoise | None = None):
@@ -414,16 +495,20 @@ def level_bounds(residual: FloatArray, floor: FloatArray, wheels: WheelNoise | N
                  ) -> tuple[FloatArray, FloatArray]:
     """The bounds of the logs of the noise levels a REML search moves in: each level at
     least its floor (``floor`` (3,) = (position, position, heading) floors the segment
-    levels, (position, heading) the pose levels; the slip floor is the heading floor over
-    the slip's scale, :attr:`WheelNoise.scale`) and at most 10 times the largest residual
-    (3, N) (over the slip's scale for slip). Five levels, six with ``wheels``."""
+    levels, (position, heading) the pose levels; the slip and timing floors are the heading
+    floor over their scales, :attr:`WheelNoise.scale` and :attr:`WheelNoise.timing_scale`)
+    and at most 10 times the largest residual (3, N) (over their scales for slip and
+    timing; the timing level also at most TIMING_PERIOD_FRACTION of the encoder period).
+    Five levels, seven with ``wheels``."""
     spread = float(np.max(np.abs(residual))) if residual.size else 1.0
     lower = np.log(np.concatenate([floor, floor[[0, 2]]]))
     upper = np.full(5, np.log(max(10.0 * spread, 1e-300)))
     if wheels is not None:
-        unit = max(wheels.scale, 1e-300)
-        lower = np.append(lower, np.log(floor[2] / unit))
-        upper = np.append(upper, np.log(max(10.0 * spread / unit, 1e-300)))
+        units = np.maximum([wheels.scale, wheels.timing_scale], 1e-300)
+        lower = np.append(lower, np.log(floor[2] / units))
+        upper = np.append(upper, np.log(np.maximum(10.0 * spread / units, 1e-300)))
+        upper[6] = min(upper[6], math.log(max(TIMING_PERIOD_FRACTION * wheels.period, 1e-300)))
+        lower[6] = min(lower[6], upper[6])
     return lower, upper
 
 
@@ -434,10 +519,11 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
     """The noise levels maximising the restricted likelihood of the residuals (3, N)
     (predicted - measured) of a fit whose Jacobian rows (3, P, N) span the fitted directions
     (only the directions the data determine): the five of the module doc and, with
-    ``wheels``, the slip level (its quantization is known, not estimated). Optimised over the
-    logs of the levels from ``start`` (L-BFGS-B); each level at least its floor: ``floor``
-    (3,) is (position, position, heading) and floors the segment levels and (position,
-    heading) the pose levels; the slip floor is the heading floor over the slip's scale.
+    ``wheels``, the slip and encoder timing levels (its quantization is known, not
+    estimated). Optimised over the logs of the levels from ``start`` (L-BFGS-B); each level
+    at least its floor: ``floor`` (3,) is (position, position, heading) and floors the
+    segment levels and (position, heading) the pose levels; the slip and timing floors are
+    the heading floor over their scales.
 
     Then the hypothesis "no segment noise" is tested (see the module doc): the restricted
     deviance with the segment levels (and slip) at their floor (the pose levels
@@ -445,17 +531,25 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
     (1 - ``test_level``)-quantile of the chi-bar-square distribution of three boundary
     components; if the data do not reject it, those levels are returned. With ``wheels``, if
     it is rejected, "slip alone, no white segment noise" is tested against the full optimum
-    the same way (three components), and slip alone is kept unless rejected.
+    the same way (three components), and slip alone is kept unless rejected. All of this
+    holds the timing level at its floor; last, "no timing error" is tested against the
+    chosen levels with a free timing level (one boundary component), and the timing level
+    kept only if rejected (else it is 0).
     """
     from scipy.optimize import minimize
 
     lower, upper = level_bounds(residual, floor, wheels)
-    first = start.vector(with_slip=wheels is not None)
+    first = start.vector(with_wheels=wheels is not None)
     segment = [0, 1, 2]  # the levels of segment noise (tested together)
     if wheels is not None:
-        unit = max(wheels.scale, 1e-300)
+        units = np.maximum([wheels.scale, wheels.timing_scale], 1e-300)
         segment.append(5)
     u0 = np.minimum(np.maximum(np.log(np.maximum(first, 1e-300)), lower), upper)
+    # where a level is held: the segment levels and slip at their floor, the timing level at
+    # 0 (not its floor: where every level sits at its floor, as in noise-free simulated logs,
+    # one more floor-sized term would change the fit)
+    held = lower.copy()
+    held[6:] = -np.inf
 
     def levels_of(u: FloatArray) -> NoiseLevels:
         return NoiseLevels.from_vector(np.exp(u))
@@ -470,7 +564,7 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
                 start_value: float | None = None) -> tuple[FloatArray, float]:
         """The minimum of the deviance over the levels not ``fixed`` at their floor
         (``start_value``: the deviance at the start, when known)."""
-        u = np.where(fixed, lower, start_u)
+        u = np.where(fixed, held, start_u)
         free = np.flatnonzero(~fixed)
         if start_value is None:
             start_value = deviance(u)
@@ -493,35 +587,56 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
     rms = np.sqrt(np.mean(residual**2, axis=1)) if residual.size else np.ones(3)
 
     def search(start_u: FloatArray, fixed: NDArray[np.bool_]) -> tuple[FloatArray, float]:
-        candidates = [start_u]
+        candidates = [np.minimum(np.maximum(start_u, lower), upper)]
         for fraction in START_FRACTIONS:
             u = start_u.copy()
             u[:3] = np.maximum(np.log(np.maximum(fraction * rms, 1e-300)), start_u[:3])
             if wheels is not None:
-                u[5] = max(np.log(max(fraction * float(np.max(rms)), 1e-300) / unit),
-                           start_u[5])
+                u[5:] = np.maximum(np.log(max(fraction * float(np.max(rms)), 1e-300) / units),
+                                   start_u[5:])
             candidates.append(np.minimum(np.maximum(u, lower), upper))
-        values = [deviance(np.where(fixed, lower, u)) for u in candidates]
+        values = [deviance(np.where(fixed, held, u)) for u in candidates]
         best = int(np.argmin(values))
         return optimum(candidates[best], fixed, values[best])
 
-    none = np.zeros(u0.size, dtype=bool)
-    u_hat, best = search(u0, none)
+    timing = np.zeros(u0.size, dtype=bool)  # the timing level (tested last)
+    timing[6:] = True
+    u, fixed, value = _segment_noise(search, optimum, u0, timing, lower, segment,
+                                     chi_bar_square_quantile(1.0 - test_level, 3))
+    if wheels is None:
+        return levels_of(u)
+    u_timing, with_timing = search(u, fixed & ~timing)
+    kept = value - with_timing > chi_bar_square_quantile(1.0 - test_level, 1)
+    return levels_of(u_timing if kept else u)
+
+
+Search = Callable[[FloatArray, NDArray[np.bool_]], tuple[FloatArray, float]]
+
+
+def _segment_noise(search: Search, optimum: Search, u0: FloatArray, held: NDArray[np.bool_],
+                   lower: FloatArray, segment: list[int], quantile: float
+                   ) -> tuple[FloatArray, NDArray[np.bool_], float]:
+    """:func:`reml_noise`'s tests of segment noise (its doc) with the levels ``held`` at
+    their floor throughout: the chosen log-levels, the levels its model holds at their floor
+    and its deviance."""
+    u_hat, best = search(u0, held)
     if not np.any(u_hat[segment] > lower[segment]):
-        return levels_of(u_hat)
-    white = none.copy()
+        return u_hat, held, best
+    white = held.copy()
     white[:3] = True
-    no_slip = none.copy()
+    no_slip = held.copy()
     no_slip[segment[3:]] = True
-    quantile = chi_bar_square_quantile(1.0 - test_level, 3)
+    with_wheels = len(segment) > 3
     # 1. Is there segment noise at all? "None" against white segment noise (slip held at its
     # floor): three boundary components.
-    _, best_white = search(u_hat, no_slip) if wheels is not None else (u_hat, best)
+    _, best_white = search(u_hat, no_slip) if with_wheels else (u_hat, best)
     u_null, null = optimum(u_hat, white | no_slip)
     if null - best_white < quantile:
-        return levels_of(u_null)
-    if wheels is None:
-        return levels_of(u_hat)
+        return u_null, white | no_slip, null
+    if not with_wheels:
+        return u_hat, held, best
     # 2. There is: does slip through the wheels explain it, without white segment noise?
     u_slip, only_slip = search(u_hat, white)
-    return levels_of(u_slip if only_slip - best < quantile else u_hat)
+    if only_slip - best < quantile:
+        return u_slip, white, only_slip
+    return u_hat, held, best

@@ -93,6 +93,7 @@ def synthetic_log(
     turn_rate: float = 1.0,
     ticks_per_rev: float | None = None,
     pose_noise_time: float = 0.0,
+    encoder_jitter: float = 0.0,
     step: float = 1e-3,
 ) -> SyntheticLog:
     """A robot driving smooth random curves (exact arcs on a fine grid of ``step`` s), recorded
@@ -107,8 +108,11 @@ def synthetic_log(
     correlation exp(-|dt| / pose_noise_time) between samples dt apart, like a scan matcher's
     or a visual odometry's slowly wandering error). ``slip``
     (rad / sqrt(s)): the wheels' ground contact differs from the encoders by a random walk of
-    this intensity per wheel (independent noise on every segment's increments). Rates should
-    divide 1 / step so that samples fall on the grid.
+    this intensity per wheel (independent noise on every segment's increments).
+    ``encoder_jitter`` (s): each encoder sample is read at its stamp plus an independent
+    Gaussian time error of this std (both wheels at once; a controller's or a serial link's
+    timing), before its rounding. Rates should divide 1 / step so that samples fall on the
+    grid.
     """
     from excite import se2
 
@@ -127,14 +131,18 @@ def synthetic_log(
     body = se2.compose(start, se2.accumulate(*predict_increment(ground_L, ground_R, params)))
     phi_L = rng.uniform(-10, 10) + np.concatenate(([0.0], np.cumsum(enc_L)))
     phi_R = rng.uniform(-10, 10) + np.concatenate(([0.0], np.cumsum(enc_R)))
-    if ticks_per_rev is not None:
-        tick = tick_angle(ticks_per_rev)
-        phi_L, phi_R = np.floor(phi_L / tick) * tick, np.floor(phi_R / tick) * tick
     e = slice(0, None, max(1, int(round(1.0 / (encoder_rate * step)))))
     p = slice(0, None, max(1, int(round(1.0 / (pose_rate * step)))))
     sensor = se2.compose(body[p], pose.as_array())
     sensor += _pose_noise(rng, t[p], pose_noise_time) * np.array([pose_noise[0], pose_noise[0],
                                                                  pose_noise[1]])
-    series = TimeSeries(t[e], phi_L[e], phi_R[e], t[p], *sensor.T,
+    read_L, read_R = phi_L[e], phi_R[e]
+    if encoder_jitter > 0:
+        read = np.clip(t[e] + encoder_jitter * rng.normal(size=read_L.size), t[0], t[-1])
+        read_L, read_R = np.interp(read, t, phi_L), np.interp(read, t, phi_R)
+    if ticks_per_rev is not None:
+        tick = tick_angle(ticks_per_rev)
+        read_L, read_R = np.floor(read_L / tick) * tick, np.floor(read_R / tick) * tick
+    series = TimeSeries(t[e], read_L, read_R, t[p], *sensor.T,
                         source=("synthetic encoders", "synthetic poses"))
     return SyntheticLog(series, params, pose, t, body)

@@ -92,7 +92,7 @@ MAX_EVALUATIONS = 400
 class HeadingWander:
     """A wandering heading error of the pose samples: ``std`` (rad), ``correlation_time``
     (s), the likelihood ratio against none (``statistic``), the chain's noise levels
-    estimated with it (``levels``: sigma m, m, rad; pose m, rad; slip rad / sqrt(s)) and
+    estimated with it (``levels``: sigma m, m, rad; pose m, rad; slip rad / sqrt(s); timing s) and
     whether the time constant sits at its bound, the longest unbroken stretch of the log
     (``at_bound``: a slower wander, indistinguishable from a heading random walk, whose
     mean over the log is then understated)."""
@@ -330,7 +330,7 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
     longest = _longest_stretch(segments)  # s
     if not step > 0.0 or not longest > 2.0 * step:  # nothing long enough to see a wander
         return None
-    n_levels = 6 if wheels is not None else 5
+    n_levels = levels.vector(wheels is not None).size
     e = residual.T.reshape(-1)
     j = jac.transpose(2, 0, 1).reshape(e.size, -1)
     chunks = []

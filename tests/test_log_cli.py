@@ -187,7 +187,7 @@ def test_a_gap_longer_than_the_window_is_named(capsys, tmp_path):
 
 
 def test_too_few_segments_to_estimate_the_noise_levels(capsys, tmp_path):
-    """A 6 s log cut into 6 segments: 18 residuals for 6 parameters and 6 noise levels.
+    """A 6 s log cut into 6 segments: 18 residuals for 6 parameters and 7 noise levels.
     Estimated anyway, the levels collapsed onto the few residuals (std 10-150x too small,
     exit 0); now a one-line error naming the way out, and given levels still calibrate."""
     series = synthetic_log(np.random.default_rng(9), 6.0, Params(0.05, 0.051, 0.3),
@@ -196,8 +196,8 @@ def test_too_few_segments_to_estimate_the_noise_levels(capsys, tmp_path):
     write_timeseries(path, series)
     code, out, err = run_cli(capsys, "calibrate", path)
     assert code == 2 and out == "" and err.count("\n") == 1
-    assert ("6 segments leave 12 residual degrees of freedom to estimate 6 noise levels from; "
-            "at least 30 are needed (about 12 segments for 6 parameters)") in err
+    assert ("6 segments leave 12 residual degrees of freedom to estimate 7 noise levels from; "
+            "at least 35 are needed (about 14 segments for 6 parameters)") in err
     code, out, _ = run_cli(capsys, "calibrate", path, "--sigma", "0.003,0.003,0.003")
     assert code == 0 and "identifiable    = yes" in out
 
@@ -220,6 +220,25 @@ def test_the_slip_share_is_reported(capsys, tmp_path, slip):
         assert report["slip_share"] < 1e-4
     code, out, err = run_cli(capsys, "calibrate", path)
     assert "% of a segment's wheel turn)" in out and err == ""
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.003])
+def test_the_encoder_timing_is_reported(capsys, tmp_path, jitter):
+    """timing: the std of the encoder samples' time errors (s), in --json and on the noise
+    line (ms); 0 (and not on the line) when the encoders are read on time."""
+    series = synthetic_log(np.random.default_rng(11), 90.0, Params(0.05, 0.051, 0.3),
+                           pose_noise=(1e-4, 1e-4), encoder_jitter=jitter).series
+    path = tmp_path / "log.csv"
+    write_timeseries(path, series)
+    code, out, err = run_cli(capsys, "calibrate", path, "--json")
+    timing = json.loads(out)["timing"]
+    code, text, err = run_cli(capsys, "calibrate", path)
+    assert code == 0 and err == ""
+    if jitter:
+        assert timing == pytest.approx(jitter, rel=0.2)
+        assert f"; encoder timing {1e3 * timing:.2g} ms" in text
+    else:
+        assert timing == 0.0 and "encoder timing" not in text
 
 
 def test_a_clock_jump_or_times_in_ns_are_one_line_errors(capsys, tmp_path):

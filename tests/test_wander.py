@@ -113,11 +113,11 @@ def _chunks(seg: Segments, wheels: WheelNoise | None):
     p = 4
     e = rng.normal(scale=1e-3, size=3 * len(seg))
     j = rng.normal(size=(3 * len(seg), p))
-    return [_Chunk.of(seg, wheels, e, j, 6 if wheels is not None else 5)]
+    return [_Chunk.of(seg, wheels, e, j, 7 if wheels is not None else 5)]
 
 
 @settings(max_examples=15, deadline=None)
-@given(st.lists(st.floats(-9.0, -4.0), min_size=8, max_size=8), st.booleans())
+@given(st.lists(st.floats(-9.0, -4.0), min_size=9, max_size=9), st.booleans())
 def test_the_restricted_deviance_has_the_analytic_gradient(u_list, with_wheels):
     seg = _log(5, 15.0)
     wheels = None
@@ -126,8 +126,8 @@ def test_the_restricted_deviance_has_the_analytic_gradient(u_list, with_wheels):
 
         theta = np.array([0.05, 0.051, 0.3, *SENSOR.as_array()])
         wheels = WheelNoise.of(SENSOR_POSE, seg, theta, 2 * np.pi / 4096)
-    n_levels = 6 if with_wheels else 5
-    u = np.array(u_list[:n_levels] + [u_list[6], np.log(np.exp(u_list[7] + 9.0) + 0.5)])
+    n_levels = 7 if with_wheels else 5  # with the wheels: slip and encoder timing
+    u = np.array(u_list[:n_levels] + [u_list[7], np.log(np.exp(u_list[8] + 9.0) + 0.5)])
     chunks = _chunks(seg, wheels)
     value, gradient = _deviance(chunks, u, n_levels, True)
     step = 1e-6
