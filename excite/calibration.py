@@ -186,7 +186,10 @@ class CalibrationResult:
     about this fraction, which the model does not state (calibrate on gentle driving when it is
     large against the std). timing: for segments cut from a log, the estimated std of each
     encoder sample's time against the pose stream (s; 0 unless the data show one,
-    :func:`excite.noise.reml_noise`); else None. rms_residual: raw residual RMS
+    :func:`excite.noise.reml_noise`); else None. timing_at_bound: whether it sits at its
+    bound, a quarter of the encoder period (:attr:`excite.noise.WheelNoise.timing_bound`;
+    larger errors are not described, the std are then too narrow); None without timing.
+    rms_residual: raw residual RMS
     per channel. n_outliers: segments whose whitened
     squared residual exceeds the 99.9% chi2(3) quantile; n_trimmed: segments dropped by
     trimming.
@@ -217,6 +220,7 @@ class CalibrationResult:
     slip: float | None
     slip_share: float | None
     timing: float | None
+    timing_at_bound: bool | None
     loss: str
     converged: bool
     iterations: int
@@ -257,6 +261,7 @@ class CalibrationResult:
             "slip": self.slip,
             "slip_share": self.slip_share,
             "timing": self.timing,
+            "timing_at_bound": self.timing_at_bound,
             "loss": self.loss,
             "converged": bool(self.converged),
             "iterations": self.iterations,
@@ -307,7 +312,9 @@ class CalibrationResult:
             + ("" if self.slip is None else f"; wheel slip {self.slip:.3e} rad/sqrt(s)")
             + ("" if self.slip_share is None
                else f" ({100 * self.slip_share:.2g}% of a segment's wheel turn)")
-            + ("" if not self.timing else f"; encoder timing {1e3 * self.timing:.2g} ms"),
+            + ("" if not self.timing else f"; encoder timing {1e3 * self.timing:.2g} ms")
+            + (" (at its bound, a quarter of the encoder period: larger timing errors are not "
+               "described and the std are too narrow)" if self.timing_at_bound else ""),
             f"  outliers        = {self.n_outliers}"
             + (f"; trimmed {self.n_trimmed}" if self.n_trimmed else ""),
             f"  converged       = {self.converged} after {self.iterations} iterations"
@@ -571,7 +578,7 @@ def calibrate(
         (sigma_xy, sigma_theta); None estimates them from the residuals, re-weighting at
         every iteration until they settle. Segments cut from one log (sharing pose samples)
         then need MIN_NOISE_DOF_PER_LEVEL residual degrees of freedom per noise level (about
-        12 segments with the sensor pose), else DataError.
+        14 segments with the sensor pose), else DataError.
     loss: "linear" (Gaussian maximum likelihood) or "huber" (robust to slip outliers; the
         threshold is 1.345 whitened standard deviations).
     sensor_pose: "auto" (default: estimate the sensor pose when the data determine it and it
@@ -920,6 +927,7 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
         direction = _describe_weak(weak, theta, seg, mf.channel_std)
     params, pose = mf.model.split(theta)
     pose_std = np.sqrt(np.diag(full)[3:6]) if mf.model is SENSOR_POSE else None
+    timing = None if slip is None or levels is None else levels.timing
     raw = fit.ev.residual.T
     z = fit.ev.raw.T / fit.sigma
     outliers = int(np.sum(np.sum(z * z, axis=1) > chi2_quantile(OUTLIER_QUANTILE, 3)))
@@ -948,7 +956,9 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
         pose_sigma=None if levels is None else levels.pose,
         slip=slip,
         slip_share=None if slip is None else _slip_share(seg, slip),
-        timing=None if slip is None or levels is None else levels.timing,
+        timing=timing,
+        timing_at_bound=(None if timing is None or whitener is None or whitener.wheels is None
+                         else whitener.wheels.at_timing_bound(timing)),
         loss=loss,
         converged=fit.converged,
         iterations=fit.iterations,

@@ -55,14 +55,21 @@ segment model's wheel Jacobian G_kj = d(increment k)/d(sub-increment j)
   -q G_start,k G_end,k-1^T between chained segments (inside the band, like the pose samples);
   the samples inside a segment enter through the change of G between sub-steps, bounded for
   correlated rounding (see :class:`WheelNoise`).
+* encoder timing: each encoder sample is read ``timing`` (s, std) off its stamp, both wheels
+  at once, and errs by the wheels' rate times that error (the sub-step before it when read
+  early, the one after when late); shared by chained segments like its rounding, the samples
+  inside a segment independent (see :class:`WheelNoise`). Its level is estimated by REML and
+  tested last (below), at most TIMING_PERIOD_FRACTION of the encoder period.
 
-With wheel-space noise the REML levels are six (white x, y, theta; pose xy, theta; slip) and
-the tests nest: first "no segment noise" against white segment noise (three components, as
-above: the pose-only logs keep the behaviour of the white model), then, if rejected, "slip
-alone" against slip plus white (three components): slip through the wheels is kept unless
-the white levels are needed too. Every search also starts the segment levels at fractions of
-the residuals' RMS, because a level at its floor has no slope in the deviance and would stay
-there.
+With wheel-space noise the REML levels are seven (white x, y, theta; pose xy, theta; slip;
+timing) and the tests nest, the timing level held at 0: first "no segment noise" against
+white segment noise (three components, as above: the pose-only logs keep the behaviour of
+the white model), then, if rejected, "slip alone" against slip plus white (three
+components): slip through the wheels is kept unless the white levels are needed too; last,
+"no timing error" against the chosen levels with a free timing level (one component). The
+segment levels are not tested again once a timing level is kept. Every search also starts
+the segment levels at fractions of the residuals' RMS, because a level at its floor has no
+slope in the deviance and would stay there.
 
 A pose source whose heading error wanders over seconds (correlated between samples, not
 independent) is modelled on top of this chain by :mod:`excite.wander`.
@@ -164,7 +171,9 @@ class NoiseLevels:
     @classmethod
     def from_vector(cls, values: FloatArray) -> NoiseLevels:
         """The inverse of :meth:`vector` (5 or 7 values; slip and timing 0 with 5)."""
-        if values.size > 5:
+        if values.size not in (5, 7):
+            raise ValueError(f"noise levels are 5 or 7 values, got {values.size}")
+        if values.size == 7:
             return cls(values[:3], values[3:5], float(values[5]), float(values[6]))
         return cls(values[:3], values[3:5])
 
@@ -220,9 +229,10 @@ class WheelNoise:
     rate_inner (N, 3, 3): sum_j D_j (w_j w_j^T + w_(j+1) w_(j+1)^T) D_j^T / 2 over the
         samples inside the segment (between sub-steps j and j + 1): their timing errors are
         independent, unlike their rounding.
-    period: the median sub-step (encoder period) duration (s); a sample's time error is at
-        most a fraction of it (TIMING_PERIOD_FRACTION), else the samples would not be in the
-        order their stamps say.
+    period: the median sub-step duration (s): the encoder period where the sub-steps are one
+        period long (:func:`excite.timeseries.segment_timeseries`: encoders of 50 Hz and more,
+        windows of up to 256 periods; else the sub-steps' own length, and the timing level is
+        an effective one of their ends). The timing level is at most :attr:`timing_bound`.
     """
 
     slip: FloatArray
@@ -290,6 +300,17 @@ class WheelNoise:
         mean slip covariance (m or rad per rad / sqrt(s))."""
         return float(np.sqrt(np.max(np.mean(np.diagonal(self.slip, axis1=1, axis2=2),
                                             axis=0))))
+
+    @property
+    def timing_bound(self) -> float:
+        """The largest timing level (s): TIMING_PERIOD_FRACTION of the period, so that a
+        time error of a few std keeps the samples in their stamps' order."""
+        return TIMING_PERIOD_FRACTION * self.period
+
+    def at_timing_bound(self, timing: float) -> bool:
+        """Whether a timing level (s) sits at :attr:`timing_bound` (larger errors are not
+        described: the std are then too narrow)."""
+        return timing >= self.timing_bound * (1.0 - 1e-9)
 
     @property
     def timing_scale(self) -> float:
@@ -498,7 +519,7 @@ def level_bounds(residual: FloatArray, floor: FloatArray, wheels: WheelNoise | N
     levels, (position, heading) the pose levels; the slip and timing floors are the heading
     floor over their scales, :attr:`WheelNoise.scale` and :attr:`WheelNoise.timing_scale`)
     and at most 10 times the largest residual (3, N) (over their scales for slip and
-    timing; the timing level also at most TIMING_PERIOD_FRACTION of the encoder period).
+    timing; the timing level also at most :attr:`WheelNoise.timing_bound`).
     Five levels, seven with ``wheels``."""
     spread = float(np.max(np.abs(residual))) if residual.size else 1.0
     lower = np.log(np.concatenate([floor, floor[[0, 2]]]))
@@ -507,7 +528,7 @@ def level_bounds(residual: FloatArray, floor: FloatArray, wheels: WheelNoise | N
         units = np.maximum([wheels.scale, wheels.timing_scale], 1e-300)
         lower = np.append(lower, np.log(floor[2] / units))
         upper = np.append(upper, np.log(np.maximum(10.0 * spread / units, 1e-300)))
-        upper[6] = min(upper[6], math.log(max(TIMING_PERIOD_FRACTION * wheels.period, 1e-300)))
+        upper[6] = min(upper[6], math.log(max(wheels.timing_bound, 1e-300)))
         lower[6] = min(lower[6], upper[6])
     return lower, upper
 
@@ -532,7 +553,7 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
     components; if the data do not reject it, those levels are returned. With ``wheels``, if
     it is rejected, "slip alone, no white segment noise" is tested against the full optimum
     the same way (three components), and slip alone is kept unless rejected. All of this
-    holds the timing level at its floor; last, "no timing error" is tested against the
+    holds the timing level at 0; last, "no timing error" is tested against the
     chosen levels with a free timing level (one boundary component), and the timing level
     kept only if rejected (else it is 0).
     """
@@ -548,8 +569,8 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
     # where a level is held: the segment levels and slip at their floor, the timing level at
     # 0 (not its floor: where every level sits at its floor, as in noise-free simulated logs,
     # one more floor-sized term would change the fit)
-    held = lower.copy()
-    held[6:] = -np.inf
+    held_at = lower.copy()
+    held_at[6:] = -np.inf
 
     def levels_of(u: FloatArray) -> NoiseLevels:
         return NoiseLevels.from_vector(np.exp(u))
@@ -564,7 +585,7 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
                 start_value: float | None = None) -> tuple[FloatArray, float]:
         """The minimum of the deviance over the levels not ``fixed`` at their floor
         (``start_value``: the deviance at the start, when known)."""
-        u = np.where(fixed, held, start_u)
+        u = np.where(fixed, held_at, start_u)
         free = np.flatnonzero(~fixed)
         if start_value is None:
             start_value = deviance(u)
@@ -595,7 +616,7 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
                 u[5:] = np.maximum(np.log(max(fraction * float(np.max(rms)), 1e-300) / units),
                                    start_u[5:])
             candidates.append(np.minimum(np.maximum(u, lower), upper))
-        values = [deviance(np.where(fixed, held, u)) for u in candidates]
+        values = [deviance(np.where(fixed, held_at, u)) for u in candidates]
         best = int(np.argmin(values))
         return optimum(candidates[best], fixed, values[best])
 

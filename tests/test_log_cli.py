@@ -222,23 +222,28 @@ def test_the_slip_share_is_reported(capsys, tmp_path, slip):
     assert "% of a segment's wheel turn)" in out and err == ""
 
 
-@pytest.mark.parametrize("jitter", [0.0, 0.003])
+@pytest.mark.parametrize("jitter", [0.0, 0.0015, 0.004])
 def test_the_encoder_timing_is_reported(capsys, tmp_path, jitter):
     """timing: the std of the encoder samples' time errors (s), in --json and on the noise
-    line (ms); 0 (and not on the line) when the encoders are read on time."""
+    line (ms); 0 (and not on the line) when the encoders are read on time; at its bound (a
+    quarter of the 10 ms encoder period) said so when the errors are larger."""
     series = synthetic_log(np.random.default_rng(11), 90.0, Params(0.05, 0.051, 0.3),
                            pose_noise=(1e-4, 1e-4), encoder_jitter=jitter).series
     path = tmp_path / "log.csv"
     write_timeseries(path, series)
     code, out, err = run_cli(capsys, "calibrate", path, "--json")
-    timing = json.loads(out)["timing"]
+    report = json.loads(out)
+    timing, at_bound = report["timing"], report["timing_at_bound"]
     code, text, err = run_cli(capsys, "calibrate", path)
     assert code == 0 and err == ""
-    if jitter:
-        assert timing == pytest.approx(jitter, rel=0.2)
-        assert f"; encoder timing {1e3 * timing:.2g} ms" in text
+    if jitter > 0.0025:
+        assert timing == pytest.approx(0.0025) and at_bound
+        assert "encoder timing 2.5 ms (at its bound, a quarter of the encoder period" in text
+    elif jitter:
+        assert timing == pytest.approx(jitter, rel=0.2) and not at_bound
+        assert f"; encoder timing {1e3 * timing:.2g} ms\n" in text
     else:
-        assert timing == 0.0 and "encoder timing" not in text
+        assert timing == 0.0 and not at_bound and "encoder timing" not in text
 
 
 def test_a_clock_jump_or_times_in_ns_are_one_line_errors(capsys, tmp_path):

@@ -354,3 +354,35 @@ def test_calibration_estimates_the_encoder_timing_and_stays_consistent():
     assert np.median(timings) == pytest.approx(0.002, rel=0.15), timings
     assert inside >= 11
     assert clean >= 10
+
+
+def test_timing_at_a_shared_sample_takes_the_rates_on_either_side():
+    """Two chained segments whose wheels turn at different constant rates: the sample they
+    share errs by w_b dt when read early and w_a dt when late (w_b: the first segment's rate,
+    w_a: the second's), so the block between them is -timing^2 G_start,1 S G_end,0^T with
+    S = (w_b w_b^T + w_a w_a^T) / 2, not the product of the halves crossed nor of one mean
+    rate; a chain's first and last sample use their own rate."""
+    rate_b, rate_a = np.array([4.0, 6.0]), np.array([7.0, 2.0])  # rad/s
+    k = 5
+    sub = np.stack([np.full((2, k), 0.05) * rate_b[:, None], np.full((2, k), 0.05)
+                    * rate_a[:, None]], axis=1)  # (2 wheels, 2 segments, k)
+    segments, theta, _ = chained_substeps(np.random.default_rng(0), 2, k, sub)
+    timing = 1e-3
+    wheels = WheelNoise.of(SENSOR_POSE, segments, theta, None)
+    # the timing part of C: the whole minus the pose noise alone (which keeps C invertible)
+    pose = np.full(2, 1e-4)
+    model = (dense_covariance(segments, NoiseLevels(np.zeros(3), pose, 0.0, timing), wheels)
+             - dense_covariance(segments, NoiseLevels(np.zeros(3), pose), wheels))
+    jac = SENSOR_POSE.wheel_jacobian(segments.sub_dphi_L, segments.sub_dphi_R, theta,
+                                     substeps=True)  # (2, k, 3, 2)
+    g_end, g_start = jac[0, -1], jac[1, 0]
+    s = 0.5 * (np.outer(rate_b, rate_b) + np.outer(rate_a, rate_a))
+    np.testing.assert_allclose(model[3:6, 0:3], -timing**2 * g_start @ s @ g_end.T,
+                               rtol=1e-6, atol=1e-14)
+    first, last = jac[0, 0] @ rate_b, jac[1, -1] @ rate_a  # the chain's ends: own rate
+    np.testing.assert_allclose(timing**2 * (np.outer(first, first) + g_end @ s @ g_end.T)
+                               + timing**2 * wheels.rate_inner[0], model[0:3, 0:3],
+                               rtol=1e-6, atol=1e-14)
+    np.testing.assert_allclose(timing**2 * (g_start @ s @ g_start.T + np.outer(last, last))
+                               + timing**2 * wheels.rate_inner[1], model[3:6, 3:6],
+                               rtol=1e-6, atol=1e-14)
