@@ -70,7 +70,7 @@ def synthetic_source(args: argparse.Namespace, i: int
                         sensor_pose=SENSOR, pose_noise=(args.pose_noise, args.pose_noise),
                         slip=args.slip, ticks_per_rev=args.ticks_per_rev,
                         pose_noise_time=args.pose_noise_time,
-                        encoder_jitter=args.encoder_jitter,
+                        encoder_jitter=args.encoder_jitter, pose_jitter=args.pose_jitter,
                         encoder_rate=args.encoder_rate, pose_rate=args.pose_rate)
     return (log.series, np.append(log.params.as_array(), SENSOR.as_array()),
             (args.pose_noise, args.pose_noise), args.ticks_per_rev)
@@ -182,6 +182,9 @@ def main() -> None:
     parser.add_argument("--encoder-jitter", type=float, default=0.0, metavar="SECONDS",
                         help="each encoder sample read at its stamp plus a Gaussian time "
                              "error of this std (s; both wheels at once)")
+    parser.add_argument("--pose-jitter", type=float, default=0.0, metavar="SECONDS",
+                        help="(synthetic) each pose sample taken at its stamp plus a Gaussian "
+                             "time error of this std (s)")
     parser.add_argument("--seed", type=int, default=1000)
     args = parser.parse_args()
     source = synthetic_source if args.source == "synthetic" else env_source

@@ -94,6 +94,7 @@ def synthetic_log(
     ticks_per_rev: float | None = None,
     pose_noise_time: float = 0.0,
     encoder_jitter: float = 0.0,
+    pose_jitter: float = 0.0,
     step: float = 1e-3,
 ) -> SyntheticLog:
     """A robot driving smooth random curves (exact arcs on a fine grid of ``step`` s), recorded
@@ -111,8 +112,9 @@ def synthetic_log(
     this intensity per wheel (independent noise on every segment's increments).
     ``encoder_jitter`` (s): each encoder sample is read at its stamp plus an independent
     Gaussian time error of this std (both wheels at once; a controller's or a serial link's
-    timing), before its rounding. Rates should divide 1 / step so that samples fall on the
-    grid.
+    timing), before its rounding. ``pose_jitter`` (s): each pose sample is taken at its stamp
+    plus an independent Gaussian time error of this std (a motion-capture or network stamp),
+    before its noise. Rates should divide 1 / step so that samples fall on the grid.
     """
     from excite import se2
 
@@ -133,7 +135,11 @@ def synthetic_log(
     phi_R = rng.uniform(-10, 10) + np.concatenate(([0.0], np.cumsum(enc_R)))
     e = slice(0, None, max(1, int(round(1.0 / (encoder_rate * step)))))
     p = slice(0, None, max(1, int(round(1.0 / (pose_rate * step)))))
-    sensor = se2.compose(body[p], pose.as_array())
+    taken = body[p]
+    if pose_jitter > 0:
+        read = np.clip(t[p] + pose_jitter * rng.normal(size=taken.shape[0]), t[0], t[-1])
+        taken = np.stack([np.interp(read, t, column) for column in body.T], axis=1)
+    sensor = se2.compose(taken, pose.as_array())
     sensor += _pose_noise(rng, t[p], pose_noise_time) * np.array([pose_noise[0], pose_noise[0],
                                                                  pose_noise[1]])
     read_L, read_R = phi_L[e], phi_R[e]
