@@ -688,9 +688,8 @@ def calibrate(
             assert levels is not None
             test = replace(test, heading_wander=_heading_wander(data, chosen, levels,
                                                                 whitener))
-    slip = None if whitener is None or whitener.wheels is None else levels.slip
     return _result(data, chosen, given is None, loss, max_relative_std, choice, test,
-                   len(seg) - len(data), levels, slip, whitener)
+                   len(seg) - len(data), levels, whitener)
 
 
 def _driving_score(data: Segments, mf: _ModelFit, whitener: ChainWhitener
@@ -906,7 +905,6 @@ def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray, lo
 def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
             max_relative_std: float, choice: str, test: FitTest,
             n_trimmed: int, levels: NoiseLevels | None = None,
-            slip: float | None = None,
             whitener: ChainWhitener | None = None) -> CalibrationResult:
     fit = mf.fit
     theta, info_rel = fit.theta, fit.system.information
@@ -927,7 +925,11 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
         direction = _describe_weak(weak, theta, seg, mf.channel_std)
     params, pose = mf.model.split(theta)
     pose_std = np.sqrt(np.diag(full)[3:6]) if mf.model is SENSOR_POSE else None
-    timing = None if slip is None or levels is None else levels.timing
+    wheels = None if whitener is None else whitener.wheels
+    # the levels through the wheels (None where the segments carry no wheel-space noise)
+    slip = timing = at_bound = None
+    if wheels is not None and levels is not None:
+        slip, timing, at_bound = levels.slip, levels.timing, wheels.at_timing_bound(levels.timing)
     raw = fit.ev.residual.T
     z = fit.ev.raw.T / fit.sigma
     outliers = int(np.sum(np.sum(z * z, axis=1) > chi2_quantile(OUTLIER_QUANTILE, 3)))
@@ -957,8 +959,7 @@ def _result(seg: Segments, mf: _ModelFit, sigma_estimated: bool, loss: Loss,
         slip=slip,
         slip_share=None if slip is None else _slip_share(seg, slip),
         timing=timing,
-        timing_at_bound=(None if timing is None or whitener is None or whitener.wheels is None
-                         else whitener.wheels.at_timing_bound(timing)),
+        timing_at_bound=at_bound,
         loss=loss,
         converged=fit.converged,
         iterations=fit.iterations,

@@ -257,7 +257,8 @@ class WheelNoise:
         moving = (sub_L != 0.0) | (sub_R != 0.0)
         k = np.arange(moving.shape[1])
         count = segments.substep_counts  # the segment's own sub-steps, equal parts of it
-        weight = np.where(moving, ((segments.t_end - segments.t_start) / count)[:, None], 0.0)
+        duration = (segments.t_end - segments.t_start) / count  # s per sub-step
+        weight = np.where(moving, duration[:, None], 0.0)
         slip = np.einsum("nk,nkaw,nkbw->nab", weight, jac, jac)
         step = (jac[:, :-1] - jac[:, 1:]) * (k[1:] < count[:, None])[:, :, None, None]
         # the bound of fully correlated rounding errors (see the class doc):
@@ -266,7 +267,6 @@ class WheelNoise:
                                                                      step)
         rows = np.arange(len(segments))
         end = jac[rows, count - 1]
-        duration = (segments.t_end - segments.t_start) / count  # s per sub-step
         per_second = np.divide(1.0, duration, out=np.zeros_like(duration),
                                where=duration > 0)
         rate = np.stack([sub_L, sub_R], axis=-1) * per_second[:, None, None]  # (N, K, 2)
@@ -298,8 +298,7 @@ class WheelNoise:
     def scale(self) -> float:
         """The typical std of an increment per unit slip level: sqrt of the largest channel's
         mean slip covariance (m or rad per rad / sqrt(s))."""
-        return float(np.sqrt(np.max(np.mean(np.diagonal(self.slip, axis1=1, axis2=2),
-                                            axis=0))))
+        return _largest_channel_std(self.slip)
 
     @property
     def timing_bound(self) -> float:
@@ -316,8 +315,7 @@ class WheelNoise:
     def timing_scale(self) -> float:
         """The typical std of an increment per unit timing level: sqrt of the largest
         channel's mean timing covariance (m/s or rad/s)."""
-        return float(np.sqrt(np.max(np.mean(np.diagonal(self._own_timing, axis1=1, axis2=2),
-                                            axis=0))))
+        return _largest_channel_std(self._own_timing)
 
     @cached_property
     def _own_samples(self) -> FloatArray:
@@ -359,6 +357,11 @@ class WheelNoise:
         - timing^2 sum_h rate_start,k,h rate_end,k-1,h^T."""
         return (-self.quantization * self._boundaries[k - 1]
                 - timing * timing * self._timing_boundaries[k - 1])
+
+
+def _largest_channel_std(blocks: FloatArray) -> float:
+    """sqrt of the largest channel's mean variance over covariance blocks (N, 3, 3)."""
+    return float(np.sqrt(np.max(np.mean(np.diagonal(blocks, axis1=1, axis2=2), axis=0))))
 
 
 def _perpendicular(segments: Segments) -> tuple[FloatArray, FloatArray]:
@@ -637,9 +640,9 @@ Search = Callable[[FloatArray, NDArray[np.bool_]], tuple[FloatArray, float]]
 def _segment_noise(search: Search, optimum: Search, u0: FloatArray, held: NDArray[np.bool_],
                    lower: FloatArray, segment: list[int], quantile: float
                    ) -> tuple[FloatArray, NDArray[np.bool_], float]:
-    """:func:`reml_noise`'s tests of segment noise (its doc) with the levels ``held`` at
-    their floor throughout: the chosen log-levels, the levels its model holds at their floor
-    and its deviance."""
+    """:func:`reml_noise`'s tests of segment noise (its doc) with the levels ``held`` held
+    throughout (where ``search`` and ``optimum`` hold levels: the timing level at 0): the
+    chosen log-levels, the levels its model holds and its deviance."""
     u_hat, best = search(u0, held)
     if not np.any(u_hat[segment] > lower[segment]):
         return u_hat, held, best

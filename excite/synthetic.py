@@ -79,6 +79,15 @@ def _pose_noise(rng: np.random.Generator, t: NDArray[np.float64],
     return noise
 
 
+def _read_times(rng: np.random.Generator, t: NDArray[np.float64], samples: slice, jitter: float
+                ) -> NDArray[np.float64]:
+    """The times (s) at which the samples ``samples`` of the grid ``t`` are taken when each
+    errs from its stamp by an independent Gaussian time error of std ``jitter`` (s), kept
+    within the grid."""
+    stamps = t[samples]
+    return np.clip(stamps + jitter * rng.normal(size=stamps.size), t[0], t[-1])
+
+
 def synthetic_log(
     rng: np.random.Generator,
     duration: float = 60.0,
@@ -137,14 +146,14 @@ def synthetic_log(
     p = slice(0, None, max(1, int(round(1.0 / (pose_rate * step)))))
     taken = body[p]
     if pose_jitter > 0:
-        read = np.clip(t[p] + pose_jitter * rng.normal(size=taken.shape[0]), t[0], t[-1])
+        read = _read_times(rng, t, p, pose_jitter)
         taken = np.stack([np.interp(read, t, column) for column in body.T], axis=1)
     sensor = se2.compose(taken, pose.as_array())
     sensor += _pose_noise(rng, t[p], pose_noise_time) * np.array([pose_noise[0], pose_noise[0],
                                                                  pose_noise[1]])
     read_L, read_R = phi_L[e], phi_R[e]
     if encoder_jitter > 0:
-        read = np.clip(t[e] + encoder_jitter * rng.normal(size=read_L.size), t[0], t[-1])
+        read = _read_times(rng, t, e, encoder_jitter)
         read_L, read_R = np.interp(read, t, phi_L), np.interp(read, t, phi_R)
     if ticks_per_rev is not None:
         tick = tick_angle(ticks_per_rev)
