@@ -21,7 +21,7 @@ demo: $(STAMP)
 test: $(STAMP) test-core
 	$(VENV)/bin/ruff check excite envs agents tests benchmarks
 	# one BLAS thread per test worker: two workers with two threads each on two cores made the
-	# many small dense factorisations (excite/wander.py) 2-3x slower
+	# many small dense factorisations (excite/calibration/wander.py) 2-3x slower
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 --dist loadgroup tests
 
 # A core-only install (numpy, scipy; no extras) in its own venv runs calibrate/segment/validate.

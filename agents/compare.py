@@ -41,12 +41,12 @@ from agents.catalog import (
 )
 from agents.oracle import oracle_design
 from agents.protocols import Protocol, ProtocolError, check_action
-from excite.consistency import estimate_error, nees
+from excite.core.information import crlb_relative_std
 from excite.errors import ExciteError
 from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
 from excite.estimators import check_distinct as check_distinct_estimators
-from excite.information import crlb_relative_std
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
+from excite.stats.consistency import estimate_error, nees
 
 #: The columns of DIR/segments.csv (see :mod:`agents.report` for their meaning and units).
 COLUMNS = ("protocol", "estimator", "episode", "segment", "r_L_err", "r_R_err", "b_err",
@@ -106,7 +106,7 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int,
     errors (default: its class name): an action that is not two finite numbers, or a user's
     protocol raising, is a ProtocolError naming it. ``nees`` is the estimator's NEES
     against the hidden truth over the ``nees_dof`` parameters it reports a covariance for
-    (:func:`excite.consistency.estimate_error`), ``time`` the seconds driven since the
+    (:func:`excite.stats.consistency.estimate_error`), ``time`` the seconds driven since the
     start."""
     label = label or type(protocol).__name__
     user = user_supplied(type(protocol).__module__)

@@ -24,7 +24,7 @@ from agents.motion import (
 )
 from agents.protocols import MAX_SPEED, WALL_MARGIN, Parameter, Protocol, Value
 from excite.contracts import RobotKnowledge
-from excite.information import segment_information
+from excite.core.information import segment_information
 
 #: Relative score difference below which two commands count as equally informative.
 TIE_TOLERANCE = 1e-9

@@ -2,7 +2,7 @@
 
 Inputs are per-segment records: index k along the last axis is the state after segment
 k + 1 of an episode (K segments); episodes, when there are several, run along the first axis.
-Consistency (NEES, ANEES and its chi-square bounds) is in :mod:`excite.consistency`, shared
+Consistency (NEES, ANEES and its chi-square bounds) is in :mod:`excite.stats.consistency`, shared
 with the environment's estimator check.
 
 * :func:`time_to_accuracy`: segments, seconds and metres of driving until the max relative
@@ -20,8 +20,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import trapezoid
 
-from excite.consistency import CONFIDENCE, check_confidence
 from excite.errors import MetricError
+from excite.stats.consistency import CONFIDENCE, check_confidence
 
 __all__ = [
     "CONFIDENCE",

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from excite.arena import DEFAULT_CHASSIS, Arena
 from excite.contracts import RobotKnowledge
-from excite.kinematics import Params, predict_increment
+from excite.core.arena import DEFAULT_CHASSIS, Arena
+from excite.core.kinematics import Params, predict_increment
 
 #: Fractions of the segment at which the predicted footprint is checked.
 CHECK_POINTS = np.array([0.25, 0.5, 0.75, 1.0])

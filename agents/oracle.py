@@ -17,9 +17,9 @@ import numpy as np
 from scipy.optimize import linprog
 
 from agents.greedy import command_grid
-from excite.information import segment_information
-from excite.kinematics import Params
-from excite.models import AXLE, SegmentModel
+from excite.core.information import segment_information
+from excite.core.kinematics import Params
+from excite.core.models import AXLE, SegmentModel
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,8 @@
 The input is the per-segment record of a comparison, as columns (equal-length numpy arrays)
 loaded from ``DIR/segments.csv``: one row per (protocol, estimator, episode, segment), with
 the signed relative errors ``r_L_err, r_R_err, b_err`` of the estimate against the hidden
-truth, the information measure ``sigma_min`` (dimensionless, see DESIGN.md), the per-episode
+truth, the information measure ``sigma_min`` (dimensionless, see docs/conventions.md), the
+per-episode
 ceiling ``oracle_sigma_min``, the Cramér–Rao relative stds ``rel_std_r_L, rel_std_r_R,
 rel_std_b``, the estimator's ``nees`` against the truth over ``nees_dof`` parameters,
 ``collision`` (0/1), the true end pose ``x, y`` (m), ``theta`` (rad), the cumulative
@@ -11,7 +12,7 @@ rel_std_b``, the estimator's ``nees`` against the truth over ``nees_dof`` parame
 
 Computation: `summarize` reduces each (protocol, estimator) pair's episodes to medians with
 percentile bootstrap 95% intervals and the decision metrics of :mod:`agents.metrics` and
-:mod:`excite.consistency`. Presentation: `format_table` prints that summary;
+:mod:`excite.stats.consistency`. Presentation: `format_table` prints that summary;
 `plot_comparison` draws errors, sigma_min and ANEES against the segment count, and the
 trajectories of the first episode.
 """
@@ -24,9 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from agents.metrics import N_BOOT, error_time_area, paired_ratio, time_to_accuracy
-from excite.consistency import CONFIDENCE, anees_bounds, verdict
+from excite.core.models import AXLE
 from excite.estimators import DEFAULT_ESTIMATOR
-from excite.models import AXLE
+from excite.stats.consistency import CONFIDENCE, anees_bounds, verdict
 
 PARAMETERS = AXLE.names
 UNDETERMINED_REL_STD = 0.1  # a parameter whose median final relative std exceeds this is flagged

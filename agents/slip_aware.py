@@ -15,12 +15,12 @@ Each segment this planner scores candidate commands near the previous one (at mo
    with its lag, and the wheels' contacts follow their surface speeds only as fast as the grip
    allows (less the lateral acceleration of the turn; turning needs spin_inertia times the
    push of a straight acceleration); the encoders see the motor.
-   The segment's motion is the composition of the contacts' sub-arcs (excite.models'
+   The segment's motion is the composition of the contacts' sub-arcs (excite.core.models'
    sub-steps), so the model predicts the measured increment's error against the single arc
    the estimator fits: from the lag bending the arc and from slip;
 2. that error, whitened, enters the estimate as a bias: after segments k the least-squares
    estimate moves by F^-1 sum_k J_k^T e_k (relative units, J_k the whitened, relatively scaled
-   Jacobian of excite.information, F including the estimator's prior);
+   Jacobian of excite.core.information, F including the estimator's prior);
 3. the cost of a candidate is the predicted squared worst error after it: the worst-direction
    variance 1 / lambda_min(F) (the Cramer-Rao bound, as greedy maximises lambda_min) plus
    ``bias_weight`` times the largest squared relative bias; the cheapest safe one is chosen.
@@ -49,9 +49,9 @@ from agents.motion import (
 )
 from agents.protocols import MAX_SPEED, WALL_MARGIN, Parameter, Protocol, ProtocolError, Value
 from excite.contracts import RobotKnowledge
-from excite.information import scaled_jacobian
-from excite.kinematics import Params
-from excite.segment_estimator import DEFAULT_PRIOR
+from excite.core.information import scaled_jacobian
+from excite.core.kinematics import Params
+from excite.estimators.base import DEFAULT_PRIOR
 
 #: Hz, the rate at which the nominal wheel dynamics are integrated (the simulator's tick).
 SUBSTEP_HZ = 50.0

@@ -28,8 +28,8 @@ sys.path.insert(0, os.path.dirname(__file__))
 from lesson_baseline import lesson_calibrate  # noqa: E402
 
 from excite import OnlineEstimator, calibrate  # noqa: E402
-from excite.information import crlb_relative_std, fisher_information, scaled_jacobian  # noqa: E402
-from excite.synthetic import LESSON_TRUTH, lesson_dataset  # noqa: E402
+from excite.core.information import crlb_relative_std, fisher_information, scaled_jacobian  # noqa: E402
+from excite.logs.synthetic import LESSON_TRUTH, lesson_dataset  # noqa: E402
 
 REGIMES = {"(2e-3, 1e-3)": (2e-3, 2e-3, 1e-3), "(5e-4, 1e-2)": (5e-4, 5e-4, 1e-2),
            "(5e-3, 2e-4)": (5e-3, 5e-3, 2e-4)}

@@ -10,8 +10,8 @@ import numpy as np
 import excite  # noqa: F401
 from envs.estimator_check import check_estimator
 from excite import calibrate
-from excite.consistency import nees as nees_of
-from excite.noise import chi2_quantile
+from excite.calibration.noise import chi2_quantile
+from excite.stats.consistency import nees as nees_of
 
 
 def batch_nees(seeds: int = 100, segments: int = 150) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Speed of ``calibrate`` on a 1-hour 100 Hz log, side by side with another checkout of excite
 (ratios, since absolute times drift on a shared machine).
 
-The log: ``excite.synthetic.synthetic_log`` of 3600 s, encoders and poses at 100 Hz, pose
+The log: ``excite.logs.synthetic.synthetic_log`` of 3600 s, encoders and poses at 100 Hz, pose
 noise 2 mm / 2 mrad, the sensor off the axle, with and without wheel slip (0.01 rad/sqrt(s)),
 cut into 1 s windows (3600 segments). Each configuration is timed in fresh subprocesses,
 alternating this tree and the baseline, ``--repeats`` times; the medians are printed.
@@ -24,10 +24,10 @@ HERE = Path(__file__).resolve().parents[1]
 CHILD = """
 import sys, time
 import numpy as np
-from excite.calibration import calibrate
-from excite.models import SensorPose
-from excite.synthetic import synthetic_log
-from excite.timeseries import segment_timeseries
+from excite.calibration.pipeline import calibrate
+from excite.core.models import SensorPose
+from excite.logs.synthetic import synthetic_log
+from excite.logs.timeseries import segment_timeseries
 
 slip, mode = float(sys.argv[1]), sys.argv[2]
 log = synthetic_log(np.random.default_rng(7), 3600.0, sensor_pose=SensorPose(0.1, -0.03, 0.4),

@@ -16,7 +16,7 @@ the synthetic logs' mounting; otherwise each log draws its own hidden robot and 
 
 Sources of logs:
 
-* ``synthetic`` (excite.synthetic): smooth random curves, an off-axle sensor, 50 Hz pose
+* ``synthetic`` (excite.logs.synthetic): smooth random curves, an off-axle sensor, 50 Hz pose
   samples with noise (white, or wandering with ``--pose-noise-time``: first-order
   Gauss-Markov, as a scan matcher's or visual odometry's error), optional random-walk wheel
   slip;
@@ -44,15 +44,15 @@ import argparse
 import numpy as np
 from tqdm import tqdm
 
-from excite.calibration import calibrate
+from excite.calibration.noise import ChainWhitener, NoiseLevels, chi2_quantile
+from excite.calibration.pipeline import calibrate
+from excite.calibration.solver import Problem, levenberg_marquardt, normal_system
 from excite.commands.args import pose_noise_arg
-from excite.data import Segments
-from excite.models import SENSOR_POSE, SensorPose
-from excite.noise import ChainWhitener, NoiseLevels, chi2_quantile
+from excite.core.models import SENSOR_POSE, SensorPose
+from excite.logs.segments import Segments
+from excite.logs.synthetic import synthetic_log
+from excite.logs.timeseries import TimeSeries, segment_timeseries, tick_angle
 from excite.registration import SENSOR_MOUNTING
-from excite.solver import Problem, levenberg_marquardt, normal_system
-from excite.synthetic import synthetic_log
-from excite.timeseries import TimeSeries, segment_timeseries, tick_angle
 
 SENSOR = SensorPose(0.1, -0.03, 0.4)
 CHI2_6_95 = chi2_quantile(0.95, SENSOR_POSE.size)

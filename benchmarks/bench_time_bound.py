@@ -35,8 +35,8 @@ from agents.compare import episode_seed
 from agents.greedy import command_grid
 from agents.oracle import oracle_design
 from agents.tuning import TUNING_STREAM
-from excite.information import segment_information
-from excite.models import SegmentModel
+from excite.core.information import segment_information
+from excite.core.models import SegmentModel
 
 TARGET = 0.002  # the 0.2 % max relative error
 
@@ -114,7 +114,8 @@ def main() -> None:
     print(f"scaling check: max over robots, commands, lambda of eig(M(lambda u) - lambda^2 M(u))"
           f" / max eig M(u) = {max(scaling_violation(r) for r in robots):.2e} (<= 0: the ramp "
           "budget is an upper bound)")
-    # The online estimator's prior: 10 % of each parameter (excite.online), in relative units.
+    # The online estimator's prior: 10 % of each parameter (excite.estimators.online), in relative
+    # units.
     prior = np.eye(robots[0].model.size) / 0.1**2
     print(f"{'s':>5} " + " ".join(f"{k:>6}" for k in range(1, args.max_segments + 1))
           + "   first k with mean P >= 1/2")

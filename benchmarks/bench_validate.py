@@ -18,10 +18,10 @@ from tqdm import tqdm
 
 from agents.compare import make_env
 from agents.protocols import Arcs, StraightSpin, UMBmark
-from excite.calibration import calibrate
+from excite.calibration.pipeline import calibrate
+from excite.logs.timeseries import TimeSeries, segment_timeseries
 from excite.registration import SENSOR_MOUNTING
-from excite.timeseries import TimeSeries, segment_timeseries
-from excite.validation import summarize, validate_log
+from excite.validation.dead_reckoning import summarize, validate_log
 
 HELD_OUT = {"umbmark": UMBmark, "straight_spin": StraightSpin}
 

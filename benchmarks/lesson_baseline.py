@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from excite.data import Segments
+from excite.logs.segments import Segments
 
 
 def _sinc1(x):

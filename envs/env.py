@@ -17,14 +17,14 @@ from envs.recording import Recorder, Recording, RecordingConfig
 from envs.robot import RobotSpec, robot_distribution
 from envs.sensors import RelativePoseSensor
 from envs.simulation import Simulation, SimulationConfig
-from excite import se2
 from excite.contracts import Estimator, EstimatorFactory, RobotKnowledge
-from excite.data import Segments
+from excite.core import se2
+from excite.core.information import eigen_3x3, information_matrix
+from excite.core.kinematics import Params
+from excite.core.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose, body_to_sensor
 from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
-from excite.information import eigen_3x3, information_matrix
-from excite.kinematics import Params
-from excite.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose, body_to_sensor
-from excite.online import BatchOnlineEstimator
+from excite.estimators.online import BatchOnlineEstimator
+from excite.logs.segments import Segments
 from excite.registration import DEFAULT_BUDGET
 
 #: The environment's estimator factory given none: the built-in of
@@ -89,12 +89,14 @@ class DiffDriveCalibEnv(gym.Env):
 
     (*) r_L, r_R, b: estimate / nominal - 1; sensor l_x, l_y: (estimate - nominal) / nominal b;
     l_theta: estimate - nominal in rad. F is the whitened, relatively scaled Fisher information
-    of all segments so far at the current estimate (DESIGN.md); sigma_min = sqrt(lambda_min(F)).
+    of all segments so far at the current estimate (docs/conventions.md); sigma_min =
+    sqrt(lambda_min(F)).
 
     ## Sensor pose
     With ``sensor_pose`` set (the id ``excite/DiffDriveCalibSensor-v0``), the pose sensor is
     mounted at a hidden pose l = (l_x, l_y, l_theta) in the body frame, drawn uniformly per
-    episode from the configured ranges; it measures its own motion in its own frame (DESIGN.md,
+    episode from the configured ranges; it measures its own motion in its own frame
+    (docs/conventions.md,
     "Sensor pose"). The nominal mounting is the middle of the ranges. The default estimator and
     the reward then use the sensor-pose model: six parameters, sigma_min over all six.
 
@@ -289,7 +291,8 @@ class DiffDriveCalibEnv(gym.Env):
             self.nominal if self.model is AXLE else self.nominal_theta.copy(), self.sigma.copy())
 
     def new_estimators(self, n: int) -> BatchOnlineEstimator | None:
-        """``n`` estimators updated together (:class:`excite.online.BatchOnlineEstimator`, one
+        """``n`` estimators updated together
+        (:class:`excite.estimators.online.BatchOnlineEstimator`, one
         pass of array code per segment) when ``estimator_factory`` is the built-in
         ``online`` (any settings) and ``n`` is at least ``BATCH_ESTIMATOR_MIN``; else None
         (one :meth:`new_estimator` per robot then: below the threshold the one-robot
@@ -534,7 +537,7 @@ def read_estimate(estimator, model: SegmentModel,
 def sense_increments(sensor: RelativePoseSensor, true_increments: np.ndarray,
                      rngs: Sequence[np.random.Generator], mounts: np.ndarray) -> np.ndarray:
     """N off-axle sensors' noisy increments (N, 3): each sensor's own motion in its own frame
-    at the segment's start (DESIGN.md, "Sensor pose"; x, y in m, theta in rad), robot i
+    at the segment's start (docs/conventions.md, "Sensor pose"; x, y in m, theta in rad), robot i
     drawing its noise from ``rngs[i]``. true_increments (N, 3): the bodies' true increments;
     mounts (N, 3): the sensors' mountings in the body frame."""
     return sensor.each(body_to_sensor(true_increments, mounts), rngs)

@@ -5,7 +5,7 @@ per segment, the RMSE of each parameter against the hidden truth and the average
 estimation error squared (ANEES) with its two-sided 95% chi-square bounds. A consistent
 estimator's ANEES lies inside the bounds; one that is overconfident lies above them. The
 parameters judged are those the estimator reports a covariance for (see
-:func:`excite.consistency.estimate_error`): the wheels (r_L, r_R, b) on the axle model, and
+:func:`excite.stats.consistency.estimate_error`): the wheels (r_L, r_R, b) on the axle model, and
 the sensor pose too on ``excite/DiffDriveCalibSensor-v0`` with a sensor-pose estimator.
 """
 
@@ -18,10 +18,10 @@ import gymnasium as gym
 import numpy as np
 
 from envs.env import default_estimator
-from excite.consistency import CONFIDENCE, anees, anees_bounds, estimate_error, nees, verdict
+from excite.calibration.noise import chi2_quantile
 from excite.contracts import EstimatorFactory
-from excite.models import SENSOR_POSE
-from excite.noise import chi2_quantile
+from excite.core.models import SENSOR_POSE
+from excite.stats.consistency import CONFIDENCE, anees, anees_bounds, estimate_error, nees, verdict
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
@@ -51,7 +51,7 @@ class EstimatorReport:
 
     @property
     def verdict(self) -> str:
-        """The final ANEES against its bounds (:func:`excite.consistency.verdict`)."""
+        """The final ANEES against its bounds (:func:`excite.stats.consistency.verdict`)."""
         return verdict(float(self.anees[-1]), self.anees_bounds)
 
     @property

@@ -32,9 +32,9 @@ import pymunk.batch
 
 from envs.robot import RobotSpec
 from envs.traction_kernel import PATH_FIELDS, STATE_FIELDS, TRACTION_FIELDS, traction_tick
-from excite.arena import Arena
 from excite.contracts import Traction
-from excite.kinematics import sinc_family
+from excite.core.arena import Arena
+from excite.core.kinematics import sinc_family
 
 GRAVITY = 9.81  # m/s^2
 WALL_RADIUS = 0.05  # m, half-thickness of the arena's wall segments

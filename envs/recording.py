@@ -25,9 +25,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from envs.sensors import RelativePoseSensor, WheelEncoders
-from excite import se2
-from excite.kinematics import sinc_family
-from excite.timeseries import TimeSeries
+from excite.core import se2
+from excite.core.kinematics import sinc_family
+from excite.logs.timeseries import TimeSeries
 
 __all__ = ["START_TIME_NS", "RecordingConfig", "Recording", "Recorder", "along_arc"]
 

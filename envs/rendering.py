@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from envs.robot import DEFAULT_CHASSIS_SIZE, RobotSpec
-from excite.kinematics import Params
+from excite.core.kinematics import Params
 
 
 class ArenaRenderer:

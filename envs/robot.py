@@ -14,7 +14,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from excite.arena import DEFAULT_CHASSIS_SIZE
+from excite.core.arena import DEFAULT_CHASSIS_SIZE
 
 
 def _require(condition: bool, message: str) -> None:

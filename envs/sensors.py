@@ -15,7 +15,7 @@ import numpy as np
 
 def relative_pose(pose_start: np.ndarray, pose_end: np.ndarray) -> np.ndarray:
     """Body-frame increment (dx, dy, dtheta) from `pose_start` to `pose_end` (3,): the single
-    env's fast scalar form of :func:`excite.se2.between` (the same bits; math's cos and sin).
+    env's fast scalar form of :func:`excite.core.se2.between` (the same bits; math's cos and sin).
 
     dx, dy (m) are the displacement expressed in the body frame at `pose_start` (x forward,
     y left); dtheta (rad) is the continuous heading change theta_end - theta_start.

@@ -23,7 +23,7 @@ from envs.physics import (
 )
 from envs.robot import DEFAULT_CHASSIS_SIZE, RobotSpec
 from envs.sensors import RelativePoseSensor, WheelEncoders, relative_pose
-from excite import se2
+from excite.core import se2
 
 #: m, minimum distance from a random start position to the walls for the default robot's
 #: 0.36 m chassis; other robots scale it with their chassis (`spawn_margin`).

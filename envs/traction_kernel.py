@@ -17,7 +17,7 @@ numba caches the compiled kernel on disk (``cache=True``: compiled once per mach
 a later process loads it in under 1 s) and keys the cache on this file alone: code or
 constants of other modules compiled into the kernel would not invalidate it. So
 :func:`sinc_cosc` is written here (equal bit for bit to
-:func:`excite.kinematics.sinc_cosc_scalar`, tested), and the one constant taken from there,
+:func:`excite.core.kinematics.sinc_cosc_scalar`, tested), and the one constant taken from there,
 TINY_THRESHOLD, is checked by the same test (after changing it, delete
 envs/__pycache__/traction_kernel.*.nbi and .nbc).
 """
@@ -29,7 +29,7 @@ import math
 import numba
 import numpy as np
 
-from excite.kinematics import TINY_THRESHOLD
+from excite.core.kinematics import TINY_THRESHOLD
 
 SLIP_ITERATIONS = 6  # Gauss-Seidel sweeps over the two wheels when a friction cap binds
 
@@ -56,7 +56,8 @@ PATH_FIELDS = ("x", "y", "theta", "phi_L", "phi_R")
 @numba.njit(cache=True)
 def sinc_cosc(u: float) -> tuple[float, float]:
     """(sin(u)/u, (1 - cos(u))/u) of a float, compiled: the branches, closed forms and series
-    coefficients of :func:`excite.kinematics.sinc_cosc_scalar` (derivatives=False), bit for bit:
+    coefficients of :func:`excite.core.kinematics.sinc_cosc_scalar` (derivatives=False), bit for
+    bit:
     for |u| < TINY_THRESHOLD the first three Taylor terms, else the closed forms in sin(u/2),
     cos(u/2), which have no cancellation."""
     if abs(u) < TINY_THRESHOLD:

@@ -25,9 +25,9 @@ from envs.env import (
 )
 from envs.simulation import BatchOutcome, BatchSimulation
 from excite.contracts import Estimator, EstimatorFactory
-from excite.information import information_matrices
-from excite.kinematics import Params
-from excite.online import BatchOnlineEstimator
+from excite.core.information import information_matrices
+from excite.core.kinematics import Params
+from excite.estimators.online import BatchOnlineEstimator
 
 
 class DiffDriveCalibVectorEnv(VectorEnv):
@@ -38,7 +38,8 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     (:class:`envs.simulation.BatchSimulation`, the single env's physics kernel on arrays).
     Everything after the physics is array code over the robots too: the sensor rows, the
     estimator updates (the default ``estimator_factory``, the built-in ``online``, becomes
-    :class:`excite.online.BatchOnlineEstimator`, every robot's filter in one pass; any other
+    :class:`excite.estimators.online.BatchOnlineEstimator`, every robot's filter in one pass; any
+    other
     factory gives one estimator per robot, updated in turn), the logs, the information
     matrices, their eigenvalues, the rewards and the observations. Each robot keeps its own
     random streams (its noise is drawn from them one robot at a time).
@@ -47,7 +48,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     same hidden robot, start, sensor mounting and noise; given the single env's actions it
     produces the single env's segments bit for bit (the physics is the same kernel; tested).
     Estimates, observations and rewards agree to rounding: from ``BATCH_ESTIMATOR_MIN``
-    robots the filter is :class:`excite.online.BatchOnlineEstimator` (the single env's
+    robots the filter is :class:`excite.estimators.online.BatchOnlineEstimator` (the single env's
     unrolled filter orders its arithmetic differently: final estimates within ~1e-9
     relative), F comes from the batched chord rows (the single env's from pure-Python
     moments), and its eigen-decomposition is LAPACK's here and a closed form in the single
@@ -67,7 +68,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     Info (arrays over robots): ``reward_terms`` (a dict of (N,) arrays), ``sigma_min``,
     ``collision``, ``n_segments``, ``measurement`` (N, 5), ``estimate`` (N, P). For evaluation:
     ``true_theta`` (N, P), ``true_params``, ``max_relative_errors`` (N,), ``segments_logged``.
-    The estimators: ``estimators``, a :class:`excite.online.BatchOnlineEstimator` (its
+    The estimators: ``estimators``, a :class:`excite.estimators.online.BatchOnlineEstimator` (its
     ``theta`` (N, P)) or a list of one estimator per robot.
     """
 

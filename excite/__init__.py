@@ -9,12 +9,12 @@ with gymnasium, see :mod:`excite.registration`)::
     from excite import load_segments, save_segments, calibrate, OnlineEstimator
 """
 
-from excite.calibration import CalibrationResult, calibrate
-from excite.data import Segments, load_segment_files, load_segments, save_segments
+from excite.calibration.pipeline import CalibrationResult, calibrate
+from excite.core.kinematics import Params, predict_increment
+from excite.core.models import SensorPose, increment_jacobian
 from excite.errors import DataError, ExciteError
-from excite.kinematics import Params, predict_increment
-from excite.models import SensorPose, increment_jacobian
-from excite.online import OnlineEstimator
+from excite.estimators.online import OnlineEstimator
+from excite.logs.segments import Segments, load_segment_files, load_segments, save_segments
 from excite.registration import install as _install_gymnasium_ids
 
 _install_gymnasium_ids()

@@ -7,8 +7,8 @@ A light module (numpy only), so a planner can drive a real robot without the sim
 - :data:`EstimatorFactory`: how a fresh estimator is made at the start of an episode;
 - :class:`Traction`: the nominal robot's limits that decide when its wheels slip.
 
-The arena's geometry is in :mod:`excite.arena`, the kinematic prediction in
-:mod:`excite.kinematics` and :mod:`excite.models`.
+The arena's geometry is in :mod:`excite.core.arena`, the kinematic prediction in
+:mod:`excite.core.kinematics` and :mod:`excite.core.models`.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from typing import Protocol
 
 import numpy as np
 
-from excite.arena import DEFAULT_CHASSIS
-from excite.kinematics import Params
-from excite.models import AXLE, SegmentModel
+from excite.core.arena import DEFAULT_CHASSIS
+from excite.core.kinematics import Params
+from excite.core.models import AXLE, SegmentModel
 
 __all__ = ["Estimator", "EstimatorFactory", "RobotKnowledge", "Traction"]
 

@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from excite.cli import main
-from excite.kinematics import Params
-from excite.models import SensorPose
-from excite.synthetic import synthetic_log
-from excite.timeseries import write_timeseries
+from excite.core.kinematics import Params
+from excite.core.models import SensorPose
+from excite.logs.synthetic import synthetic_log
+from excite.logs.timeseries import write_timeseries
 
 
 def check(condition: bool, what: str) -> None:

@@ -44,7 +44,7 @@ def sigma_arg(text: str) -> tuple[float, ...]:
 
 def params_arg(text: str, what: str = "--init"):
     """RL,RR,B (m) as :class:`excite.Params`."""
-    from excite.kinematics import Params
+    from excite.core.kinematics import Params
 
     return Params(*floats(text, ("RL", "RR", "B"), what))
 
@@ -52,7 +52,7 @@ def params_arg(text: str, what: str = "--init"):
 def sensor_pose_arg(text: str, option: str = "--sensor-pose"):
     """A sensor pose X,Y,THETA (m, m, rad) in the body frame; for ``--sensor-pose`` also the
     words auto, axle, estimate."""
-    from excite.models import SensorPose
+    from excite.core.models import SensorPose
 
     words = option == "--sensor-pose"
     if words and text in ("auto", "axle", "estimate"):

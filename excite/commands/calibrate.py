@@ -14,7 +14,7 @@ from excite.commands.args import (
     sigma_arg,
 )
 from excite.commands.logs import Input, add_log_options
-from excite.data import MIN_SEGMENTS
+from excite.logs.segments import MIN_SEGMENTS
 
 EXIT_OK, EXIT_UNIDENTIFIABLE, EXIT_MISFIT = 0, 3, 4
 
@@ -63,11 +63,11 @@ def _split_holdout(inputs: list[Input], fraction: float) -> tuple[list[Input], l
 
 
 def run(args: argparse.Namespace) -> int:
-    from excite.calibration import calibrate
+    from excite.calibration.export import static_transform_command, write_ros2_yaml
+    from excite.calibration.pipeline import calibrate
+    from excite.calibration.wiring import check_pose_source, check_wiring
     from excite.commands.logs import group_inputs, read_log, segment_inputs
-    from excite.data import Segments
-    from excite.export import static_transform_command, write_ros2_yaml
-    from excite.wiring import check_pose_source, check_wiring
+    from excite.logs.segments import Segments
 
     sigma = sigma_arg(args.sigma) if args.sigma else None
     initial = params_arg(args.init) if args.init else None
@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
                        ticks_per_rev=args.ticks_per_rev)
     validation = None
     if held:
-        from excite.validation import summarize, validate_log
+        from excite.validation.dead_reckoning import summarize, validate_log
 
         robot = (result.params, result.sensor_pose)
         nominal = (initial, result.sensor_pose)

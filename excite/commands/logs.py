@@ -18,9 +18,9 @@ from dataclasses import dataclass
 from typing import Literal
 
 from excite.commands.args import UsageError
-from excite.data import Segments, check_not_utf16
 from excite.errors import DataError
-from excite.timeseries import MAX_TIME_OFFSET, OffsetHint, SegmentedLog, TimeSeries
+from excite.logs.segments import Segments, check_not_utf16
+from excite.logs.timeseries import MAX_TIME_OFFSET, OffsetHint, SegmentedLog, TimeSeries
 
 __all__ = ["Log", "Input", "Part", "add_log_options", "group_inputs", "read_log",
            "segment_log", "segment_inputs"]
@@ -45,7 +45,7 @@ class Log:
     + offset = encoder time) and where that offset came from: "given" (--time-offset S),
     "estimated" (--time-offset estimate) or "default" (none given: 0). With the default,
     hint says what offset the data suggest when it is clearly not zero
-    (excite.timeseries.noticeable_time_offset), else None. skipped: for a bag, the messages
+    (excite.logs.timeseries.noticeable_time_offset), else None. skipped: for a bag, the messages
     the reader skipped, in one line (None for a CSV log)."""
 
     name: str
@@ -93,7 +93,7 @@ def _frame_pair(text: str) -> tuple[str, str]:
 
 
 def add_log_options(parser: argparse.ArgumentParser, segmentation: bool = True) -> None:
-    """The time-series and bag options (DESIGN.md, "Time-series logs"); with
+    """The time-series and bag options (docs/formats.md, "Time-series logs"); with
     ``segmentation`` also the options that cut logs into segments."""
     group = parser.add_argument_group(
         "time-series logs and ROS bags",
@@ -132,8 +132,8 @@ def add_log_options(parser: argparse.ArgumentParser, segmentation: bool = True) 
 
 
 def _kind(path: str) -> tuple[str, frozenset[str]]:
-    from excite.bags import bag_path_problem, is_bag_path
-    from excite.timeseries import timeseries_streams
+    from excite.logs.bags import bag_path_problem, is_bag_path
+    from excite.logs.timeseries import timeseries_streams
 
     problem = bag_path_problem(path)
     if problem is not None:
@@ -183,7 +183,7 @@ def read_log(args: argparse.Namespace, source: Input, whole: bool = False) -> Lo
     """Read one time-series or bag input and settle its clock offset. whole: the log will be
     followed whole (dead reckoning, not segments): a jump in either stream is an error, before
     anything is said about the clocks."""
-    from excite.timeseries import (
+    from excite.logs.timeseries import (
         check_continuity,
         estimate_time_offset,
         noticeable_time_offset,
@@ -193,7 +193,7 @@ def read_log(args: argparse.Namespace, source: Input, whole: bool = False) -> Lo
 
     skipped = None
     if source.kind == "bag":
-        from excite.bags import read_bag_log
+        from excite.logs.bags import read_bag_log
 
         if not args.left_wheel or not args.right_wheel:
             raise UsageError(f"{source.name}: a bag needs --left-wheel and --right-wheel "
@@ -230,7 +230,7 @@ def read_log(args: argparse.Namespace, source: Input, whole: bool = False) -> Lo
 
 def segment_log(args: argparse.Namespace, log: Log) -> SegmentedLog:
     """Cut a log into segments with the command line's settings."""
-    from excite.timeseries import segment_timeseries
+    from excite.logs.timeseries import segment_timeseries
 
     return segment_timeseries(log.series, window=args.window, min_distance=args.min_distance,
                               min_angle=args.min_angle, time_offset=log.time_offset,
@@ -262,7 +262,7 @@ class Part:
 
 def segment_inputs(args: argparse.Namespace, inputs: Sequence[Input]) -> list[Part]:
     """Every input as segments: segment files are read, logs read and cut."""
-    from excite.data import load_segments
+    from excite.logs.segments import load_segments
 
     parts = []
     for source in inputs:

@@ -23,10 +23,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from excite.calibration.starts import initial_estimate
     from excite.commands.logs import group_inputs, segment_inputs
-    from excite.data import Segments, save_segments
-    from excite.models import single_arc_error
-    from excite.starts import initial_estimate
+    from excite.core.models import single_arc_error
+    from excite.logs.segments import Segments, save_segments
 
     inputs = group_inputs(args.logs)
     if any(source.kind == "segments" for source in inputs):

@@ -17,14 +17,6 @@ import re
 from pathlib import Path
 from typing import Any
 
-from excite.bags import (
-    BAG_SUFFIXES,
-    JOINT_STATES,
-    LEFT_WHEEL,
-    POSE_TOPIC,
-    RIGHT_WHEEL,
-    STORAGES,
-)
 from excite.commands.args import (
     UsageError,
     check_output_file,
@@ -34,6 +26,14 @@ from excite.commands.args import (
     pose_noise_arg,
     positive_int,
     robot_preset,
+)
+from excite.logs.bags import (
+    BAG_SUFFIXES,
+    JOINT_STATES,
+    LEFT_WHEEL,
+    POSE_TOPIC,
+    RIGHT_WHEEL,
+    STORAGES,
 )
 from excite.registration import DEFAULT_ENV_ID
 
@@ -107,7 +107,7 @@ def _write_log(args: argparse.Namespace, out: Path, base: Any) -> tuple[dict[str
     """Write the log of the finished episode; returns the truth keys of the format and what
     was written, in words."""
     if args.format == "segments":
-        from excite.data import save_segments
+        from excite.logs.segments import save_segments
 
         save_segments(out, base.segments)
         return {"calibrate_args": []}, f"{len(base.segments)} segments"
@@ -116,12 +116,12 @@ def _write_log(args: argparse.Namespace, out: Path, base: Any) -> tuple[dict[str
     truth = {"pose_noise": {"xy": float(recording.sigma[0]), "theta": float(recording.sigma[2])},
              "pose_rate": base.recording_config.pose_hz}
     if args.format == "timeseries":
-        from excite.timeseries import write_timeseries
+        from excite.logs.timeseries import write_timeseries
 
         write_timeseries(out, series, ticks_per_rev=recording.ticks_per_rev)
         calibrate_args = ["--ticks-per-rev", str(recording.ticks_per_rev)]
     else:
-        from excite.bags import write_bag
+        from excite.logs.bags import write_bag
 
         storage = args.storage or STORAGES[0]
         write_bag(out, series, storage=storage)

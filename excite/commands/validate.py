@@ -1,5 +1,6 @@
 """``excite validate``: does the calibration help? Dead-reckon held-out logs with the nominal
-and the calibrated robot and compare both with the external poses (:mod:`excite.validation`
+and the calibrated robot and compare both with the external poses
+(:mod:`excite.validation.dead_reckoning`
 holds the method and the metrics)."""
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from excite.commands.logs import group_inputs, read_log
-    from excite.validation import read_params_file, summarize, validate_log
+    from excite.validation.dead_reckoning import read_params_file, summarize, validate_log
 
     result_file = read_params_file(args.params)
     nominal_params = (params_arg(args.nominal, "--nominal") if args.nominal
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
                                         (nominal_params, nominal_pose), name=log.name))
     result = summarize(validations)
     if args.plot:
-        from excite.validation_plot import plot_validation
+        from excite.validation.plot import plot_validation
 
         try:
             plot_validation(result, args.plot)

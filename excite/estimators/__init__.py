@@ -31,12 +31,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from excite.contracts import Estimator
+from excite.core.kinematics import Params
+from excite.core.models import AXLE, SENSOR_POSE, SegmentModel
 from excite.errors import EstimatorError, one_line_repr
 from excite.estimators.ekf import ExtendedKalmanFilter
+from excite.estimators.online import OnlineEstimator
 from excite.estimators.window import SlidingWindowSmoother
-from excite.kinematics import Params
-from excite.models import AXLE, SENSOR_POSE, SegmentModel
-from excite.online import OnlineEstimator
 
 __all__ = [
     "DEFAULT_ESTIMATOR",

@@ -3,7 +3,7 @@
 State theta = (r_L, r_R, b) in m (and l_x, l_y [m], l_theta [rad] on the sensor-pose
 model), constant (no process noise); covariance P in the same units. One update per
 segment, linearised once at the estimate before the segment (the segment model's prediction
-and Jacobian, :mod:`excite.models`):
+and Jacobian, :mod:`excite.core.models`):
 
     y = z - h(theta) (heading wrapped),  S = H P H^T + R,  K = P H^T S^-1,
     theta <- theta + K y (angles wrapped),  P <- (I - K H) P (I - K H)^T + K R K^T (Joseph).
@@ -33,10 +33,10 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from excite.information import DEFAULT_SIGMA
-from excite.kinematics import Params, wrap_angle
-from excite.models import AXLE, SegmentModel
-from excite.segment_estimator import SegmentEstimator
+from excite.core.information import DEFAULT_SIGMA
+from excite.core.kinematics import Params, wrap_angle
+from excite.core.models import AXLE, SegmentModel
+from excite.estimators.base import SegmentEstimator
 
 __all__ = ["ExtendedKalmanFilter"]
 
@@ -46,7 +46,7 @@ FloatArray = NDArray[np.float64]
 class ExtendedKalmanFilter(SegmentEstimator):
     """Extended Kalman filter in theta (module doc): constant cost per update (P x P algebra).
 
-    Arguments as :class:`excite.segment_estimator.SegmentEstimator`: ``initial`` (the prior
+    Arguments as :class:`excite.estimators.base.SegmentEstimator`: ``initial`` (the prior
     mean, Params or P parameters), ``prior_std`` (parameter units; None: 10% of lengths,
     0.1 b for offsets, 0.5 rad for angles), ``sigma`` (sigma_x [m], sigma_y [m],
     sigma_theta [rad]) and ``model``. The filter itself knows no constraint: an update that

@@ -16,10 +16,10 @@ estimate (the batch :func:`excite.calibrate` plus the prior), and with a shorter
 differs only by the linearisation of the segments that left.
 
 q is the chart of :class:`excite.OnlineEstimator`, the model's relative step from the
-nominal parameters (:meth:`excite.models.SegmentModel.step`): log(theta / nominal) for
+nominal parameters (:meth:`excite.core.models.SegmentModel.step`): log(theta / nominal) for
 lengths, (theta - nominal) / nominal b for offsets, theta - nominal in rad for angles; the
 prior information of the segments that left stays in the chart where the scale invariance
-of the heading is the fixed direction (1, 1, 1) (module doc of :mod:`excite.online`).
+of the heading is the fixed direction (1, 1, 1) (module doc of :mod:`excite.estimators.online`).
 
 Cost per update: a few evaluations of W segments (bounded, not constant: O(W)).
 """
@@ -31,11 +31,11 @@ from collections import deque
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from excite.core.information import DEFAULT_SIGMA
+from excite.core.kinematics import Params, wrap_angle
+from excite.core.models import AXLE, SegmentModel
 from excite.errors import EstimatorError
-from excite.information import DEFAULT_SIGMA
-from excite.kinematics import Params, wrap_angle
-from excite.models import AXLE, SegmentModel
-from excite.segment_estimator import MAX_CHART_STEP, SegmentEstimator
+from excite.estimators.base import MAX_CHART_STEP, SegmentEstimator
 
 __all__ = ["DEFAULT_WINDOW", "DEFAULT_WINDOW_ITERATIONS", "SlidingWindowSmoother"]
 
@@ -55,7 +55,7 @@ _TOLERANCE = 1e-3
 class SlidingWindowSmoother(SegmentEstimator):
     """Sliding-window maximum a posteriori estimator with a marginalised prior (module doc).
 
-    Arguments as :class:`excite.segment_estimator.SegmentEstimator`: ``initial`` (the prior
+    Arguments as :class:`excite.estimators.base.SegmentEstimator`: ``initial`` (the prior
     mean, Params or P parameters), ``prior_std`` (parameter units; None: 10% of lengths,
     0.1 b for offsets, 0.5 rad for angles), ``sigma`` (sigma_x [m], sigma_y [m],
     sigma_theta [rad]) and ``model``; plus ``size``, the window length W in segments, and

@@ -1,0 +1,407 @@
+"""A pose source whose heading error wanders: a first-order Gauss-Markov heading error of the
+pose samples, estimated with the other noise levels of a log's segments, and the covariance
+of the fitted parameters it implies.
+
+Model (frames and linearisation as :mod:`excite.calibration.noise`). Besides each pose sample's
+independent noise, the heading of every pose sample errs by g(t), a stationary first-order
+Gauss-Markov process (a scan matcher's or visual odometry's slowly wandering error): std
+``std`` (rad) and correlation exp(-|t - t'| / ``time``) (s) between samples on one clock;
+samples on different clocks (logs whose times do not follow on) are independent. Segment k,
+measured between the pose samples at t_s and t_e, errs by
+
+    -g(t_s) J d_k  (x, y; J d_k the measured increment turned by +90 degrees),
+    g(t_e) - g(t_s)  (theta).
+
+The heading error does not cancel in x and y: a part of it that is constant over the log
+turns every increment by the same angle, exactly as the sensor's mounting angle does, so no
+fit of one log can tell them apart, and the mounting angle carries the log's mean heading
+error. The model states that uncertainty instead of hiding it: its level and time constant
+are identified by how the error varies within the log, and the mean over the log that this
+implies enters the parameters' covariance. (A time constant far beyond the log's length
+cannot be told from a heading random walk; it is bounded by the longest unbroken stretch of
+chained segments, no gap between them, and ``HeadingWander.at_bound`` says when it sits
+there; from below by the median segment duration.) The position part of such
+an error is not modelled: its differences nearly cancel along the log.
+
+* :func:`estimate_wander`: restricted maximum likelihood (as
+:func:`excite.calibration.noise.reml_noise`)
+  of the chain's noise levels with and without the wandering error, with analytic gradients,
+  on the dense covariance of chunks of at most CHUNK_SEGMENTS consecutive segments (their
+  restricted likelihood as if the chunks were independent; at most MAX_CHUNKS chunks, spread
+  over the log); the wandering error is kept when the likelihood ratio exceeds the
+  chi-bar-square quantile of one variance component on its boundary at ``test_level`` (as
+  :func:`excite.calibration.noise.reml_noise`'s tests; the time constant is not identified without
+  the
+  wander, so the level is approximate: ``benchmarks/bench_logs.py`` counts how often white
+  pose noise is taken for a wander).
+* :func:`wander_covariance`: the covariance of the estimate weighted by the chain's
+  covariance B alone (the fit is unchanged) when the increments' covariance is
+  C = B' + A Sigma A^T (the sandwich I^-1 J^T B^-1 C B^-1 J I^-1), in O(N).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from excite.calibration.noise import (
+    ChainWhitener,
+    NoiseLevels,
+    WheelNoise,
+    chain_band,
+    chi_bar_square_quantile,
+    level_bounds,
+)
+from excite.logs.segments import Segments
+from excite.stats.autocorrelation import runs_of
+
+__all__ = ["HeadingWander", "estimate_wander", "wander_covariance", "CHUNK_SEGMENTS",
+           "MAX_CHUNKS", "MIN_WANDER_SEGMENTS", "WANDER_TEST_LEVEL"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+#: Segments per chunk of the dense restricted likelihood (a 3n x 3n covariance per chunk).
+CHUNK_SEGMENTS = 150
+#: At most this many chunks enter the estimate (spread evenly over a longer log).
+MAX_CHUNKS = 3
+#: Logs of fewer segments are not tested for a wandering heading error.
+MIN_WANDER_SEGMENTS = 50
+#: Time constants (in segment durations) at which the search may start, each with the std
+#: at the chain's heading level and 3 times it; it starts at the best.
+START_TIMES = (2.0, 6.0, 20.0, 60.0)
+#: Relative tolerance of each likelihood search (the deviance is ~ -1e3 per 100 segments).
+FTOL = 1e-10
+#: A search restarts from where it stopped (at most MAX_RESTARTS times) while a restart
+#: lowers the deviance by more than RESTART_GAIN.
+MAX_RESTARTS = 8
+RESTART_GAIN = 1e-2
+#: Level of the likelihood-ratio test of "no wandering heading error".
+WANDER_TEST_LEVEL = 0.05
+#: The deviance where a covariance is not positive definite (finite: L-BFGS-B's difference
+#: checks stay numbers).
+UNDEFINED = 1e300
+#: Relative jitter added to the diagonal of each chunk's dense covariance.
+JITTER = 1e-10
+#: Most evaluations of one L-BFGS-B search.
+MAX_EVALUATIONS = 400
+
+
+@dataclass(frozen=True)
+class HeadingWander:
+    """A wandering heading error of the pose samples: ``std`` (rad), ``correlation_time``
+    (s), the likelihood ratio against none (``statistic``), the chain's noise levels
+    estimated with it (``levels``: sigma m, m, rad; pose m, rad; slip rad / sqrt(s); timing s) and
+    whether the time constant sits at its bound, the longest unbroken stretch of the log
+    (``at_bound``: a slower wander, indistinguishable from a heading random walk, whose
+    mean over the log is then understated)."""
+
+    std: float
+    correlation_time: float
+    statistic: float
+    levels: NoiseLevels
+    at_bound: bool = False
+
+
+@dataclass(frozen=True)
+class _Samples:
+    """The pose samples segments are measured between: each segment's first and last sample
+    (indices into ``times``), the samples' times (s) and clocks (a new clock wherever a
+    segment starts before the one before it ended: another log)."""
+
+    start: IntArray
+    end: IntArray
+    times: FloatArray
+    clock: IntArray
+
+    @classmethod
+    def of(cls, segments: Segments) -> _Samples:
+        if segments.t_start is None or segments.t_end is None:
+            raise ValueError("a wandering heading error needs segments with times")
+        t0, t1 = segments.t_start, segments.t_end
+        clock = np.concatenate(([0], np.cumsum(t0[1:] < t1[:-1])))
+        keys = np.stack([np.concatenate([clock, clock]), np.concatenate([t0, t1])], axis=1)
+        unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+        n = len(segments)
+        inverse = inverse.reshape(-1)
+        return cls(inverse[:n], inverse[n:], unique[:, 1], unique[:, 0].astype(np.int64))
+
+    def correlation(self, time: float) -> tuple[FloatArray, FloatArray]:
+        """R (M, M) for the correlation ``time`` (s): exp(-|t_i - t_j| / time) on one clock,
+        0 across clocks; and dR / d log time = R |t_i - t_j| / time."""
+        lag = np.abs(self.times[:, None] - self.times[None, :])
+        same = self.clock[:, None] == self.clock[None, :]
+        r = np.where(same, np.exp(-lag / time), 0.0)
+        return r, r * lag / time
+
+    def apply_correlation(self, time: float, h: FloatArray) -> FloatArray:
+        """R h for h (M, P) and the correlation ``time`` (s), in O(M P): the forward and
+        backward first-order recursions."""
+        gap = np.diff(self.times)
+        a = np.where(np.diff(self.clock) == 0, np.exp(-np.maximum(gap, 0.0) / time), 0.0)
+        forward, backward = h.copy(), h.copy()
+        for i in range(1, len(h)):
+            forward[i] += a[i - 1] * forward[i - 1]
+        for i in range(len(h) - 2, -1, -1):
+            backward[i] += a[i] * backward[i + 1]
+        return forward + backward - h
+
+    def transpose_design(self, segments: Segments, rows: FloatArray) -> FloatArray:
+        """A^T ``rows`` (M, P) for rows (3N, P) in O(N P)."""
+        x, y, th = rows[0::3], rows[1::3], rows[2::3]
+        lever = _lever(segments)
+        out = np.zeros((len(self.times), rows.shape[1]))
+        np.add.at(out, self.start, lever[:, :1] * x + lever[:, 1:] * y - th)
+        np.add.at(out, self.end, th)
+        return out
+
+
+def _longest_stretch(segments: Segments) -> float:
+    """The longest unbroken stretch of chained segments (s): from the first one's start to
+    the last one's end, with no gap or part boundary between (0 without times)."""
+    if segments.t_start is None or segments.t_end is None:
+        return 0.0
+    runs = runs_of(segments.chained, len(segments))
+    first = np.flatnonzero(np.diff(runs, prepend=-1) != 0)
+    last = np.append(first[1:], len(segments)) - 1
+    return float(np.max(segments.t_end[last] - segments.t_start[first]))
+
+
+def _dense(band: FloatArray) -> FloatArray:
+    """The symmetric matrix of lower band storage ``band`` (b + 1, n)."""
+    n = band.shape[1]
+    out = np.zeros((n, n))
+    for d in range(band.shape[0]):
+        j = np.arange(n - d)
+        out[j + d, j] = band[d, : n - d]
+        out[j, j + d] = band[d, : n - d]
+    return out
+
+
+def _band_inner(band: FloatArray, m: FloatArray) -> float:
+    """sum(X * M) for X the symmetric matrix of lower band storage ``band`` and symmetric M."""
+    n = band.shape[1]
+    total = float(band[0] @ np.diagonal(m))
+    for d in range(1, band.shape[0]):
+        total += 2.0 * float(band[d, : n - d] @ np.diagonal(m, offset=-d))
+    return total
+
+
+def _band_product(band: FloatArray, x: FloatArray) -> FloatArray:
+    """X x for X the symmetric matrix of lower band storage ``band`` and x (n, P)."""
+    n = band.shape[1]
+    out = band[0][:, None] * x
+    for d in range(1, band.shape[0]):
+        b = band[d, : n - d][:, None]
+        out[d:] += b * x[: n - d]
+        out[: n - d] += b * x[d:]
+    return out
+
+
+@dataclass(frozen=True)
+class _Chunk:
+    """One chunk's fixed parts: the covariance's constant band and its band per unit
+    variance of each level, the heading-error design and the residuals and Jacobian."""
+
+    fixed: FloatArray
+    units: list[FloatArray]
+    samples: _Samples
+    lever: FloatArray
+    residual: FloatArray
+    jac: FloatArray
+
+    @classmethod
+    def of(cls, segments: Segments, wheels: WheelNoise | None, residual: FloatArray,
+           jac: FloatArray, n_levels: int) -> _Chunk:
+        zero = NoiseLevels(np.zeros(3), np.zeros(2), 0.0)
+        fixed = chain_band(segments, zero, wheels)
+        units = []
+        for i in range(n_levels):
+            unit = np.zeros(n_levels)
+            unit[i] = 1.0
+            units.append(chain_band(segments, NoiseLevels.from_vector(unit), wheels)
+                         - fixed)
+        samples = _Samples.of(segments)
+        return cls(fixed, units, samples, _lever(segments), residual, jac)
+
+
+def _lever(segments: Segments) -> FloatArray:
+    """-J d (N, 2) (m/rad): each segment's x and y error per unit heading error at its first
+    sample (its theta row is -1 there and +1 at its last: the design A of the module doc)."""
+    return np.stack([segments.dy, -segments.dx], axis=1)
+
+
+def _sandwiched(samples: _Samples, lever: FloatArray, r: FloatArray) -> FloatArray:
+    """A R A^T (3n, 3n) for the design A of ``samples`` and ``lever`` (:func:`_lever`) and
+    R (M, M)."""
+    first, last, a = samples.start, samples.end, lever
+    ss, se, ee = r[np.ix_(first, first)], r[np.ix_(first, last)], r[np.ix_(last, last)]
+    n = len(first)
+    out = np.empty((n, 3, n, 3))
+    out[:, :2, :, :2] = a[:, :, None, None] * a[None, None, :, :] * ss[:, None, :, None]
+    cross = a[:, :, None] * (se - ss)[:, None, :]  # xy of k with theta of j
+    out[:, :2, :, 2] = cross
+    out[:, 2, :, :2] = (se.T - ss)[:, :, None] * a[None, :, :]  # theta of k with xy of j
+    out[:, 2, :, 2] = ee - se - se.T + ss
+    return out.reshape(3 * n, 3 * n)
+
+
+def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
+              with_gradient: bool = True) -> tuple[float, FloatArray | None]:
+    """-2 log restricted likelihood (up to a constant) of the chunks taken as independent,
+    and (``with_gradient``) its gradient by u = log of (levels..., [std, time]). Each chunk's
+    covariance gets JITTER of its diagonal added: the wander's rank-one x, y blocks with the
+    position levels at their floor are otherwise singular to rounding."""
+    from scipy.linalg import cho_factor, cho_solve
+    from scipy.linalg.lapack import dpotri
+
+    variances = np.exp(2.0 * u[:n_levels])
+    std2, time = (math.exp(2.0 * u[-2]), math.exp(u[-1])) if wander else (0.0, 1.0)
+    total = 0.0
+    parts = []
+    p = chunks[0].jac.shape[1]
+    info, gradient = np.zeros((p, p)), np.zeros(p)
+    for c in chunks:
+        band = c.fixed + sum(v * unit for v, unit in zip(variances, c.units, strict=True))
+        cov = _dense(band)
+        k = dk = None
+        if wander:
+            r, dr = c.samples.correlation(time)
+            k = _sandwiched(c.samples, c.lever, r)
+            dk = _sandwiched(c.samples, c.lever, dr) if with_gradient else None
+            cov += std2 * k
+        cov[np.diag_indices_from(cov)] *= 1.0 + JITTER
+        factor, _ = cho_factor(cov, lower=True, check_finite=False)
+        total += 2.0 * float(np.sum(np.log(np.diag(factor))))
+        inverse, status = dpotri(factor, lower=1)
+        if status:
+            raise np.linalg.LinAlgError("covariance not positive definite")
+        inverse = np.tril(inverse) + np.tril(inverse, -1).T
+        ci_j, ci_e = inverse @ c.jac, inverse @ c.residual
+        info += c.jac.T @ ci_j
+        gradient += c.jac.T @ ci_e
+        total += float(c.residual @ ci_e)
+        parts.append((inverse, ci_j, ci_e, k, dk))
+    g_factor = cho_factor(info, lower=True, check_finite=False)
+    beta = cho_solve(g_factor, gradient, check_finite=False)
+    total += 2.0 * float(np.sum(np.log(np.diag(g_factor[0])))) - float(gradient @ beta)
+    if not with_gradient:
+        return total, None
+    grad = np.zeros(u.size)
+    info_inverse = cho_solve(g_factor, np.eye(p), check_finite=False)
+    for c, (inverse, ci_j, ci_e, k, dk) in zip(chunks, parts, strict=True):
+        y = ci_e - ci_j @ beta  # P e
+        m = inverse - ci_j @ info_inverse @ ci_j.T - np.outer(y, y)  # P - P e e^T P
+        for i, (v, unit) in enumerate(zip(variances, c.units, strict=True)):
+            grad[i] += 2.0 * v * _band_inner(unit, m)
+        if wander:
+            grad[-2] += 2.0 * std2 * float(np.sum(m * k))
+            grad[-1] += std2 * float(np.sum(m * dk))
+    return total, grad
+
+
+def _chunk_ranges(n: int) -> list[range]:
+    """Up to MAX_CHUNKS ranges of CHUNK_SEGMENTS consecutive segments (a shorter log: one or
+    more chunks of about equal length), spread evenly over the n segments."""
+    count = math.ceil(n / CHUNK_SEGMENTS)
+    size = math.ceil(n / count)
+    starts = [i * size for i in range(count)]
+    if count > MAX_CHUNKS:
+        starts = [starts[i] for i in np.linspace(0, count - 1, MAX_CHUNKS).round().astype(int)]
+    return [range(s, min(s + size, n)) for s in starts]
+
+
+def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
+                    levels: NoiseLevels, floor: FloatArray, wheels: WheelNoise | None = None,
+                    test_level: float = WANDER_TEST_LEVEL) -> HeadingWander | None:
+    """The wandering heading error of the pose samples (module doc), or None when the data do
+    not show one (or the log is shorter than MIN_WANDER_SEGMENTS, has no times, or no
+    unbroken stretch longer than two segment durations). residual (3, N) (predicted
+    - measured) and jac (3, P, N) (the directions the data determine) of the fit at the
+    chain's noise ``levels`` (the start of the search; ``wheels``: its wheel-space noise);
+    ``floor`` (3,): the (position, position, heading) floor of the levels, as reml_noise."""
+    from scipy.optimize import minimize
+
+    n = len(segments)
+    if n < MIN_WANDER_SEGMENTS or segments.t_start is None or segments.t_end is None:
+        return None
+    step = float(np.median(segments.t_end - segments.t_start))  # s
+    longest = _longest_stretch(segments)  # s
+    if not step > 0.0 or not longest > 2.0 * step:  # nothing long enough to see a wander
+        return None
+    n_levels = levels.vector(wheels is not None).size
+    e = residual.T.reshape(-1)
+    j = jac.transpose(2, 0, 1).reshape(e.size, -1)
+    chunks = []
+    for part in _chunk_ranges(n):
+        rows = np.arange(3 * part.start, 3 * part.stop)
+        chunk_wheels = None if wheels is None else wheels.take(np.asarray(part))
+        chunks.append(_Chunk.of(segments[part.start:part.stop], chunk_wheels, e[rows],
+                                j[rows], n_levels))
+    lower, upper = level_bounds(residual, floor, wheels)
+    start = np.clip(np.log(np.maximum(levels.vector(wheels is not None), 1e-300)), lower,
+                    upper)
+
+    def deviance(u: FloatArray, wander: bool, with_gradient: bool = True
+                 ) -> tuple[float, FloatArray]:
+        try:
+            value, gradient = _deviance(chunks, u, n_levels, wander, with_gradient)
+        except np.linalg.LinAlgError:  # not positive definite at the bounds
+            return UNDEFINED, np.zeros(u.size)
+        return value, np.zeros(u.size) if gradient is None else gradient
+
+    def fitted(u0: FloatArray, lo: FloatArray, hi: FloatArray, wander: bool
+               ) -> tuple[FloatArray, float]:
+        # L-BFGS-B stops early in the deviance's curved valleys (its line search gives up):
+        # it restarts from where it stopped until a restart gains less than RESTART_GAIN
+        u, value = u0, math.inf
+        for _ in range(MAX_RESTARTS):
+            result = minimize(deviance, u, args=(wander,), jac=True, method="L-BFGS-B",
+                              bounds=list(zip(lo, hi, strict=True)),
+                              options={"ftol": FTOL, "maxfun": MAX_EVALUATIONS})
+            gain = value - float(result.fun)
+            if gain > 0:
+                u, value = result.x, float(result.fun)
+            if not gain > RESTART_GAIN:
+                break
+        return u, value
+
+    _, null = fitted(start, lower, upper, wander=False)
+    if null >= UNDEFINED:
+        return None
+    largest_heading = max(float(np.max(np.abs(residual[2]))), floor[2])  # rad
+    w_lower = np.append(lower, [math.log(floor[2]), math.log(step)])
+    w_upper = np.append(upper, [math.log(10.0 * largest_heading), math.log(longest)])
+    # start the search at the best of a few time constants (the deviance can have a local
+    # minimum at a short one, mimicking white noise, and one at a long one)
+    first_std = max(levels.pose[1], levels.sigma[2], floor[2])  # rad: the chain's heading level
+    starts = [np.clip(np.append(start, [math.log(std), math.log(tau)]), w_lower, w_upper)
+              for tau in step * np.array(START_TIMES) for std in (first_std, 3.0 * first_std)]
+    values = [deviance(u0, True, with_gradient=False)[0] for u0 in starts]
+    best_u, best = fitted(starts[int(np.argmin(values))], w_lower, w_upper, wander=True)
+    statistic = null - best
+    if statistic <= chi_bar_square_quantile(1.0 - test_level, 1):
+        return None
+    return HeadingWander(float(np.exp(best_u[-2])), float(np.exp(best_u[-1])), statistic,
+                         NoiseLevels.from_vector(np.exp(best_u[:n_levels])),
+                         at_bound=bool(best_u[-1] >= w_upper[-1] - 1e-6))
+
+
+def wander_covariance(segments: Segments, whitener: ChainWhitener, jac: FloatArray,
+                      covariance: FloatArray, wander: HeadingWander) -> FloatArray:
+    """The covariance (P, P) of the parameters fitted with the chain's whitener (covariance B;
+    ``covariance`` = I^-1 = (J^T B^-1 J)^-1, relative units) when the increments' covariance
+    is C = B' + A Sigma A^T: B' the chain's at ``wander.levels`` and Sigma the wandering
+    heading error's. jac (3, P, N): the unwhitened relative Jacobian rows of the fit."""
+    samples = _Samples.of(segments)
+    j = jac.transpose(2, 0, 1).reshape(3 * len(segments), -1)
+    g = whitener.solve(j)  # B^-1 J
+    band = chain_band(segments, wander.levels, whitener.wheels)
+    h = samples.transpose_design(segments, g)  # A^T B^-1 J
+    middle = g.T @ _band_product(band, g) + wander.std**2 * (
+        h.T @ samples.apply_correlation(wander.correlation_time, h))
+    out = covariance @ middle @ covariance
+    return 0.5 * (out + out.T)

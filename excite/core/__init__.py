@@ -1,0 +1,3 @@
+"""The math every layer shares: SE(2) poses, the arc of one segment and its sinc family,
+the segment models, the information measures and the arena's geometry (numpy/scipy only).
+"""

@@ -1,0 +1,662 @@
+"""ROS bags to time-series logs: wheel angles and the external sensor's poses.
+
+Reads rosbag2 (sqlite3 or mcap storage: a directory with ``metadata.yaml``, or a single
+``.db3`` / ``.mcap`` file) and ROS 1 (``.bag``) through the ``rosbags`` library (the ``ros``
+extra), imported only when a bag is read.
+Messages are decoded with the definitions the bag records for the topics read (types it does
+not define: rosbags' ROS 1 Noetic or latest ROS 2 store); other topics' definitions are never
+looked at, so a rosserial bridge's empty definition or a stale custom type elsewhere in the bag
+does not matter. Parts of a bag that cannot be opened as given (``.bag.active``, a rosbag2
+directory without ``metadata.yaml``, its ``metadata.yaml`` or a ``.zstd`` file) are named with
+the way out (:func:`bag_path_problem`).
+
+* Wheel angles: ``sensor_msgs/msg/JointState`` messages on one topic; ``position`` (rad,
+  cumulative) of the two wheel joints, found by name in each message (any order; a message
+  lacking either joint is left out; one naming both with an empty ``position``, as a
+  velocity-only publisher sends, is skipped and counted).
+* Poses of the external sensor in the world frame: a ``geometry_msgs/msg/PoseStamped``,
+  ``geometry_msgs/msg/PoseWithCovarianceStamped`` or ``nav_msgs/msg/Odometry`` topic (several of
+  these types on one topic are fine: publishers of different types), or TF:
+  the transforms from ``parent`` to ``child`` in ``tf2_msgs/msg/TFMessage`` messages on
+  ``/tf``. Only direct parent -> child transforms are used (no chaining through other frames,
+  no inversion, not ``/tf_static``); record the transform you need directly. Leading ``/`` of
+  frame ids (ROS 1) are ignored. x, y in m; heading = yaw of the orientation quaternion (rad,
+  computed free of the quaternion's length). The world frame must be z-up: an orientation
+  tilted more than MAX_TILT (45 degrees) from it is an error (most often a Y-up motion capture
+  stream); roll and pitch below that (a ramp) are fine.
+* Times are the messages' header stamps (s), not receive times; each stream is put in stamp
+  order. Messages stamped zero (not set) before the first stamped message of their topic are
+  skipped and counted (published before the clock ran), as are exact repeats (same stamp,
+  same values); zero stamps after stamped ones, or one stamp with different values, are
+  errors. :func:`read_bag_log` returns the counts beside the log.
+
+Writing (:func:`write_bag`, :class:`BagWriter`): a time-series log as JointState and
+PoseStamped messages, in any of the three storages, readable by :func:`read_bag`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from excite.errors import DataError
+from excite.logs.timeseries import TimeSeries, sample_at
+
+__all__ = ["POSE_TYPES", "STORAGES", "BagLog", "BagWriter", "bag_path_problem", "is_bag_path",
+           "read_bag", "read_bag_log", "write_bag"]
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+TF_TOPIC = "/tf"
+#: Supported pose message types, and where each keeps its geometry_msgs/Pose.
+POSE_TYPES: dict[str, Callable[[Any], Any]] = {
+    "geometry_msgs/msg/PoseStamped": lambda msg: msg.pose,
+    "geometry_msgs/msg/PoseWithCovarianceStamped": lambda msg: msg.pose.pose,
+    "nav_msgs/msg/Odometry": lambda msg: msg.pose.pose,
+}
+BAG_SUFFIXES = (".bag", ".db3", ".mcap")
+#: Bag storages write_bag can write: rosbag2 (a directory) with sqlite3 or mcap files, ROS 1.
+STORAGES = ("sqlite3", "mcap", "ros1")
+#: Defaults of write_bag: the wheel joints, the topics, and the frame of the sensor's poses.
+JOINT_STATES = "/joint_states"
+LEFT_WHEEL, RIGHT_WHEEL = "left_wheel_joint", "right_wheel_joint"
+POSE_TOPIC = "/pose"
+WORLD_FRAME = "map"
+#: Quaternions shorter than this are no rotation (an orientation never set is all zeros).
+MIN_QUATERNION_NORM = 1e-3
+#: The largest tilt (rad) of the pose's z axis from the world z axis: a ground robot's sensor
+#: stays near z-up (a ramp tilts it a few degrees); more means another frame convention.
+MAX_TILT = math.radians(45.0)
+#: Why a JointState message naming both wheels is skipped: its position array is empty.
+NO_POSITIONS = "without wheel positions"
+_NEEDS_ROS = "{} bags needs the ros extra: pip install 'excite[ros]'"
+MISSING_EXTRA = _NEEDS_ROS.format("reading")
+MISSING_WRITE_EXTRA = _NEEDS_ROS.format("writing")
+
+
+def is_bag_path(path: str | os.PathLike[str]) -> bool:
+    """Whether a path looks like a bag: a .bag, .db3 or .mcap file, a directory holding a
+    rosbag2 metadata.yaml, or a part of a bag that :func:`bag_path_problem` explains (by name
+    only; read_bag checks the content)."""
+    p = Path(path)
+    return (p.suffix.lower() in BAG_SUFFIXES or (p / "metadata.yaml").is_file()
+            or bag_path_problem(p) is not None)
+
+
+def _stamp(header: Any) -> int:
+    """A header stamp in ns."""
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def _frame(frame_id: str) -> str:
+    return frame_id.lstrip("/")
+
+
+class _Stream:
+    """Rows (header stamp in ns first, then the values read) of one topic in receive order,
+    and the messages skipped, per reason."""
+
+    def __init__(self, where: str) -> None:
+        self.where = where
+        self.rows: list[tuple[float, ...]] = []
+        self.skipped: dict[str, int] = {}
+
+    def skip(self, reason: str, count: int = 1) -> None:
+        if count:
+            self.skipped[reason] = self.skipped.get(reason, 0) + count
+
+    def table(self, width: int) -> np.ndarray:
+        """The rows (n, width) in stamp order, the stamp in s.
+
+        Header stamps of zero (not set) are allowed only before the first stamped message in
+        receive order (published before the clock ran, e.g. before /clock in simulation);
+        those messages are skipped. A message repeating the previous one (same stamp, same
+        values) is skipped; two messages with one stamp and different values are an error.
+        """
+        table = np.array(self.rows, dtype=float).reshape(-1, width)
+        if table.size == 0:
+            return table  # TimeSeries names the stream with too few samples
+        unset = table[:, 0] == 0
+        if unset.all():
+            raise DataError(f"{self.where}: header stamps of zero (the publisher does not set "
+                            "them)")
+        first = int(np.argmax(~unset))
+        if unset[first:].any():
+            later = first + int(np.argmax(unset[first:]))
+            raise DataError(f"{self.where}: a header stamp of zero (not set) after stamped "
+                            f"messages (message {later + 1} of {unset.size}, received after "
+                            f"the one stamped {table[later - 1, 0] * 1e-9:.6f} s)")
+        self.skip("stamped 0 before the first stamped message", first)
+        table = table[first:]
+        table = table[np.argsort(table[:, 0], kind="stable")]
+        table[:, 0] *= 1e-9
+        same_stamp = np.flatnonzero(table[1:, 0] == table[:-1, 0])
+        equal = np.all((table[same_stamp] == table[same_stamp + 1])
+                       | (np.isnan(table[same_stamp]) & np.isnan(table[same_stamp + 1])),
+                       axis=1)
+        if not equal.all():
+            stamp = table[same_stamp[np.argmin(equal)], 0]
+            raise DataError(f"{sample_at(self.where, stamp)}: two messages with this header stamp "
+                            "and different values")
+        self.skip("repeated (same stamp, same values)", same_stamp.size)
+        return np.delete(table, same_stamp + 1, axis=0)
+
+
+class _Joints(_Stream):
+    """Collects (stamp, left angle, right angle) from JointState messages."""
+
+    def __init__(self, where: str, left: str, right: str) -> None:
+        super().__init__(where)
+        self.left, self.right = left, right
+        self.names: set[str] = set()
+        self.alone: set[str] = set()  # the wheels seen in messages without the other one
+
+    def add(self, msg: Any) -> None:
+        names = list(msg.name)
+        self.names.update(names)
+        if self.left not in names or self.right not in names:
+            self.alone.update({self.left, self.right} & set(names))
+            return
+        if len(msg.position) == 0:  # velocity or effort only: allowed by JointState
+            self.skip(NO_POSITIONS)
+            return
+        if len(msg.position) != len(names):
+            raise DataError(f"{sample_at(self.where, _stamp(msg.header) * 1e-9)}: "
+                            f"{len(msg.position)} positions for {len(names)} joint names")
+        self.rows.append((_stamp(msg.header), msg.position[names.index(self.left)],
+                          msg.position[names.index(self.right)]))
+
+    def columns(self) -> list[np.ndarray]:
+        """[t (s), phi_L, phi_R (rad)]."""
+        for joint in (self.left, self.right):
+            if joint not in self.names:
+                present = ", ".join(sorted(self.names)) or "none"
+                raise DataError(f"{self.where}: no joint {joint!r}; joints present: {present}")
+        if not self.rows:
+            if self.skipped.get(NO_POSITIONS):
+                raise DataError(f"{self.where}: no message has positions for the joints "
+                                f"{self.left!r} and {self.right!r} "
+                                f"({self.skipped[NO_POSITIONS]} name them with an empty "
+                                "position array: velocity or effort only)")
+            apart = (" (they come in separate messages; excite needs both wheels' positions in "
+                     "one message, as joint_state_broadcaster publishes them)"
+                     if self.alone == {self.left, self.right} else "")
+            raise DataError(f"{self.where}: no message has both joints {self.left!r} and "
+                            f"{self.right!r}{apart}")
+        return list(self.table(3).T)
+
+
+def _headings(where: str, t: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Headings (rad, in (-pi, pi]) of orientation quaternions ``q`` (n, 4: x, y, z, w) stamped
+    ``t`` (s): the rotation about z of their ZYX Euler angles, i.e. the direction of the body
+    x axis projected on the world xy plane. The quaternions need not have unit length (the
+    heading and the tilt are computed free of it).
+
+    Raises DataError naming the topic and stamp for a quaternion that is not finite or
+    shorter than MIN_QUATERNION_NORM (an orientation never set is all zeros), and for a body
+    z axis tilted more than MAX_TILT from the world z axis (a ground robot's pose is near
+    z-up; more tilt means another frame convention, most often Y-up from motion capture).
+    """
+    x, y, z, w = q.T
+    norm2 = np.sum(q * q, axis=1)
+    bad = ~(np.isfinite(norm2) & (norm2 >= MIN_QUATERNION_NORM**2))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise DataError(f"{sample_at(where, t[i])}: the orientation quaternion (x, y, z, w) = "
+                        f"({x[i]}, {y[i]}, {z[i]}, {w[i]}) is not a rotation (zero length "
+                        "or not finite)")
+    tilt = np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y) / norm2, -1.0, 1.0))
+    if np.any(tilt > MAX_TILT):
+        i = int(np.argmax(tilt))
+        raise DataError(f"{sample_at(where, t[i])}: the pose's z axis is tilted "
+                        f"{math.degrees(tilt[i]):.1f} degrees from the world z axis (the "
+                        f"largest tilt; a ground robot stays within "
+                        f"{math.degrees(MAX_TILT):.0f}): a Y-up frame? Motion capture systems "
+                        "often stream Y-up; convert the poses to Z-up")
+    return np.arctan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
+
+
+def _planar(position: Any, q: Any) -> tuple[float, ...]:
+    """What a pose row keeps: x, y (m) and the orientation quaternion's x, y, z, w."""
+    return position.x, position.y, q.x, q.y, q.z, q.w
+
+
+class _PoseStream(_Stream):
+    """Rows of (stamp, x, y, quaternion x, y, z, w)."""
+
+    def columns(self) -> list[np.ndarray]:
+        """[t (s), x, y (m), theta (rad, wrapped)]."""
+        t, x, y, *q = self.table(7).T
+        return [t, x, y, _headings(self.where, t, np.column_stack(q))]
+
+
+class _Poses(_PoseStream):
+    """Collects the poses of messages of the supported types (one topic may carry several,
+    from publishers of different types)."""
+
+    def add(self, msg: Any) -> None:
+        pose = POSE_TYPES[msg.__msgtype__](msg)
+        self.rows.append((_stamp(msg.header), *_planar(pose.position, pose.orientation)))
+
+
+class _Transforms(_PoseStream):
+    """Collects the direct parent -> child transforms in TF messages."""
+
+    def __init__(self, where: str, parent: str, child: str) -> None:
+        super().__init__(where)
+        self.pair = (_frame(parent), _frame(child))
+        self.pairs: set[tuple[str, str]] = set()
+
+    def add(self, msg: Any) -> None:
+        for transform in msg.transforms:
+            pair = (_frame(transform.header.frame_id), _frame(transform.child_frame_id))
+            self.pairs.add(pair)
+            if pair == self.pair:
+                self.rows.append((_stamp(transform.header),
+                                  *_planar(transform.transform.translation,
+                                           transform.transform.rotation)))
+
+    def columns(self) -> list[np.ndarray]:
+        """[t (s), x, y (m), theta (rad, wrapped)]."""
+        if not self.rows:
+            present = ", ".join(f"{a} -> {b}" for a, b in sorted(self.pairs)) or "none"
+            raise DataError(f"{self.where}: no transform {self.pair[0]} -> {self.pair[1]}; "
+                            f"frame pairs present: {present}")
+        return super().columns()
+
+
+def bag_path_problem(path: str | os.PathLike[str]) -> str | None:
+    """What is wrong with a path that is part of a ROS bag but not one excite can open (one
+    line with the way out), or None: an unfinished ROS 1 recording (``.bag.active``), a
+    rosbag2 directory without ``metadata.yaml`` (a recording stopped without closing it), the
+    ``metadata.yaml`` or a compressed file (``.zstd``) of a rosbag2 bag given instead of its
+    directory."""
+    p = Path(path)
+    try:
+        return _bag_part(p)
+    except OSError:  # an unreadable directory: opening it says what is wrong
+        return None
+
+
+def _bag_part(p: Path) -> str | None:
+    if p.name.endswith(".bag.active"):
+        return (f"{p}: an unfinished ROS 1 recording (.bag.active); `rosbag reindex {p}` "
+                "repairs it, then rename it to .bag")
+    if p.is_dir() and not (p / "metadata.yaml").exists() and any(
+            q.name.endswith(suffix) for q in p.iterdir()
+            for suffix in (".db3", ".mcap", ".db3.zstd", ".mcap.zstd")):
+        return (f"{p}: a rosbag2 directory without metadata.yaml (a recording stopped without "
+                f"closing it?); `ros2 bag reindex {p}` writes it")
+    if p.name == "metadata.yaml":
+        return f"{p}: the metadata of a rosbag2 bag; give the bag's directory {p.parent}"
+    if p.suffix == ".zstd" and Path(p.stem).suffix in (".db3", ".mcap"):
+        return f"{p}: a compressed file of a rosbag2 bag; give the bag's directory {p.parent}"
+    return None
+
+
+class _Bag:
+    """One open bag (rosbags' ROS 1 or rosbag2 reader; the ``ros`` extra): its connections,
+    and the messages of chosen connections decoded with the definitions recorded for those
+    connections only, so that an unused topic's missing, empty or mismatching definition (a
+    rosserial bridge's, a stale custom type) does not matter. Types the bag defines for no
+    chosen connection come from rosbags' typestore of ROS 1 Noetic or of the latest ROS 2."""
+
+    def __init__(self, name: str) -> None:
+        try:
+            from rosbags.rosbag1 import Reader as Reader1
+            from rosbags.rosbag2 import Reader as Reader2
+        except ImportError:
+            raise DataError(MISSING_EXTRA) from None
+        self.name = name
+        self.ros1 = Path(name).suffix == ".bag"
+        try:
+            self.reader = (Reader1 if self.ros1 else Reader2)(Path(name))
+            self.reader.open()
+        except Exception as exc:  # rosbags raises its own errors, and KeyError on odd files
+            raise DataError(f"{name}: not a readable ROS bag ({_why(exc)})") from None
+        self.connections = list(self.reader.connections)
+
+    def close(self) -> None:
+        self.reader.close()
+
+    def messages(self, connections: list[Any]) -> Iterator[tuple[Any, Any]]:
+        """(connection, decoded message) of ``connections`` in receive order; DataError naming
+        the topic for a message its recorded definition cannot decode."""
+        decode = self._decoder(connections)
+        where = ""
+        try:
+            for connection, _, raw in self.reader.messages(connections=connections):
+                where = connection.topic
+                yield connection, decode(raw, connection.msgtype)
+        except Exception as exc:  # rosbags' errors while reading or decoding
+            hint = ""
+            if Path(self.name).is_file() and (Path(self.name).parent / "metadata.yaml").exists():
+                hint = (f"; if the bag is compressed, give its directory "
+                        f"{Path(self.name).parent}")
+            place = f"{self.name} {where}" if where else self.name
+            raise DataError(f"{place}: a message cannot be read or decoded "
+                            f"({_why(exc)}){hint}") from None
+
+    def _decoder(self, connections: list[Any]) -> Callable[[bytes, str], Any]:
+        from rosbags.interfaces import MessageDefinitionFormat
+        from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+        default = get_typestore(Stores.ROS1_NOETIC if self.ros1 else Stores.LATEST)
+        types = dict(default.fielddefs)
+        try:
+            for connection in connections:
+                definition = connection.msgdef
+                if definition.format == MessageDefinitionFormat.MSG and definition.data.strip():
+                    types.update(get_types_from_msg(definition.data, connection.msgtype))
+                elif definition.format == MessageDefinitionFormat.IDL and definition.data.strip():
+                    separator = "=" * 80 + "\n"  # several IDL files, each under "IDL: name"
+                    idls = ([part.split("\n", 1)[1]
+                             for part in definition.data.split(separator)[1:]]
+                            if definition.data.startswith(f"{separator}IDL: ")
+                            else [definition.data])
+                    for idl in idls:
+                        types.update(get_types_from_idl(idl))
+        except Exception as exc:  # a definition rosbags cannot parse
+            raise DataError(f"{self.name}: the recorded message definition of "
+                            f"{connection.topic} ({connection.msgtype}) cannot be read "
+                            f"({_why(exc)})") from None
+        store = get_typestore(Stores.EMPTY)
+        store.register(types)
+        return store.deserialize_ros1 if self.ros1 else store.deserialize_cdr
+
+
+def _why(exc: Exception) -> str:
+    """An exception from rosbags in a few words (its message, else its type)."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    if isinstance(exc, KeyError) and text == "'ros1msg'":
+        return "an mcap file of ROS 1 messages; convert it to a ROS 1 .bag"
+    return text if text and not isinstance(exc, KeyError) else f"{type(exc).__name__} {text}"
+
+
+@contextmanager
+def _opened(name: str) -> Iterator[_Bag]:
+    """An open bag; DataError (one line) for anything that is not a bag or cannot be read, or
+    an empty bag."""
+    if not os.path.exists(name):
+        raise DataError(f"{name}: no such file or directory")
+    problem = bag_path_problem(name)
+    if problem is not None:
+        raise DataError(problem)
+    bag = _Bag(name)
+    try:
+        if bag.reader.message_count == 0:
+            raise DataError(f"{name}: empty bag (no messages)")
+        yield bag
+    finally:
+        bag.close()
+
+
+def _topic_list(topics: dict[str, set[str]]) -> str:
+    return ", ".join(f"{topic} ({', '.join(sorted(msgtypes))})"
+                     for topic, msgtypes in sorted(topics.items()))
+
+
+def _require(name: str, topics: dict[str, set[str]], topic: str, kinds: tuple[str, ...],
+             role: str) -> None:
+    """DataError unless the topic exists and all its message types are among ``kinds``."""
+    if topic not in topics:
+        raise DataError(f"{name}: no topic {topic} ({role}); the bag has: {_topic_list(topics)}")
+    unsupported = sorted(topics[topic] - set(kinds))
+    if unsupported:
+        raise DataError(f"{name}: topic {topic} has type {', '.join(unsupported)}, not "
+                        f"supported for {role}; supported: {', '.join(kinds)}")
+
+
+def _pose_collector(name: str, topics: dict[str, set[str]], pose_topic: str | None,
+                    tf: tuple[str, str] | None) -> tuple[str, _Poses | _Transforms, str]:
+    """(topic to read, its collector, the pose stream's source label)."""
+    if tf is not None:
+        _require(name, topics, TF_TOPIC, (TF_MESSAGE,), "transforms")
+        transforms = _Transforms(f"{name} {TF_TOPIC}", *tf)
+        parent, child = transforms.pair
+        return TF_TOPIC, transforms, f"{name} {TF_TOPIC} {parent}->{child}"
+    assert pose_topic is not None  # read_bag checked that exactly one source is given
+    _require(name, topics, pose_topic, tuple(POSE_TYPES), "poses")
+    poses = _Poses(f"{name} {pose_topic}")
+    return pose_topic, poses, poses.where
+
+
+@dataclass(frozen=True)
+class BagLog:
+    """A bag read as a time-series log.
+
+    series: the log (see :func:`read_bag`). skipped: the messages left out and why, as
+    {"topic reason": count} in reading order, e.g. {"/joint_states without wheel
+    positions": 12}; empty when every message of the two streams was used.
+    """
+
+    series: TimeSeries
+    skipped: dict[str, int] = field(default_factory=dict)
+
+    def skipped_text(self) -> str:
+        """The skipped messages in one line, e.g. '12 /joint_states without wheel
+        positions, 3 /pose stamped 0 before the first stamped message', or 'none'."""
+        return ", ".join(f"{n} {what}" for what, n in self.skipped.items()) or "none"
+
+
+def read_bag_log(
+    path: str | os.PathLike[str],
+    left_wheel: str,
+    right_wheel: str,
+    pose_topic: str | None = None,
+    tf: tuple[str, str] | None = None,
+    joint_states: str = JOINT_STATES,
+) -> BagLog:
+    """Read wheel angles and sensor poses from a ROS bag (see the module docstring), with
+    what was skipped.
+
+    left_wheel, right_wheel: joint names in the JointState messages on ``joint_states``.
+    Exactly one pose source: ``pose_topic`` (PoseStamped, PoseWithCovarianceStamped or
+    Odometry) or ``tf=(parent, child)`` (the child frame's pose in the parent, world, frame,
+    from /tf). The series is on the header-stamp clocks (s), theta unwrapped; its source
+    names the bag and topics.
+
+    Skipped, and counted in ``skipped``: JointState messages that name both wheels with an
+    empty position array (velocity or effort only); messages stamped zero (not set) before
+    the first stamped message of their topic, in receive order (published before the clock
+    ran); a message repeating another (same stamp, same values).
+
+    Raises DataError (one line) when rosbags is missing, the path is missing or not a bag, the
+    bag is empty, a topic is missing (listing the topics and types present) or of an
+    unsupported type (listing the supported ones), a joint is unknown (listing the joints
+    present) or never has a position, no transform parent -> child exists (listing the frame
+    pairs present), an orientation is no rotation (zero length, not finite) or tilted over
+    MAX_TILT (a Y-up frame), or a stream is invalid (no stamps set, a zero stamp after
+    stamped messages, two messages with one stamp and different values, too few samples).
+    """
+    name = os.fspath(path)
+    if (pose_topic is None) == (tf is None):
+        raise DataError("give exactly one pose source: pose_topic or tf=(parent, child)")
+    with _opened(name) as bag:
+        topics: dict[str, set[str]] = {}
+        for connection in bag.connections:
+            topics.setdefault(connection.topic, set()).add(connection.msgtype)
+        _require(name, topics, joint_states, (JOINT_STATE,), "wheel joint states")
+        joints = _Joints(f"{name} {joint_states}", left_wheel, right_wheel)
+        pose_key, poses, pose_source = _pose_collector(name, topics, pose_topic, tf)
+        collectors: dict[str, _Joints | _Poses | _Transforms] = {joint_states: joints,
+                                                                 pose_key: poses}
+        wanted = [c for c in bag.connections if c.topic in collectors]
+        for connection, msg in bag.messages(wanted):
+            collectors[connection.topic].add(msg)
+    t_enc, phi_L, phi_R = joints.columns()
+    t_pose, x, y, theta = poses.columns()
+    series = TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,
+                        source=(joints.where, pose_source))
+    skipped = {f"{topic} {reason}": n for topic, stream in ((joint_states, joints),
+                                                             (pose_key, poses))
+               for reason, n in stream.skipped.items()}
+    return BagLog(series, skipped)
+
+
+def read_bag(
+    path: str | os.PathLike[str],
+    left_wheel: str,
+    right_wheel: str,
+    pose_topic: str | None = None,
+    tf: tuple[str, str] | None = None,
+    joint_states: str = JOINT_STATES,
+) -> TimeSeries:
+    """The time-series log of a ROS bag: :func:`read_bag_log` without the account of the
+    skipped messages (same arguments and errors)."""
+    return read_bag_log(path, left_wheel, right_wheel, pose_topic, tf, joint_states).series
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def _ns(t: float) -> int:
+    """A time in s as whole ns (header stamps and receive times)."""
+    return int(round(t * 1e9))
+
+
+class BagWriter:
+    """A new ROS bag, written message by message with rosbags' writers.
+
+    storage: "sqlite3" or "mcap" (rosbag2 version 9; ``path`` is the bag's directory, created
+    with its parents) or "ros1" (``path`` is the ``.bag`` file; its directory must exist). The
+    path must not exist. Messages are built with the storage's typestore (ROS 2, or ROS 1
+    Noetic, whose Header has a seq): ``types`` maps type names to message classes, and
+    `header`, `joint_state`, `pose`, `pose_stamped` build the common ones. Use it as a context
+    manager; the bag is complete once it closes.
+
+    Raises DataError (one line) without rosbags (naming the extra to install), for an unknown
+    storage, or when the bag cannot be created.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], storage: str = "sqlite3") -> None:
+        if storage not in STORAGES:
+            raise DataError(f"unknown bag storage {storage!r}; use one of {', '.join(STORAGES)}")
+        try:
+            from rosbags.rosbag1 import Writer as Writer1
+            from rosbags.rosbag1 import WriterError as Writer1Error
+            from rosbags.rosbag2 import StoragePlugin
+            from rosbags.rosbag2 import Writer as Writer2
+            from rosbags.rosbag2 import WriterError as Writer2Error
+            from rosbags.typesys import Stores, get_typestore
+        except ImportError:
+            raise DataError(MISSING_WRITE_EXTRA) from None
+        self.path = Path(path)
+        self.ros1 = storage == "ros1"
+        self.store = get_typestore(Stores.ROS1_NOETIC if self.ros1 else Stores.LATEST)
+        self.types: dict[str, Any] = self.store.types
+        self._errors = (Writer1Error, Writer2Error, OSError)
+        self._connections: dict[str, Any] = {}
+        try:
+            if self.ros1:
+                self._writer: Any = Writer1(self.path)
+            else:
+                plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+                self._writer = Writer2(self.path, version=9, storage_plugin=plugin)
+        except self._errors as exc:
+            raise DataError(f"{self.path}: cannot write the bag ({exc})") from None
+
+    def __enter__(self) -> BagWriter:
+        try:
+            self._writer.open()
+        except self._errors as exc:
+            raise DataError(f"{self.path}: cannot write the bag ({exc})") from None
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self._writer.close()
+
+    def add_topic(self, topic: str, msgtype: str) -> None:
+        """Declare a topic and its message type (also when no message follows)."""
+        if topic not in self._connections:
+            self._connections[topic] = self._writer.add_connection(topic, msgtype,
+                                                                   typestore=self.store)
+
+    def write(self, topic: str, received: float, msg: Any) -> None:
+        """Write a message on a topic (declared on first use) at receive time ``received``
+        (s; the bag's timestamp, apart from the header stamp)."""
+        self.add_topic(topic, msg.__msgtype__)
+        serialize = self.store.serialize_ros1 if self.ros1 else self.store.serialize_cdr
+        self._writer.write(self._connections[topic], _ns(received),
+                           serialize(msg, msg.__msgtype__))
+
+    def header(self, t: float, frame_id: str = "") -> Any:
+        """A std_msgs Header stamped ``t`` s (whole ns)."""
+        sec, nanosec = divmod(_ns(t), 1_000_000_000)
+        stamp = self.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
+        extra = {"seq": 0} if self.ros1 else {}
+        return self.types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id, **extra)
+
+    def joint_state(self, t: float, names: list[str], positions: list[float]) -> Any:
+        """A JointState stamped ``t`` s: joint ``names`` at ``positions`` (rad)."""
+        empty = np.zeros(0)
+        return self.types[JOINT_STATE](header=self.header(t), name=names,
+                                       position=np.array(positions, dtype=float),
+                                       velocity=empty, effort=empty)
+
+    def pose(self, x: float, y: float, theta: float) -> Any:
+        """A geometry_msgs Pose at (x, y, 0) m, turned by the yaw ``theta`` (rad)."""
+        types = self.types
+        return types["geometry_msgs/msg/Pose"](
+            position=types["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+            orientation=types["geometry_msgs/msg/Quaternion"](
+                x=0.0, y=0.0, z=math.sin(0.5 * theta), w=math.cos(0.5 * theta)))
+
+    def pose_stamped(self, t: float, x: float, y: float, theta: float,
+                     frame_id: str = WORLD_FRAME) -> Any:
+        """A PoseStamped stamped ``t`` s: `pose` (x, y, theta) in ``frame_id``."""
+        return self.types[POSE_STAMPED](header=self.header(t, frame_id),
+                                        pose=self.pose(x, y, theta))
+
+
+def write_bag(
+    path: str | os.PathLike[str],
+    series: TimeSeries,
+    storage: str = "sqlite3",
+    joint_states: str = JOINT_STATES,
+    left_wheel: str = LEFT_WHEEL,
+    right_wheel: str = RIGHT_WHEEL,
+    pose_topic: str = POSE_TOPIC,
+) -> Path:
+    """Write a time-series log as a new ROS bag that :func:`read_bag` reads back.
+
+    The encoder stream becomes JointState messages on ``joint_states`` (joints ``left_wheel``,
+    ``right_wheel``, positions in rad), the pose stream PoseStamped messages on ``pose_topic``
+    (frame ``WORLD_FRAME``, z = 0, the heading as a yaw quaternion). Header stamps are the
+    sample times in whole ns (read back as ns * 1e-9 s), receive times equal the stamps, and
+    messages are written in time order. storage: see :class:`BagWriter`. Returns the path to
+    read: the bag directory (rosbag2) or file (ros1).
+
+    Raises DataError (one line) for a sample time that is not positive (a zero stamp means
+    "not set" in ROS), and as BagWriter does.
+    """
+    for stream, t in (("encoder", series.t_enc), ("pose", series.t_pose)):
+        if t[0] <= 0:
+            raise DataError(f"{series.location(stream, 0)}: a ROS header stamp must be "
+                            "positive (zero means not set)")
+    times = np.concatenate([series.t_enc, series.t_pose])
+    order = np.argsort(times, kind="stable").tolist()
+    n_enc = series.t_enc.size
+    with BagWriter(path, storage) as bag:
+        bag.add_topic(joint_states, JOINT_STATE)
+        bag.add_topic(pose_topic, POSE_STAMPED)
+        for i in order:
+            if i < n_enc:
+                t = float(series.t_enc[i])
+                msg = bag.joint_state(t, [left_wheel, right_wheel],
+                                      [series.phi_L[i], series.phi_R[i]])
+                bag.write(joint_states, t, msg)
+            else:
+                k = i - n_enc
+                t = float(series.t_pose[k])
+                bag.write(pose_topic, t, bag.pose_stamped(t, series.x[k], series.y[k],
+                                                          series.theta[k]))
+    return bag.path

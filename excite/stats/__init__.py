@@ -1,0 +1,2 @@
+"""Generic statistics: chi-square helpers, serial correlation, estimator consistency (NEES).
+"""

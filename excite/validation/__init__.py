@@ -1,0 +1,2 @@
+"""Validation on held-out logs: does a calibration make dead reckoning better?
+"""

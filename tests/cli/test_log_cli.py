@@ -1,0 +1,349 @@
+"""excite calibrate / segment on time-series logs through the command line: real files on
+disk, synthetic logs with a known robot and an off-axle sensor."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from excite.core.kinematics import Params
+from excite.core.models import SensorPose
+from excite.logs.segments import load_segments
+from excite.logs.synthetic import synthetic_log
+from excite.logs.timeseries import write_timeseries
+
+from .conftest import run_cli
+
+TRUTH = Params(0.050, 0.051, 0.300)
+SENSOR = SensorPose(0.1, -0.03, 0.4)
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("logs")
+    paths = []
+    for seed in range(3):
+        log = synthetic_log(np.random.default_rng(seed), 90, TRUTH, SENSOR,
+                            pose_noise=(0.002, 0.002), slip=0.005)
+        path = directory / f"log{seed}.csv"
+        write_timeseries(path, log.series)
+        paths.append(str(path))
+    return paths
+
+
+def test_calibrate_a_log_recovers_the_robot_and_the_sensor(capsys, logs):
+    code, out, _ = run_cli(capsys, "calibrate", logs[0], "--json")
+    assert code == 0
+    report = json.loads(out)
+    assert report["model"] == "sensor_pose"
+    values = [report["params"][k] for k in ("r_L", "r_R", "b")]
+    std = [report["std"][k] for k in ("r_L", "r_R", "b")]
+    assert np.all(np.abs(np.array(values) - TRUTH.as_array()) < 5 * np.array(std))
+    pose = report["sensor_pose"]
+    assert abs(pose["x"] - SENSOR.x) < 0.01 and abs(pose["theta"] - SENSOR.theta) < 0.01
+    assert report["pose_sigma"] is not None  # the shared pose samples are modelled
+    assert report["inputs"][0].startswith(logs[0])
+
+
+def test_segment_writes_times_and_calibrate_reads_them_back(capsys, logs, tmp_path):
+    out_csv = tmp_path / "segments.csv"
+    code, out, err = run_cli(capsys, "segment", logs[0], "--out", str(out_csv))
+    assert code == 0 and "segments" in out and "one arc" in err
+    segments = load_segments(out_csv)
+    assert segments.t_start is not None and segments.chained[1:].all()
+    code, out, _ = run_cli(capsys, "calibrate", str(out_csv), "--json")
+    assert json.loads(out)["pose_sigma"] is not None
+
+
+def test_holdout_validates_on_the_logs_kept_back(capsys, logs):
+    code, out, _ = run_cli(capsys, "calibrate", *logs, "--holdout", "0.3", "--init",
+                       "0.0525,0.0485,0.31", "--json")
+    assert code == 0
+    report = json.loads(out)
+    assert len(report["inputs"]) == 2 and len(report["holdout"]["logs"]) == 1
+    assert report["holdout"]["overall"]["ratio"]["end_position_error"] < 0.3
+    assert report["nominal"] == {"r_L": 0.0525, "r_R": 0.0485, "b": 0.31}
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--holdout", "0.3"], "--init"),
+    (["--holdout", "0.3", "--init", "0.05,0.05,0.3", "--window", "0"], "--window"),
+    (["--time-offset", "soon"], "--time-offset"),
+    (["--tf", "map"], "--tf"),
+])
+def test_bad_options_are_one_line_errors(capsys, logs, extra, message):
+    code, _, err = run_cli(capsys, "calibrate", logs[0], *extra)
+    assert code == 2 and message in err and err.count("\n") == 1
+
+
+def test_time_offset_estimate_and_its_search_range(capsys, tmp_path):
+    """A 2.5 s clock offset: outside the default search range (+-1 s) a one-line error; found
+    with --max-time-offset 3."""
+    series = synthetic_log(np.random.default_rng(3), 60, TRUTH, SENSOR,
+                           pose_noise=(0.002, 0.002)).series
+    path = tmp_path / "late.csv"
+    write_timeseries(path, dataclasses.replace(series, t_pose=series.t_pose - 2.5))
+    code, out, err = run_cli(capsys, "calibrate", path, "--time-offset", "estimate", "--json")
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "cannot estimate the time offset: it is not within +-1.0 s" in err
+    code, out, _ = run_cli(capsys, "calibrate", path, "--time-offset", "estimate",
+                           "--max-time-offset", "3", "--json")
+    assert code == 0
+    assert "time offset +2.500" in json.loads(out)["inputs"][0]
+
+
+def test_an_unflagged_clock_offset_is_noted_and_changes_nothing(capsys, tmp_path, logs):
+    """Without --time-offset, a log whose clocks are 0.15 s apart gets a one-line note on
+    stderr and the estimate in its JSON description, and is calibrated with offset 0 as
+    before; a log without an offset gets no note and the same result as --time-offset 0."""
+    series = synthetic_log(np.random.default_rng(4), 60, TRUTH, SENSOR,
+                           pose_noise=(0.002, 0.002)).series
+    path = tmp_path / "offset.csv"
+    write_timeseries(path, dataclasses.replace(series, t_pose=series.t_pose - 0.15))
+    code, out, err = run_cli(capsys, "calibrate", path, "--json")
+    assert code in (0, 3, 4)
+    notes = [line for line in err.splitlines() if line.startswith("excite: note:")]
+    assert len(notes) == 1 and str(path) in notes[0] and "0 is used" in notes[0]
+    assert "the data suggest +0.15" in notes[0] and "--time-offset estimate" in notes[0]
+    report = json.loads(out)
+    assert "time offset +0.0000 s (default; the data suggest +0.15" in report["inputs"][0]
+    _, given, _ = run_cli(capsys, "calibrate", path, "--time-offset", "0", "--json")
+    assert json.loads(given)["params"] == report["params"]
+    code, out, err = run_cli(capsys, "calibrate", logs[0], "--json")
+    assert code == 0 and "note" not in err
+    assert json.loads(out)["inputs"][0].endswith("time offset +0.0000 s (default)")
+    _, given, _ = run_cli(capsys, "calibrate", logs[0], "--time-offset", "0", "--json")
+    assert json.loads(given)["params"] == json.loads(out)["params"]
+
+
+def test_wrapped_wheel_angles_through_the_cli(capsys, tmp_path):
+    """A log whose wheel angles are wrapped to [-pi, pi) calibrates as the cumulative one, and
+    its description says they were unwrapped."""
+    series = synthetic_log(np.random.default_rng(5), 60, TRUTH, SENSOR, encoder_rate=50.0,
+                           pose_rate=50.0, pose_noise=(0.002, 0.002)).series
+    assert np.array_equal(series.t_enc, series.t_pose)
+    wrap = lambda phi: np.angle(np.exp(1j * phi))  # noqa: E731
+    columns = (series.t_enc, wrap(series.phi_L), wrap(series.phi_R), series.x, series.y,
+               series.theta)
+    wrapped, plain = tmp_path / "wrapped.csv", tmp_path / "plain.csv"
+    np.savetxt(wrapped, np.column_stack(columns), delimiter=",", fmt="%.17g",
+               header="t,phi_L,phi_R,x,y,theta", comments="")
+    write_timeseries(plain, series)
+    code, out, _ = run_cli(capsys, "calibrate", wrapped, "--json")
+    assert code == 0
+    report = json.loads(out)
+    assert "phi_L, phi_R wrapped modulo 2 pi, unwrapped" in report["inputs"][0]
+    _, reference, _ = run_cli(capsys, "calibrate", plain, "--json")
+    reference = json.loads(reference)
+    assert "unwrapped" not in reference["inputs"][0]
+    for name, value in reference["params"].items():
+        assert abs(report["params"][name] - value) < 1e-9
+
+
+def test_a_lone_stream_file_names_what_is_missing(capsys, tmp_path):
+    encoders = tmp_path / "enc.csv"
+    encoders.write_text("t,phi_L,phi_R\n0,0,0\n1,1,1\n")
+    code, _, err = run_cli(capsys, "calibrate", str(encoders))
+    assert code == 2 and "only the encoder stream" in err
+
+
+def test_holdout_needs_two_logs(capsys, logs):
+    code, _, err = run_cli(capsys, "calibrate", logs[0], "--holdout", "0.3", "--init",
+                       "0.05,0.05,0.3")
+    assert code == 2 and "at least 2" in err
+
+
+# -- acceptance: every bad input through the command line is one line naming file:line or topic
+
+GOOD_ROWS = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,5,5,0.25,0,0\n1.0,10,10,0.5,0,0\n"
+
+
+@pytest.mark.parametrize("text, extra, fragment", [
+    (GOOD_ROWS + "0.9,11,11,0.55,0,0\n", [], "log.csv:5: time does not increase"),
+    ("t,phi_L,phi_R,x,theta\n0,0,0,0,0\n", [], "log.csv:1: missing column y"),
+    (GOOD_ROWS + "1.5,nan,15,0.75,0,0\n", [], "log.csv:5: phi_L is not finite"),
+    ("t,ticks_L,ticks_R,x,y,theta\n0,0,0,0,0,0\n", [],
+     "log.csv:1: encoder ticks (ticks_L, ticks_R) need the encoder resolution"),
+    ("t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,1,1,0.1,0,0\n1.0,-2.5,-2.5,0.2,0,0\n", [],
+     "log.csv:4: the wheel angles phi_L are wrapped modulo 2 pi and sampled too slowly"),
+])
+def test_bad_log_files_through_the_cli(capsys, tmp_path, text, extra, fragment):
+    path = tmp_path / "log.csv"
+    path.write_text(text)
+    code, out, err = run_cli(capsys, "calibrate", path, *extra)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert fragment in err and "Traceback" not in err
+
+
+def test_a_gap_longer_than_the_window_is_named(capsys, tmp_path):
+    rows = [f"{0.1 * i:.1f},{i},{i},{0.005 * i},0,0" for i in range(60) if not 20 < i < 40]
+    path = tmp_path / "log.csv"
+    path.write_text("t,phi_L,phi_R,x,y,theta\n" + "\n".join(rows) + "\n")
+    code, _, err = run_cli(capsys, "calibrate", path)
+    assert code == 2 and err.count("\n") == 1
+    assert f"{path}:23: gap of 2.000 s" in err and "longer than the window (1 s)" in err
+    assert err.rstrip().endswith("--split-at-gaps (on_gap='split') cuts the log there instead")
+
+
+def test_too_few_segments_to_estimate_the_noise_levels(capsys, tmp_path):
+    """A 6 s log cut into 6 segments: 18 residuals for 6 parameters and 7 noise levels.
+    Estimated anyway, the levels collapsed onto the few residuals (std 10-150x too small,
+    exit 0); now a one-line error naming the way out, and given levels still calibrate."""
+    series = synthetic_log(np.random.default_rng(9), 6.0, Params(0.05, 0.051, 0.3),
+                           SensorPose(0.1, 0.02, 0.1), pose_noise=(0.002, 0.002)).series
+    path = tmp_path / "short.csv"
+    write_timeseries(path, series)
+    code, out, err = run_cli(capsys, "calibrate", path)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert ("6 segments leave 12 residual degrees of freedom to estimate 7 noise levels from; "
+            "at least 35 are needed (about 14 segments for 6 parameters)") in err
+    code, out, _ = run_cli(capsys, "calibrate", path, "--sigma", "0.003,0.003,0.003")
+    assert code == 0 and "identifiable    = yes" in out
+
+
+@pytest.mark.parametrize("slip", [0.0, 0.05])
+def test_the_slip_share_is_reported(capsys, tmp_path, slip):
+    """slip_share: the slip's std over a segment against the wheel turn (0.05 rad/sqrt(s) on
+    ~6 rad per 1 s segment: ~0.8%), in --json and on the noise line; 0 without slip."""
+    series = synthetic_log(np.random.default_rng(10), 60.0, Params(0.05, 0.051, 0.3),
+                           pose_noise=(0.001, 0.001), slip=slip).series
+    path = tmp_path / "log.csv"
+    write_timeseries(path, series)
+    code, out, err = run_cli(capsys, "calibrate", path, "--json")
+    report = json.loads(out)
+    speed = np.maximum(np.abs(np.diff(series.phi_L)), np.abs(np.diff(series.phi_R)))
+    turn = np.median(speed / np.diff(series.t_enc))  # rad per 1 s segment
+    if slip:
+        assert report["slip_share"] == pytest.approx(slip / turn, rel=0.3)
+    else:
+        assert report["slip_share"] < 1e-4
+    code, out, err = run_cli(capsys, "calibrate", path)
+    assert "% of a segment's wheel turn)" in out and err == ""
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.0015, 0.004])
+def test_the_encoder_timing_is_reported(capsys, tmp_path, jitter):
+    """timing: the std of the encoder samples' time errors (s), in --json and on the noise
+    line (ms); 0 (and not on the line) when the encoders are read on time; at its bound (a
+    quarter of the 10 ms encoder period) said so when the errors are larger."""
+    series = synthetic_log(np.random.default_rng(11), 90.0, Params(0.05, 0.051, 0.3),
+                           pose_noise=(1e-4, 1e-4), encoder_jitter=jitter).series
+    path = tmp_path / "log.csv"
+    write_timeseries(path, series)
+    code, out, err = run_cli(capsys, "calibrate", path, "--json")
+    report = json.loads(out)
+    timing, at_bound = report["timing"], report["timing_at_bound"]
+    code, text, err = run_cli(capsys, "calibrate", path)
+    assert code == 0 and err == ""
+    if jitter > 0.0025:
+        assert timing == pytest.approx(0.0025) and at_bound
+        assert "encoder timing 2.5 ms (at its bound, a quarter of the encoder period" in text
+    elif jitter:
+        assert timing == pytest.approx(jitter, rel=0.2) and not at_bound
+        assert f"; encoder timing {1e3 * timing:.2g} ms\n" in text
+    else:
+        assert timing == 0.0 and not at_bound and "encoder timing" not in text
+
+
+def test_a_clock_jump_or_times_in_ns_are_one_line_errors(capsys, tmp_path):
+    """A clock that jumps by a year mid-log (NTP setting a Raspberry Pi's clock), and epoch
+    times written in ns: one line each, not the time-offset check's grid over the whole span
+    (which asked for TiB of memory)."""
+    series = synthetic_log(np.random.default_rng(8), 30.0, pose_noise=(0.002, 0.002)).series
+    jump = 365 * 86400.0
+    jumped = dataclasses.replace(series, t_enc=np.where(series.t_enc > 15, series.t_enc + jump,
+                                                        series.t_enc),
+                                 t_pose=np.where(series.t_pose > 15, series.t_pose + jump,
+                                                 series.t_pose))
+    path = tmp_path / "jump.csv"
+    write_timeseries(path, jumped)
+    code, _, err = run_cli(capsys, "calibrate", path)
+    assert code == 2 and err.count("\n") == 1 and "gap of 31536000" in err
+    code, _, _ = run_cli(capsys, "calibrate", path, "--split-at-gaps")
+    assert code == 0  # each side of the jump calibrates
+    code, _, err = run_cli(capsys, "calibrate", path, "--time-offset", "estimate")
+    assert code == 2 and err.count("\n") == 1 and "long gaps (or a clock that jumps)" in err
+    nanoseconds = dataclasses.replace(series, t_enc=1.763e18 + 1e9 * series.t_enc,
+                                      t_pose=1.763e18 + 1e9 * series.t_pose)
+    path = tmp_path / "ns.csv"
+    write_timeseries(path, nanoseconds)
+    code, _, err = run_cli(capsys, "calibrate", path)
+    assert code == 2 and err.count("\n") == 1
+    assert err.rstrip().endswith("(times are in s: are these ms, us or ns?)")
+
+
+@pytest.fixture(scope="module")
+def bag_log():
+    series = synthetic_log(np.random.default_rng(7), 20, TRUTH, SENSOR,
+                           pose_noise=(0.001, 0.001)).series
+    # a ROS header stamp of 0 means "not set": the log starts at 1 s
+    return dataclasses.replace(series, t_enc=series.t_enc + 1.0, t_pose=series.t_pose + 1.0)
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap", "ros1"])
+@pytest.mark.parametrize("extra, fragment", [
+    (["--left-wheel", "front_left"], "/joint_states: no joint 'front_left'; joints present: "
+                                     "left_wheel_joint, right_wheel_joint"),
+    (["--pose-topic", "/joint_states"], "topic /joint_states has type "
+                                        "sensor_msgs/msg/JointState, not supported for poses"),
+    (["--pose-topic", "/odom"], "no topic /odom (poses); the bag has: /joint_states"),
+])
+def test_bad_bag_options_through_the_cli(capsys, tmp_path, bag_log, storage, extra, fragment):
+    from excite.logs.bags import write_bag
+
+    path = tmp_path / ("log.bag" if storage == "ros1" else "log")
+    write_bag(path, bag_log, storage=storage)
+    options = {"--left-wheel": "left_wheel_joint", "--right-wheel": "right_wheel_joint",
+               "--pose-topic": "/pose"}
+    options.update(dict(zip(extra[::2], extra[1::2], strict=True)))
+    code, out, err = run_cli(capsys, "calibrate", path,
+                             *[item for pair in options.items() for item in pair])
+    assert code == 2 and out == "" and err.count("\n") == 1 and fragment in err
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap", "ros1"])
+def test_an_empty_bag_through_the_cli(capsys, tmp_path, storage):
+    from excite.logs.bags import BagWriter
+
+    path = tmp_path / ("log.bag" if storage == "ros1" else "log")
+    with BagWriter(path, storage):
+        pass
+    code, _, err = run_cli(capsys, "calibrate", path, "--left-wheel", "l", "--right-wheel", "r",
+                           "--pose-topic", "/pose")
+    assert code == 2 and err.count("\n") == 1 and "empty bag (no messages)" in err
+
+
+def test_the_driving_test_holds_its_size_on_random_slip():
+    """Logs whose only errors are pose noise and random wheel slip (the model's): the score
+    statistic of "r_L, r_R, b differ where the wheels speed up or slow down" is chi-square
+    with 3 dof, so over 30 logs its mean stays near 3 (std of the mean 0.45) and the fit
+    passes."""
+    from excite.calibration.pipeline import calibrate
+    from excite.logs.timeseries import segment_timeseries
+
+    statistics = []
+    for seed in range(30):
+        series = synthetic_log(np.random.default_rng(2000 + seed), 60.0,
+                               Params(0.05, 0.051, 0.3), SensorPose(0.1, -0.03, 0.2),
+                               pose_noise=(0.002, 0.002), slip=0.01 * (seed % 2)).series
+        result = calibrate(segment_timeseries(series).segments)
+        assert result.fit.driving_dof == 3 and result.fit.ok, result.fit.message
+        statistics.append(result.fit.driving_statistic)
+    assert 1.5 < np.mean(statistics) < 4.5
+
+
+@pytest.mark.parametrize("protocol, code", [("random", 4), ("arcs:speed=0.1", 0)])
+def test_slip_that_grows_with_acceleration_fails_the_fit(capsys, tmp_path, protocol, code):
+    """The slip env driven by `random` (a new wheel speed every segment): its wheels slip more
+    while they speed up, which biased r_L, r_R by 2-7% (z -3 to -6) beside 'fit ok'; the
+    driving test fails the fit (exit 4). Gentle arcs pass."""
+    path = tmp_path / "log.csv"
+    assert run_cli(capsys, "simulate", "--protocol", protocol, "--segments", 60, "--seed", 1,
+                   "--format", "timeseries", "--out", path)[0] == 0
+    got, out, _ = run_cli(capsys, "calibrate", path, "--ticks-per-rev", 4096, "--json")
+    fit = json.loads(out)["fit"]
+    assert got == code and fit["driving_dof"] == 3
+    if code:
+        assert fit["message"].startswith("r_L, r_R and b differ between the segments whose "
+                                         "wheels speed up or slow down")
