@@ -9,8 +9,7 @@ import pytest
 from excite import save_segments
 from excite.errors import DataError
 from excite.logs.synthetic import lesson_dataset
-
-from .conftest import TRUTH, assert_one_line_error, run_cli, spin_segments, straight_segments
+from tests.conftest import TRUTH, assert_one_line_error, run_cli, spin_segments, straight_segments
 
 
 @pytest.fixture
@@ -225,7 +224,7 @@ def test_all_zero_log_is_a_one_line_error(capsys, tmp_path):
 
 
 def test_noise_free_log_gives_the_exact_parameters_without_warnings(tmp_path, rng):
-    from .conftest import exact_segments
+    from tests.conftest import exact_segments
 
     path = tmp_path / "exact.csv"
     save_segments(path, exact_segments(rng.normal(0, 0.4, 60), rng.normal(0, 0.4, 60)))

@@ -12,8 +12,7 @@ from excite.core.models import SensorPose
 from excite.logs.segments import load_segments
 from excite.logs.synthetic import synthetic_log
 from excite.logs.timeseries import write_timeseries
-
-from .conftest import run_cli
+from tests.conftest import run_cli
 
 TRUTH = Params(0.050, 0.051, 0.300)
 SENSOR = SensorPose(0.1, -0.03, 0.4)

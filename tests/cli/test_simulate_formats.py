@@ -16,8 +16,9 @@ import pytest
 import excite  # noqa: F401  (registers the environment ids)
 from envs.env import DiffDriveCalibEnv
 from envs.recording import START_TIME_NS, Recording, along_arc
-from excite import calibrate, se2
+from excite import calibrate
 from excite.cli import main
+from excite.core import se2
 from excite.logs.timeseries import TimeSeries, read_timeseries, segment_timeseries, write_timeseries
 
 IDEAL, SENSOR = "excite/DiffDriveCalibIdeal-v0", "excite/DiffDriveCalibSensor-v0"

@@ -21,8 +21,7 @@ from excite.validation.dead_reckoning import (
     summarize,
     validate_log,
 )
-
-from .conftest import assert_one_line_error, run_cli
+from tests.conftest import assert_one_line_error, run_cli
 
 NOMINAL = Params(0.050, 0.050, 0.300)
 #: The hidden robot: 5% off nominal on every parameter.

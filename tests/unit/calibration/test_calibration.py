@@ -8,8 +8,7 @@ from excite import DataError, Params, calibrate
 from excite.calibration.pipeline import initial_estimate
 from excite.core.information import crlb_relative_std, fisher_information, scaled_jacobian
 from excite.logs.synthetic import lesson_dataset
-
-from .conftest import TRUTH, exact_segments, spin_segments, straight_segments
+from tests.conftest import TRUTH, exact_segments, spin_segments, straight_segments
 
 
 def test_noiseless_data_recover_truth_without_a_guess(rng):

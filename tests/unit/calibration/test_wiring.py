@@ -17,8 +17,7 @@ from excite.logs.segments import Segments
 from excite.logs.synthetic import lesson_dataset, synthetic_log
 from excite.logs.timeseries import write_timeseries
 from excite.validation.dead_reckoning import dead_reckon
-
-from .conftest import run_cli
+from tests.conftest import run_cli
 
 TRUTH = Params(0.050, 0.051, 0.300)
 SENSOR = SensorPose(0.1, -0.03, 0.4)

@@ -18,8 +18,7 @@ from excite.core.models import (
     sensor_to_body,
 )
 from excite.core.se2 import compose, inverse
-
-from .conftest import TRUTH
+from tests.conftest import TRUTH
 
 lengths = st.floats(0.01, 1.0)
 wheel = st.one_of(st.floats(-60.0, 60.0), st.floats(-1e-6, 1e-6), st.just(0.0))

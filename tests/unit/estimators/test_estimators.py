@@ -25,8 +25,7 @@ from excite.estimators import (
 )
 from excite.logs.synthetic import lesson_dataset
 from excite.stats.consistency import anees, anees_bounds
-
-from .conftest import TRUTH
+from tests.conftest import TRUTH
 
 NOMINAL = Params(0.05, 0.05, 0.30)
 SIGMA = np.array(DEFAULT_SIGMA)

@@ -9,8 +9,7 @@ from hypothesis import strategies as st
 from excite import OnlineEstimator, Params, calibrate
 from excite.core.information import fisher_information, scaled_jacobian, sigma_min
 from excite.logs.synthetic import lesson_dataset
-
-from .conftest import TRUTH
+from tests.conftest import TRUTH
 
 NOMINAL = Params(0.05, 0.05, 0.30)
 SIGMA = (2e-3, 2e-3, 1e-3)
