@@ -4,12 +4,12 @@ PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
-.PHONY: install demo test test-core bench lint clean
+.PHONY: install demo test test-fast test-core bench lint clean docs
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --upgrade pip >/dev/null
-	$(PIP) install -c constraints.txt -e '.[all,dev]'
+	$(PIP) install -c constraints.txt -e '.[all,dev,docs]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -18,8 +18,8 @@ demo: $(STAMP)
 	$(VENV)/bin/excite compare --episodes 100 --out demo_out
 	@echo "plots and tables: demo_out/ (summary.json, segments.csv, *.png)"
 
-test: $(STAMP) test-core
-	$(VENV)/bin/ruff check excite envs agents tests benchmarks
+test: $(STAMP) test-core docs
+	$(VENV)/bin/ruff check excite envs agents tests benchmarks examples docs/hooks
 	# one BLAS thread per test worker: two workers with two threads each on two cores made the
 	# many small dense factorisations (excite/calibration/wander.py) 2-3x slower
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 --dist loadgroup tests
@@ -32,11 +32,21 @@ test-core:
 	$(CORE_VENV)/bin/python -m pip install -q -c constraints.txt .
 	$(CORE_VENV)/bin/python tests/core_only.py
 
+# The documentation site (mkdocs.yml, docs/): warnings are errors; written to build/site.
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict --quiet
+
+# The daily subset: everything but the tests marked slow (Monte Carlo, subprocesses, Ray,
+# training); under a minute on 2 cores.
+test-fast: $(STAMP)
+	$(VENV)/bin/ruff check excite envs agents tests benchmarks examples docs/hooks
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -m "not slow" tests
+
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check excite envs agents tests benchmarks
+	$(VENV)/bin/ruff check excite envs agents tests benchmarks examples docs/hooks
 
 clean:
 	rm -rf $(VENV) $(CORE_VENV) demo_out .pytest_cache .hypothesis

@@ -48,7 +48,7 @@ from excite.estimators import check_distinct as check_distinct_estimators
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
 from excite.stats.consistency import estimate_error, nees
 
-#: The columns of DIR/segments.csv (see :mod:`agents.report` for their meaning and units).
+#: The columns of DIR/segments.csv (see :mod:`agents.segment_record` for their meaning and units).
 COLUMNS = ("protocol", "estimator", "episode", "segment", "r_L_err", "r_R_err", "b_err",
            "sigma_min", "oracle_sigma_min", "rel_std_r_L", "rel_std_r_R", "rel_std_b",
            "nees", "nees_dof", "collision", "x", "y", "theta", "distance", "time")
@@ -426,6 +426,6 @@ def run_comparison(
 
 
 def columns_of(rows: Sequence[dict]) -> dict[str, np.ndarray]:
-    """Rows of a comparison as columns (equal-length arrays, one per COLUMNS key), the input
-    of :mod:`agents.report`."""
+    """Rows of a comparison as columns (equal-length arrays, one per COLUMNS key): the segment
+    record that :mod:`agents.summary` and :mod:`agents.plots` take."""
     return {key: np.array([row[key] for row in rows]) for key in COLUMNS}

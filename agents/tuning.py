@@ -37,7 +37,7 @@ from agents.compare import (
     run_comparison,
 )
 from agents.protocols import ProtocolError
-from agents.report import final_max_errors
+from agents.segment_record import final_max_errors
 from excite.errors import ExciteError
 
 #: Version of the tuned-settings file format.

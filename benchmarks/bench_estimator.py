@@ -10,7 +10,7 @@ import numpy as np
 import excite  # noqa: F401
 from envs.estimator_check import check_estimator
 from excite import calibrate
-from excite.calibration.noise import chi2_quantile
+from excite.stats.chi2 import chi2_quantile
 from excite.stats.consistency import nees as nees_of
 
 

@@ -27,7 +27,7 @@ import numpy as np
 from excite.calibration.pipeline import calibrate
 from excite.core.models import SensorPose
 from excite.logs.synthetic import synthetic_log
-from excite.logs.timeseries import segment_timeseries
+from excite.logs.segmentation import segment_timeseries
 
 slip, mode = float(sys.argv[1]), sys.argv[2]
 log = synthetic_log(np.random.default_rng(7), 3600.0, sensor_pose=SensorPose(0.1, -0.03, 0.4),

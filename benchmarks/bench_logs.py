@@ -44,15 +44,17 @@ import argparse
 import numpy as np
 from tqdm import tqdm
 
-from excite.calibration.noise import ChainWhitener, NoiseLevels, chi2_quantile
+from excite.calibration.noise import ChainWhitener, NoiseLevels
 from excite.calibration.pipeline import calibrate
 from excite.calibration.solver import Problem, levenberg_marquardt, normal_system
 from excite.commands.args import pose_noise_arg
 from excite.core.models import SENSOR_POSE, SensorPose
+from excite.logs.segmentation import segment_timeseries
 from excite.logs.segments import Segments
 from excite.logs.synthetic import synthetic_log
-from excite.logs.timeseries import TimeSeries, segment_timeseries, tick_angle
+from excite.logs.timeseries import TimeSeries, tick_angle
 from excite.registration import SENSOR_MOUNTING
+from excite.stats.chi2 import chi2_quantile
 
 SENSOR = SensorPose(0.1, -0.03, 0.4)
 CHI2_6_95 = chi2_quantile(0.95, SENSOR_POSE.size)

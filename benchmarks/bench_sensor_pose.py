@@ -35,11 +35,11 @@ from bench_calibration import REGIMES, _median_time, update_latency  # noqa: E40
 from lesson_baseline import lesson_calibrate  # noqa: E402
 
 from excite import OnlineEstimator, Segments, calibrate  # noqa: E402
-from excite.calibration.pipeline import chi2_quantile  # noqa: E402
 from excite.core.information import crlb_relative_std, fisher_information, scaled_jacobian  # noqa: E402
 from excite.core.kinematics import wrap_angle  # noqa: E402
 from excite.core.models import SENSOR_POSE  # noqa: E402
 from excite.logs.synthetic import LESSON_TRUTH, lesson_dataset  # noqa: E402
+from excite.stats.chi2 import chi2_quantile  # noqa: E402
 
 POSE = np.array([0.05, -0.03, 1.8])
 TRUTH = np.append(LESSON_TRUTH.as_array(), POSE)

@@ -19,7 +19,8 @@ from tqdm import tqdm
 from agents.compare import make_env
 from agents.protocols import Arcs, StraightSpin, UMBmark
 from excite.calibration.pipeline import calibrate
-from excite.logs.timeseries import TimeSeries, segment_timeseries
+from excite.logs.segmentation import segment_timeseries
+from excite.logs.timeseries import TimeSeries
 from excite.registration import SENSOR_MOUNTING
 from excite.validation.dead_reckoning import summarize, validate_log
 

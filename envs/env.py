@@ -3,39 +3,46 @@
 from __future__ import annotations
 
 import copy
+import inspect
 import math
-import numbers
-from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from envs.config import check_config, config_reference, make_config, sensor_ranges
+from envs.config import default_config as _default_config
+from envs.observation import (
+    eigen,
+    measure_poses,
+    observation,
+    observation_space,
+    read_estimate,
+    sense_increments,
+)
 from envs.physics import traction_of
 from envs.recording import Recorder, Recording, RecordingConfig
+from envs.reward import reward_terms, uses_error
 from envs.robot import RobotSpec, robot_distribution
-from envs.sensors import RelativePoseSensor
 from envs.simulation import Simulation, SimulationConfig
 from excite.contracts import Estimator, EstimatorFactory, RobotKnowledge
-from excite.core import se2
-from excite.core.information import eigen_3x3, information_matrix
+from excite.core.information import information_matrix
 from excite.core.kinematics import Params
-from excite.core.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose, body_to_sensor
-from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
+from excite.core.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose
+from excite.estimators import (
+    DEFAULT_ESTIMATOR,
+    EstimatorSpec,
+    check_contract,
+    estimator_factory,
+)
 from excite.estimators.online import BatchOnlineEstimator
 from excite.logs.segments import Segments
-from excite.registration import DEFAULT_BUDGET
 
 #: The environment's estimator factory given none: the built-in of
 #: :data:`excite.estimators.DEFAULT_ESTIMATOR` (:class:`excite.OnlineEstimator` started at the
 #: nominal robot, and sensor pose on the sensor-pose model, with the sensor's noise levels).
 default_estimator = estimator_factory(DEFAULT_ESTIMATOR)
-
-
-def observation_size(model: SegmentModel) -> int:
-    """Length of the observation vector for a model with P parameters: 3 P + 7."""
-    return 3 * model.size + 7
 
 
 #: Robots from which the vector env updates the built-in filter of every robot in one pass
@@ -45,9 +52,6 @@ def observation_size(model: SegmentModel) -> int:
 #: 24, 33 vs 30 at 32. (The sensor-pose model's one-robot update is slower, ~90 us, so its
 #: crossover is lower; one threshold keeps the rule simple.)
 BATCH_ESTIMATOR_MIN = 20
-
-#: The observation length on the axle model.
-OBS_SIZE = observation_size(AXLE)
 
 
 class DiffDriveCalibEnv(gym.Env):
@@ -123,14 +127,6 @@ class DiffDriveCalibEnv(gym.Env):
     Truncated after ``budget`` segments (the env alone owns the budget: the ids register no
     ``max_episode_steps``). Terminated when ``target_sigma_min`` (if set) is reached.
 
-    ## Configuration
-    ``DiffDriveCalibEnv.default_config()`` documents every key; override with
-    ``config={...}`` or keyword arguments, e.g.
-    ``gymnasium.make("excite/DiffDriveCalib-v0", budget=50)``. ``gymnasium.make_vec(id,
-    num_envs=N)`` steps N robots in one process (:class:`envs.vector_env.DiffDriveCalibVectorEnv`).
-    ``estimator_factory(nominal, sigma)`` plugs in another estimator (default:
-    :class:`excite.OnlineEstimator` at the nominal robot).
-
     ## Evaluation
     ``env.unwrapped.true_params`` (hidden truth), ``env.unwrapped.segments`` (the episode's
     calibration log), ``env.unwrapped.estimator``.
@@ -138,43 +134,24 @@ class DiffDriveCalibEnv(gym.Env):
     ``reset(options={"robot": RobotSpec, "sensor_pose": SensorPose, "pose": (x, y, theta)})``
     fixes the hidden robot, the hidden sensor mounting (sensor-pose envs) and/or the start
     pose.
+
+    ## Configuration
+    The keys below, given as ``config={...}`` or keyword arguments, e.g.
+    ``gymnasium.make("excite/DiffDriveCalib-v0", budget=50)``; an unknown key is a
+    ``ValueError``. ``DiffDriveCalibEnv.default_config()`` returns the defaults.
+    ``gymnasium.make_vec(id, num_envs=N)`` steps N robots in one process
+    (:class:`envs.vector_env.DiffDriveCalibVectorEnv`). ``estimator_factory(nominal, sigma)``
+    plugs in another estimator (default: :class:`excite.OnlineEstimator` at the nominal robot).
     """
+
+    # The key table, rendered from the keys' one source (envs.config.CONFIG_KEYS); `or ""`:
+    # python -OO strips docstrings.
+    __doc__ = inspect.cleandoc(__doc__ or "") + "\n\n" + config_reference()
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
 
-    @staticmethod
-    def default_config() -> dict[str, Any]:
-        return {
-            "ideal": False,  # True: roll without slip or lag (the kinematic model is exact)
-            "budget": DEFAULT_BUDGET,  # segments per episode
-            "segment_duration": 1.0,  # s the command is held (a multiple of 1 / physics_hz)
-            "settle_time": 0.0,  # s of zero command after it (> 0: stop-and-go segments)
-            "arena_size": None,  # m, square arena side; None: scaled with the robot (4 m default)
-            "physics_hz": 50.0,  # physics tick rate
-            "ticks_per_rev": 4096,  # encoder resolution
-            "sigma_xy": 2e-3,  # m, pose sensor noise (per segment increment)
-            "sigma_theta": 1e-3,  # rad
-            # A preset ("default", "turtlebot3", "jackal", "husky") or RobotDistribution
-            # overrides, e.g. {"preset": "jackal", "radius_rel": 0.03}
-            "robot": {},
-            "information_scale": 100.0,  # reward unit of sigma_min
-            "collision_penalty": 1.0,
-            "effort_cost": 0.0,
-            "time_cost": 0.0,
-            "accuracy_weight": 0.0,  # privileged term (uses the hidden truth)
-            "error_weight": 0.0,  # privileged term: the log-error-vs-time area
-            "target_sigma_min": None,  # terminate once sigma_min reaches it
-            # None: the pose sensor sits on the axle. Else the ranges the hidden mounting is
-            # drawn from: {"x": (lo, hi) m, "y": (lo, hi) m, "theta": (lo, hi) rad}.
-            "sensor_pose": None,
-            # Time-series recording (env.unwrapped.recording), off by default: encoder ticks at
-            # every physics tick and the sensor's world pose at record_pose_hz, each recorded
-            # pose with its own noise (motion-capture-like levels), the truth beside them.
-            "record": False,
-            "record_pose_hz": 100.0,  # Hz
-            "record_sigma_xy": 1e-3,  # m, noise of each recorded pose
-            "record_sigma_theta": 2e-3,  # rad
-        }
+    #: Every key with its default value (a new dict): :func:`envs.config.default_config`.
+    default_config = staticmethod(_default_config)
 
     def __init__(
         self,
@@ -183,20 +160,10 @@ class DiffDriveCalibEnv(gym.Env):
         estimator_factory: EstimatorFactory | None = None,
         **overrides: Any,
     ):
-        cfg = self.default_config()
-        for key, value in {**(config or {}), **overrides}.items():
-            if key not in cfg:
-                raise ValueError(f"unknown config key {key!r}; known: {', '.join(cfg)}")
-            cfg[key] = value
+        cfg = make_config(config, overrides)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
-        if int(cfg["budget"]) < 1:
-            raise ValueError(f"budget must be at least 1 segment, got {cfg['budget']}")
-        scale = cfg["information_scale"]
-        if (not isinstance(scale, numbers.Real) or isinstance(scale, bool)
-                or not (math.isfinite(scale) and scale > 0)):
-            raise ValueError("information_scale must be a positive number (sigma_min per reward "
-                             f"unit), got {scale!r}")
+        check_config(cfg)
         self.config = cfg
         self.render_mode = render_mode
         self.distribution = robot_distribution(cfg["robot"])
@@ -204,7 +171,7 @@ class DiffDriveCalibEnv(gym.Env):
             cfg["arena_size"] = self.distribution.arena_size()
         nominal = self.distribution.nominal()
         self.nominal = Params(*nominal.kinematic_params())
-        self.sensor_ranges = _sensor_ranges(cfg["sensor_pose"])
+        self.sensor_ranges = sensor_ranges(cfg["sensor_pose"])
         self.model: SegmentModel = AXLE if self.sensor_ranges is None else SENSOR_POSE
         self.nominal_theta = self.nominal.as_array()
         if self.sensor_ranges is not None:
@@ -227,10 +194,7 @@ class DiffDriveCalibEnv(gym.Env):
         self._recorder: Recorder | None = None
 
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
-        p = self.model.size
-        low = np.array([-1] * p + [0] * p + [-1] * p + [-1.5] * 2 + [-1] * 4 + [0], np.float32)
-        high = np.array([1] * p + [5] * p + [1] * p + [1.5] * 2 + [1] * 4 + [1], np.float32)
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.observation_space = observation_space(self.model)
         self._renderer = None
         self._robot: RobotSpec | None = None
 
@@ -286,9 +250,15 @@ class DiffDriveCalibEnv(gym.Env):
 
     def new_estimator(self) -> Estimator:
         """A fresh estimator of ``estimator_factory`` at the nominal robot (and nominal sensor
-        pose on the sensor-pose model), with the sensor's noise levels."""
-        return self.estimator_factory(
+        pose on the sensor-pose model), with the sensor's noise levels. A user's factory (not
+        an :class:`~excite.estimators.EstimatorSpec`) is checked against the estimator
+        contract: EstimatorError in one line instead of a TypeError inside ``step``."""
+        factory = self.estimator_factory
+        estimator = factory(
             self.nominal if self.model is AXLE else self.nominal_theta.copy(), self.sigma.copy())
+        if not isinstance(factory, EstimatorSpec):  # a user's factory: its product checked
+            check_contract(getattr(factory, "__qualname__", repr(factory)), estimator)
+        return estimator
 
     def new_estimators(self, n: int) -> BatchOnlineEstimator | None:
         """``n`` estimators updated together
@@ -331,7 +301,7 @@ class DiffDriveCalibEnv(gym.Env):
         self._estimate, self._theta = self._read_estimate()
         self._measured_pose = self._measure_pose(outcome.pose_end)
         self._information = self.information_at(self._theta)
-        self._eigen = _eigen(self._information)
+        self._eigen = eigen(self._information)
         self._sigma_min = math.sqrt(max(self._eigen[0][0], 0.0))
         n = self._n
         config = self.config
@@ -481,167 +451,4 @@ class DiffDriveCalibEnv(gym.Env):
         state = copy.copy(self.__dict__)
         state["_renderer"] = None  # figures do not pickle; a new one is made on demand
         return state
-
-
-#: The reward's terms, in the order the envs report them in ``info["reward_terms"]``.
-REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy", "error")
-
-
-#: The error term's floor on relative errors (a robot drawn without spread starts at 0).
-ERROR_FLOOR = 1e-12
-
-
-def uses_error(config: dict[str, Any]) -> bool:
-    """Whether a reward term needs the max relative error against the hidden truth."""
-    return bool(config["accuracy_weight"] or config["error_weight"])
-
-
-def reward_terms(config: dict[str, Any], sigma_gain: float | np.ndarray,
-                 collision: bool | np.ndarray, effort: float | np.ndarray,
-                 errors: tuple[Any, Any, Any]) -> dict[str, Any]:
-    """The reward's terms (see DiffDriveCalibEnv, "Reward") of one segment of one robot
-    (floats) or of N robots (arrays (N,); ``time``, and ``accuracy`` and ``error`` when they
-    are off, stay scalars for the caller to broadcast).
-
-    config: the env's configuration; sigma_gain: sigma_min's increase (relative information
-    units); collision: whether the chassis touched a wall; effort: the sum of the squared
-    normalised wheel commands; errors: the max relative error at the episode's start, before
-    and after the segment (unused unless :func:`uses_error`)."""
-    accuracy, area = config["accuracy_weight"], config["error_weight"]
-    start, previous, error = errors
-    return {
-        "information": sigma_gain / config["information_scale"],
-        "collision": -float(config["collision_penalty"]) * collision + 0.0,  # 0.0, not -0.0
-        "effort": -float(config["effort_cost"]) * 0.5 * effort,
-        "time": -float(config["time_cost"]),
-        "accuracy": -accuracy * 100.0 * (error - previous) if accuracy else 0.0,
-        "error": -area * np.log(np.maximum(error, ERROR_FLOOR) / np.maximum(start, ERROR_FLOOR))
-        if area else 0.0,
-    }
-
-
-def read_estimate(estimator, model: SegmentModel,
-                  nominal_theta: np.ndarray) -> tuple[Params, np.ndarray]:
-    """The estimator's wheel parameters and all model parameters (an estimator without
-    ``theta`` leaves the sensor pose at its nominal value)."""
-    p = estimator.params
-    params = p if isinstance(p, Params) else Params.from_array(p)
-    if model is AXLE:
-        return params, params.as_array()
-    theta = getattr(estimator, "theta", None)
-    if theta is None or len(theta) != model.size:
-        theta = np.append(params.as_array(), nominal_theta[3:])
-    return params, np.asarray(theta, dtype=float)
-
-
-def sense_increments(sensor: RelativePoseSensor, true_increments: np.ndarray,
-                     rngs: Sequence[np.random.Generator], mounts: np.ndarray) -> np.ndarray:
-    """N off-axle sensors' noisy increments (N, 3): each sensor's own motion in its own frame
-    at the segment's start (docs/conventions.md, "Sensor pose"; x, y in m, theta in rad), robot i
-    drawing its noise from ``rngs[i]``. true_increments (N, 3): the bodies' true increments;
-    mounts (N, 3): the sensors' mountings in the body frame."""
-    return sensor.each(body_to_sensor(true_increments, mounts), rngs)
-
-
-def measure_poses(sensor: RelativePoseSensor, body_poses: np.ndarray,
-                  rngs: Sequence[np.random.Generator], mounts: np.ndarray | None,
-                  theta: np.ndarray) -> np.ndarray:
-    """N bodies' world poses (N, 3) (x, y, theta) as the robots know them: each sensor's
-    noisy world pose (robot i drawing from ``rngs[i]``), taken back to the body with the
-    estimated mounting (theta[:, 3:6]). body_poses (N, 3): the true poses; mounts (N, 3): the
-    sensors' true mountings (None: on the axle); theta (N, P): the estimates."""
-    if mounts is None:
-        return sensor.each(body_poses, rngs)
-    readings = sensor.each(se2.compose(body_poses, mounts), rngs)
-    return se2.compose(readings, se2.inverse(theta[:, 3:6]))
-
-
-def observation(model: SegmentModel, theta: Sequence[float], nominal_theta: Sequence[float],
-                eigenvalues: Sequence[float], weakest: Sequence[float], pose: Sequence[float],
-                last_action: Sequence[float], used: float, arena_size: float,
-                space: spaces.Box) -> np.ndarray:
-    """One robot's observation (3 P + 7,) float32 (the table in DiffDriveCalibEnv's doc), from
-    Python floats: the single env's step (a few microseconds, where :func:`observations` of a
-    batch of one spends several times that on numpy's call overheads); a tested
-    specialisation of :func:`observations`, the same numbers.
-
-    theta: the estimate (P values), nominal_theta: the nominal ones; eigenvalues (ascending)
-    and weakest, the eigenvector of the smallest (given a unique sign here: its largest
-    entry is positive); pose: the measured world pose (x, y in m, theta in rad); last_action
-    (2 values); used: the fraction of the budget used; arena_size (m). Clipped to ``space``.
-    """
-    sign = 1.0 if max(weakest, key=abs) >= 0 else -1.0  # a unique sign for the direction
-    relative = [theta[0] / nominal_theta[0] - 1.0, theta[1] / nominal_theta[1] - 1.0,
-                theta[2] / nominal_theta[2] - 1.0]
-    if model is not AXLE:
-        b = nominal_theta[2]
-        relative += [(theta[3] - nominal_theta[3]) / b, (theta[4] - nominal_theta[4]) / b,
-                     theta[5] - nominal_theta[5]]
-    x, y, heading = pose
-    to_unit = 2.0 / arena_size
-    obs = np.array([
-        *relative,
-        *[0.1 * math.log1p(max(lam, 0.0)) for lam in eigenvalues],
-        *[sign * v for v in weakest],
-        x * to_unit, y * to_unit, math.cos(heading), math.sin(heading),
-        *last_action,
-        used,
-    ], dtype=np.float32)
-    return np.minimum(np.maximum(obs, space.low, out=obs), space.high, out=obs)
-
-
-def observations(model: SegmentModel, theta: np.ndarray, nominal_theta: np.ndarray,
-                 eigenvalues: np.ndarray, weakest: np.ndarray, pose: np.ndarray,
-                 last_action: np.ndarray, used: np.ndarray, arena_size: float,
-                 space: spaces.Box) -> np.ndarray:
-    """N robots' observations (N, 3 P + 7) float32 (the table in DiffDriveCalibEnv's doc),
-    batch-first.
-
-    theta (N, P): the estimates; nominal_theta (P,): the nominal parameters; eigenvalues
-    (N, P), ascending, and weakest (N, P), the eigenvector of the smallest (given a unique
-    sign here: its first entry of largest magnitude is positive); pose (N, 3): the measured
-    world poses (x, y in m, theta in rad); last_action (N, 2); used (N,): the fraction of the
-    budget used; arena_size (m). Clipped to ``space``. The vector env's step; the single
-    env's is :func:`observation`.
-    """
-    n, p = theta.shape
-    obs = np.empty((n, 3 * p + 7))
-    np.divide(theta[:, :3], nominal_theta[:3], out=obs[:, :3])
-    obs[:, :3] -= 1.0
-    if model is not AXLE:  # offsets in units of the nominal b, the angle in rad
-        obs[:, 3:5] = (theta[:, 3:5] - nominal_theta[3:5]) / nominal_theta[2]
-        obs[:, 5] = theta[:, 5] - nominal_theta[5]
-    obs[:, p:2 * p] = 0.1 * np.log1p(np.maximum(eigenvalues, 0.0))
-    largest = weakest[np.arange(n), np.abs(weakest).argmax(axis=1)]
-    np.multiply(weakest, np.where(largest >= 0, 1.0, -1.0)[:, None], out=obs[:, 2 * p:3 * p])
-    obs[:, 3 * p:3 * p + 2] = pose[:, :2] * (2.0 / arena_size)
-    obs[:, 3 * p + 2] = np.cos(pose[:, 2])
-    obs[:, 3 * p + 3] = np.sin(pose[:, 2])
-    obs[:, 3 * p + 4:3 * p + 6] = last_action
-    obs[:, 3 * p + 6] = used
-    out = obs.astype(np.float32)
-    return np.minimum(np.maximum(out, space.low, out=out), space.high, out=out)
-
-
-def _sensor_ranges(config: dict | None) -> np.ndarray | None:
-    """The (3, 2) ranges (low, high) of the hidden sensor mounting (x, y [m], theta [rad])."""
-    if config is None:
-        return None
-    if not isinstance(config, dict) or set(config) - {"x", "y", "theta"}:
-        raise ValueError('sensor_pose must be None or {"x": (lo, hi), "y": (lo, hi), '
-                         f'"theta": (lo, hi)}}, got {config!r}')
-    ranges = np.array([config.get(k, (0.0, 0.0)) for k in ("x", "y", "theta")], dtype=float)
-    if ranges.shape != (3, 2) or not np.all(np.isfinite(ranges)) or np.any(
-            ranges[:, 0] > ranges[:, 1]) or np.any(np.abs(ranges[2]) > math.pi):
-        raise ValueError(f"sensor_pose ranges must be finite (lo, hi) pairs with lo <= hi "
-                         f"(theta within [-pi, pi]), got {config!r}")
-    return ranges
-
-
-def _eigen(information: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Eigenvalues (ascending) and the weakest eigenvector; closed form for 3 x 3."""
-    if information.shape == (3, 3):
-        return eigen_3x3(information)
-    lam, vec = np.linalg.eigh(information)
-    return tuple(lam.tolist()), tuple(vec[:, 0].tolist())
 

@@ -18,9 +18,9 @@ import gymnasium as gym
 import numpy as np
 
 from envs.env import default_estimator
-from excite.calibration.noise import chi2_quantile
 from excite.contracts import EstimatorFactory
 from excite.core.models import SENSOR_POSE
+from excite.stats.chi2 import chi2_quantile
 from excite.stats.consistency import CONFIDENCE, anees, anees_bounds, estimate_error, nees, verdict
 
 Policy = Callable[[np.ndarray], np.ndarray]

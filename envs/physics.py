@@ -1,14 +1,10 @@
-"""Drives: how wheel-speed commands move the chassis in the walled arena.
+"""The slipping drive: a pymunk rigid body pushed by two wheels through a traction model.
 
-Two implementations of one `Drive` interface:
-
-- `PymunkDrive`: a pymunk rigid body pushed by two wheels through a traction model with
-  motor lag and a friction circle per wheel (it slips under hard accelerations).
-- `IdealDrive`: rolls without slip and without lag, so the kinematic model is exact.
-
-and their batches of N robots stepped together (`PymunkBatchDrive`, `IdealBatchDrive`), which
-run the same kernels (the compiled `envs.traction_kernel.traction_tick` on N robots instead of
-one, `ideal_arcs`) and give each robot the single drive's numbers bit for bit.
+`PymunkDrive` moves one robot: motor lag and a friction circle per wheel, so it slips under
+hard accelerations; `PymunkBatchDrive` steps N robots together in one pymunk space on the same
+compiled kernel (:func:`envs.traction_kernel.traction_tick` on N robots instead of one) and
+gives each robot the single drive's numbers bit for bit. The drive of the default
+configuration; :mod:`envs.ideal_drive` is the other, without slip or lag.
 
 Frames and units: world frame x right, y up, theta counter-clockwise (rad, continuous);
 body frame x forward, y left, origin at the axle midpoint (the reference point of every
@@ -24,7 +20,7 @@ overlap, small against any chassis).
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Protocol
+from typing import NamedTuple
 
 import numpy as np
 import pymunk
@@ -34,7 +30,6 @@ from envs.robot import RobotSpec
 from envs.traction_kernel import PATH_FIELDS, STATE_FIELDS, TRACTION_FIELDS, traction_tick
 from excite.contracts import Traction
 from excite.core.arena import Arena
-from excite.core.kinematics import sinc_family
 
 GRAVITY = 9.81  # m/s^2
 WALL_RADIUS = 0.05  # m, half-thickness of the arena's wall segments
@@ -49,119 +44,6 @@ def traction_of(robot: RobotSpec) -> Traction:
     I / (m (b/2)^2), the quantities the physics' slip model uses."""
     return Traction(robot.motor_tau, robot.mu * GRAVITY * robot.wheel_load_fraction,
                     robot.inertia / (robot.mass * (0.5 * robot.b) ** 2))
-
-
-class Drive(Protocol):
-    """Moves one robot in the arena at a fixed tick; both implementations share this API."""
-
-    dt: float  # s, one physics tick
-
-    def reset(self, robot: RobotSpec, pose: np.ndarray, wheel_angles: np.ndarray) -> None:
-        """Place `robot` at rest at world pose (x, y, theta) with absolute wheel angles (rad)."""
-        ...
-
-    @property
-    def pose(self) -> np.ndarray:
-        """Current world pose (x, y, theta) of the axle midpoint, theta continuous."""
-        ...
-
-    @property
-    def wheel_angles(self) -> np.ndarray:
-        """Current absolute wheel angles (phi_L, phi_R) in rad, unquantized."""
-        ...
-
-    def run(self, cmd_L: float, cmd_R: float,
-            n_ticks: int) -> tuple[np.ndarray, np.ndarray, bool]:
-        """Hold wheel-speed commands (rad/s) for `n_ticks` ticks.
-
-        Returns the world poses at every tick, shape (n_ticks + 1, 3) starting with the
-        current pose, the absolute wheel angles (phi_L, phi_R) (rad, unquantized) at the same
-        ticks, shape (n_ticks + 1, 2), and whether the chassis touched a wall.
-        """
-        ...
-
-
-class IdealDrive:
-    """Exact kinematics: no motor lag, no slip; each tick is an exact constant-curvature arc.
-
-    When a tick would put the footprint into a wall, the robot stops for the rest of the
-    call (both wheels stop, so the wheel increments still match the arc travelled) and a
-    collision is reported. One robot; :func:`ideal_arcs` is the batch-first kernel it runs.
-    """
-
-    def __init__(self, arena: Arena, physics_hz: float) -> None:
-        self.arena = arena
-        self.dt = 1.0 / physics_hz
-        self._robot: RobotSpec | None = None
-        self._pose = np.zeros(3)
-        self._phi = np.zeros(2)
-
-    def reset(self, robot: RobotSpec, pose: np.ndarray, wheel_angles: np.ndarray) -> None:
-        self._robot = robot
-        self._pose = np.array(pose, dtype=float)
-        self._phi = np.array(wheel_angles, dtype=float)
-
-    @property
-    def pose(self) -> np.ndarray:
-        return self._pose.copy()
-
-    @property
-    def wheel_angles(self) -> np.ndarray:
-        return self._phi.copy()
-
-    def run(self, cmd_L: float, cmd_R: float,
-            n_ticks: int) -> tuple[np.ndarray, np.ndarray, bool]:
-        robot = self._robot
-        paths, wheels, collided = ideal_arcs(
-            self.arena, self.dt, self._pose[None], self._phi[None], np.array([[cmd_L, cmd_R]]),
-            np.array([robot.max_wheel_speed]), np.array([robot.kinematic_params()]),
-            [robot.chassis], n_ticks)
-        self._pose = paths[0, -1].copy()
-        self._phi = wheels[0, -1].copy()
-        return paths[0], wheels[0], bool(collided[0])
-
-
-def ideal_arcs(arena: Arena, dt: float, poses: np.ndarray, wheel_angles: np.ndarray,
-               commands: np.ndarray, limits: np.ndarray, params: np.ndarray,
-               chassis: list[tuple[float, float]], n_ticks: int
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """N robots rolling exactly along constant-curvature arcs for ``n_ticks`` ticks of ``dt`` s.
-
-    poses (N, 3) world (x, y, theta); wheel_angles (N, 2) rad; commands (N, 2) wheel speeds
-    (rad/s), clipped to +-limits (N,); params (N, 3) true (r_L, r_R, b) in m; chassis: each
-    robot's (length, width) in m. A robot whose footprint would enter a wall stops there for
-    the rest of the call. Returns the poses (N, n_ticks + 1, 3) and wheel angles
-    (N, n_ticks + 1, 2) at every tick, the current ones first, and whether each robot hit a
-    wall (N,).
-    """
-    limit = limits[:, None]
-    omega = np.clip(commands, -limit, limit)
-    t = np.arange(1, n_ticks + 1) * dt
-    r_L, r_R, b = params[:, 0], params[:, 1], params[:, 2]
-    v_L, v_R = r_L * omega[:, 0], r_R * omega[:, 1]
-    ds = (0.5 * (v_L + v_R))[:, None] * t
-    dth = ((v_R - v_L) / b)[:, None] * t
-    sinc, cosc = sinc_family(dth, derivatives=False)
-    bx, by = ds * sinc, ds * cosc
-    x0, y0, th0 = (poses[:, i, None] for i in range(3))
-    c, s = np.cos(th0), np.sin(th0)
-    path = np.empty((len(poses), n_ticks + 1, 3))
-    path[:, 0] = poses
-    path[:, 1:, 0] = x0 + c * bx - s * by
-    path[:, 1:, 1] = y0 + s * bx + c * by
-    path[:, 1:, 2] = th0 + dth
-    inside = np.empty((len(poses), n_ticks), dtype=bool)
-    for footprint in set(chassis):
-        rows = [i for i, c in enumerate(chassis) if c == footprint]
-        ahead = path[rows, 1:]
-        inside[rows] = arena.contains_footprint(ahead[..., 0], ahead[..., 1], ahead[..., 2],
-                                                chassis=footprint)
-    clear = inside.all(axis=1)
-    ticks_done = np.where(clear, n_ticks, np.argmin(inside, axis=1))  # (N,)
-    held = np.minimum(np.arange(n_ticks + 1), ticks_done[:, None])  # (N, n_ticks + 1)
-    path = np.take_along_axis(path, held[:, :, None], axis=1)
-    wheels = wheel_angles[:, None, :] + omega[:, None, :] * (held * dt)[:, :, None]
-    return path, wheels, ~clear
 
 
 def traction_constants(robot: RobotSpec, dt: float) -> tuple[float, ...]:
@@ -529,41 +411,3 @@ class PymunkBatchDrive:
                                              np.ascontiguousarray(commands, dtype=float),
                                              self._contacts, self._began, n_ticks)
         return self._state[:, _POSE].copy(), self._touched.copy()
-
-
-class IdealBatchDrive:
-    """N robots of :class:`IdealDrive` (the same kernel, :func:`ideal_arcs`), bit for bit."""
-
-    def __init__(self, arena: Arena, physics_hz: float, n: int) -> None:
-        self.arena = arena
-        self.dt = 1.0 / physics_hz
-        self.n = n
-        self._poses = np.zeros((n, 3))
-        self._phi = np.zeros((n, 2))
-        self._limits = np.ones(n)
-        self._params = np.ones((n, 3))
-        self._chassis: list[tuple[float, float]] = [(1.0, 1.0)] * n
-
-    def reset(self, i: int, robot: RobotSpec, pose: np.ndarray,
-              wheel_angles: np.ndarray) -> None:
-        """Place robot ``i`` at rest at world pose (x, y, theta) with wheel angles (rad)."""
-        self._poses[i] = pose
-        self._phi[i] = wheel_angles
-        self._limits[i] = robot.max_wheel_speed
-        self._params[i] = robot.kinematic_params()
-        self._chassis[i] = robot.chassis
-
-    def poses(self) -> np.ndarray:
-        return self._poses.copy()
-
-    @property
-    def wheel_angles(self) -> np.ndarray:
-        return self._phi.copy()
-
-    def run(self, commands: np.ndarray, n_ticks: int) -> tuple[np.ndarray, np.ndarray]:
-        paths, wheels, collided = ideal_arcs(self.arena, self.dt, self._poses, self._phi,
-                                             commands, self._limits, self._params,
-                                             self._chassis, n_ticks)
-        self._poses = paths[:, -1].copy()
-        self._phi = wheels[:, -1].copy()
-        return self._poses.copy(), collided

@@ -43,7 +43,8 @@ _SNAP = 1e-9
 
 @dataclass(frozen=True)
 class RecordingConfig:
-    """What to record; no defaults here (the environment's ``default_config`` holds them).
+    """What to record; no defaults here (the environment's keys ``record_*`` hold them,
+    :mod:`envs.config`).
 
     Attributes:
         pose_hz: rate of the pose stream (Hz).

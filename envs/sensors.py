@@ -13,19 +13,6 @@ from dataclasses import dataclass
 import numpy as np
 
 
-def relative_pose(pose_start: np.ndarray, pose_end: np.ndarray) -> np.ndarray:
-    """Body-frame increment (dx, dy, dtheta) from `pose_start` to `pose_end` (3,): the single
-    env's fast scalar form of :func:`excite.core.se2.between` (the same bits; math's cos and sin).
-
-    dx, dy (m) are the displacement expressed in the body frame at `pose_start` (x forward,
-    y left); dtheta (rad) is the continuous heading change theta_end - theta_start.
-    """
-    ex, ey = pose_end[0] - pose_start[0], pose_end[1] - pose_start[1]
-    th = pose_start[2]
-    c, s = math.cos(th), math.sin(th)
-    return np.array([c * ex + s * ey, -s * ex + c * ey, pose_end[2] - th])
-
-
 class WheelEncoders:
     """Incremental encoders reading the absolute wheel angles floored to whole ticks.
 

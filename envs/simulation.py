@@ -10,20 +10,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
-from envs.physics import (
-    Arena,
-    Drive,
-    IdealBatchDrive,
-    IdealDrive,
-    PymunkBatchDrive,
-    PymunkDrive,
-)
+from envs.ideal_drive import IdealBatchDrive, IdealDrive
+from envs.physics import PymunkBatchDrive, PymunkDrive
 from envs.robot import DEFAULT_CHASSIS_SIZE, RobotSpec
-from envs.sensors import RelativePoseSensor, WheelEncoders, relative_pose
+from envs.sensors import RelativePoseSensor, WheelEncoders
 from excite.core import se2
+from excite.core.arena import Arena
 
 #: m, minimum distance from a random start position to the walls for the default robot's
 #: 0.36 m chassis; other robots scale it with their chassis (`spawn_margin`).
@@ -35,6 +31,37 @@ def spawn_margin(robot: RobotSpec) -> float:
     SPAWN_MARGIN per 0.36 m of the chassis' longer side (5/3 of it), so any heading keeps the
     footprint (half-diagonal at most 0.71 of the longer side) well clear of the walls."""
     return SPAWN_MARGIN * (max(robot.chassis_length, robot.chassis_width) / DEFAULT_CHASSIS_SIZE)
+
+
+class Drive(Protocol):
+    """Moves one robot in the arena at a fixed tick: what a Simulation needs of its drive
+    (:class:`envs.ideal_drive.IdealDrive`, :class:`envs.physics.PymunkDrive`)."""
+
+    dt: float  # s, one physics tick
+
+    def reset(self, robot: RobotSpec, pose: np.ndarray, wheel_angles: np.ndarray) -> None:
+        """Place `robot` at rest at world pose (x, y, theta) with absolute wheel angles (rad)."""
+        ...
+
+    @property
+    def pose(self) -> np.ndarray:
+        """Current world pose (x, y, theta) of the axle midpoint, theta continuous."""
+        ...
+
+    @property
+    def wheel_angles(self) -> np.ndarray:
+        """Current absolute wheel angles (phi_L, phi_R) in rad, unquantized."""
+        ...
+
+    def run(self, cmd_L: float, cmd_R: float,
+            n_ticks: int) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Hold wheel-speed commands (rad/s) for `n_ticks` ticks.
+
+        Returns the world poses at every tick, shape (n_ticks + 1, 3) starting with the
+        current pose, the absolute wheel angles (phi_L, phi_R) (rad, unquantized) at the same
+        ticks, shape (n_ticks + 1, 2), and whether the chassis touched a wall.
+        """
+        ...
 
 
 @dataclass(frozen=True)
@@ -212,7 +239,7 @@ class Simulation(_World):
             wheels = np.concatenate([wheels, stop_wheels[1:]])
             collision = collision or stop_collision
         phi_end = self.drive.wheel_angles
-        true_increment = relative_pose(path[0], path[-1])
+        true_increment = se2.between_scalar(path[0], path[-1])
         measurement = np.concatenate([self.encoders.increments(phi_start, phi_end),
                                       self.pose_sensor.measure(true_increment, self._rng)])
         return SegmentOutcome(
@@ -262,7 +289,7 @@ class BatchSimulation(_World):
     Robot i reset with a robot, a generator and a pose draws and measures exactly as a
     :class:`Simulation` reset with the same arguments (same start draws, same noise draws);
     the physics is the same kernel on arrays (:class:`envs.physics.PymunkBatchDrive`,
-    :class:`envs.physics.IdealBatchDrive`).
+    :class:`envs.ideal_drive.IdealBatchDrive`).
     """
 
     def __init__(self, config: SimulationConfig | None = None, n: int = 1) -> None:

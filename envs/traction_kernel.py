@@ -16,10 +16,10 @@ Meters, radians, seconds, kilograms.
 numba caches the compiled kernel on disk (``cache=True``: compiled once per machine, about 2 s;
 a later process loads it in under 1 s) and keys the cache on this file alone: code or
 constants of other modules compiled into the kernel would not invalidate it. So
-:func:`sinc_cosc` is written here (equal bit for bit to
-:func:`excite.core.kinematics.sinc_cosc_scalar`, tested), and the one constant taken from there,
-TINY_THRESHOLD, is checked by the same test (after changing it, delete
-envs/__pycache__/traction_kernel.*.nbi and .nbc).
+:func:`sinc_cosc`, the compiled fast form of :func:`excite.core.kinematics.sinc_family_scalar`,
+is written here (equal to it bit for bit: tests/unit/core/test_fast_forms.py), and the one
+constant taken from there, TINY_THRESHOLD, is checked by the same test (after changing it,
+delete envs/__pycache__/traction_kernel.*.nbi and .nbc).
 """
 
 from __future__ import annotations
@@ -56,10 +56,9 @@ PATH_FIELDS = ("x", "y", "theta", "phi_L", "phi_R")
 @numba.njit(cache=True)
 def sinc_cosc(u: float) -> tuple[float, float]:
     """(sin(u)/u, (1 - cos(u))/u) of a float, compiled: the branches, closed forms and series
-    coefficients of :func:`excite.core.kinematics.sinc_cosc_scalar` (derivatives=False), bit for
-    bit:
-    for |u| < TINY_THRESHOLD the first three Taylor terms, else the closed forms in sin(u/2),
-    cos(u/2), which have no cancellation."""
+    coefficients of :func:`excite.core.kinematics.sinc_family_scalar` (derivatives=False), bit
+    for bit: for |u| < TINY_THRESHOLD the first three Taylor terms, else the closed forms in
+    sin(u/2), cos(u/2), which have no cancellation."""
     if abs(u) < TINY_THRESHOLD:
         u2 = u * u
         f = (1.0 / 120.0 * u2 + -1.0 / 6.0) * u2 + 1.0

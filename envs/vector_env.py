@@ -13,16 +13,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from envs.env import (
-    REWARD_TERMS,
-    DiffDriveCalibEnv,
-    measure_poses,
-    observations,
-    read_estimate,
-    reward_terms,
-    sense_increments,
-    uses_error,
-)
+from envs.env import DiffDriveCalibEnv
+from envs.observation import measure_poses, observations, read_estimate, sense_increments
+from envs.reward import REWARD_TERMS, reward_terms, uses_error
 from envs.simulation import BatchOutcome, BatchSimulation
 from excite.contracts import Estimator, EstimatorFactory
 from excite.core.information import information_matrices
@@ -60,8 +53,9 @@ class DiffDriveCalibVectorEnv(VectorEnv):
     and info are in ``info["final_obs"]``, ``info["final_info"]``, masked by
     ``info["_final_obs"]``).
 
-    Configuration: the single env's keys (``DiffDriveCalibEnv.default_config()``), as
-    ``config={...}`` or keyword arguments; ``budget`` ends every robot's episode.
+    Configuration: the single env's keys (:mod:`envs.config`, tabled in DiffDriveCalibEnv's
+    docstring), as ``config={...}`` or keyword arguments; ``budget`` ends every robot's
+    episode.
     ``reset(options={"robot": RobotSpec, "pose": (x, y, theta)})`` fixes every robot's hidden
     robot / start pose; ``options={"reset_mask": (N,) bool}`` resets only those robots.
 
@@ -285,7 +279,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self._sigma_min[robots] = np.sqrt(np.maximum(eigenvalues[robots, 0], 0.0))
 
     def _observations(self) -> np.ndarray:
-        """Every robot's observation (N, 3 P + 7) (:func:`envs.env.observations`)."""
+        """Every robot's observation (N, 3 P + 7) (:func:`envs.observation.observations`)."""
         return observations(self.model, self._theta, self.single.nominal_theta,
                             self._eigenvalues, self._weakest, self._measured_pose,
                             self._last_action, self._n / self.budget, self.config["arena_size"],

@@ -9,7 +9,7 @@ with gymnasium, see :mod:`excite.registration`)::
     from excite import load_segments, save_segments, calibrate, OnlineEstimator
 """
 
-from excite.calibration.pipeline import CalibrationResult, calibrate
+from excite.calibration import CalibrationResult, calibrate
 from excite.core.kinematics import Params, predict_increment
 from excite.core.models import SensorPose, increment_jacobian
 from excite.errors import DataError, ExciteError

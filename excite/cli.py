@@ -1,13 +1,12 @@
-"""The ``excite`` command line: the one place that wires every layer together.
+"""The ``excite`` command line: builds the parser of every subcommand (one module each in
+:mod:`excite.commands`) and runs the one asked for, turning every way a command ends into its
+exit status (:mod:`excite.commands.exit_status`).
 
-Each subcommand lives in :mod:`excite.commands` (``add_parser`` and ``run``); heavy layers
-(gymnasium, pymunk, torch, matplotlib, rosbags) are imported inside ``run``. Exit status: 0
-success; 2 bad input or usage (one line ``excite: error: ...`` on stderr, also when an optional
-extra is missing); 3 when ``calibrate`` finds the data cannot determine all the parameters,
-4 when the model does not fit the data (the report is still printed, with the reason in
-words). A closed stdout (``| head``) is a normal end. numpy's RuntimeWarnings (overflow,
-invalid values on the way to an error or a rejected trial step) stay off stderr, so an error
-is one line; ``EXCITE_DEBUG=1`` shows them and tracebacks.
+Heavy layers (gymnasium, pymunk, torch, matplotlib, rosbags) are imported inside a command's
+``run``, so ``excite --version`` and the core commands stay light. A closed stdout (``| head``)
+is a normal end. numpy's RuntimeWarnings (overflow, invalid values on the way to an error or a
+rejected trial step) stay off stderr, so an error is one line; ``EXCITE_DEBUG=1`` shows them
+and tracebacks.
 """
 
 from __future__ import annotations
@@ -16,6 +15,7 @@ import argparse
 import os
 import signal
 import sys
+import textwrap
 import threading
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -34,12 +34,18 @@ from excite.commands import (
     validate,
 )
 from excite.commands.args import UsageError
+from excite.commands.exit_status import (
+    EXIT_FAILURE,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_USAGE,
+    MEANINGS,
+)
+from excite.commands.parser import CommandsHelpFormatter, Parser
 from excite.errors import ExciteError
 
-__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE",
-           "EXIT_UNIDENTIFIABLE", "EXIT_MISFIT"]
+__all__ = ["main", "build_parser"]
 
-EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_UNIDENTIFIABLE, EXIT_MISFIT = 0, 1, 2, 3, 4
 COMMANDS = (calibrate, segment, validate, simulate, protocols, compare, tune, train, sweep)
 
 #: The optional extra that provides each third-party module a subcommand may import.
@@ -47,16 +53,32 @@ EXTRA_OF_MODULE = {"rosbags": "ros", "gymnasium": "sim", "pymunk": "sim", "matpl
                    "tqdm": "sim", "yaml": "sim", "stable_baselines3": "rl", "torch": "rl",
                    "ray": "ray"}
 
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, no usage dump
-        raise UsageError(message)
+#: What ``excite --help`` says excite is.
+DESCRIPTION = textwrap.fill(
+    "Calibrate a differential-drive robot: estimate its wheel radii r_L, r_R and wheel "
+    "separation b (m), and the pose of an external pose sensor on it, from wheel-encoder "
+    "readings and the sensor's poses (segment files, time-series logs or ROS bags). In "
+    "simulation, compare the maneuvers (protocols) that identify a robot fastest, tune them "
+    "and train a policy that drives them.", 79)
+#: The end of ``excite --help``: the exit statuses, the extras, where the options are.
+EPILOG = "\n".join([
+    "exit status:",
+    *(textwrap.fill(meaning, 79, initial_indent=f"  {status:<5}", subsequent_indent=" " * 7)
+      for status, meaning in MEANINGS.items()),
+    "",
+    textwrap.fill("simulate, compare, tune, train and sweep need the sim extra (pip install "
+                  "'excite[sim]'), train and sweep also rl, sweep also ray; ROS bags need ros. "
+                  "excite COMMAND --help describes a command and its options.", 79),
+])
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="excite", description=__doc__.splitlines()[0])
-    parser.add_argument("--version", action="version", version=f"excite {__version__}")
-    sub = parser.add_subparsers(dest="command", parser_class=_Parser, metavar="COMMAND")
+    parser = Parser(prog="excite", description=DESCRIPTION, epilog=EPILOG,
+                    formatter_class=CommandsHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"excite {__version__}",
+                        help="print excite's version and exit")
+    sub = parser.add_subparsers(dest="command", parser_class=Parser, metavar="COMMAND",
+                                title="commands")
     for command in COMMANDS:
         command.add_parser(sub)
     return parser
@@ -112,7 +134,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("excite: interrupted (compare, tune and sweep keep finished work: re-run the "
               "same command to continue)", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     except Exception as exc:  # never a traceback for users; EXCITE_DEBUG=1 shows it
         if isinstance(exc, ModuleNotFoundError) and (
                 message := _missing_extra(exc, getattr(args, "command", None))):

@@ -27,7 +27,42 @@ __all__ = ["Estimator", "EstimatorFactory", "RobotKnowledge", "Traction"]
 
 
 class Estimator(Protocol):
-    """What the environment needs of an online estimator (OnlineEstimator implements it)."""
+    """What the environment needs of an online estimator (OnlineEstimator implements it).
+
+    ``update(dphi_L, dphi_R, dx, dy, dtheta)``: fold in one segment, called once per segment
+    with five positional floats: the wheel increments dphi_L, dphi_R (rad) and the measured
+    increment dx, dy (m), dtheta (rad), the sensor's motion in its own frame at the segment's
+    start (docs/conventions.md); returns nothing.
+
+    ``params``: the current estimate of the wheel parameters, :class:`excite.Params` or three
+    finite values (r_L, r_R, b) in m.
+
+    ``covariance``: its covariance, a finite (P, P) array in the parameters' units (m^2
+    between lengths, m rad and rad^2 with an angle), P >= 3: (r_L, r_R, b) first, then, for
+    an estimator of the sensor pose (P = 6), l_x, l_y [m] and l_theta [rad]. Such an
+    estimator also gives ``theta``, all P parameters (P,) in that order.
+
+    The smallest estimator, which keeps the nominal robot (the factory's arguments are those
+    of :data:`EstimatorFactory`)::
+
+        >>> import numpy as np
+        >>> from excite import Params
+        >>> class Nominal:
+        ...     def __init__(self, nominal, sigma):
+        ...         self.params = nominal
+        ...         self.covariance = np.diag((0.1 * nominal.as_array()) ** 2)
+        ...     def update(self, dphi_L, dphi_R, dx, dy, dtheta):
+        ...         pass
+        >>> estimator = Nominal(Params(0.05, 0.05, 0.3), np.array([2e-3, 2e-3, 1e-3]))
+        >>> estimator.update(10.0, 10.0, 0.5, 0.0, 0.0)
+        >>> estimator.params
+        Params(r_L=0.05, r_R=0.05, b=0.3)
+        >>> estimator.covariance.shape
+        (3, 3)
+
+    A class like ``Nominal`` is itself a factory: ``excite compare --estimators
+    module:Nominal``, or ``estimator_factory=Nominal`` for the environment.
+    """
 
     def update(self, dphi_L: float, dphi_R: float, dx: float, dy: float,
                dtheta: float) -> None: ...

@@ -21,7 +21,7 @@ from excite.cli import main
 from excite.core.kinematics import Params
 from excite.core.models import SensorPose
 from excite.logs.synthetic import synthetic_log
-from excite.logs.timeseries import write_timeseries
+from excite.logs.timeseries_csv import write_timeseries
 
 
 def check(condition: bool, what: str) -> None:

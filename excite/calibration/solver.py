@@ -15,10 +15,11 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from excite.calibration.noise import MEDIAN_ABS_NORMAL, ChainWhitener
+from excite.calibration.noise import ChainWhitener
 from excite.core.kinematics import wrap_angle
 from excite.core.models import SegmentModel
 from excite.logs.segments import Segments
+from excite.stats.robust import MEDIAN_ABS_NORMAL
 
 __all__ = ["Loss", "HUBER_K", "Problem", "Evaluation", "System", "Fit", "solve_psd",
            "complement", "damped_step", "levenberg_marquardt", "normal_system", "estimate_sigma"]
@@ -61,9 +62,8 @@ class Evaluation:
 
 class Problem:
     """A data set and a model: evaluates residuals and relative Jacobians at theta. whitener:
-    an :class:`excite.calibration.noise.ChainWhitener` for segments whose noise is correlated (then
-    fit
-    with sigma = 1), or None (independent segments, per-channel sigma)."""
+    an :class:`excite.calibration.noise.ChainWhitener` for segments whose noise is correlated
+    (then fit with sigma = 1), or None (independent segments, per-channel sigma)."""
 
     def __init__(self, model: SegmentModel, segments: Segments,
                  whitener: ChainWhitener | None = None):

@@ -7,21 +7,33 @@
   turns as the body does), then b and the sensor pose from the translations, a quadratic in
   (b, l_x, l_y, cos l_theta, sin l_theta) minimised on the circle cos^2 + sin^2 = 1 (here in
   closed form: the linear unknowns eliminated, the smallest eigenvector of the 2x2 rest).
+* :func:`first_estimates`: the start of every fit of one calibration, for the model asked for
+  and for the axle model.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
+from excite.calibration.options import SensorPoseOption
 from excite.calibration.solver import solve_psd
 from excite.core.kinematics import Params, sinc_family
-from excite.core.models import SensorPose, sensor_to_body
+from excite.core.models import (
+    AXLE,
+    SENSOR_POSE,
+    FixedSensorPoseModel,
+    SegmentModel,
+    SensorPose,
+    sensor_to_body,
+)
 from excite.logs.segments import Segments
 
-__all__ = ["DEFAULT_NOMINAL", "initial_estimate", "sensor_pose_estimate"]
+__all__ = ["DEFAULT_NOMINAL", "Starts", "body_frame_estimate", "first_estimates",
+           "initial_estimate", "sensor_pose_estimate"]
 
 FloatArray = NDArray[np.float64]
 
@@ -126,3 +138,52 @@ def sensor_pose_estimate(segments: Segments,
         return initial_estimate(segments, fallback), SensorPose(0.0, 0.0, 0.0)
     pose = SensorPose(float(x1[1]), float(x1[2]), math.atan2(x2[1], x2[0]))
     return Params(ratios[0] * b, ratios[1] * b, b), pose
+
+
+@dataclass(frozen=True)
+class Starts:
+    """The first estimates the fits of one calibration start from.
+
+    Attributes
+    ----------
+    primary : SegmentModel
+        The model asked for: the sensor-pose model (``sensor_pose`` "auto" or "estimate"),
+        the axle model ("axle") or the model at a given sensor pose (a SensorPose).
+    start : ndarray, shape (P,)
+        The primary model's start: r_L, r_R, b (m) and, for the sensor-pose model, the
+        sensor's x, y (m) and theta (rad) in the body frame.
+    axle : ndarray, shape (3,)
+        The axle model's start r_L, r_R, b (m).
+    fallback : Params
+        Fills in what the data do not determine: the initial guess when given, else
+        DEFAULT_NOMINAL.
+    """
+
+    primary: SegmentModel
+    start: FloatArray
+    axle: FloatArray
+    fallback: Params
+
+
+def first_estimates(segments: Segments, initial: Params | ArrayLike | None,
+                    sensor_pose: SensorPoseOption) -> Starts:
+    """The starts of :func:`excite.calibration.pipeline.calibrate`'s fits: the closed forms
+    above, or the ``initial`` guess (Params or r_L, r_R, b in m) for the axle model and a
+    given sensor pose; the sensor-pose model always starts from Censi's closed form (any
+    mounting angle)."""
+    fallback = DEFAULT_NOMINAL
+    if initial is not None:
+        fallback = initial if isinstance(initial, Params) else Params.from_array(initial)
+    axle = (initial_estimate(segments) if initial is None else fallback).as_array()
+    primary: SegmentModel
+    if isinstance(sensor_pose, SensorPose):
+        primary = FixedSensorPoseModel(sensor_pose)
+        start = (body_frame_estimate(segments, sensor_pose, fallback) if initial is None
+                 else fallback).as_array()
+    elif sensor_pose == "axle":
+        primary, start = AXLE, axle
+    else:
+        primary = SENSOR_POSE
+        wheels, pose = sensor_pose_estimate(segments, fallback)
+        start = np.append(wheels.as_array(), pose.as_array())
+    return Starts(primary, start, axle, fallback)

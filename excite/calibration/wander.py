@@ -24,16 +24,14 @@ there; from below by the median segment duration.) The position part of such
 an error is not modelled: its differences nearly cancel along the log.
 
 * :func:`estimate_wander`: restricted maximum likelihood (as
-:func:`excite.calibration.noise.reml_noise`)
-  of the chain's noise levels with and without the wandering error, with analytic gradients,
-  on the dense covariance of chunks of at most CHUNK_SEGMENTS consecutive segments (their
-  restricted likelihood as if the chunks were independent; at most MAX_CHUNKS chunks, spread
-  over the log); the wandering error is kept when the likelihood ratio exceeds the
-  chi-bar-square quantile of one variance component on its boundary at ``test_level`` (as
-  :func:`excite.calibration.noise.reml_noise`'s tests; the time constant is not identified without
-  the
-  wander, so the level is approximate: ``benchmarks/bench_logs.py`` counts how often white
-  pose noise is taken for a wander).
+  :func:`excite.calibration.reml.reml_noise`) of the chain's noise levels with and without the
+  wandering error, with analytic gradients, on the dense covariance of chunks of at most
+  CHUNK_SEGMENTS consecutive segments (their restricted likelihood as if the chunks were
+  independent; at most MAX_CHUNKS chunks, spread over the log); the wandering error is kept
+  when the likelihood ratio exceeds the chi-bar-square quantile of one variance component on
+  its boundary at ``test_level`` (as :func:`excite.calibration.reml.reml_noise`'s tests; the
+  time constant is not identified without the wander, so the level is approximate:
+  ``benchmarks/bench_logs.py`` counts how often white pose noise is taken for a wander).
 * :func:`wander_covariance`: the covariance of the estimate weighted by the chain's
   covariance B alone (the fit is unchanged) when the increments' covariance is
   C = B' + A Sigma A^T (the sandwich I^-1 J^T B^-1 C B^-1 J I^-1), in O(N).
@@ -47,16 +45,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from excite.calibration.noise import (
-    ChainWhitener,
-    NoiseLevels,
-    WheelNoise,
-    chain_band,
-    chi_bar_square_quantile,
-    level_bounds,
-)
+from excite.calibration.noise import ChainWhitener, NoiseLevels, WheelNoise, chain_band
+from excite.calibration.reml import level_bounds
 from excite.logs.segments import Segments
 from excite.stats.autocorrelation import runs_of
+from excite.stats.chi2 import chi_bar_square_quantile
 
 __all__ = ["HeadingWander", "estimate_wander", "wander_covariance", "CHUNK_SEGMENTS",
            "MAX_CHUNKS", "MIN_WANDER_SEGMENTS", "WANDER_TEST_LEVEL"]

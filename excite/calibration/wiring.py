@@ -38,10 +38,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from excite.core.kinematics import MAX_RADIUS_TO_TRACK
 from excite.errors import DataError
 from excite.logs.segments import Segments
 
-__all__ = ["DERIVED_RTOL", "MAX_RADIUS_TO_TRACK", "WIRING_Z", "check_pose_source",
+__all__ = ["DERIVED_RTOL", "WIRING_Z", "check_pose_source",
            "check_wiring"]
 
 #: Standard errors below zero at which a wheel ratio counts as negative.
@@ -52,9 +53,6 @@ _RANK_RTOL = 1e-12
 #: weight is at least this fraction of the larger.
 _SAME_SIGN = 0.1
 
-#: r / b of any differential drive is below this (its wheels are smaller than its track; 0.3
-#: on a Husky): heading changes faster than this per wheel radian are in other units.
-MAX_RADIUS_TO_TRACK = 1.0
 #: Heading changes explained by the wheel increments to this fraction of their RMS come from
 #: the wheel angles, not from an external sensor.
 DERIVED_RTOL = 1e-7

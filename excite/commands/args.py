@@ -1,32 +1,45 @@
-"""Argument types shared by the subcommands: each turns one command-line string into a value,
-or raises :class:`UsageError` with a one-line message naming the option."""
+"""Argument types and value checks of the subcommands, each turning one command-line string
+into a value. An argparse type (``type=``) raises :class:`argparse.ArgumentTypeError`, which
+argparse reports naming the option; a check a command calls on an option's value raises
+:class:`UsageError` naming the option itself. Either ends the command with one line
+(:mod:`excite.commands.exit_status`)."""
 
 from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Sequence
 from pathlib import Path
 
 from excite.errors import ExciteError
 
-__all__ = ["UsageError", "floats", "sigma_arg", "params_arg", "sensor_pose_arg",
+__all__ = ["PARAMS_VALUES", "SIGMA_VALUES", "POSE_VALUES", "POSE_NOISE_VALUES", "UsageError",
+           "floats", "sigma_arg", "params_arg", "sensor_pose_arg", "pose_noise_arg",
            "fraction_arg", "positive_int", "nonnegative_int", "env_id", "robot_preset",
            "output_folder", "check_parent_folder", "check_output_file"]
 
+#: The comma-separated values of the options that take several numbers, as their metavars and
+#: error messages name them: wheel radii and separation (m); noise std of dx, dy, dtheta (m, m,
+#: rad); a sensor pose in the body frame (m, m, rad); pose-noise std (m, rad).
+PARAMS_VALUES = "RL,RR,B"
+SIGMA_VALUES = "SX,SY,STH"
+POSE_VALUES = "X,Y,THETA"
+POSE_NOISE_VALUES = "SXY,STH"
+
 
 class UsageError(ExciteError):
-    """Bad input or usage: reported as one line, exit status 2."""
+    """Bad input or usage: reported as one line, exit status EXIT_USAGE (2)."""
 
 
-def floats(text: str, names: Sequence[str], what: str) -> tuple[float, ...]:
-    """Comma-separated positive finite numbers, one per name (``what`` is the option)."""
+def floats(text: str, names: str, what: str) -> tuple[float, ...]:
+    """Comma-separated positive finite numbers, one per name of ``names`` (comma-separated,
+    such as PARAMS_VALUES; ``what`` is the option)."""
+    expected = names.split(",")
     parts = text.split(",")
-    if len(parts) != len(names):
-        raise UsageError(f"{what} needs {len(names)} comma-separated values "
-                         f"({','.join(names)}), got {text!r}")
+    if len(parts) != len(expected):
+        raise UsageError(f"{what} needs {len(expected)} comma-separated values ({names}), "
+                         f"got {text!r}")
     values = []
-    for name, part in zip(names, parts, strict=True):
+    for name, part in zip(expected, parts, strict=True):
         try:
             value = float(part)
         except ValueError:
@@ -39,14 +52,14 @@ def floats(text: str, names: Sequence[str], what: str) -> tuple[float, ...]:
 
 def sigma_arg(text: str) -> tuple[float, ...]:
     """--sigma SX,SY,STH (m, m, rad)."""
-    return floats(text, ("SX", "SY", "STH"), "--sigma")
+    return floats(text, SIGMA_VALUES, "--sigma")
 
 
 def params_arg(text: str, what: str = "--init"):
     """RL,RR,B (m) as :class:`excite.Params`."""
     from excite.core.kinematics import Params
 
-    return Params(*floats(text, ("RL", "RR", "B"), what))
+    return Params(*floats(text, PARAMS_VALUES, what))
 
 
 def sensor_pose_arg(text: str, option: str = "--sensor-pose"):
@@ -57,14 +70,14 @@ def sensor_pose_arg(text: str, option: str = "--sensor-pose"):
     words = option == "--sensor-pose"
     if words and text in ("auto", "axle", "estimate"):
         return text
-    expected = "auto, axle, estimate or X,Y,THETA" if words else "X,Y,THETA"
+    expected = f"auto, axle, estimate or {POSE_VALUES}" if words else POSE_VALUES
     parts = text.split(",")
     if len(parts) != 3:
         raise UsageError(f"{option} must be {expected} (m, m, rad), got {text!r}")
     try:
         return SensorPose(*map(float, parts))
     except ValueError:
-        raise UsageError(f"{option}: X,Y,THETA must be finite numbers, got {text!r}") from None
+        raise UsageError(f"{option}: {POSE_VALUES} must be finite numbers, got {text!r}") from None
 
 
 def pose_noise_arg(text: str) -> tuple[float, float]:
@@ -75,8 +88,8 @@ def pose_noise_arg(text: str) -> tuple[float, float]:
     except ValueError:
         values = ()
     if len(values) != 2 or not all(0 <= v < math.inf for v in values):
-        raise argparse.ArgumentTypeError(f"must be SXY,STH: two finite numbers >= 0 (m, rad), "
-                                         f"got {text!r}")
+        raise argparse.ArgumentTypeError(f"must be {POSE_NOISE_VALUES}: two finite numbers >= 0 "
+                                         f"(m, rad), got {text!r}")
     return values[0], values[1]
 
 

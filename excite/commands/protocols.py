@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import re
 
+from excite.commands.exit_status import EXIT_OK
+
 SYNTAX = ("Write a protocol NAME[:KEY=VALUE...] (e.g. umbmark:speed=0.2), a user's protocol "
           "module:Class[:KEY=VALUE...];\nexcite tune tries the values of the parameters "
           "marked tuned.")
@@ -39,12 +41,14 @@ def run(args: argparse.Namespace) -> int:
         for row in rows[name]:
             print(line(row) + "  " + row[-1])
     print(f"\n{SYNTAX}")
-    return 0
+    return EXIT_OK
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    prot = sub.add_parser("protocols", help="list the protocols and their parameters")
+    prot = sub.add_parser("protocols", help="list the protocols and their parameters",
+                          description="Describe calibration protocols: each parameter's type, "
+                          "default, range, whether excite tune tunes it, and its meaning.")
     prot.add_argument("names", nargs="*", metavar="NAME",
-                      help="protocols to describe (registered names or module:Class); "
-                      "default: every registered protocol")
+                      help="protocols to describe: registered names (%(protocols)s) or a "
+                      "user's module:Class; default: every registered protocol")
     prot.set_defaults(handler=run)

@@ -9,30 +9,34 @@ import sys
 import numpy as np
 
 from excite.commands.args import UsageError
-from excite.commands.logs import add_log_options
+from excite.commands.exit_status import EXIT_OK
+from excite.commands.logs import LOG_FILES, add_log_options
+
+#: What ``excite segment --help`` says the command does.
+DESCRIPTION = """Cut time-series logs and ROS bags into segments (fixed windows, or keyframes by
+distance and angle) and write them as one segment CSV, with a line per input on the segments kept
+and dropped. excite calibrate also reads the logs themselves, which is more exact."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    seg = sub.add_parser("segment", help="cut time-series logs or bags into a segment CSV")
-    seg.add_argument("logs", nargs="+", metavar="LOG",
-                     help="time-series CSV (or a pair of stream CSVs) or ROS bag")
+    seg = sub.add_parser("segment", help="cut time-series logs or bags into a segment CSV",
+                         description=DESCRIPTION)
+    seg.add_argument("logs", nargs="+", metavar="LOG", help=LOG_FILES)
     seg.add_argument("--out", required=True, metavar="FILE.csv",
-                     help="segment CSV: dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt,t_start,t_end")
+                     help="the segment CSV (required), columns dphi_L,dphi_R,dx_gt,dy_gt,"
+                     "dtheta_gt,t_start,t_end (rad, rad, m, m, rad, s, s)")
     add_log_options(seg)
     seg.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from excite.calibration.starts import initial_estimate
-    from excite.commands.logs import group_inputs, segment_inputs
+    from excite.commands.logs import log_options, print_note
     from excite.core.models import single_arc_error
+    from excite.logs.inputs import segment_logs
     from excite.logs.segments import Segments, save_segments
 
-    inputs = group_inputs(args.logs)
-    if any(source.kind == "segments" for source in inputs):
-        bad = next(source for source in inputs if source.kind == "segments")
-        raise UsageError(f"{bad.name}: a segment file, not a time-series log or bag")
-    parts = segment_inputs(args, inputs)
+    parts = segment_logs(args.logs, log_options(args), on_note=print_note)
     segments = Segments.concatenate([part.segments for part in parts])
     try:
         save_segments(args.out, segments)
@@ -47,4 +51,4 @@ def run(args: argparse.Namespace) -> int:
     print(f"each row is one arc: within the segments the curvature changes, and one arc per "
           f"segment misses the motion by up to {worst:.2e} m (median {typical:.2e} m); "
           "excite calibrate on the log itself composes the sub-steps", file=sys.stderr)
-    return 0
+    return EXIT_OK

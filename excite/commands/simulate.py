@@ -1,12 +1,6 @@
 """``excite simulate``: drive a simulated robot with a protocol and write its log, with the
-hidden truth beside it.
-
-Formats: ``segments`` (the segment CSV of the env's segments), ``timeseries`` (one time-series
-CSV: encoder ticks at every physics tick, the sensor's noisy world pose at the recording's
-pose rate) or ``bag`` (the same streams as JointState and PoseStamped messages in a ROS bag).
-The truth JSON (``FILE.truth.json``, or ``OUT.truth.json`` for other names) holds the hidden
-robot and sensor mounting, the noise levels, the encoder resolution and ``calibrate_args``:
-the options ``excite calibrate`` needs to read the log.
+hidden truth beside it (``NAME.truth.json``, see :func:`truth_path`; docs/formats.md describes
+the log formats).
 """
 
 from __future__ import annotations
@@ -18,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from excite.commands.args import (
+    POSE_NOISE_VALUES,
     UsageError,
     check_output_file,
     check_parent_folder,
@@ -27,46 +22,51 @@ from excite.commands.args import (
     positive_int,
     robot_preset,
 )
-from excite.logs.bags import (
-    BAG_SUFFIXES,
-    JOINT_STATES,
-    LEFT_WHEEL,
-    POSE_TOPIC,
-    RIGHT_WHEEL,
-    STORAGES,
-)
-from excite.registration import DEFAULT_ENV_ID
+from excite.commands.exit_status import EXIT_OK
+from excite.commands.options import add_robot_options, add_seed_option
+from excite.logs.bag_reader import BAG_SUFFIXES, JOINT_STATES
+from excite.logs.bag_writer import LEFT_WHEEL, POSE_TOPIC, RIGHT_WHEEL, STORAGES
 
 FORMATS = ("segments", "timeseries", "bag")
+#: What ``excite simulate --help`` says the command does.
+DESCRIPTION = """Drive a simulated robot (a hidden robot drawn around --robot, with a hidden sensor
+mounting for the Sensor env) with a protocol and write its log: the segment CSV, a time-series
+CSV (encoder ticks at every physics tick, the sensor's noisy world pose at the recording's pose
+rate) or a ROS bag of the same streams. The hidden truth goes beside the log, to NAME.truth.json
+with NAME the log's name without its extension (log.csv: log.truth.json; run1.bag, or the rosbag2
+directory run1: run1.truth.json): the robot and sensor mounting, the noise levels, the encoder
+resolution and calibrate_args, the options excite calibrate needs to read the log."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    sim = sub.add_parser("simulate", help="drive a simulated robot with a protocol, write its log")
+    sim = sub.add_parser("simulate", help="drive a simulated robot with a protocol, write its "
+                         "log", description=DESCRIPTION)
     sim.add_argument("--protocol", required=True, metavar="NAME[:KEY=VALUE...]",
-                     help="a protocol with optional settings (see excite protocols)")
-    sim.add_argument("--segments", type=positive_int, required=True, metavar="N")
-    sim.add_argument("--seed", type=nonnegative_int, default=0, metavar="S")
+                     help="the protocol (required): one of %(protocols)s, or a user's "
+                     "module:Class, with optional settings (see excite protocols)")
+    sim.add_argument("--segments", type=positive_int, required=True, metavar="N",
+                     help="segments to drive (required): actions of the protocol, each held "
+                     "for the env's segment duration")
+    add_seed_option(sim, "seed of the episode: hidden robot, sensor mounting, start, noise and "
+                    "the protocol's draws (default %(default)s)")
     sim.add_argument("--robot-seed", type=nonnegative_int, metavar="R",
                      help="drive the hidden robot and sensor mounting of seed R's episode "
                      "(default: --seed's): logs with other --seed and one --robot-seed are "
                      "logs of one robot (e.g. held-out logs for excite validate)")
-    sim.add_argument("--env", default=DEFAULT_ENV_ID, metavar="ID")
-    sim.add_argument("--policy", metavar="PATH",
-                     help="policy file of --protocol learned (its policy setting)")
-    sim.add_argument("--robot", default="default", metavar="PRESET",
-                     help="robot preset: default, turtlebot3, jackal, husky")
+    add_robot_options(sim)
     sim.add_argument("--format", choices=FORMATS, default="segments",
                      help="segments (default): the segment CSV; timeseries: a time-series "
                      "CSV (encoder ticks, sensor poses); bag: a ROS bag of the same streams")
     sim.add_argument("--storage", choices=STORAGES,
-                     help="bag storage (with --format bag): sqlite3 (default) or mcap "
-                     "(rosbag2, OUT is a directory), ros1 (OUT is a .bag file)")
-    sim.add_argument("--pose-noise", type=pose_noise_arg, metavar="SXY,STH",
+                     help=f"bag storage (with --format bag): {STORAGES[0]} (default) or mcap "
+                     "(rosbag2, FILE is a directory), ros1 (FILE is a .bag file)")
+    sim.add_argument("--pose-noise", type=pose_noise_arg, metavar=POSE_NOISE_VALUES,
                      help="noise std of each recorded pose (m, rad; with --format timeseries "
                      "or bag; default: the env's record_sigma_xy, record_sigma_theta)")
     sim.add_argument("--out", required=True, metavar="FILE",
-                     help="the log (segment CSV, time-series CSV or bag); the hidden truth "
-                     "goes to FILE.truth.json")
+                     help="the log (required): a segment or time-series CSV, a ROS 1 .bag "
+                     "file or a rosbag2 directory; the hidden truth goes to NAME.truth.json "
+                     "beside it, NAME being FILE without its extension")
     # "--pose-noise -1,0" is a (bad) value, not an unknown option: argparse takes an argument
     # that starts with "-" for a value only when it matches this pattern (by default a single
     # number), and simulate has no option that looks like a number
@@ -98,9 +98,11 @@ def _check_output(args: argparse.Namespace, out: Path) -> None:
                          f"give --out without the {out.suffix} suffix")
 
 
-def _truth_path(out: Path) -> Path:
-    return out.with_name(out.stem + ".truth.json") if out.suffix == ".csv" else Path(
-        f"{out}.truth.json")
+def truth_path(out: Path) -> Path:
+    """Where the hidden truth of the log ``out`` goes: NAME.truth.json beside it, NAME being
+    the log's name without its extension (log.csv, run1.bag, run1.mcap and the rosbag2
+    directory run1 give log.truth.json, run1.truth.json)."""
+    return out.with_name(out.stem + ".truth.json")
 
 
 def _write_log(args: argparse.Namespace, out: Path, base: Any) -> tuple[dict[str, Any], str]:
@@ -116,12 +118,12 @@ def _write_log(args: argparse.Namespace, out: Path, base: Any) -> tuple[dict[str
     truth = {"pose_noise": {"xy": float(recording.sigma[0]), "theta": float(recording.sigma[2])},
              "pose_rate": base.recording_config.pose_hz}
     if args.format == "timeseries":
-        from excite.logs.timeseries import write_timeseries
+        from excite.logs.timeseries_csv import write_timeseries
 
         write_timeseries(out, series, ticks_per_rev=recording.ticks_per_rev)
         calibrate_args = ["--ticks-per-rev", str(recording.ticks_per_rev)]
     else:
-        from excite.logs.bags import write_bag
+        from excite.logs.bag_writer import write_bag
 
         storage = args.storage or STORAGES[0]
         write_bag(out, series, storage=storage)
@@ -173,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
                                      else mount.as_array().tolist(), strict=True)),
              "ticks_per_rev": base.sim.encoders.ticks_per_rev,
              **written}
-    truth_path = _truth_path(out)
-    truth_path.write_text(json.dumps(truth, indent=2) + "\n")
-    print(f"wrote {what} to {out} and the hidden truth to {truth_path}")
-    return 0
+    truth_file = truth_path(out)
+    truth_file.write_text(json.dumps(truth, indent=2) + "\n")
+    print(f"wrote {what} to {out} and the hidden truth to {truth_file}")
+    return EXIT_OK

@@ -1,11 +1,5 @@
-"""``excite tune``: choose each protocol's settings on tuning episodes, for ``compare --tuned``.
-
-Every candidate setting (the grid of each protocol's tunable parameters, ``excite protocols``)
-runs on the same tuning episodes, whose seeds are disjoint from every evaluation seed; the
-setting with the lowest median final max error wins (:mod:`agents.tuning`). The episodes are
-kept in ``TUNED.tuning/`` beside the output, so an interrupted run re-run with the same
-command continues where it stopped.
-"""
+"""``excite tune``: choose each protocol's settings on tuning episodes, for ``compare --tuned``
+(:mod:`agents.tuning` holds the method)."""
 
 from __future__ import annotations
 
@@ -13,7 +7,8 @@ import argparse
 from pathlib import Path
 
 from excite.commands.args import UsageError, check_output_file
-from excite.commands.compare import (
+from excite.commands.exit_status import EXIT_OK
+from excite.commands.options import (
     add_episode_options,
     check_backend_options,
     episode_settings,
@@ -21,17 +16,26 @@ from excite.commands.compare import (
     runnable,
 )
 
+#: What ``excite tune --help`` says the command does.
+DESCRIPTION = """Choose each protocol's settings for excite compare --tuned. Every candidate setting
+(the values of each protocol's parameters marked tuned in excite protocols) runs on the same
+tuning episodes, whose seeds never meet compare's; the setting with the lowest median final max
+relative error wins. The episodes are kept in TUNED.tuning/ beside --out, so an interrupted run
+re-run with the same command continues where it stopped."""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    tune = sub.add_parser("tune", help="tune protocol settings on tuning episodes")
+    tune = sub.add_parser("tune", help="tune protocol settings on tuning episodes",
+                          description=DESCRIPTION)
     add_episode_options(tune, episodes=50)
     tune.add_argument("--out", required=True, metavar="TUNED.json",
-                      help="the tuned settings (JSON); the episodes go to TUNED.tuning/")
+                      help="the tuned settings, a .json file (required); the episodes go to "
+                      "the folder TUNED.tuning/ beside it")
     tune.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from agents.report import format_tuning
+    from agents.tables import format_tuning
     from agents.tuning import run_tuning, work_dir
 
     out = Path(args.out)
@@ -49,4 +53,4 @@ def run(args: argparse.Namespace) -> int:
     print(format_tuning(document))
     print(f"\ntuned settings: {out} (episodes: {work_dir(out)}); use them with "
           f"excite compare --tuned {out}")
-    return 0
+    return EXIT_OK

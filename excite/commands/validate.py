@@ -8,63 +8,65 @@ from __future__ import annotations
 import argparse
 import json
 
-from excite.commands.args import UsageError, params_arg, sensor_pose_arg
-from excite.commands.logs import add_log_options
+from excite.commands.args import (
+    PARAMS_VALUES,
+    POSE_VALUES,
+    UsageError,
+    params_arg,
+    sensor_pose_arg,
+)
+from excite.commands.exit_status import EXIT_OK
+from excite.commands.logs import LOG_FILES, add_log_options
 
-EXIT_OK = 0
+#: What ``excite validate --help`` says the command does.
+DESCRIPTION = """Dead-reckon each log's encoders (exact arcs between encoder samples, from the log's
+first external pose) with the nominal and with the calibrated robot, and report per log and
+overall (mean over logs, ratio of the means): end-point position error (m), end-point heading
+error (rad), RMS path error (m) and the ratio calibrated / nominal; UMBmark's E_max,syst (m) when
+a log is a bidirectional square. Validation uses every pose sample (no segmentation)."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    val = sub.add_parser(
-        "validate", help="does the calibration help? dead-reckon held-out logs with the "
-        "nominal and the calibrated parameters and compare with the external poses",
-        description="Dead-reckon each log's encoders (exact arcs between encoder samples, "
-        "from the log's first external pose) with the nominal and with the calibrated robot, "
-        "and report per log and overall (mean over logs, ratio of the means): end-point "
-        "position error (m), end-point heading error (rad), RMS path error (m) and the ratio "
-        "calibrated / nominal; UMBmark's E_max,syst (m) when a log is a bidirectional square. "
-        "Validation uses every pose sample (no segmentation).")
+    val = sub.add_parser("validate", help="does the calibration help? dead-reckon held-out logs",
+                         description=DESCRIPTION)
     val.add_argument("logs", nargs="+", metavar="LOG",
-                     help="time-series CSV (or a pair of stream CSVs) or ROS bag, not used "
-                     "for the calibration")
+                     help=f"{LOG_FILES}, not used for the calibration")
     val.add_argument("--params", required=True, metavar="RESULT.json",
-                     help="the calibration: the output of excite calibrate --json (params, "
-                     "sensor_pose, and optionally nominal)")
-    val.add_argument("--nominal", metavar="RL,RR,B",
+                     help="the calibration (required): the output of excite calibrate --json "
+                     "(params, sensor_pose, and optionally nominal)")
+    val.add_argument("--nominal", metavar=PARAMS_VALUES,
                      help="nominal wheel radii and separation (m); default: the params file's "
                      "\"nominal\" key")
-    val.add_argument("--nominal-sensor-pose", metavar="X,Y,THETA",
+    val.add_argument("--nominal-sensor-pose", metavar=POSE_VALUES,
                      help="the nominal robot's sensor pose in the body frame (m, m, rad); "
                      "default: the calibrated one, so that the comparison measures the wheel "
                      "calibration")
     val.add_argument("--plot", metavar="OUT.png",
                      help="write an overlay of the measured, nominal and calibrated paths "
-                     "(needs the sim extra: matplotlib)")
-    val.add_argument("--json", action="store_true", help="print one JSON object")
+                     "(needs the sim extra: matplotlib); default: no plot")
+    val.add_argument("--json", action="store_true",
+                     help="print one JSON object instead of the report")
     add_log_options(val, segmentation=False)
     val.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from excite.commands.logs import group_inputs, read_log
-    from excite.validation.dead_reckoning import read_params_file, summarize, validate_log
+    from excite.calibration.logs import validate_logs
+    from excite.commands.logs import log_options, print_note
+    from excite.validation.dead_reckoning import read_params_file
 
     result_file = read_params_file(args.params)
     nominal_params = (params_arg(args.nominal, "--nominal") if args.nominal
                       else result_file.nominal)
     if nominal_params is None:
-        raise UsageError(f"{args.params}: no \"nominal\" parameters; give --nominal RL,RR,B "
-                         "(m)")
+        raise UsageError(f"{args.params}: no \"nominal\" parameters; give --nominal "
+                         f"{PARAMS_VALUES} (m)")
     nominal_pose = result_file.sensor_pose
     if args.nominal_sensor_pose:
         nominal_pose = sensor_pose_arg(args.nominal_sensor_pose, "--nominal-sensor-pose")
     calibrated = (result_file.params, result_file.sensor_pose)
-    validations = []
-    for source in group_inputs(args.logs):
-        log = read_log(args, source, whole=True)
-        validations.append(validate_log(log.series, log.time_offset, calibrated,
-                                        (nominal_params, nominal_pose), name=log.name))
-    result = summarize(validations)
+    result = validate_logs(args.logs, calibrated, (nominal_params, nominal_pose),
+                           log_options(args), on_note=print_note).result
     if args.plot:
         from excite.validation.plot import plot_validation
 

@@ -10,6 +10,12 @@ The Fisher information F = sum_k J_k^T J_k is then dimensionless and
 * ``crlb_relative_std(F)`` = sqrt(diag(F^-1)): per-parameter relative CRLB std.
 
 Every estimator, the environment's reward and the planners use these functions.
+
+The reference is ``fisher_information(scaled_jacobian(...))``. For the axle model with
+sigma_x == sigma_y, F comes from the Jacobian's rows turned onto the chord of each arc
+(:func:`_information_rows`), in two fast forms: :func:`_chord_rows` in array code and
+:func:`_chord_information_scalar` in one pure-Python pass over short logs (the single
+environment's step); tests/unit/core/test_fast_forms.py holds both equal to the reference.
 """
 
 from __future__ import annotations
@@ -20,12 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from excite.core.kinematics import (
-    Params,
-    _as_params,
-    sinc_and_derivative,
-    sinc_and_derivative_scalar,
-)
+from excite.core.kinematics import Params, _as_params, sinc_family, sinc_family_scalar
 from excite.core.models import AXLE, SegmentModel
 
 __all__ = [
@@ -119,6 +120,12 @@ def scaled_jacobian(
     return jac / as_sigma(sigma)[:, None] * model.column_scale(nominal)[..., None, None, :]
 
 
+def fisher_information(scaled_jac: ArrayLike) -> FloatArray:
+    """F = sum_k J_k^T J_k of scaled Jacobians shaped (..., N, 3, P) -> (..., P, P)."""
+    j = np.asarray(scaled_jac, dtype=float)
+    return np.einsum("...nki,...nkj->...ij", j, j)
+
+
 def _information_rows(
     dphi_L: ArrayLike,
     dphi_R: ArrayLike,
@@ -130,8 +137,8 @@ def _information_rows(
     """Rows R (P parameters, 3 rows, N segments) with R[:, :, k] R[:, :, k]^T = J_k^T J_k,
     J_k the whitened, relatively scaled Jacobian of segment k (:func:`scaled_jacobian`).
 
-    For the axle model with sigma_x == sigma_y a tested specialisation (below) halves the
-    work; every other case takes the model's Jacobian.
+    For the axle model with sigma_x == sigma_y the chord rows (:func:`_chord_rows`, below)
+    halve the work; every other case takes the model's Jacobian.
 
     With sigma_x == sigma_y the two position rows may be turned by any angle without changing
     J^T J; turned by -dtheta/2 (onto the chord of the arc) they need only sinc and sinc' of
@@ -157,7 +164,7 @@ def _chord_rows(phi_L: FloatArray, phi_R: FloatArray, coefficients: tuple[Any, .
     v_L, v_R, w_L, w_R, h_L, h_R, h_v, e_L, e_R = coefficients
     v = v_L * phi_L + v_R * phi_R
     w = w_L * phi_L + w_R * phi_R
-    sinc, dsinc = sinc_and_derivative(v)
+    sinc, _, dsinc, _ = sinc_family(v)
     rows = np.empty((3, 3) + v.shape)
     heading = rows[:, 2]  # the heading gradient, whitened at the end
     np.multiply(h_L, phi_L, out=heading[0])
@@ -169,6 +176,59 @@ def _chord_rows(phi_L: FloatArray, phi_R: FloatArray, coefficients: tuple[Any, .
     rows[1, 0] += e_R * phi_R * sinc
     heading *= 1.0 / sigma_theta
     return rows
+
+
+#: Segment count up to which the pure-Python pass beats numpy's per-call overhead (inside the
+#: environment's step, where numpy calls run with cold caches).
+_LOOP_MAX = 32
+
+
+def _chord_information_scalar(
+    phi_L: list[float], phi_R: list[float], coefficients: tuple[float, ...], sigma_theta: float
+) -> FloatArray:
+    """F from the chord rows (:func:`_chord_rows`) of short logs, in one pure-Python pass:
+    the fast scalar form of ``rows @ rows.T`` where numpy's per-call overheads would dominate.
+
+    With t = (h_L dphi_L, h_R dphi_R, h_v v) the heading gradient and e = (e_L dphi_L,
+    e_R dphi_R, 0) that of the whitened travel (:func:`_chord_coefficients`), the rows are
+    t / sigma_theta, w dsinc t + sinc e and w sinc t, so
+    F = sum a t t^T + m (t e^T + e t^T) + sinc^2 e e^T with the per-segment weights
+    a = w^2 (sinc^2 + dsinc^2) + 1 / sigma_theta^2 and m = w sinc dsinc: weighted moments of
+    (dphi_L, dphi_R, v), v summed as itself (not expanded), so F's b entries stay >= 0.
+    """
+    v_L, v_R, w_L, w_R, h_L, h_R, h_v, e_L, e_R = coefficients
+    heading_weight = 1.0 / (sigma_theta * sigma_theta)
+    a_ll = a_lr = a_rr = a_lv = a_rv = a_vv = 0.0
+    m_ll = m_lr = m_rr = m_lv = m_rv = s_ll = s_lr = s_rr = 0.0
+    for left, right in zip(phi_L, phi_R, strict=True):
+        v = v_L * left + v_R * right
+        w = w_L * left + w_R * right
+        sinc, _, dsinc, _ = sinc_family_scalar(v)
+        sinc2 = sinc * sinc
+        a = w * w * (sinc2 + dsinc * dsinc) + heading_weight
+        m = w * sinc * dsinc
+        ll, lr, rr, lv, rv = left * left, left * right, right * right, left * v, right * v
+        a_ll += a * ll
+        a_lr += a * lr
+        a_rr += a * rr
+        a_lv += a * lv
+        a_rv += a * rv
+        a_vv += a * v * v
+        m_ll += m * ll
+        m_lr += m * lr
+        m_rr += m * rr
+        m_lv += m * lv
+        m_rv += m * rv
+        s_ll += sinc2 * ll
+        s_lr += sinc2 * lr
+        s_rr += sinc2 * rr
+    f00 = h_L * h_L * a_ll + 2.0 * h_L * e_L * m_ll + e_L * e_L * s_ll
+    f01 = h_L * h_R * a_lr + (h_L * e_R + h_R * e_L) * m_lr + e_L * e_R * s_lr
+    f11 = h_R * h_R * a_rr + 2.0 * h_R * e_R * m_rr + e_R * e_R * s_rr
+    f02 = h_v * (h_L * a_lv + e_L * m_lv)
+    f12 = h_v * (h_R * a_rv + e_R * m_rv)
+    f22 = h_v * h_v * a_vv
+    return np.array([[f00, f01, f02], [f01, f11, f12], [f02, f12, f22]])
 
 
 def segment_information(
@@ -202,7 +262,7 @@ def information_matrix(
 
     Up to ``_LOOP_MAX`` segments with sigma_x == sigma_y (the environment's step) F comes from
     nine weighted wheel-increment moments summed in one pure-Python pass (see
-    :func:`_information_from_moments`); beyond, from the vectorized rows.
+    :func:`_chord_information_scalar`); beyond, from the vectorized rows.
     """
     s = as_sigma(sigma)
     sigma_x, sigma_y, sigma_theta = s.tolist()
@@ -213,7 +273,7 @@ def information_matrix(
             p = _as_params(params)
             coefficients = _chord_coefficients(p, p if scale is None else _as_params(scale),
                                                sigma_x)
-            return _information_from_moments(left, right, coefficients, sigma_theta)
+            return _chord_information_scalar(left, right, coefficients, sigma_theta)
     rows = _information_rows(phi_L, phi_R, params, s, scale, model)
     rows = rows.reshape(rows.shape[0], -1)
     return rows @ rows.T
@@ -247,58 +307,6 @@ def information_matrices(
                        coefficients, float(s[2]))  # (3, 3, N, K)
     flat = rows.transpose(2, 0, 1, 3).reshape(theta.shape[0], 3, -1)
     return flat @ flat.transpose(0, 2, 1)
-
-
-#: Segment count up to which the pure-Python moments beat numpy's per-call overhead (measured
-#: inside the environment's step, where numpy calls run with cold caches).
-_LOOP_MAX = 32
-
-
-def _information_from_moments(
-    phi_L: list[float], phi_R: list[float], coefficients: tuple[float, ...], sigma_theta: float
-) -> FloatArray:
-    """F from the rows of :func:`_information_rows`, in one pure-Python pass.
-
-    With t = (h_L dphi_L, h_R dphi_R, h_v v) the heading gradient and e = (e_L dphi_L,
-    e_R dphi_R, 0) that of the whitened travel (:func:`_chord_coefficients`), the rows are
-    t / sigma_theta, w dsinc t + sinc e and w sinc t, so
-    F = sum a t t^T + m (t e^T + e t^T) + sinc^2 e e^T with the per-segment weights
-    a = w^2 (sinc^2 + dsinc^2) + 1 / sigma_theta^2 and m = w sinc dsinc: weighted moments of
-    (dphi_L, dphi_R, v), v summed as itself (not expanded), so F's b entries stay >= 0.
-    """
-    v_L, v_R, w_L, w_R, h_L, h_R, h_v, e_L, e_R = coefficients
-    heading_weight = 1.0 / (sigma_theta * sigma_theta)
-    a_ll = a_lr = a_rr = a_lv = a_rv = a_vv = 0.0
-    m_ll = m_lr = m_rr = m_lv = m_rv = s_ll = s_lr = s_rr = 0.0
-    for left, right in zip(phi_L, phi_R, strict=True):
-        v = v_L * left + v_R * right
-        w = w_L * left + w_R * right
-        sinc, dsinc = sinc_and_derivative_scalar(v)
-        sinc2 = sinc * sinc
-        a = w * w * (sinc2 + dsinc * dsinc) + heading_weight
-        m = w * sinc * dsinc
-        ll, lr, rr, lv, rv = left * left, left * right, right * right, left * v, right * v
-        a_ll += a * ll
-        a_lr += a * lr
-        a_rr += a * rr
-        a_lv += a * lv
-        a_rv += a * rv
-        a_vv += a * v * v
-        m_ll += m * ll
-        m_lr += m * lr
-        m_rr += m * rr
-        m_lv += m * lv
-        m_rv += m * rv
-        s_ll += sinc2 * ll
-        s_lr += sinc2 * lr
-        s_rr += sinc2 * rr
-    f00 = h_L * h_L * a_ll + 2.0 * h_L * e_L * m_ll + e_L * e_L * s_ll
-    f01 = h_L * h_R * a_lr + (h_L * e_R + h_R * e_L) * m_lr + e_L * e_R * s_lr
-    f11 = h_R * h_R * a_rr + 2.0 * h_R * e_R * m_rr + e_R * e_R * s_rr
-    f02 = h_v * (h_L * a_lv + e_L * m_lv)
-    f12 = h_v * (h_R * a_rv + e_R * m_rv)
-    f22 = h_v * h_v * a_vv
-    return np.array([[f00, f01, f02], [f01, f11, f12], [f02, f12, f22]])
 
 
 def eigen_3x3(information: ArrayLike) -> tuple[tuple[float, float, float],
@@ -381,12 +389,6 @@ def _norm2(a: tuple[float, float, float]) -> float:
 def _unit(a: tuple[float, float, float]) -> tuple[float, float, float]:
     n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
     return (a[0] / n, a[1] / n, a[2] / n)
-
-
-def fisher_information(scaled_jac: ArrayLike) -> FloatArray:
-    """F = sum_k J_k^T J_k of scaled Jacobians shaped (..., N, 3, P) -> (..., P, P)."""
-    j = np.asarray(scaled_jac, dtype=float)
-    return np.einsum("...nki,...nkj->...ij", j, j)
 
 
 def sigma_min(information: ArrayLike) -> FloatArray | float:

@@ -12,8 +12,9 @@ For a constant-curvature segment (lesson, section 2)::
     dy     = ds * cosc(dtheta),  cosc(u) = (1 - cos(u)) / u
 
 sinc, cosc and their derivatives are evaluated by cancellation-free closed forms where those
-are accurate and by their Taylor series where not (see :func:`sinc_family`); both branches
-agree to a few ulps at each seam, and nothing is NaN or inf for u = 0, tiny u, or many turns.
+are accurate and by their Taylor series where not (see :func:`sinc_family`; its fast form for
+one float is :func:`sinc_family_scalar`); both branches agree to a few ulps at each seam, and
+nothing is NaN or inf for u = 0, tiny u, or many turns.
 """
 
 from __future__ import annotations
@@ -27,18 +28,20 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "MAX_RADIUS_TO_TRACK",
     "Arc",
     "Params",
     "predict_increment",
     "sinc_family",
-    "sinc_and_derivative",
-    "sinc_and_derivative_scalar",
-    "sinc_cosc_scalar",
+    "sinc_family_scalar",
     "wrap_angle",
 ]
 
 FloatArray = NDArray[np.float64]
 _TWO_PI = 2.0 * math.pi
+#: r / b of any differential drive is below this (its wheels are smaller than its track; 0.3
+#: on a Husky): heading changes faster than this per wheel radian are in other units.
+MAX_RADIUS_TO_TRACK = 1.0
 
 #: Below this |u| sinc' uses its series (12 terms: truncation error < 1e-20 there).
 SERIES_THRESHOLD = 1.0
@@ -164,40 +167,10 @@ def sinc_family(u: ArrayLike, derivatives: bool = True) -> tuple[FloatArray, ...
     return (f, g, fp, gp) if derivatives else (f, g)
 
 
-def sinc_and_derivative(u: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """(sinc(u), sinc'(u)) of an array: the two functions the information needs.
-
-    sin(u) / u is accurate to an ulp or two for every u != 0 (u = 0 gives 1); sinc'(u) =
-    (cos u - sinc u) / u loses 3 eps / u^2 to cancellation, so it uses its series for
-    |u| < 1, as :func:`sinc_family` does.
-    """
-    u = np.asarray(u, dtype=float)
-    if u.ndim == 0:
-        return tuple(x.reshape(()) for x in sinc_and_derivative(u.reshape(1)))
-    safe = np.where(u == 0.0, 1e-300, u)  # sin(1e-300) / 1e-300 == 1 exactly
-    f = np.sin(safe) / safe
-    fp = (np.cos(safe) - f) / safe
-    small = np.abs(u) < SERIES_THRESHOLD
-    if small.any():
-        fp[small] = _dsinc_series(u[small])
-    return f, fp
-
-
-def sinc_and_derivative_scalar(u: float) -> tuple[float, float]:
-    """(sinc(u), sinc'(u)) of one Python float, with the branches of
-    :func:`sinc_and_derivative`: the hot loop of :func:`excite.information_matrix`."""
-    if abs(u) < SERIES_THRESHOLD:
-        if u == 0.0:
-            return 1.0, 0.0
-        u2 = u * u
-        return math.sin(u) / u, u * _series(_dsinc_terms(u2), u2)
-    f = math.sin(u) / u
-    return f, (math.cos(u) - f) / u
-
-
-def sinc_cosc_scalar(u: float, derivatives: bool = True) -> tuple[float, ...]:
-    """(sinc, cosc[, sinc', cosc']) of one Python float, with the branches of
-    :func:`sinc_family`: the hot path of the online estimator and the physics."""
+def sinc_family_scalar(u: float, derivatives: bool = True) -> tuple[float, ...]:
+    """:func:`sinc_family` of one Python float, with its branches: the one-segment hot paths
+    (the online filter's update, the chord information's loop) where numpy's per-call
+    overhead would dominate."""
     if abs(u) < TINY_THRESHOLD:
         u2 = u * u
         f, g = _series(_SINC3, u2), u * _series(_COSC3, u2)

@@ -47,7 +47,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from excite.core.kinematics import Arc, Params, sinc_cosc_scalar, wrap_angle
+from excite.core import se2
+from excite.core.kinematics import Arc, Params, sinc_family_scalar, wrap_angle
 
 __all__ = [
     "AXLE",
@@ -113,9 +114,10 @@ class SegmentModel(ABC):
     def evaluate_scalar(self, dphi_L: float, dphi_R: float,
                         theta: tuple[float, ...]) -> tuple[tuple[float, float, float],
                                                           tuple[tuple[float, ...], ...]]:
-        """One segment in pure Python (the online filter's hot path, microseconds): the
-        prediction (dx, dy, dtheta) and the three Jacobian rows (each P floats); the same
-        numbers as :meth:`evaluate` (tested)."""
+        """:meth:`evaluate` of one segment in pure Python, the fast form for the one-filter
+        update (:func:`excite.estimators.online.update_scalar`) and the EKF: the prediction
+        (dx, dy, dtheta) and the three Jacobian rows (each P floats), equal to
+        :meth:`evaluate`'s up to rounding (tests/unit/core/test_fast_forms.py)."""
 
     def predict(self, dphi_L: ArrayLike, dphi_R: ArrayLike, theta: ArrayLike) -> FloatArray:
         """Predicted measured increments (..., N, 3): dx, dy (m), dtheta (rad)."""
@@ -273,7 +275,7 @@ class AxleModel(SegmentModel):
         r_L, r_R, b = theta[0], theta[1], theta[2]
         s_L, s_R = r_L * dphi_L, r_R * dphi_R
         ds, th = 0.5 * (s_L + s_R), (s_R - s_L) / b
-        f, g, fp, gp = sinc_cosc_scalar(th)
+        f, g, fp, gp = sinc_family_scalar(th)
         t = (-dphi_L / b, dphi_R / b, -th / b)
         a = (0.5 * dphi_L, 0.5 * dphi_R, 0.0)
         kf, kg = ds * fp, ds * gp
@@ -451,14 +453,8 @@ def body_to_sensor(body: ArrayLike, pose: SensorPose | ArrayLike) -> FloatArray:
 def sensor_to_body(measured: ArrayLike, pose: SensorPose) -> FloatArray:
     """The body's increments o (N, 3) from the sensor's s (N, 3) for a known sensor pose:
     o = l (+) s (+) (-l), the inverse of the sensor-pose model's transform."""
-    s = np.asarray(measured, dtype=float)
-    l_x, l_y, l_t = pose.as_array()
-    c, si = math.cos(l_t), math.sin(l_t)
-    th = s[:, 2]
-    # l (+) s: position l_xy + R(l_t) s_xy; then (+) (-l): minus R(th) l_xy.
-    x = l_x + c * s[:, 0] - si * s[:, 1] - (np.cos(th) * l_x - np.sin(th) * l_y)
-    y = l_y + si * s[:, 0] + c * s[:, 1] - (np.sin(th) * l_x + np.cos(th) * l_y)
-    return np.column_stack([x, y, th])
+    mount = pose.as_array()
+    return se2.compose(se2.compose(mount, measured), se2.inverse(mount))
 
 
 def single_arc_error(sub_dphi_L: ArrayLike, sub_dphi_R: ArrayLike,

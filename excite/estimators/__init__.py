@@ -24,6 +24,7 @@ is estimated; sigma (sigma_x [m], sigma_y [m], sigma_theta [rad])).
 from __future__ import annotations
 
 import importlib
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -43,6 +44,7 @@ __all__ = [
     "ESTIMATORS",
     "OPTIONS",
     "CheckedEstimator",
+    "check_contract",
     "EstimatorSpec",
     "check_distinct",
     "ExtendedKalmanFilter",
@@ -121,24 +123,48 @@ class EstimatorSpec:
         except Exception as exc:  # a user's code: any failure is bad input, named
             raise EstimatorError(f"estimator {self.label}: its factory raised "
                                  f"{type(exc).__name__}: {exc}") from None
-        missing = [name for name in ("update", "params", "covariance")
-                   if not hasattr(estimator, name)]
-        if missing:
-            raise EstimatorError(f"estimator {self.label}: its factory returned "
-                                 f"{one_line_repr(estimator)}, not an estimator (it has no "
-                                 f"{', '.join(missing)})")
         return CheckedEstimator(self.label, estimator)
 
 
+def check_contract(label: str, estimator: object) -> None:
+    """EstimatorError (one line, naming the estimator ``label``) unless ``estimator`` has
+    ``update``, ``params`` and ``covariance`` and its ``update`` takes the segment's five
+    positional values (a signature that cannot be read is left to the call)."""
+    missing = [name for name in ("update", "params", "covariance")
+               if not hasattr(estimator, name)]
+    if missing:
+        raise EstimatorError(f"estimator {label}: its factory returned "
+                             f"{one_line_repr(estimator)}, not an estimator (it has no "
+                             f"{', '.join(missing)})")
+    update = estimator.update  # type: ignore[attr-defined]
+    try:
+        signature = inspect.signature(update)
+    except TypeError:  # not callable
+        raise EstimatorError(f"estimator {label}: its update is "
+                             f"{one_line_repr(update)}, not a method") from None
+    except ValueError:  # callable without a readable signature (a builtin)
+        return
+    try:
+        signature.bind(0.0, 0.0, 0.0, 0.0, 0.0)
+    except TypeError:
+        raise EstimatorError(f"estimator {label}: its update{signature} does not take "
+                             "the segment's five values update(dphi_L, dphi_R, dx, dy, "
+                             "dtheta) (rad, rad, m, m, rad)") from None
+
+
 class CheckedEstimator:
-    """A user's estimator (``module:factory``) with every call checked: an exception in
-    ``update`` or in reading ``params``, ``covariance`` or ``theta``, params that are not 3
-    finite values, or a covariance that is not a finite square matrix is an EstimatorError
-    naming the estimator (``label``), not a failure deep inside the environment. The
-    user's object is ``estimator``; its other attributes read through."""
+    """A user's estimator (``module:factory``) checked against the protocol
+    (:class:`excite.contracts.Estimator`) when wrapped and at every call: an object without
+    ``update``, ``params`` or ``covariance``, an ``update`` that does not take the segment's
+    five values, an exception in ``update`` or in reading ``params``, ``covariance`` or
+    ``theta``, params that are not 3 finite values, or a covariance that is not a finite
+    square matrix is an EstimatorError naming the estimator (``label``), not a failure deep
+    inside the environment. The user's object is ``estimator``; its other attributes read
+    through."""
 
     def __init__(self, label: str, estimator: Estimator) -> None:
         self.label, self.estimator = label, estimator
+        check_contract(label, estimator)
 
     def __getattr__(self, name: str) -> object:
         """Any other attribute is the user's estimator's (``n_segments``, ...)."""

@@ -19,11 +19,10 @@ direction fixed at (1, 1, 1) wherever the estimate is and re-linearises within e
 this filter has neither protection (and no trust region), which is what makes it a
 baseline: the comparison shows what they buy.
 
-Measured (tests/test_estimators.py): with the truth drawn from the default 10% prior its
-ANEES stays above the 95% chi-square bound for tens of segments (100 episodes, after 10
-segments: 4-8 on synthetic streams, 13 in the ideal env's loop; bounds 2.5-3.5), and where
-it ends far from the batch estimate the offset lies along the common scale of (r_L, r_R,
-b); with a 1% prior (Jacobians taken near the truth) it is consistent.
+Tested (tests/unit/estimators/test_estimators.py): with the truth drawn from the default
+10% prior its ANEES stays above the 95% chi-square bound for tens of segments, and where it
+ends far from the batch estimate the offset lies along the common scale of (r_L, r_R, b);
+with a 1% prior (Jacobians taken near the truth) it is consistent.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from excite.calibration.noise import chi2_survival
+from excite.stats.chi2 import chi2_survival
 
 __all__ = ["LJUNG_BOX_LAGS", "LjungBox", "ljung_box", "long_run_covariance", "at_least",
            "runs_of"]

@@ -15,10 +15,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from excite.calibration.noise import chi2_quantile
 from excite.contracts import Estimator
 from excite.core.kinematics import Params
 from excite.errors import MetricError
+from excite.stats.chi2 import chi2_quantile
 
 __all__ = [
     "CONFIDENCE",

@@ -72,8 +72,9 @@ from excite.core import se2
 from excite.core.kinematics import Params, predict_increment, wrap_angle
 from excite.core.models import SensorPose
 from excite.errors import DataError
+from excite.logs.continuity import check_continuity
 from excite.logs.segments import read_text
-from excite.logs.timeseries import TimeSeries, check_continuity
+from excite.logs.timeseries import TimeSeries
 
 __all__ = [
     "Loop",
@@ -355,7 +356,7 @@ def validate_log(series: TimeSeries, time_offset: float, calibrated: Robot, nomi
     time_offset (s): pose time + time_offset = encoder time. name: the log's name in messages
     and results (default: the pose stream's source). Raises DataError when fewer than 2 pose
     samples fall within the encoder time range, and
-    (:func:`excite.logs.timeseries.check_continuity`)
+    (:func:`excite.logs.continuity.check_continuity`)
     when either stream jumps.
     """
     name = series.source[1] if name is None else name

@@ -126,6 +126,7 @@ def _rows(path):
         return list(csv.DictReader(handle))
 
 
+@pytest.mark.slow
 def test_comparison_outputs_and_paired_episodes(tmp_path):
     settings = CompareSettings(IDEAL, 6, 1)
     rows = run_comparison(tmp_path, ["umbmark", "greedy"], 3, settings, workers=1,
@@ -141,6 +142,7 @@ def test_comparison_outputs_and_paired_episodes(tmp_path):
     assert len({oracle[("greedy", str(e))] for e in range(3)}) == 3
 
 
+@pytest.mark.slow
 def test_rerun_adds_only_what_is_missing_and_rejects_other_settings(tmp_path):
     settings = CompareSettings(IDEAL, 4, 0)
     run_comparison(tmp_path, ["spin"], 2, settings, workers=1, progress=False)
@@ -164,6 +166,7 @@ def _line_count(path) -> int:
         return sum(1 for _ in handle)
 
 
+@pytest.mark.slow
 def test_killed_comparison_resumes_without_loss_or_duplicates(tmp_path):
     """Kill a running `excite compare` (SIGKILL, no chance to clean up) and re-run it."""
     out = tmp_path / "run"
@@ -189,6 +192,7 @@ def test_killed_comparison_resumes_without_loss_or_duplicates(tmp_path):
     assert _line_count(out / "segments.csv") == 2 * 24 * 10 + 1
 
 
+@pytest.mark.slow
 def test_compare_cli_writes_summary_and_plots(tmp_path, capsys):
     from matplotlib.image import imread
 
@@ -206,6 +210,7 @@ def test_compare_cli_writes_summary_and_plots(tmp_path, capsys):
         assert image.shape[0] > 100 and image.std() > 0.01
 
 
+@pytest.mark.slow
 def test_compare_runs_on_the_sensor_env_and_skips_a_policy_of_another_layout(tmp_path, capsys):
     """greedy and the oracle plan with the six-parameter model; the shipped policy (trained on
     the axle env's 16 observations) is skipped with a one-line message, the rest runs."""
@@ -242,9 +247,9 @@ def test_compare_runs_on_the_sensor_env_and_skips_a_policy_of_another_layout(tmp
         (["compare", "--estimators", "online,,ekf"], "empty name"),
         (["compare", "--estimators", ""], "empty name"),
         (["compare", "--estimators", "window:width=3"], "'width=3' is not a setting"),
-        (["compare", "--estimators", "tests.test_compare:missing"], "has no 'missing'"),
+        (["compare", "--estimators", "tests.agents.test_compare:missing"], "has no 'missing'"),
         (["compare", "--estimators", "no_such_module_x:f"], "cannot import module"),
-        (["compare", "--estimators", "tests.test_compare:two_arguments_too_few",
+        (["compare", "--estimators", "tests.agents.test_compare:two_arguments_too_few",
           "--episodes", "1", "--segments", "2"], "its factory raised TypeError"),
         (["compare", "--protocols", "learned", "--episodes", "1"], "learned policy"),
         (["simulate", "--protocol", "zigzag", "--segments", "3", "--out", "x.csv"],
@@ -280,6 +285,7 @@ def test_compare_runs_on_the_sensor_env_and_skips_a_policy_of_another_layout(tmp
          "adir/summary.json: it is a folder"),
     ],
 )
+@pytest.mark.slow
 def test_compare_and_simulate_bad_input(tmp_path, capsys, monkeypatch, argv, fragment):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "afile").write_text("a file, not a folder\n")
@@ -345,7 +351,7 @@ def test_estimators_run_on_the_same_episodes_and_resume_per_estimator(tmp_path):
                            progress=False, estimators=["online"])
     assert {r["estimator"] for r in first} == {"online"} and len(first) == 2 * 2 * 5
     before = _rows(tmp_path / "segments.csv")
-    user = "tests.test_compare:inflated_online"
+    user = "tests.agents.test_compare:inflated_online"
     rows = run_comparison(tmp_path, ["greedy", "arcs"], 2, settings, workers=1,
                           progress=False, estimators=["online", user])
     assert len(rows) == 2 * 2 * 2 * 5
@@ -381,14 +387,15 @@ def _episode_seed(settings, episode):
     return episode_seed(settings.seed, episode, settings.stream)
 
 
+@pytest.mark.slow
 def test_compare_cli_estimators_axis(tmp_path, capsys):
     code = main(["compare", "--protocols", "umbmark,greedy", "--estimators",
-                 "online,ekf,tests.test_compare:inflated_online", "--episodes", "2",
+                 "online,ekf,tests.agents.test_compare:inflated_online", "--episodes", "2",
                  "--segments", "5", "--env", IDEAL, "--workers", "1", "--out", str(tmp_path)])
     out = capsys.readouterr().out
     assert code == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
-    estimators = ["online", "ekf", "tests.test_compare:inflated_online"]
+    estimators = ["online", "ekf", "tests.agents.test_compare:inflated_online"]
     assert summary["settings"]["estimators"] == estimators
     for protocol in ("umbmark", "greedy"):
         assert list(summary["protocols"][protocol]) == estimators
@@ -428,6 +435,7 @@ def test_run_comparison_rejects_no_or_repeated_estimators(tmp_path):
     assert not (tmp_path / "segments.csv").exists()
 
 
+@pytest.mark.slow
 def test_resume_refuses_results_of_a_policy_file_changed_at_the_same_path(tmp_path):
     """The label learned:policy=PATH names a path, not a policy: a file retrained at the same
     path must not reuse the old file's results (the folder ties them to its sha256)."""

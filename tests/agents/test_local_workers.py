@@ -54,6 +54,7 @@ def _started_compare(out: Path) -> tuple[subprocess.Popen, set[int]]:
     return proc, workers
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
 def test_workers_end_with_their_parent(tmp_path, sig):
     proc, workers = _started_compare(tmp_path / "out")

@@ -50,7 +50,7 @@ class Zigzag(Protocol):
         return np.array([0.3 - turn, 0.3 + turn])
 
 
-ZIGZAG = "tests.test_protocols:Zigzag"
+ZIGZAG = "tests.agents.test_protocols:Zigzag"
 
 
 def test_parameter_syntax_labels_and_settings():
@@ -112,10 +112,11 @@ def test_excite_protocols_lists_names_parameters_defaults_and_ranges(capsys):
         assert f"{name}  ({PROTOCOLS[name]})" in out
     assert "speed         float  0.5      [0.1, 1.0]" in out
     assert "lookahead     bool   false" in out
-    code, _, err = run_cli(capsys, "protocols", "tests.test_protocols:Nope")
+    code, _, err = run_cli(capsys, "protocols", "tests.agents.test_protocols:Nope")
     assert_one_line_error(code, err, "no Protocol subclass named 'Nope'")
 
 
+@pytest.mark.slow
 def test_a_user_protocol_plugs_in_by_module_and_class(tmp_path, capsys, monkeypatch):
     """Defined here, never registered in excite: described, compared and tuned by its entry
     point; registering a name for it is one call."""
@@ -164,6 +165,7 @@ def _tuning_rows(path):
         return [(r["protocol"], r["episode"], r["segment"]) for r in csv.DictReader(handle)]
 
 
+@pytest.mark.slow
 def test_tune_writes_settings_and_seeds_resumes_and_compare_uses_them(tmp_path, capsys):
     out = tmp_path / "tuned.json"
     argv = ["tune", "--protocols", "umbmark,greedy:grid=5", "--segments", "5", "--env", IDEAL,
@@ -246,6 +248,7 @@ def test_shipped_tuned_settings_were_tuned_on_tuning_seeds_only(path):
         parse_protocol(label).under(entry["settings"])  # every setting valid today
 
 
+@pytest.mark.slow
 def test_compare_of_a_preset_runs_that_presets_shipped_settings(tmp_path, capsys):
     path = shipped_path(DEFAULT_ENV_ID, "turtlebot3")
     label = load_tuned(path)["protocols"]["umbmark"]["label"]
@@ -255,6 +258,7 @@ def test_compare_of_a_preset_runs_that_presets_shipped_settings(tmp_path, capsys
     assert code == 0 and label in text and str(path) in text
 
 
+@pytest.mark.slow
 def test_default_compare_runs_the_shipped_settings(tmp_path, capsys):
     document = load_tuned(shipped_path(DEFAULT_ENV_ID))
     code, text, _ = run_cli(capsys, "compare", "--protocols", "umbmark", "--episodes", "1",

@@ -41,6 +41,7 @@ def test_chunk_size_gives_tasks_of_at_least_the_target():
     assert chunk_size(0.0, 0.2) == 1
 
 
+@pytest.mark.slow
 def test_ray_tasks_yield_results_as_they_finish(ray_cluster, tmp_path):
     """The first task submitted waits for a file the driver writes only after it received
     the second task's result: results come in completion order, not submission order."""
@@ -75,6 +76,7 @@ def _wait_for(path: str | None, value: str, timeout: float = 60.0) -> str:
     return value
 
 
+@pytest.mark.slow
 def test_compare_on_ray_writes_the_same_file_as_local(ray_cluster, tmp_path, local_reference):
     rows = run_comparison(tmp_path, PROTOCOLS, EPISODES, SETTINGS, progress=False,
                           backend="ray")
@@ -82,6 +84,7 @@ def test_compare_on_ray_writes_the_same_file_as_local(ray_cluster, tmp_path, loc
     assert (tmp_path / "segments.csv").read_bytes() == local_reference
 
 
+@pytest.mark.slow
 def test_ray_comparison_resumes_like_a_local_one(ray_cluster, tmp_path, local_reference):
     run_comparison(tmp_path, PROTOCOLS[:2], 5, SETTINGS, progress=False, backend="ray")
     with open(tmp_path / "segments.csv", "a") as handle:  # an interrupted write
@@ -95,6 +98,7 @@ def _line_count(path) -> int:
         return sum(1 for _ in handle)
 
 
+@pytest.mark.slow
 def test_killed_ray_compare_cli_resumes_to_the_local_file(ray_cluster, tmp_path,
                                                          local_reference):
     """`excite compare --backend ray --address` joins the session's Ray; SIGKILL it after
@@ -138,6 +142,7 @@ def test_bad_backend_options(tmp_path, capsys, monkeypatch, argv, fragment):
     assert not (tmp_path / "excite_compare").exists()
 
 
+@pytest.mark.slow
 def test_unreachable_ray_address_is_a_one_line_error_at_once(tmp_path):
     """In a fresh process (this one may already hold the session's Ray): nothing listens on
     port 1, and RAY_ADDRESS is read like --address."""
@@ -166,6 +171,7 @@ def test_open_backend_rejects_unknown_names():
         pass
 
 
+@pytest.mark.slow
 def test_tune_on_ray_writes_the_same_settings_as_local(ray_cluster, tmp_path, capsys):
     common = ["tune", "--protocols", "umbmark,spin", "--episodes", "6", "--segments", "5",
               "--env", IDEAL]

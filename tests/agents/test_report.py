@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 
 from agents.metrics import error_time_area, time_to_accuracy
-from agents.report import format_table, plot_comparison, summarize
+from agents.plots import plot_comparison
+from agents.summary import summarize
+from agents.tables import format_table
 from excite.stats.consistency import anees_bounds
 
 PROTOCOLS = ("straight", "greedy", "spin")  # order of first appearance in the rows
@@ -143,6 +145,7 @@ def test_format_table_fits_extreme_values(columns):
     assert max(len(line) for line in table.splitlines()) <= 100
 
 
+@pytest.mark.slow
 def test_plot_comparison_writes_four_images(columns, tmp_path):
     import matplotlib.image
 

@@ -159,6 +159,7 @@ def test_without_the_nominal_traction_it_says_what_it_needs():
         planner.act(knowledge)
 
 
+@pytest.mark.slow
 def test_runs_in_compare_beside_greedy(tmp_path, capsys):
     code, out, _ = run_cli(capsys, "compare", "--protocols", "slip_aware,greedy", "--episodes",
                            "2", "--segments", "6", "--workers", "1", "--tuned", "none",

@@ -39,6 +39,7 @@ def _table(out):
         return list(csv.DictReader(handle))
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("ray")
 def test_sweep_of_four_tiny_trials_writes_the_table_and_a_loadable_best_policy(
         ray_cluster, tmp_path, capsys):
@@ -67,6 +68,7 @@ def test_sweep_of_four_tiny_trials_writes_the_table_and_a_loadable_best_policy(
     assert code == 0 and "learned" in printed
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("ray")
 def test_killed_sweep_resumes_its_trials(ray_cluster, tmp_path):
     """SIGKILL `excite sweep` (joined to the session's Ray) once a trial has finished; the
@@ -174,6 +176,7 @@ def test_bad_sweep_options(tmp_path, capsys, monkeypatch, argv, fragment):
     assert_one_line_error(code, err, fragment)
 
 
+@pytest.mark.slow
 def test_another_config_in_the_same_folder_is_refused_once_a_trial_ran(tmp_path):
     """A sweep that fails while starting (here: no Ray at --address) leaves DIR/sweep.yaml
     but nothing ran, so another config may use the folder; once a trial folder exists, the

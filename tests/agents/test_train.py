@@ -27,6 +27,7 @@ def small_config(tmp_path):
     return path
 
 
+@pytest.mark.slow
 def test_smoke_train_save_load_evaluate_and_resume(tmp_path, small_config, capsys):
     out = tmp_path / "run"
     summary = train(out, "ppo", 2048, n_envs=2, seed=3, config_path=small_config,
@@ -54,6 +55,7 @@ def test_smoke_train_save_load_evaluate_and_resume(tmp_path, small_config, capsy
     assert code == 0 and "learned" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_training_is_reproducible_under_a_seed(tmp_path, small_config):
     params = []
     for run in ("a", "b"):
@@ -206,6 +208,7 @@ def test_training_without_an_evaluation_in_its_steps_evaluates_once_at_the_end(
     make_protocol(ProtocolSpec.of("learned", {"policy": str(out / "best_model.zip")}))
 
 
+@pytest.mark.slow
 def test_a_used_out_folder_needs_resume_and_resume_takes_no_new_settings(
         tmp_path, small_config, capsys):
     out = tmp_path / "run"

@@ -11,7 +11,7 @@ from excite.core.kinematics import Params
 from excite.core.models import SensorPose
 from excite.logs.segments import load_segments
 from excite.logs.synthetic import synthetic_log
-from excite.logs.timeseries import write_timeseries
+from excite.logs.timeseries_csv import write_timeseries
 from tests.conftest import run_cli
 
 TRUTH = Params(0.050, 0.051, 0.300)
@@ -92,6 +92,7 @@ def test_time_offset_estimate_and_its_search_range(capsys, tmp_path):
     assert "time offset +2.500" in json.loads(out)["inputs"][0]
 
 
+@pytest.mark.slow
 def test_an_unflagged_clock_offset_is_noted_and_changes_nothing(capsys, tmp_path, logs):
     """Without --time-offset, a log whose clocks are 0.15 s apart gets a one-line note on
     stderr and the estimate in its JSON description, and is calibrated with offset 0 as
@@ -116,6 +117,7 @@ def test_an_unflagged_clock_offset_is_noted_and_changes_nothing(capsys, tmp_path
     assert json.loads(given)["params"] == json.loads(out)["params"]
 
 
+@pytest.mark.slow
 def test_wrapped_wheel_angles_through_the_cli(capsys, tmp_path):
     """A log whose wheel angles are wrapped to [-pi, pi) calibrates as the cumulative one, and
     its description says they were unwrapped."""
@@ -221,6 +223,7 @@ def test_the_slip_share_is_reported(capsys, tmp_path, slip):
     assert "% of a segment's wheel turn)" in out and err == ""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jitter", [0.0, 0.0015, 0.004])
 def test_the_encoder_timing_is_reported(capsys, tmp_path, jitter):
     """timing: the std of the encoder samples' time errors (s), in --json and on the noise
@@ -289,7 +292,7 @@ def bag_log():
     (["--pose-topic", "/odom"], "no topic /odom (poses); the bag has: /joint_states"),
 ])
 def test_bad_bag_options_through_the_cli(capsys, tmp_path, bag_log, storage, extra, fragment):
-    from excite.logs.bags import write_bag
+    from excite.logs.bag_writer import write_bag
 
     path = tmp_path / ("log.bag" if storage == "ros1" else "log")
     write_bag(path, bag_log, storage=storage)
@@ -303,7 +306,7 @@ def test_bad_bag_options_through_the_cli(capsys, tmp_path, bag_log, storage, ext
 
 @pytest.mark.parametrize("storage", ["sqlite3", "mcap", "ros1"])
 def test_an_empty_bag_through_the_cli(capsys, tmp_path, storage):
-    from excite.logs.bags import BagWriter
+    from excite.logs.bag_writer import BagWriter
 
     path = tmp_path / ("log.bag" if storage == "ros1" else "log")
     with BagWriter(path, storage):
@@ -313,13 +316,15 @@ def test_an_empty_bag_through_the_cli(capsys, tmp_path, storage):
     assert code == 2 and err.count("\n") == 1 and "empty bag (no messages)" in err
 
 
+@pytest.mark.slow
+@pytest.mark.statistical
 def test_the_driving_test_holds_its_size_on_random_slip():
     """Logs whose only errors are pose noise and random wheel slip (the model's): the score
     statistic of "r_L, r_R, b differ where the wheels speed up or slow down" is chi-square
     with 3 dof, so over 30 logs its mean stays near 3 (std of the mean 0.45) and the fit
     passes."""
     from excite.calibration.pipeline import calibrate
-    from excite.logs.timeseries import segment_timeseries
+    from excite.logs.segmentation import segment_timeseries
 
     statistics = []
     for seed in range(30):

@@ -19,7 +19,9 @@ from envs.recording import START_TIME_NS, Recording, along_arc
 from excite import calibrate
 from excite.cli import main
 from excite.core import se2
-from excite.logs.timeseries import TimeSeries, read_timeseries, segment_timeseries, write_timeseries
+from excite.logs.segmentation import segment_timeseries
+from excite.logs.timeseries import TimeSeries
+from excite.logs.timeseries_csv import read_timeseries, write_timeseries
 
 IDEAL, SENSOR = "excite/DiffDriveCalibIdeal-v0", "excite/DiffDriveCalibSensor-v0"
 STREAMS = ("t_enc", "phi_L", "phi_R", "t_pose", "x", "y", "theta")
@@ -152,9 +154,11 @@ def test_timeseries_csv_reads_back_the_recording(tmp_path, recorded):
         write_timeseries(tmp_path / "x.csv", rec.series, ticks_per_rev=1000)
 
 
+@pytest.mark.slow
 def test_bags_of_every_storage_read_back_identically(tmp_path, recorded):
     pytest.importorskip("rosbags")
-    from excite.logs.bags import STORAGES, read_bag, write_bag
+    from excite.logs.bag_reader import read_bag
+    from excite.logs.bag_writer import STORAGES, write_bag
 
     series = recorded.unwrapped.recording.series
     logs = [read_bag(write_bag(tmp_path / ("log.bag" if s == "ros1" else s), series, storage=s),
@@ -216,8 +220,7 @@ def simulate(tmp_path: Path, *options: str, out: str = "log.csv", env: str = SEN
     path = tmp_path / out
     assert main(["simulate", "--protocol", "random", "--segments", "4", "--seed", str(seed),
                  "--env", env, "--out", str(path), *options]) == 0
-    truth = path.with_name(path.stem + ".truth.json") if path.suffix == ".csv" else Path(
-        f"{path}.truth.json")
+    truth = path.with_name(path.stem + ".truth.json")  # log.csv, run.bag, run: NAME.truth.json
     return path, json.loads(truth.read_text())
 
 
@@ -282,7 +285,7 @@ def test_simulate_segments_is_unchanged(tmp_path):
                                           ("ros1", "run.bag")])
 def test_simulate_bag(tmp_path, storage, out):
     pytest.importorskip("rosbags")
-    from excite.logs.bags import read_bag
+    from excite.logs.bag_reader import read_bag
 
     path, truth = simulate(tmp_path, "--format", "bag", "--storage", storage, out=out)
     csv, _ = simulate(tmp_path, "--format", "timeseries", out="log.csv")

@@ -127,6 +127,10 @@ class TwoParams(_Fixed):
 class NaNCovariance(_Fixed):
     def update(self, *row):
         self.covariance = np.full((3, 3), np.nan)
+
+class OneArgUpdate(_Fixed):
+    def update(self, segment):
+        pass
 '''
 BROKEN = {"plugin_importerror": "raise ImportError('missing dependency xyz')\n",
           "plugin_zerodivision": "x = 1 / 0\n", "plugin_syntax": "def f(:\n"}
@@ -214,6 +218,8 @@ def test_a_bad_action_in_a_compare_worker_is_named(plugins, tmp_path, capsys):
     ("NaNParams", "params is array([nan, nan, nan]), not 3 finite values"),
     ("TwoParams", "params is array([1., 2.]), not 3 finite values"),
     ("NaNCovariance", "covariance is array([[nan, nan, nan], [nan, nan, nan], [nan, "),
+    ("OneArgUpdate", "its update(segment) does not take the segment's five values "
+                     "update(dphi_L, dphi_R, dx, dy, dtheta) (rad, rad, m, m, rad)"),
 ])
 def test_a_misbehaving_user_estimator_is_a_one_line_error_naming_it(plugins, tmp_path, capsys,
                                                                     factory, fragment):

@@ -12,8 +12,9 @@ import pytest
 from excite import save_segments
 from excite.core.kinematics import Params
 from excite.core.models import SensorPose
+from excite.logs.segmentation import segment_timeseries
 from excite.logs.synthetic import synthetic_log
-from excite.logs.timeseries import TimeSeries, segment_timeseries
+from excite.logs.timeseries import TimeSeries
 from excite.validation.dead_reckoning import (
     dead_reckon,
     find_loops,
@@ -247,6 +248,7 @@ def test_nominal_sensor_pose_override(capsys, log_files, params_file):
     assert ratio < 0.5
 
 
+@pytest.mark.slow
 def test_params_from_calibrate_and_plot(capsys, tmp_path, rng, log_files):
     # Calibrate on one log, validate on another: the calibrate --json output is the input.
     training = synthetic_log(rng, 120.0, TRUTH, SENSOR, pose_noise=(0.002, 0.001), step=0.002)

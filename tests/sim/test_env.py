@@ -25,6 +25,7 @@ def test_gymnasium_and_sb3_check_env_without_warnings(env_id):
     assert [str(w.message) for w in caught] == []
 
 
+@pytest.mark.slow
 def test_both_registration_orders_work():
     import subprocess
     import sys
@@ -79,6 +80,7 @@ def test_gymnasium_vector_envs(vector_cls):
     envs.close()
 
 
+@pytest.mark.slow
 def test_sb3_subproc_vec_env():
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import SubprocVecEnv
@@ -237,6 +239,8 @@ def test_pluggable_estimator_and_ideal_env_batch_consistency():
     assert 2.0 < np.mean(nees) < 4.2, np.mean(nees)
 
 
+@pytest.mark.slow
+@pytest.mark.statistical
 def test_estimator_harness_ideal_is_consistent_and_slip_is_not():
     ideal = check_estimator("excite/DiffDriveCalibIdeal-v0", episodes=40, budget=60)
     assert_consistent(ideal)
@@ -303,3 +307,24 @@ def test_robot_presets_scale_the_arena_and_run(preset):
     for _ in range(5):
         obs, *_ = env.step(env.action_space.sample())
         assert env.observation_space.contains(obs)
+
+
+def test_a_user_factory_whose_update_breaks_the_contract_is_a_one_line_error():
+    """An estimator given straight to the env (not through a spec) whose update takes one
+    argument: an EstimatorError naming what is wrong at reset, not a TypeError inside step."""
+    from excite.errors import EstimatorError
+
+    class OneArgument:
+        params = np.array([0.05, 0.05, 0.3])
+        covariance = np.eye(3)
+
+        def update(self, segment):
+            pass
+
+    def factory(nominal, sigma):
+        return OneArgument()
+
+    env = gym.make("excite/DiffDriveCalibIdeal-v0", estimator_factory=factory)
+    with pytest.raises(EstimatorError, match=r"estimator .*factory.*: its update\(segment\) does "
+                                             r"not take the segment's five values"):
+        env.reset(seed=0)

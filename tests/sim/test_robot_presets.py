@@ -10,7 +10,6 @@ import pickle
 import numpy as np
 import pytest
 
-from envs.physics import Arena
 from envs.robot import (
     DEFAULT_CHASSIS_SIZE,
     PRESETS,
@@ -21,6 +20,7 @@ from envs.robot import (
 )
 from envs.simulation import SPAWN_MARGIN, Simulation, SimulationConfig, spawn_margin
 from excite import Params, predict_increment
+from excite.core.arena import Arena
 
 NAMES = sorted(PRESETS)
 

@@ -10,11 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from envs.physics import Arena
 from envs.robot import DEFAULT_CHASSIS_SIZE as CHASSIS_SIZE
 from envs.robot import RobotDistribution, RobotSpec
-from envs.sensors import RelativePoseSensor, WheelEncoders, relative_pose
+from envs.sensors import RelativePoseSensor, WheelEncoders
 from envs.simulation import SPAWN_MARGIN, Simulation, SimulationConfig
+from excite.core import se2
+from excite.core.arena import Arena
 
 DIST = RobotDistribution()
 BIG = {"arena_width": 200.0, "arena_height": 200.0}  # room for any segment without walls
@@ -134,7 +135,7 @@ def test_ideal_path_is_the_arc_at_physics_rate():
     assert out.path.shape == (31, 3)
     np.testing.assert_array_equal(out.path[0], out.pose_start)
     np.testing.assert_array_equal(out.path[-1], out.pose_end)
-    half = relative_pose(out.pose_start, out.path[15])
+    half = se2.between_scalar(out.pose_start, out.path[15])
     expected = kinematic_increment(out.true_dphi / 2, sim.robot)
     np.testing.assert_allclose(half, expected, atol=1e-12)
 
@@ -213,18 +214,6 @@ def test_segment_measurement_layout():
     assert np.all(np.abs(out.measurement[2:] - out.true_increment) < 6 * sim.pose_sensor.sigma)
     for array in (out.measurement, out.true_increment, out.path, out.pose_end):
         assert not array.flags.writeable
-
-
-def test_relative_pose_is_se2_between_bit_for_bit():
-    """The single env's scalar increment and the batch's se2.between give the same bits (the
-    vector env's robot i equals the single env bit for bit)."""
-    from excite.core import se2
-    rng = np.random.default_rng(5)
-    starts = rng.uniform(-50, 50, (2000, 3))
-    ends = starts + rng.normal(0, 2, (2000, 3))
-    batch = se2.between(starts, ends)
-    single = np.array([relative_pose(a, b) for a, b in zip(starts, ends, strict=True)])
-    np.testing.assert_array_equal(single.view(np.int64), batch.view(np.int64))
 
 
 def test_relative_pose_sensor_statistics():
@@ -318,7 +307,7 @@ def test_collision_reported_when_driving_into_a_wall(ideal):
 
 def test_layer_imports_no_rl_or_agents():
     root = Path(__file__).resolve().parents[2] / "envs"
-    for name in ("robot.py", "physics.py", "sensors.py", "simulation.py"):
+    for name in ("robot.py", "physics.py", "ideal_drive.py", "sensors.py", "simulation.py"):
         tree = ast.parse((root / name).read_text())
         modules = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
         modules += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]

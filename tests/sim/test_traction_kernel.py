@@ -8,6 +8,7 @@ import sys
 import numba
 import numpy as np
 import pymunk.batch
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,10 +19,8 @@ from envs.traction_kernel import (
     PATH_FIELDS,
     STATE_FIELDS,
     TRACTION_FIELDS,
-    sinc_cosc,
     traction_tick,
 )
-from excite.core.kinematics import TINY_THRESHOLD, sinc_cosc_scalar
 
 DT = 1.0 / 50.0
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -31,13 +30,6 @@ COLUMN = {name: j for j, name in enumerate(STATE_FIELDS)}
 def bits(values) -> np.ndarray:
     """The float64 bit patterns (so -0.0 != 0.0 and equal means identical)."""
     return np.asarray(values, dtype=np.float64).view(np.int64)
-
-
-@given(st.one_of(st.floats(-2 * TINY_THRESHOLD, 2 * TINY_THRESHOLD),
-                 st.floats(-20.0, 20.0), st.floats(-1e8, 1e8)))
-@settings(max_examples=400, deadline=None)
-def test_sinc_cosc_is_the_kinematics_one_bit_for_bit(u):
-    np.testing.assert_array_equal(bits(sinc_cosc(u)), bits(sinc_cosc_scalar(u, False)))
 
 
 def random_batch(rng: np.random.Generator, n: int, hard: bool):
@@ -149,6 +141,7 @@ def test_the_robot_loop_is_not_vectorised():
     assert "svml" not in asm.lower()
 
 
+@pytest.mark.slow
 def test_the_compiled_kernel_is_reused_from_the_disk_cache(tmp_path):
     """A fresh process compiles the kernel once into the cache directory; the next process
     loads it from there instead of compiling."""

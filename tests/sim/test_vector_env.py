@@ -283,7 +283,8 @@ def test_batched_observations_are_the_single_env_observation(model):
     """observations (the vector env's, batch-first) and observation (the single env's, on
     Python floats) give the same float32 numbers, clipping and the eigenvector's sign
     included (ties in magnitude: the first entry decides)."""
-    from envs.env import DiffDriveCalibEnv, observation, observations
+    from envs.env import DiffDriveCalibEnv
+    from envs.observation import observation, observations
 
     env = DiffDriveCalibEnv(sensor_pose=None if model is AXLE else {"x": (0.0, 0.1)})
     rng = np.random.default_rng(0)
@@ -312,7 +313,7 @@ def test_batched_sensor_increments_and_poses_are_the_single_robots():
     """body_to_sensor with one mounting per increment, and measure_poses / sense_increments
     of N robots, are the one-robot computations bit for bit (each robot drawing its own
     noise)."""
-    from envs.env import measure_poses, sense_increments
+    from envs.observation import measure_poses, sense_increments
     from envs.sensors import RelativePoseSensor
     from excite.core.models import SensorPose, body_to_sensor
 

@@ -7,16 +7,18 @@ on logs whose pose error wanders (synthetic_log's pose_noise_time)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from excite.calibration import pipeline as calibration
-from excite.calibration.pipeline import TEST_LEVEL, calibrate
+from excite.calibration import covariance, fit_tests
+from excite.calibration.options import TEST_LEVEL
+from excite.calibration.pipeline import calibrate
 from excite.core.models import SensorPose
+from excite.logs.segmentation import segment_timeseries
 from excite.logs.segments import Segments
 from excite.logs.synthetic import synthetic_log
-from excite.logs.timeseries import segment_timeseries
 from excite.stats.autocorrelation import (
     LJUNG_BOX_LAGS,
     at_least,
@@ -128,6 +130,7 @@ def _log(seed: int, correlation_time: float):
     return segment_timeseries(log.series).segments
 
 
+@pytest.mark.slow
 def test_calibrate_widens_the_covariance_only_when_the_residuals_are_correlated(monkeypatch):
     """Pose noise wandering over 20 s (benchmarks: flagged in ~40% of logs): of 8 logs at
     least one is flagged, and each flagged one reports the test and the Newey-West window, and
@@ -144,7 +147,7 @@ def test_calibrate_widens_the_covariance_only_when_the_residuals_are_correlated(
             assert "correlated over time" in result.fit.message
             assert result.fit.ok  # widened, not a misfit
             with monkeypatch.context() as m:  # the same fit without the widening
-                m.setattr(calibration, "_long_run",
+                m.setattr(covariance, "_long_run",
                           lambda mf, inverse, covariance, test, runs: (covariance, test))
                 model = calibrate(_log(seed, 20.0), sensor_pose="estimate")
             assert np.all(np.diag(result.full_covariance)
@@ -159,11 +162,12 @@ def test_calibrate_widens_the_covariance_only_when_the_residuals_are_correlated(
     assert "correlated over time" not in white.fit.message
 
 
+@pytest.mark.slow
 def test_calibrate_counts_neighbours_only_inside_each_log(monkeypatch):
     """Two logs calibrated as one data set (flagged and widened): the test and Newey-West see
     two runs."""
     seen = []
-    real_ljung_box, real_long_run = calibration.ljung_box, calibration.long_run_covariance
+    real_ljung_box, real_long_run = fit_tests.ljung_box, covariance.long_run_covariance
 
     def ljung_box_spy(white, runs=None, *args):
         seen.append(("test", np.unique(runs).size))
@@ -173,8 +177,8 @@ def test_calibrate_counts_neighbours_only_inside_each_log(monkeypatch):
         seen.append(("widening", np.unique(runs).size))
         return real_long_run(scores, inverse, runs, *args)
 
-    monkeypatch.setattr(calibration, "ljung_box", ljung_box_spy)
-    monkeypatch.setattr(calibration, "long_run_covariance", long_run_spy)
+    monkeypatch.setattr(fit_tests, "ljung_box", ljung_box_spy)
+    monkeypatch.setattr(covariance, "long_run_covariance", long_run_spy)
     both = Segments.concatenate([_log(4, 20.0), _log(5, 20.0)])  # each flagged alone
     result = calibrate(both, sensor_pose="estimate")
     assert ("test", 2) in seen
@@ -193,6 +197,7 @@ def test_a_misfit_is_not_blamed_on_serial_correlation():
     assert "wandering" not in result.fit.message
 
 
+@pytest.mark.slow
 def test_the_report_carries_the_test():
     """--json's fit: the test's numbers and the Newey-West window (JSON-clean)."""
     import json

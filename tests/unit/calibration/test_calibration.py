@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from excite import DataError, Params, calibrate
-from excite.calibration.pipeline import initial_estimate
+from excite.calibration.starts import initial_estimate
 from excite.core.information import crlb_relative_std, fisher_information, scaled_jacobian
 from excite.logs.synthetic import lesson_dataset
 from tests.conftest import TRUTH, exact_segments, spin_segments, straight_segments
@@ -43,6 +43,8 @@ def test_estimated_sigma_recovers_the_noise_levels(rng):
     assert result.sigma_estimated
 
 
+@pytest.mark.slow
+@pytest.mark.statistical
 @pytest.mark.parametrize("sigma_known", [True, False])
 def test_monte_carlo_rmse_reaches_the_cramer_rao_bound(sigma_known):
     """Efficiency in the regime where the unweighted lesson estimator is ~2.5x the bound.
@@ -248,8 +250,8 @@ def test_a_noise_free_log_is_fitted_to_the_truth(sensor):
     channel ~1e10 times more precise than the lengths: every determined direction must still
     step (the relative SVD cut alone froze the common scale at the closed-form start, 0.17%
     off with std 1e-6) and the damping must be able to vanish (it crawled along the scale)."""
+    from excite.logs.segmentation import segment_timeseries
     from excite.logs.synthetic import synthetic_log
-    from excite.logs.timeseries import segment_timeseries
 
     log = synthetic_log(np.random.default_rng(5), 60, TRUTH, sensor)
     result = calibrate(segment_timeseries(log.series).segments)

@@ -11,21 +11,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from excite.calibration.noise import (
-    SEGMENT_NOISE_TEST_LEVEL,
-    ChainWhitener,
-    NoiseLevels,
-    WheelNoise,
-    chi2_quantile,
-    chi_bar_square_quantile,
-)
+from excite.calibration.noise import ChainWhitener, NoiseLevels, WheelNoise
 from excite.calibration.pipeline import calibrate
+from excite.calibration.reml import SEGMENT_NOISE_TEST_LEVEL
 from excite.calibration.solver import Problem, levenberg_marquardt
 from excite.core import se2
 from excite.core.models import SENSOR_POSE, SensorPose
+from excite.logs.segmentation import segment_timeseries
 from excite.logs.segments import Segments
 from excite.logs.synthetic import synthetic_log
-from excite.logs.timeseries import segment_timeseries
+from excite.stats.chi2 import chi2_quantile, chi_bar_square_quantile
 
 SENSOR = SensorPose(0.1, -0.03, 0.4)
 
@@ -82,6 +77,8 @@ def log_segments(seed: int, slip: float) -> tuple[Segments, np.ndarray]:
     return segment_timeseries(log.series).segments, truth
 
 
+@pytest.mark.slow
+@pytest.mark.statistical
 def test_no_segment_noise_is_found_on_logs_without_slip():
     """Pose noise only: the segment levels stay at their floor unless the test rejects (at
     most its level, 5%, of the logs; at 30 logs, more than 5 would be p < 0.01); the pose
@@ -96,6 +93,8 @@ def test_no_segment_noise_is_found_on_logs_without_slip():
     assert np.mean(pose, axis=0) == pytest.approx([2e-3, 2e-3], rel=0.05)
 
 
+@pytest.mark.slow
+@pytest.mark.statistical
 def test_reml_recovers_a_known_slip_level():
     """Random-walk wheel slip of 0.01 rad/sqrt(s) per wheel, with pose noise: the slip level
     estimated by REML through the wheels is within 25% of the truth in every log (its
@@ -110,6 +109,8 @@ def test_reml_recovers_a_known_slip_level():
     assert white <= 2
 
 
+@pytest.mark.slow
+@pytest.mark.statistical
 def test_slip_level_is_found_without_pose_noise():
     """Slip only (noise-free poses): the slip level within 15%, the white levels at the
     floor in at least 4 of 5 logs, and the pose levels (free, not tested) under 1e-4 (the
@@ -125,6 +126,8 @@ def test_slip_level_is_found_without_pose_noise():
     assert quiet >= 4
 
 
+@pytest.mark.slow
+@pytest.mark.statistical
 def test_estimated_levels_are_as_efficient_as_the_true_levels():
     """On logs with pose noise only (the encoders' resolution given), the test of "no
     segment noise" keeps the segment levels at their floor in all but a few logs (at its 5%
@@ -283,6 +286,8 @@ def test_wheel_noise_whitens_the_residuals_of_slipping_logs_at_the_truth():
     np.testing.assert_allclose(mean_square, 1.0, atol=0.1)
 
 
+@pytest.mark.slow
+@pytest.mark.statistical
 def test_calibration_is_consistent_on_slipping_logs():
     """The calibrated estimate of 40 slip-only logs against the truth: the mean normalised
     squared error e^T C^-1 e over the six parameters is that of chi2(6), 6 +- 1.6 (3 standard
@@ -338,6 +343,8 @@ def jittered_log(seed: int, jitter: float) -> tuple[Segments, np.ndarray]:
                                                                SENSOR.as_array())
 
 
+@pytest.mark.slow
+@pytest.mark.statistical
 def test_calibration_estimates_the_encoder_timing_and_stays_consistent():
     """Logs whose encoder samples are read 2 ms (std) off their stamps: the estimated timing
     level is the truth within 15% (median of 12 logs), the truth is inside the 95% ellipse

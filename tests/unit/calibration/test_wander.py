@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from excite.calibration import pipeline as calibration
+from excite.calibration import fit_tests
 from excite.calibration.noise import ChainWhitener, NoiseLevels, WheelNoise, chain_band
 from excite.calibration.pipeline import calibrate
 from excite.calibration.solver import Problem
@@ -32,9 +32,9 @@ from excite.calibration.wander import (
     wander_covariance,
 )
 from excite.core.models import SensorPose
+from excite.logs.segmentation import segment_timeseries
 from excite.logs.segments import Segments
 from excite.logs.synthetic import synthetic_log
-from excite.logs.timeseries import segment_timeseries
 
 SENSOR = SensorPose(0.1, -0.03, 0.4)
 
@@ -144,7 +144,7 @@ def test_the_restricted_deviance_has_the_analytic_gradient(u_list, with_wheels):
 def test_the_deviance_without_the_wander_is_the_chain_models():
     """With the heading error off, the dense deviance is the banded chain model's (the same
     likelihood as excite.calibration.noise's REML)."""
-    from excite.calibration.noise import _restricted_deviance
+    from excite.calibration.reml import _restricted_deviance
 
     seg = _log(6, 15.0)
     levels = NoiseLevels(np.array([1e-4, 2e-4, 3e-4]), np.array([2e-3, 1e-3]))
@@ -196,6 +196,7 @@ def _segments(seed: int, correlation_time: float) -> Segments:
     return _log(seed, 120.0, correlation_time)
 
 
+@pytest.mark.slow
 def test_a_wandering_heading_error_is_found_and_widens_the_mounting_angle(monkeypatch):
     """Pose heading errors wandering over 8 s (2 mrad): found (time and std of the right
     order), the message and --json say so, and the mounting angle's std is wider than the
@@ -210,7 +211,7 @@ def test_a_wandering_heading_error_is_found_and_widens_the_mounting_angle(monkey
     fit = json.loads(json.dumps(result.fit.to_dict(), allow_nan=False))
     assert set(fit["heading_wander"]) == {"std", "correlation_time", "statistic", "at_bound"}
     with monkeypatch.context() as m:  # the same fit without the wander
-        m.setattr(calibration, "estimate_wander", lambda *args, **kwargs: None)
+        m.setattr(fit_tests, "estimate_wander", lambda *args, **kwargs: None)
         chain = calibrate(seg, sensor_pose="estimate")
     assert np.allclose(result.params.as_array(), chain.params.as_array())
     assert result.sensor_pose_std[2] > 1.5 * chain.sensor_pose_std[2]
@@ -232,6 +233,7 @@ def test_short_logs_are_not_searched():
                            NoiseLevels(np.ones(3), np.ones(2)), np.full(3, 1e-9)) is None
 
 
+@pytest.mark.slow
 def test_joined_logs_reach_the_optimum():
     """Two 70 s logs joined (review: the search once stopped at a start where the dense
     covariance was singular, LR 20.6 at tau = 60 s): the optimum, LR about 49.6."""

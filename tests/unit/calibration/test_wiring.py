@@ -15,7 +15,7 @@ from excite.core.models import SENSOR_POSE, SensorPose
 from excite.errors import DataError
 from excite.logs.segments import Segments
 from excite.logs.synthetic import lesson_dataset, synthetic_log
-from excite.logs.timeseries import write_timeseries
+from excite.logs.timeseries_csv import write_timeseries
 from excite.validation.dead_reckoning import dead_reckon
 from tests.conftest import run_cli
 

@@ -3,7 +3,6 @@ against LAPACK."""
 
 import math
 
-import mpmath
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -11,7 +10,6 @@ from hypothesis import strategies as st
 
 from excite import Params
 from excite.core import information as I
-from excite.core.kinematics import sinc_and_derivative, sinc_and_derivative_scalar, sinc_family
 
 # Wheel increments (rad) giving heading changes from exactly 0 through tiny, the series seam
 # and several turns, including straight segments (equal increments) and spins.
@@ -57,48 +55,11 @@ def test_segment_information_equals_each_jacobian_product(segs, p, sigma):
     assert np.all(np.abs(got - expected) <= 1e-13 * size + TINY)
 
 
-def test_both_summation_paths_agree_around_the_switch():
-    rng = np.random.default_rng(0)
-    p, sigma = Params(0.05, 0.051, 0.3), (2e-3, 2e-3, 1e-3)
-    for n in (I._LOOP_MAX - 1, I._LOOP_MAX, I._LOOP_MAX + 1, 500):
-        phi = rng.uniform(-30, 30, (n, 2))
-        expected = _reference(phi, p, sigma, p)
-        got = I.information_matrix(phi[:, 0], phi[:, 1], p, sigma)
-        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-13 * np.abs(expected).max())
-
-
 def test_information_matrix_rejects_bad_sigma():
     with pytest.raises(ValueError, match="sigma"):
         I.information_matrix([1.0], [2.0], Params(0.05, 0.05, 0.3), (2e-3, 0.0, 1e-3))
     with pytest.raises(ValueError, match="sigma"):
         I.information_matrix([1.0], [2.0], Params(0.05, 0.05, 0.3), (2e-3, np.nan, 1e-3))
-
-
-def test_sinc_and_derivative_are_accurate_everywhere():
-    """Against 50-digit arithmetic, in units of the functions' natural size; the scalar and
-    vectorized forms agree."""
-    mpmath.mp.dps = 50
-    rng = np.random.default_rng(1)
-    u = np.concatenate([[0.0, -0.0, 5e-324, 1e-300, 1e-9, -1e-5, 0.999999, 1.0],
-                        rng.uniform(-1.2, 1.2, 400), rng.uniform(-60, 60, 400)])
-    f, fp = sinc_and_derivative(u)
-
-    def exact(x: float) -> tuple[float, float]:
-        if x == 0.0:
-            return 1.0, 0.0
-        m = mpmath.mpf(x)
-        return float(mpmath.sin(m) / m), float((m * mpmath.cos(m) - mpmath.sin(m)) / m**2)
-
-    ref = np.array([exact(x) for x in u])
-    size = np.maximum(1.0 / np.maximum(np.abs(u), 1.0), np.abs(ref[:, 0]))  # ~1/|u| far out
-    assert np.all(np.abs(f - ref[:, 0]) <= 4 * np.finfo(float).eps * size)
-    assert np.all(np.abs(fp - ref[:, 1]) <= 4 * np.finfo(float).eps * size)
-    scalar = np.array([sinc_and_derivative_scalar(float(x)) for x in u])
-    np.testing.assert_allclose(scalar[:, 0], f, rtol=0, atol=4e-16)
-    np.testing.assert_allclose(scalar[:, 1], fp, rtol=0, atol=4e-16)
-    F, _, FP, _ = sinc_family(u)  # the Jacobian's own branches agree
-    np.testing.assert_allclose(f, F, rtol=0, atol=4e-16)
-    np.testing.assert_allclose(fp, FP, rtol=0, atol=4e-16)
 
 
 def _random_symmetric(rng: np.random.Generator, eigenvalues) -> np.ndarray:

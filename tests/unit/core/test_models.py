@@ -121,20 +121,6 @@ def test_sensor_pose_rejects_non_finite_values():
     assert SensorPose(0, 0, 3 * math.pi).theta == pytest.approx(math.pi)
 
 
-@settings(max_examples=200, deadline=None)
-@given(r_L=lengths, r_R=lengths, b=lengths, phi_L=wheel, phi_R=wheel, l_x=offset, l_y=offset,
-       l_t=angle)
-def test_scalar_evaluation_equals_the_vectorized_one(r_L, r_R, b, phi_L, phi_R, l_x, l_y, l_t):
-    for model, theta in ((AXLE, (r_L, r_R, b)), (SENSOR_POSE, (r_L, r_R, b, l_x, l_y, l_t)),
-                         (FixedSensorPoseModel(SensorPose(l_x, l_y, l_t)), (r_L, r_R, b))):
-        prediction, rows = model.evaluate_scalar(phi_L, phi_R, theta)
-        expected, jac = model.evaluate(np.array([phi_L]), np.array([phi_R]), np.array(theta))
-        size = 1e-12 * (1.0 + np.abs(expected).max())
-        np.testing.assert_allclose(prediction, expected[:, 0], rtol=1e-12, atol=size)
-        np.testing.assert_allclose(np.array(rows), jac[:, :, 0], rtol=1e-11,
-                                   atol=1e-12 * (1.0 + np.abs(jac).max()))
-
-
 # --------------------------------------------------------------------------- sub-steps
 
 substep_wheel = st.lists(st.floats(-8.0, 8.0), min_size=1, max_size=5)
@@ -203,6 +189,7 @@ def _five_point(f, x: np.ndarray, index: tuple, h: float) -> np.ndarray:
 @settings(max_examples=200, deadline=None)
 @given(r_L=lengths, r_R=lengths, b=lengths, left=substep_wheel, right=substep_wheel,
        l_x=offset, l_y=offset, l_t=angle)
+@pytest.mark.slow
 def test_wheel_jacobian_equals_finite_differences(r_L, r_R, b, left, right, l_x, l_y, l_t):
     """d(measured increment)/d(each wheel sub-increment) of the three models, with sub-steps
     and (the first sub-step alone) without, against five-point differences."""

@@ -63,6 +63,8 @@ CHECKPOINTS = (1, 10, SEGMENTS)
 BOUNDS = anees_bounds(EPISODES, 3, confidence=1 - 0.05 / len(CHECKPOINTS))
 
 
+@pytest.mark.slow
+@pytest.mark.statistical
 def test_window_is_consistent_with_segments_marginalised(rng):
     """Truth drawn from the window's prior (Gaussian in log-parameters, 10%); W = 10 < 40
     segments, so most of the information has passed through the marginalised prior."""
@@ -241,7 +243,7 @@ def test_window_rejects_bad_sizes():
 # -- registry -------------------------------------------------------------------------------
 
 def half_window(nominal, sigma):
-    """A user factory, as ``tests.test_estimators:half_window``."""
+    """A user factory, as ``tests.unit.estimators.test_estimators:half_window``."""
     return SlidingWindowSmoother(nominal, sigma=np.asarray(sigma) / 2, size=5)
 
 
@@ -268,16 +270,17 @@ def test_builtin_settings():
 
 def test_module_factory():
     """A user's factory's estimator comes checked (CheckedEstimator), its object inside."""
-    est = make_estimator("tests.test_estimators:half_window", NOMINAL, SIGMA)
+    est = make_estimator("tests.unit.estimators.test_estimators:half_window", NOMINAL, SIGMA)
     assert isinstance(est.estimator, SlidingWindowSmoother) and est.size == 5
     np.testing.assert_array_equal(est.sigma, SIGMA / 2)
-    nested = make_estimator("tests.test_estimators:Factories.window_of_two", NOMINAL, SIGMA)
+    nested = make_estimator("tests.unit.estimators.test_estimators:Factories.window_of_two",
+                            NOMINAL, SIGMA)
     assert nested.size == 2 and nested.params == nested.estimator.params
 
 
 def test_factories_pickle_and_plug_into_the_environment():
     gym = pytest.importorskip("gymnasium")
-    for spec in ("ekf", "window:size=4", "tests.test_estimators:half_window"):
+    for spec in ("ekf", "window:size=4", "tests.unit.estimators.test_estimators:half_window"):
         factory = pickle.loads(pickle.dumps(estimator_factory(spec)))
         assert isinstance(factory, EstimatorSpec)
         env = gym.make("excite/DiffDriveCalibIdeal-v0", budget=6, estimator_factory=factory)
@@ -297,13 +300,23 @@ def test_factories_pickle_and_plug_into_the_environment():
     ("window:size", "'size' is not a setting"),
     ("window:size=big", "'big' is not a number"),
     ("no_such_module_xyz:factory", "cannot import module 'no_such_module_xyz'"),
-    ("tests.test_estimators:missing", "has no 'missing'"),
-    ("tests.test_estimators:NOMINAL", "'NOMINAL' is not callable"),
+    ("tests.unit.estimators.test_estimators:missing", "has no 'missing'"),
+    ("tests.unit.estimators.test_estimators:NOMINAL", "'NOMINAL' is not callable"),
 ])
 def test_bad_specs_are_one_line_errors(spec, message):
     with pytest.raises(EstimatorError, match=re.escape(message)) as info:
         estimator_factory(spec)
     assert "\n" not in str(info.value)
+
+
+def test_the_estimator_contract_example_runs():
+    """The protocol's example (excite.contracts.Estimator's docstring) runs as written."""
+    import doctest
+
+    import excite.contracts
+
+    result = doctest.testmod(excite.contracts)
+    assert result.attempted and not result.failed
 
 
 def test_model_for_nominal_sizes():

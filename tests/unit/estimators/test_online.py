@@ -101,17 +101,6 @@ def sensor_dataset(rng, n, theta, sigma=SIGMA):
     return Segments(phi_L, phi_R, *measured.T)
 
 
-def test_general_update_is_the_unrolled_axle_update(rng):
-    """The axle model's unrolled update is a specialisation: the general one gives the same."""
-    seg = lesson_dataset(rng, 100, TRUTH)
-    fast = run(OnlineEstimator(NOMINAL, sigma=SIGMA), seg)
-    general = OnlineEstimator(NOMINAL, sigma=SIGMA)
-    general._update = general._update_general
-    run(general, seg)
-    np.testing.assert_allclose(general.theta, fast.theta, rtol=1e-10)
-    np.testing.assert_allclose(general.information, fast.information, rtol=1e-8, atol=1e-6)
-
-
 def test_sensor_pose_model_online_agrees_with_batch(rng):
     from excite.core.models import SENSOR_POSE
 

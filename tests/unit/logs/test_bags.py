@@ -16,17 +16,15 @@ from rosbags.typesys import get_types_from_msg  # noqa: E402
 
 from excite import DataError  # noqa: E402
 from excite.core.kinematics import wrap_angle  # noqa: E402
-from excite.logs.bags import (  # noqa: E402
-    MISSING_EXTRA,
+from excite.logs.bag_reader import MISSING_EXTRA, is_bag_path, read_bag, read_bag_log  # noqa: E402
+from excite.logs.bag_writer import (  # noqa: E402
     MISSING_WRITE_EXTRA,
     STORAGES,
     BagWriter,
-    is_bag_path,
-    read_bag,
-    read_bag_log,
     write_bag,
 )
-from excite.logs.timeseries import TimeSeries, segment_timeseries  # noqa: E402
+from excite.logs.segmentation import segment_timeseries  # noqa: E402
+from excite.logs.timeseries import TimeSeries  # noqa: E402
 from tests.conftest import assert_one_line_error, run_cli  # noqa: E402
 from tests.unit.logs.test_timeseries import assert_same, make_log, simulate  # noqa: E402
 
@@ -388,7 +386,7 @@ def test_parts_of_bags_are_named_with_the_way_out(tmp_path, capsys, good_bag):
 
 
 def test_an_mcap_of_ros1_messages_is_named():
-    from excite.logs.bags import _why
+    from excite.logs.bag_reader import _why
 
     assert "ROS 1 messages" in _why(KeyError("ros1msg"))
     assert _why(KeyError("")) == "KeyError ''"
@@ -516,6 +514,7 @@ def rolled(j: int, theta: float) -> tuple[float, float, float, float]:
     return zyx(theta, 0.0, np.radians(degrees))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("pose_kind", ["pose", "pose_cov", "odom", "tf"])
 @pytest.mark.parametrize("orientation", [y_up, rolled])
 def test_a_tilted_pose_is_refused_naming_the_largest_tilt(tmp_path, log, pose_kind,

@@ -18,7 +18,8 @@ import pytest
 
 from excite import DataError, Params, SensorPose, predict_increment
 from excite.core.models import body_to_sensor
-from excite.logs.timeseries import (
+from excite.logs.continuity import Limits
+from excite.logs.segmentation import (
     CARRIED,
     CUT_BY_GAP,
     ENCODER_JUMP,
@@ -27,15 +28,11 @@ from excite.logs.timeseries import (
     OUTSIDE_ENCODERS,
     POSE_JUMP,
     STANDSTILL,
-    Limits,
-    TimeSeries,
-    estimate_time_offset,
-    is_timeseries_csv,
-    noticeable_time_offset,
-    read_timeseries,
     segment_timeseries,
-    write_timeseries,
 )
+from excite.logs.time_offset import estimate_time_offset, noticeable_time_offset
+from excite.logs.timeseries import TimeSeries
+from excite.logs.timeseries_csv import is_timeseries_csv, read_timeseries, write_timeseries
 
 TRUTH = Params(0.050, 0.051, 0.300)
 SENSOR = SensorPose(0.12, -0.04, 0.3)

@@ -1,4 +1,4 @@
-"""ROS bags to time-series logs: wheel angles and the external sensor's poses.
+"""ROS bags read as time-series logs: wheel angles and the external sensor's poses.
 
 Reads rosbag2 (sqlite3 or mcap storage: a directory with ``metadata.yaml``, or a single
 ``.db3`` / ``.mcap`` file) and ROS 1 (``.bag``) through the ``rosbags`` library (the ``ros``
@@ -30,8 +30,7 @@ the way out (:func:`bag_path_problem`).
   same values); zero stamps after stamped ones, or one stamp with different values, are
   errors. :func:`read_bag_log` returns the counts beside the log.
 
-Writing (:func:`write_bag`, :class:`BagWriter`): a time-series log as JointState and
-PoseStamped messages, in any of the three storages, readable by :func:`read_bag`.
+Writing bags: :mod:`excite.logs.bag_writer`.
 """
 
 from __future__ import annotations
@@ -49,8 +48,8 @@ import numpy as np
 from excite.errors import DataError
 from excite.logs.timeseries import TimeSeries, sample_at
 
-__all__ = ["POSE_TYPES", "STORAGES", "BagLog", "BagWriter", "bag_path_problem", "is_bag_path",
-           "read_bag", "read_bag_log", "write_bag"]
+__all__ = ["POSE_TYPES", "BAG_SUFFIXES", "JOINT_STATES", "MISSING_EXTRA", "BagLog",
+           "bag_path_problem", "is_bag_path", "read_bag", "read_bag_log"]
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
@@ -63,13 +62,8 @@ POSE_TYPES: dict[str, Callable[[Any], Any]] = {
     "nav_msgs/msg/Odometry": lambda msg: msg.pose.pose,
 }
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
-#: Bag storages write_bag can write: rosbag2 (a directory) with sqlite3 or mcap files, ROS 1.
-STORAGES = ("sqlite3", "mcap", "ros1")
-#: Defaults of write_bag: the wheel joints, the topics, and the frame of the sensor's poses.
+#: The topic of the wheels' JointState messages, unless told otherwise (reading and writing).
 JOINT_STATES = "/joint_states"
-LEFT_WHEEL, RIGHT_WHEEL = "left_wheel_joint", "right_wheel_joint"
-POSE_TOPIC = "/pose"
-WORLD_FRAME = "map"
 #: Quaternions shorter than this are no rotation (an orientation never set is all zeros).
 MIN_QUATERNION_NORM = 1e-3
 #: The largest tilt (rad) of the pose's z axis from the world z axis: a ground robot's sensor
@@ -77,9 +71,7 @@ MIN_QUATERNION_NORM = 1e-3
 MAX_TILT = math.radians(45.0)
 #: Why a JointState message naming both wheels is skipped: its position array is empty.
 NO_POSITIONS = "without wheel positions"
-_NEEDS_ROS = "{} bags needs the ros extra: pip install 'excite[ros]'"
-MISSING_EXTRA = _NEEDS_ROS.format("reading")
-MISSING_WRITE_EXTRA = _NEEDS_ROS.format("writing")
+MISSING_EXTRA = "reading bags needs the ros extra: pip install 'excite[ros]'"
 
 
 def is_bag_path(path: str | os.PathLike[str]) -> bool:
@@ -513,150 +505,3 @@ def read_bag(
     """The time-series log of a ROS bag: :func:`read_bag_log` without the account of the
     skipped messages (same arguments and errors)."""
     return read_bag_log(path, left_wheel, right_wheel, pose_topic, tf, joint_states).series
-
-
-# --------------------------------------------------------------------------- writing
-
-
-def _ns(t: float) -> int:
-    """A time in s as whole ns (header stamps and receive times)."""
-    return int(round(t * 1e9))
-
-
-class BagWriter:
-    """A new ROS bag, written message by message with rosbags' writers.
-
-    storage: "sqlite3" or "mcap" (rosbag2 version 9; ``path`` is the bag's directory, created
-    with its parents) or "ros1" (``path`` is the ``.bag`` file; its directory must exist). The
-    path must not exist. Messages are built with the storage's typestore (ROS 2, or ROS 1
-    Noetic, whose Header has a seq): ``types`` maps type names to message classes, and
-    `header`, `joint_state`, `pose`, `pose_stamped` build the common ones. Use it as a context
-    manager; the bag is complete once it closes.
-
-    Raises DataError (one line) without rosbags (naming the extra to install), for an unknown
-    storage, or when the bag cannot be created.
-    """
-
-    def __init__(self, path: str | os.PathLike[str], storage: str = "sqlite3") -> None:
-        if storage not in STORAGES:
-            raise DataError(f"unknown bag storage {storage!r}; use one of {', '.join(STORAGES)}")
-        try:
-            from rosbags.rosbag1 import Writer as Writer1
-            from rosbags.rosbag1 import WriterError as Writer1Error
-            from rosbags.rosbag2 import StoragePlugin
-            from rosbags.rosbag2 import Writer as Writer2
-            from rosbags.rosbag2 import WriterError as Writer2Error
-            from rosbags.typesys import Stores, get_typestore
-        except ImportError:
-            raise DataError(MISSING_WRITE_EXTRA) from None
-        self.path = Path(path)
-        self.ros1 = storage == "ros1"
-        self.store = get_typestore(Stores.ROS1_NOETIC if self.ros1 else Stores.LATEST)
-        self.types: dict[str, Any] = self.store.types
-        self._errors = (Writer1Error, Writer2Error, OSError)
-        self._connections: dict[str, Any] = {}
-        try:
-            if self.ros1:
-                self._writer: Any = Writer1(self.path)
-            else:
-                plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-                self._writer = Writer2(self.path, version=9, storage_plugin=plugin)
-        except self._errors as exc:
-            raise DataError(f"{self.path}: cannot write the bag ({exc})") from None
-
-    def __enter__(self) -> BagWriter:
-        try:
-            self._writer.open()
-        except self._errors as exc:
-            raise DataError(f"{self.path}: cannot write the bag ({exc})") from None
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self._writer.close()
-
-    def add_topic(self, topic: str, msgtype: str) -> None:
-        """Declare a topic and its message type (also when no message follows)."""
-        if topic not in self._connections:
-            self._connections[topic] = self._writer.add_connection(topic, msgtype,
-                                                                   typestore=self.store)
-
-    def write(self, topic: str, received: float, msg: Any) -> None:
-        """Write a message on a topic (declared on first use) at receive time ``received``
-        (s; the bag's timestamp, apart from the header stamp)."""
-        self.add_topic(topic, msg.__msgtype__)
-        serialize = self.store.serialize_ros1 if self.ros1 else self.store.serialize_cdr
-        self._writer.write(self._connections[topic], _ns(received),
-                           serialize(msg, msg.__msgtype__))
-
-    def header(self, t: float, frame_id: str = "") -> Any:
-        """A std_msgs Header stamped ``t`` s (whole ns)."""
-        sec, nanosec = divmod(_ns(t), 1_000_000_000)
-        stamp = self.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
-        extra = {"seq": 0} if self.ros1 else {}
-        return self.types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id, **extra)
-
-    def joint_state(self, t: float, names: list[str], positions: list[float]) -> Any:
-        """A JointState stamped ``t`` s: joint ``names`` at ``positions`` (rad)."""
-        empty = np.zeros(0)
-        return self.types[JOINT_STATE](header=self.header(t), name=names,
-                                       position=np.array(positions, dtype=float),
-                                       velocity=empty, effort=empty)
-
-    def pose(self, x: float, y: float, theta: float) -> Any:
-        """A geometry_msgs Pose at (x, y, 0) m, turned by the yaw ``theta`` (rad)."""
-        types = self.types
-        return types["geometry_msgs/msg/Pose"](
-            position=types["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-            orientation=types["geometry_msgs/msg/Quaternion"](
-                x=0.0, y=0.0, z=math.sin(0.5 * theta), w=math.cos(0.5 * theta)))
-
-    def pose_stamped(self, t: float, x: float, y: float, theta: float,
-                     frame_id: str = WORLD_FRAME) -> Any:
-        """A PoseStamped stamped ``t`` s: `pose` (x, y, theta) in ``frame_id``."""
-        return self.types[POSE_STAMPED](header=self.header(t, frame_id),
-                                        pose=self.pose(x, y, theta))
-
-
-def write_bag(
-    path: str | os.PathLike[str],
-    series: TimeSeries,
-    storage: str = "sqlite3",
-    joint_states: str = JOINT_STATES,
-    left_wheel: str = LEFT_WHEEL,
-    right_wheel: str = RIGHT_WHEEL,
-    pose_topic: str = POSE_TOPIC,
-) -> Path:
-    """Write a time-series log as a new ROS bag that :func:`read_bag` reads back.
-
-    The encoder stream becomes JointState messages on ``joint_states`` (joints ``left_wheel``,
-    ``right_wheel``, positions in rad), the pose stream PoseStamped messages on ``pose_topic``
-    (frame ``WORLD_FRAME``, z = 0, the heading as a yaw quaternion). Header stamps are the
-    sample times in whole ns (read back as ns * 1e-9 s), receive times equal the stamps, and
-    messages are written in time order. storage: see :class:`BagWriter`. Returns the path to
-    read: the bag directory (rosbag2) or file (ros1).
-
-    Raises DataError (one line) for a sample time that is not positive (a zero stamp means
-    "not set" in ROS), and as BagWriter does.
-    """
-    for stream, t in (("encoder", series.t_enc), ("pose", series.t_pose)):
-        if t[0] <= 0:
-            raise DataError(f"{series.location(stream, 0)}: a ROS header stamp must be "
-                            "positive (zero means not set)")
-    times = np.concatenate([series.t_enc, series.t_pose])
-    order = np.argsort(times, kind="stable").tolist()
-    n_enc = series.t_enc.size
-    with BagWriter(path, storage) as bag:
-        bag.add_topic(joint_states, JOINT_STATE)
-        bag.add_topic(pose_topic, POSE_STAMPED)
-        for i in order:
-            if i < n_enc:
-                t = float(series.t_enc[i])
-                msg = bag.joint_state(t, [left_wheel, right_wheel],
-                                      [series.phi_L[i], series.phi_R[i]])
-                bag.write(joint_states, t, msg)
-            else:
-                k = i - n_enc
-                t = float(series.t_pose[k])
-                bag.write(pose_topic, t, bag.pose_stamped(t, series.x[k], series.y[k],
-                                                          series.theta[k]))
-    return bag.path

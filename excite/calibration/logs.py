@@ -1,0 +1,188 @@
+"""Calibration and validation from files: segment files, time-series logs and ROS bags, read
+with :class:`~excite.logs.inputs.LogOptions` (what ``excite calibrate`` and ``excite validate``
+do, without the command line).
+
+:func:`calibrate_logs` is a recipe of named stages: group the inputs and keep back whole logs
+for validation (``holdout``) -> read and segment each input -> check each one's wiring and
+pose source -> pool the segments -> calibrate (:func:`excite.calibration.pipeline.calibrate`)
+-> validate on the held-out logs. :func:`validate_logs` dead-reckons logs with a calibrated
+and a nominal robot (:mod:`excite.validation.dead_reckoning`).
+
+Nothing here prints: the notes for the user come back in the results, and are passed as they
+arise to an ``on_note`` function when one is given (the command line prints them so).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from numpy.typing import ArrayLike
+
+from excite.calibration.options import SensorPoseOption
+from excite.calibration.pipeline import calibrate
+from excite.calibration.result import CalibrationResult
+from excite.calibration.solver import Loss
+from excite.calibration.wiring import check_pose_source, check_wiring
+from excite.core.kinematics import Params
+from excite.errors import DataError
+from excite.logs.inputs import (
+    DEFAULT_LOG_OPTIONS,
+    Input,
+    LogOptions,
+    OnNote,
+    Part,
+    group_inputs,
+    note_taker,
+    read_log,
+    segment_inputs,
+)
+from excite.logs.segments import MIN_SEGMENTS, Segments
+from excite.validation.dead_reckoning import Robot, ValidationResult, summarize, validate_log
+
+__all__ = ["LogCalibration", "ValidatedLogs", "calibrate_logs", "validate_logs"]
+
+
+@dataclass(frozen=True)
+class ValidatedLogs:
+    """Logs dead-reckoned with a calibrated and a nominal robot.
+
+    result: the metrics per log and overall
+    (:class:`~excite.validation.dead_reckoning.ValidationResult`; its ``summary()`` and
+    ``to_dict()`` are ``excite validate``'s report and JSON). notes: what the user should hear
+    about the logs, one line each, in order (wheel angles that were unwrapped; a clock offset
+    the data suggest when none was given).
+    """
+
+    result: ValidationResult
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class LogCalibration:
+    """A calibration from segment files, logs and bags.
+
+    result: the :class:`~excite.calibration.result.CalibrationResult`. parts: the inputs
+    calibrated on, in order, each as segments (``Part.describe()`` says in one line what was
+    read, kept and dropped). notes: what the user should hear, one line each, in order: the
+    logs' notes (a clock offset the data suggest when none was given), pose sources whose
+    headings follow the wheel angles exactly
+    (:func:`~excite.calibration.wiring.check_pose_source`), then the held-out logs' notes.
+    holdout: the validation on the held-out logs against the nominal robot, None without a
+    hold-out.
+    """
+
+    result: CalibrationResult
+    parts: tuple[Part, ...]
+    notes: tuple[str, ...] = ()
+    holdout: ValidatedLogs | None = None
+
+
+def _split_holdout(inputs: list[Input], fraction: float) -> tuple[list[Input], list[Input]]:
+    """(inputs to calibrate on, logs kept back): the last round(fraction * logs) logs, >= 1."""
+    if not fraction:
+        return inputs, []
+    logs = [source for source in inputs if source.kind != "segments"]
+    if len(logs) < 2:
+        raise DataError("--holdout keeps back whole logs: give at least 2 time-series logs "
+                        "or bags")
+    count = min(max(1, round(fraction * len(logs))), len(logs) - 1)
+    held = logs[-count:]
+    return [source for source in inputs if source not in held], held
+
+
+def _check_part(part: Part, initial: Params | None, note: OnNote) -> None:
+    """DataError when a part's heading changes contradict its wheels (wiring), or its poses
+    are the nominal robot's own dead reckoning; a note when a log's headings follow its wheel
+    angles exactly (a segment file, most often made rather than recorded, is not noted)."""
+    check_wiring(part.segments, part.source.name)
+    if part.log is None:
+        return
+    start = None if initial is None else tuple(initial.as_array().tolist())
+    text = check_pose_source(part.segments, part.source.name, start)
+    if text is not None:
+        note(text)
+
+
+def _pooled(parts: Sequence[Part]) -> Segments:
+    """The segments of every part as one set (at least MIN_SEGMENTS)."""
+    segments = Segments.concatenate([part.segments for part in parts])
+    if len(segments) < MIN_SEGMENTS:
+        raise DataError(f"{len(segments)} segment(s) in total; at least {MIN_SEGMENTS} are "
+                        "needed")
+    return segments
+
+
+def _validated(inputs: Sequence[Input], options: LogOptions, calibrated: Robot,
+               nominal: Robot, on_note: OnNote | None) -> ValidatedLogs:
+    """Each log read whole and dead-reckoned with both robots, in order."""
+    notes: list[str] = []
+    note = note_taker(notes, on_note)
+    validations = []
+    for source in inputs:
+        log = read_log(source, options, whole=True, on_note=note)
+        validations.append(validate_log(log.series, log.time_offset, calibrated, nominal,
+                                        name=log.name))
+    return ValidatedLogs(summarize(validations), tuple(notes))
+
+
+def validate_logs(paths: Sequence[str], calibrated: Robot, nominal: Robot,
+                  options: LogOptions = DEFAULT_LOG_OPTIONS, *,
+                  on_note: OnNote | None = None) -> ValidatedLogs:
+    """Dead-reckon each time-series log or bag of ``paths`` (a pair of stream CSVs is one log)
+    with the calibrated and the nominal robot, each (Params, SensorPose or None), and compare
+    both with the log's external poses (:func:`excite.validation.dead_reckoning.validate_log`).
+    options: how the logs are read (the segmentation options are not used). on_note: told
+    each note as it arises.
+
+    Raises DataError for a segment file, a log that cannot be read or whose streams jump, and
+    as validate_log does.
+    """
+    return _validated(group_inputs(paths), options, calibrated, nominal, on_note)
+
+
+def calibrate_logs(
+    paths: Sequence[str],
+    options: LogOptions = DEFAULT_LOG_OPTIONS,
+    *,
+    initial: Params | None = None,
+    sigma: ArrayLike | None = None,
+    loss: Loss = "linear",
+    sensor_pose: SensorPoseOption = "auto",
+    trim: float = 0.0,
+    holdout: float = 0.0,
+    on_note: OnNote | None = None,
+) -> LogCalibration:
+    """Calibrate r_L, r_R, b (and the sensor pose) on the segment files, time-series logs and
+    bags of ``paths``, one data set (a pair of stream CSVs is one log); the stages are listed
+    in the module docstring.
+
+    options: how the logs are read and cut. initial (m): the nominal robot and starting point
+    (None: found from the data). sigma, loss, sensor_pose, trim: as
+    :func:`excite.calibration.pipeline.calibrate`, which also gets options.ticks_per_rev.
+    holdout: the fraction of the logs (whole logs, the last ones, at least one; segment files
+    are never kept back) not calibrated on but validated on, against ``initial`` with the
+    calibrated sensor pose; it needs ``initial`` and at least 2 logs. on_note: told each note
+    as it arises (they are in the result too).
+
+    Raises DataError for bad inputs or settings: as the readers, segmentation and
+    :func:`~excite.calibration.pipeline.calibrate` do, for miswired wheels or poses that are
+    the nominal robot's own dead reckoning (:mod:`excite.calibration.wiring`), and for fewer
+    than MIN_SEGMENTS segments in all.
+    """
+    if holdout and initial is None:
+        raise DataError("--holdout compares with the nominal robot: give --init RL,RR,B (m)")
+    used, held = _split_holdout(group_inputs(paths), holdout)
+    notes: list[str] = []
+    note = note_taker(notes, on_note)
+    parts = segment_inputs(used, options, on_note=note)
+    for part in parts:
+        _check_part(part, initial, note)
+    result = calibrate(_pooled(parts), initial=initial, sigma=sigma, loss=loss,
+                       sensor_pose=sensor_pose, trim=trim, ticks_per_rev=options.ticks_per_rev)
+    validation = None
+    if held:
+        assert initial is not None  # checked above
+        validation = _validated(held, options, (result.params, result.sensor_pose),
+                                (initial, result.sensor_pose), note)
+    return LogCalibration(result, tuple(parts), tuple(notes), validation)

@@ -1,0 +1,122 @@
+"""The candidate models of one calibration, and the choice between them.
+
+``sensor_pose="auto"`` fits the sensor-pose model and the axle model and keeps the
+sensor-pose model when the data determine the sensor pose and it fits significantly better:
+a likelihood-ratio test (3 degrees of freedom) at TEST_LEVEL. ``"estimate"``, ``"axle"`` and a
+given SensorPose fit the one model asked for.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from excite.calibration.identifiability import describe_weak
+from excite.calibration.model_fit import Fitter, ModelFit
+from excite.calibration.noise_rounds import EstimatedNoise
+from excite.calibration.options import TEST_LEVEL, SensorPoseOption
+from excite.calibration.solver import Loss, normal_system
+from excite.calibration.starts import Starts
+from excite.core.models import AXLE, SENSOR_POSE
+from excite.stats.chi2 import chi2_quantile
+
+__all__ = ["Candidates", "ModelChoice", "choose_model", "fit_candidates"]
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """The models fitted to choose from.
+
+    Attributes
+    ----------
+    primary : ModelFit
+        The model asked for (the sensor-pose model under "auto" and "estimate").
+    axle : ModelFit or None
+        The axle model, fitted under "auto" only.
+    """
+
+    primary: ModelFit
+    axle: ModelFit | None
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """The model chosen, why, and the test behind the choice.
+
+    Attributes
+    ----------
+    chosen : ModelFit
+        The model the result reports.
+    words : str
+        Why this model, in words (:attr:`CalibrationResult.model_choice`).
+    alternative : ModelFit or None
+        The sensor-pose fit when "auto" kept the axle model although the data determine the
+        sensor pose (the fit test measures the axle model's misfit against it); else None.
+    statistic : float or None
+        The likelihood ratio 2 log(L_sensor-pose / L_axle) (dimensionless) of "auto"'s test
+        when the data determine the sensor pose; else None.
+    statistic_name : str or None
+        "likelihood ratio" under "auto" (also when ``statistic`` is None); else None.
+    """
+
+    chosen: ModelFit
+    words: str
+    alternative: ModelFit | None = None
+    statistic: float | None = None
+    statistic_name: str | None = None
+
+
+def fit_candidates(fitter: Fitter, starts: Starts, noise: EstimatedNoise | None,
+                   sensor_pose: SensorPoseOption) -> Candidates:
+    """The primary model fitted from its start (the noise rounds' last parameters when the
+    noise levels were estimated with them) and, under "auto", the axle model from its own
+    start."""
+    start = starts.start if noise is None else noise.theta
+    primary = fitter.fit(starts.primary, start)
+    axle = (fitter.fit(AXLE, starts.axle)
+            if starts.primary is SENSOR_POSE and sensor_pose == "auto" else None)
+    return Candidates(primary, axle)
+
+
+def choose_model(candidates: Candidates, fitter: Fitter) -> ModelChoice:
+    """The model to report: the one asked for, or under "auto" the sensor-pose model when the
+    data determine its sensor pose and the likelihood ratio exceeds the chi-square(3)
+    quantile at TEST_LEVEL, else the axle model."""
+    primary, axle = candidates.primary, candidates.axle
+    if primary.model is not SENSOR_POSE:
+        return ModelChoice(primary, "axle: as asked" if primary.model is AXLE
+                           else "sensor_pose: at the given pose, as asked")
+    if axle is None:
+        return ModelChoice(primary, "sensor_pose: estimated, as asked")
+    name = "likelihood ratio"
+    if not primary.identifiable:
+        return ModelChoice(axle, "axle: the data do not determine the sensor pose ("
+                           + describe_weak(primary.weak, primary.theta, fitter.data,
+                                           primary.channel_std) + ")", statistic_name=name)
+    threshold = chi2_quantile(TEST_LEVEL, 3)
+    statistic = _likelihood_ratio(axle, primary, fitter.sigma is not None, fitter.options.loss)
+    if statistic <= threshold:
+        return ModelChoice(axle, f"axle: the sensor-pose model does not fit significantly "
+                           f"better (likelihood ratio {statistic:.3g} <= {threshold:.3g})",
+                           primary, statistic, name)
+    return ModelChoice(primary, f"sensor_pose: it fits significantly better than the axle "
+                       f"model (likelihood ratio {statistic:.3g} > {threshold:.3g})",
+                       None, statistic, name)
+
+
+def _likelihood_ratio(small: ModelFit, large: ModelFit, sigma_given: bool,
+                      loss: Loss) -> float:
+    """2 log(L_large / L_small) >= 0 of two nested fits on the same data: with estimated
+    noise levels (linear loss) the profile likelihood N sum_c log(RSS_c,small / RSS_c,large);
+    otherwise the difference of the whitened costs at the larger model's noise levels."""
+    if loss == "linear" and not sigma_given:
+        rss_small = small.fit.ev.unit_system()[2]
+        rss_large = large.fit.ev.unit_system()[2]
+        floor = large.problem.sigma_floor**2
+        ratio = np.maximum(rss_small, floor) / np.maximum(rss_large, floor)
+        return max(float(small.problem.n * np.sum(np.log(ratio))), 0.0)
+    sigma = large.fit.sigma
+    cost_small = normal_system(small.fit.ev, sigma, loss).cost
+    cost_large = normal_system(large.fit.ev, sigma, loss).cost
+    return max(2.0 * (cost_small - cost_large), 0.0)

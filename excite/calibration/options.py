@@ -1,0 +1,84 @@
+"""What :func:`excite.calibration.pipeline.calibrate` is asked to do: its inputs checked, the
+settings every fit shares, and the levels of its tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from excite.calibration.solver import Loss
+from excite.calibration.wiring import check_wiring
+from excite.core.information import as_sigma
+from excite.core.models import SensorPose
+from excite.errors import DataError
+from excite.logs.segments import Segments
+
+__all__ = ["DEFAULT_MAX_RELATIVE_STD", "TEST_LEVEL", "FitOptions", "SensorPoseOption",
+           "checked_inputs"]
+
+FloatArray = NDArray[np.float64]
+#: How the sensor pose is treated: "auto" (estimated when the data determine it and it fits
+#: significantly better than the axle model), "axle", "estimate", or a known SensorPose.
+SensorPoseOption = Literal["auto", "axle", "estimate"] | SensorPose
+
+#: Data determine the parameters when the worst-direction relative std 1/sigma_min is at most
+#: this.
+DEFAULT_MAX_RELATIVE_STD = 0.1
+#: Level of the likelihood-ratio test of the axle model against the sensor-pose model, of the
+#: score test of an imposed model, of the goodness-of-fit test against given noise levels, of
+#: the test of serial correlation and of the driving test.
+TEST_LEVEL = 0.999
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """The settings every Levenberg-Marquardt fit of one calibration shares.
+
+    Attributes
+    ----------
+    loss : {"linear", "huber"}
+        "linear": Gaussian maximum likelihood; "huber": robust to slip outliers (threshold
+        :data:`excite.calibration.solver.HUBER_K` whitened standard deviations).
+    max_iterations : int
+        Most iterations of one fit.
+    tol : float
+        A fit has converged when its largest relative step is below this (relative units of
+        the model's ``column_scale``).
+    max_relative_std : float
+        Identifiability threshold on 1/sigma_min (relative std, dimensionless): relative
+        directions of the parameters whose std would exceed it are not determined by the data
+        and are held at their start.
+    """
+
+    loss: Loss
+    max_iterations: int
+    tol: float
+    max_relative_std: float
+
+
+def checked_inputs(segments: Segments | ArrayLike, sigma: ArrayLike | None, loss: Loss,
+                   sensor_pose: SensorPoseOption, trim: float
+                   ) -> tuple[Segments, FloatArray | None]:
+    """The segments (an (N, 5) array in CSV column order becomes :class:`Segments`) and the
+    given noise std (sigma_x [m], sigma_y [m], sigma_theta [rad]; None: to be estimated),
+    after checking the inputs in this order: at least 3 segments (DataError), the loss, the
+    sensor-pose option and the trim fraction (ValueError), some wheel moves (DataError), the
+    wiring (:func:`excite.calibration.wiring.check_wiring`, DataError), sigma (ValueError)."""
+    seg = segments if isinstance(segments, Segments) else Segments.from_array(segments)
+    if len(seg) < 3:
+        raise DataError(f"{len(seg)} segment(s); at least 3 are needed")
+    if loss not in ("linear", "huber"):
+        raise ValueError(f"loss must be 'linear' or 'huber', got {loss!r}")
+    if not (isinstance(sensor_pose, SensorPose) or sensor_pose in ("auto", "axle", "estimate")):
+        raise ValueError("sensor_pose must be 'auto', 'axle', 'estimate' or a SensorPose, "
+                         f"got {sensor_pose!r}")
+    if not 0.0 <= trim < 0.5:
+        raise ValueError(f"trim must be a fraction in [0, 0.5), got {trim}")
+    if not np.any(seg.dphi_L) and not np.any(seg.dphi_R):
+        raise DataError("no segment moves: every wheel increment is 0")
+    check_wiring(seg)
+    return seg, None if sigma is None else as_sigma(sigma)

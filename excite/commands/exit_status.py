@@ -1,0 +1,32 @@
+"""The exit statuses of ``excite``, each defined once with what it means to a user.
+
+Every problem with the input or the command line ends a command the same way: one line
+``excite: error: MESSAGE`` on stderr and :data:`EXIT_USAGE`. A command raises
+:class:`~excite.commands.args.UsageError` (or any :class:`~excite.errors.ExciteError`); an
+argument type raises :class:`argparse.ArgumentTypeError`, which the parser turns into the same
+line, naming the option (``argument --seed: ...``).
+"""
+
+from __future__ import annotations
+
+__all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_UNIDENTIFIABLE", "EXIT_MISFIT",
+           "EXIT_INTERRUPTED", "MEANINGS"]
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+EXIT_UNIDENTIFIABLE = 3
+EXIT_MISFIT = 4
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
+
+#: Each exit status and what it means, in words (the epilog of ``excite --help``).
+MEANINGS = {
+    EXIT_OK: "success",
+    EXIT_FAILURE: "internal error: a bug in excite (EXCITE_DEBUG=1 shows the traceback)",
+    EXIT_USAGE: "bad input, bad usage or a missing extra: 'excite: error: ...' on stderr",
+    EXIT_UNIDENTIFIABLE: "calibrate: the data cannot determine every parameter (the report "
+                         "names the direction)",
+    EXIT_MISFIT: "calibrate: the model does not fit the data (the report gives the reason)",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C or SIGTERM); compare, tune and sweep keep "
+                      "finished work",
+}

@@ -1,0 +1,295 @@
+"""Data sets given as paths: what each one is, reading a log with its clock offset settled,
+and cutting logs into segments, with the options that govern it (:class:`LogOptions`, the
+settings of ``excite calibrate``, ``segment`` and ``validate``, defined here once).
+
+Each input is one of: a segment file (segment CSV or Censi tuple file), a time-series CSV
+holding both streams, a pair of adjacent time-series CSVs (one with the encoder stream
+``t,phi_L,phi_R``, the other with the pose stream ``t,x,y,theta``, in either order), or a ROS
+bag (``.bag``, ``.db3``, ``.mcap``, or a rosbag2 directory).
+
+Nothing here prints. What a user should hear about a log (the clock offset its data suggest
+when none was given; wheel angles that were unwrapped, for a log followed whole) comes back as
+notes, one line each (:attr:`Log.notes`), and is passed as it arises to an ``on_note``
+function when one is given (the command line prints them so, in order with everything else,
+also when a later step fails).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+from excite.errors import DataError
+from excite.logs.bag_reader import JOINT_STATES, bag_path_problem, is_bag_path, read_bag_log
+from excite.logs.continuity import check_continuity
+from excite.logs.segmentation import SegmentedLog, segment_timeseries
+from excite.logs.segments import Segments, check_not_utf16, load_segments
+from excite.logs.time_offset import (
+    MAX_TIME_OFFSET,
+    OffsetHint,
+    estimate_time_offset,
+    noticeable_time_offset,
+)
+from excite.logs.timeseries import TimeSeries, unwrapped_words
+from excite.logs.timeseries_csv import read_timeseries, timeseries_streams
+
+__all__ = ["LogOptions", "DEFAULT_LOG_OPTIONS", "Input", "Log", "Part", "OnNote",
+           "note_taker", "group_inputs", "read_log", "segment_log", "segment_inputs",
+           "segment_logs"]
+
+#: What is told each note for the user as it arises (the command line prints it).
+OnNote = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class LogOptions:
+    """How time-series logs and bags are read and cut into segments (docs/formats.md,
+    "Time-series logs"); the defaults are the command line's.
+
+    window (s): segment duration (fixed windows). min_distance (m), min_angle (rad): keyframes
+    instead of windows, a new segment once the sensor has moved min_distance or turned
+    min_angle from the last keyframe (either or both; None: not used). split_at_gaps: cut a log
+    at gaps longer than the window instead of refusing it. ticks_per_rev: encoder ticks per
+    wheel revolution, converting ticks_L, ticks_R columns to rad (None: the wheel columns are
+    angles in rad). time_offset: pose time + time_offset = encoder time (s); "estimate" finds
+    it from the data; None uses 0, with a note when the data suggest otherwise.
+    max_time_offset (s): estimated offsets are searched within +- this. Bags only:
+    joint_states, the topic of the JointState messages; left_wheel, right_wheel, the wheel
+    joint names in them (required); the sensor's poses from exactly one of pose_topic (a
+    PoseStamped, PoseWithCovarianceStamped or Odometry topic) and tf, (parent, child): the
+    child frame's pose in the parent frame from /tf.
+    """
+
+    window: float = 1.0
+    min_distance: float | None = None
+    min_angle: float | None = None
+    split_at_gaps: bool = False
+    ticks_per_rev: float | None = None
+    time_offset: float | Literal["estimate"] | None = None
+    max_time_offset: float = MAX_TIME_OFFSET
+    joint_states: str = JOINT_STATES
+    left_wheel: str | None = None
+    right_wheel: str | None = None
+    pose_topic: str | None = None
+    tf: tuple[str, str] | None = None
+
+
+#: The options the command line starts from (its defaults are read from here).
+DEFAULT_LOG_OPTIONS = LogOptions()
+
+
+@dataclass(frozen=True)
+class Input:
+    """One data set: ``kind`` is "segments", "timeseries" or "bag"; ``paths`` its one or two
+    files; ``name`` how messages call it."""
+
+    kind: str
+    paths: tuple[str, ...]
+
+    @property
+    def name(self) -> str:
+        return "+".join(self.paths)
+
+
+@dataclass(frozen=True)
+class Log:
+    """A time-series log read from an input, with the clock offset used for it (s; pose time
+    + offset = encoder time) and where that offset came from: "given" (a number in
+    LogOptions.time_offset), "estimated" ("estimate") or "default" (none given: 0). With the
+    default, hint says what offset the data suggest when it is clearly not zero
+    (:func:`excite.logs.time_offset.noticeable_time_offset`), else None. skipped: for a bag,
+    the messages the reader skipped, in one line (None for a CSV log). notes: what the user
+    should hear about the log, one line each, in order (each starts with the log's name)."""
+
+    name: str
+    series: TimeSeries
+    time_offset: float
+    offset_source: Literal["given", "estimated", "default"]
+    hint: OffsetHint | None = None
+    skipped: str | None = None
+    notes: tuple[str, ...] = ()
+
+    def offset_text(self) -> str:
+        """The offset and its source, e.g. '+0.0000 s (default; the data suggest -0.1502 s:
+        --time-offset estimate)'."""
+        how = self.offset_source + (f"; {self.hint.text()}" if self.hint is not None else "")
+        return f"{self.time_offset:+.4f} s ({how})"
+
+
+@dataclass(frozen=True)
+class Part:
+    """One input as segments: the input, its segments, and for a log the log and its
+    segmentation (None for a segment file)."""
+
+    source: Input
+    segments: Segments
+    log: Log | None = None
+    cut: SegmentedLog | None = None
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """The log's notes (none for a segment file)."""
+        return () if self.log is None else self.log.notes
+
+    def describe(self) -> str:
+        """What was read, in one line (a log: segments kept, dropped and why, time offset; a
+        bag also the messages skipped)."""
+        if self.cut is None or self.log is None:
+            return f"{self.source.name}: {len(self.segments)} segments"
+        report = self.cut.report
+        offset = f"; time offset {self.log.offset_text()}"
+        unwrapped = f"; {report.unwrapped_text()}" if report.unwrapped_text() else ""
+        skipped = "" if self.log.skipped is None else f"; messages skipped: {self.log.skipped}"
+        return (f"{self.source.name}: {report.n_segments} segments; dropped: "
+                f"{report.counts_text()}{unwrapped}{skipped}{offset}")
+
+
+def note_taker(notes: list[str], on_note: OnNote | None) -> OnNote:
+    """A function that keeps each note it is given in ``notes`` and passes it on to
+    ``on_note`` (when given) at once."""
+
+    def note(text: str) -> None:
+        notes.append(text)
+        if on_note is not None:
+            on_note(text)
+
+    return note
+
+
+def _kind(path: str) -> tuple[str, frozenset[str]]:
+    """The kind of input a path is, and for a time-series CSV the streams it holds."""
+    problem = bag_path_problem(path)
+    if problem is not None:
+        raise DataError(problem)
+    if is_bag_path(path):
+        return "bag", frozenset()
+    if not os.path.exists(path):
+        raise DataError(f"{path}: no such file")
+    try:
+        with open(path, "rb") as handle:
+            start = handle.read(2)
+    except OSError:
+        start = b""  # a directory or an unreadable file: reading it says what is wrong
+    check_not_utf16(path, start)
+    streams = timeseries_streams(path)
+    return ("timeseries" if streams else "segments"), streams
+
+
+def _lone_stream(path: str, streams: frozenset[str]) -> DataError:
+    (only,) = streams
+    return DataError(f"{path}: has only the {only} stream; give the file with the other "
+                     "stream right after it")
+
+
+def _not_a_log(source: Input) -> DataError:
+    return DataError(f"{source.name}: a segment file, not a time-series log or bag")
+
+
+def group_inputs(paths: Sequence[str]) -> list[Input]:
+    """The data sets of a list of paths, in order (see the module docstring)."""
+    inputs: list[Input] = []
+    pending: tuple[str, frozenset[str]] | None = None
+    for path in paths:
+        kind, streams = _kind(path)
+        if pending is not None:
+            first, first_streams = pending
+            if kind != "timeseries" or len(streams) != 1 or streams == first_streams:
+                raise _lone_stream(first, first_streams)
+            inputs.append(Input("timeseries", (first, path)))
+            pending = None
+        elif kind == "timeseries" and len(streams) == 1:
+            pending = (path, streams)
+        else:
+            inputs.append(Input(kind, (path,)))
+    if pending is not None:
+        raise _lone_stream(*pending)
+    return inputs
+
+
+def _read_series(source: Input, options: LogOptions) -> tuple[TimeSeries, str | None]:
+    """The log of a time-series or bag input, and for a bag the messages skipped."""
+    if source.kind == "bag":
+        if not options.left_wheel or not options.right_wheel:
+            raise DataError(f"{source.name}: a bag needs --left-wheel and --right-wheel "
+                            "(joint names in the JointState messages)")
+        if (options.pose_topic is None) == (options.tf is None):
+            raise DataError(f"{source.name}: a bag needs exactly one pose source: "
+                            "--pose-topic TOPIC or --tf PARENT:CHILD")
+        bag = read_bag_log(source.paths[0], options.left_wheel, options.right_wheel,
+                           pose_topic=options.pose_topic, tf=options.tf,
+                           joint_states=options.joint_states)
+        return bag.series, bag.skipped_text()
+    if source.kind == "timeseries":
+        return read_timeseries(source.paths, ticks_per_rev=options.ticks_per_rev), None
+    raise _not_a_log(source)
+
+
+def _clock_offset(series: TimeSeries, options: LogOptions
+                  ) -> tuple[float, Literal["given", "estimated", "default"], OffsetHint | None]:
+    """The log's clock offset (s), where it came from, and with the default (0) what the data
+    suggest instead when that is clearly not zero."""
+    if options.time_offset == "estimate":
+        offset = estimate_time_offset(series, max_offset=options.max_time_offset)
+        return offset, "estimated", None
+    if options.time_offset is not None:
+        return float(options.time_offset), "given", None
+    return 0.0, "default", noticeable_time_offset(series, max_offset=options.max_time_offset)
+
+
+def read_log(source: Input, options: LogOptions, *, whole: bool = False,
+             on_note: OnNote | None = None) -> Log:
+    """Read one time-series or bag input and settle its clock offset. whole: the log will be
+    followed whole (dead reckoning, not segments): a jump in either stream is an error, before
+    anything is said about the clocks, and unwrapped wheel angles are noted (segmentation
+    reports them instead). on_note: told each of the log's notes as it arises."""
+    series, skipped = _read_series(source, options)
+    notes: list[str] = []
+    note = note_taker(notes, on_note)
+    if whole:
+        check_continuity(series)
+        unwrapped = unwrapped_words(series.unwrapped_wheels, series.unwrapped_counters)
+        if unwrapped:
+            note(f"{source.name}: {unwrapped}")
+    offset, offset_source, hint = _clock_offset(series, options)
+    if hint is not None:
+        note(f"{source.name}: the clocks of the encoder and pose streams seem offset (pose "
+             "time + offset = encoder time), but none was given and 0 is used; "
+             f"{hint.text()}")
+    return Log(source.name, series, offset, offset_source, hint, skipped, tuple(notes))
+
+
+def segment_log(log: Log, options: LogOptions) -> SegmentedLog:
+    """Cut a log into segments with the options' settings and the log's clock offset."""
+    return segment_timeseries(log.series, window=options.window,
+                              min_distance=options.min_distance, min_angle=options.min_angle,
+                              time_offset=log.time_offset,
+                              on_gap="split" if options.split_at_gaps else "error")
+
+
+def segment_inputs(inputs: Sequence[Input], options: LogOptions, *,
+                   on_note: OnNote | None = None) -> list[Part]:
+    """Every input as segments, in order: segment files are read, logs read and cut (their
+    notes on the parts, and told to on_note as they arise)."""
+    parts = []
+    for source in inputs:
+        if source.kind == "segments":
+            parts.append(Part(source, load_segments(source.paths[0])))
+        else:
+            log = read_log(source, options, on_note=on_note)
+            cut = segment_log(log, options)
+            parts.append(Part(source, cut.segments, log, cut))
+    return parts
+
+
+def segment_logs(paths: Sequence[str], options: LogOptions = DEFAULT_LOG_OPTIONS, *,
+                 on_note: OnNote | None = None) -> list[Part]:
+    """The time-series logs and bags of ``paths`` (a pair of stream CSVs is one log; no
+    segment files) read and cut into segments, one part per log, as
+    :func:`segment_inputs` does."""
+    inputs = group_inputs(paths)
+    segment_files = [source for source in inputs if source.kind == "segments"]
+    if segment_files:
+        raise _not_a_log(segment_files[0])
+    return segment_inputs(inputs, options, on_note=on_note)
