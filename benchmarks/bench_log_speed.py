@@ -24,10 +24,19 @@ HERE = Path(__file__).resolve().parents[1]
 CHILD = """
 import sys, time
 import numpy as np
-from excite.calibration.pipeline import calibrate
-from excite.core.models import SensorPose
-from excite.logs.synthetic import synthetic_log
-from excite.logs.segmentation import segment_timeseries
+import os
+import excite
+from excite.calibration import calibrate
+# the layout of the tree on sys.path (an editable install would resolve missing modules
+# from another tree): a checkout from before the subpackages has flat modules
+if not os.path.exists(os.path.join(os.path.dirname(excite.__file__), "timeseries.py")):
+    from excite.core.models import SensorPose
+    from excite.logs.segmentation import segment_timeseries
+    from excite.logs.synthetic import synthetic_log
+else:
+    from excite.models import SensorPose
+    from excite.synthetic import synthetic_log
+    from excite.timeseries import segment_timeseries
 
 slip, mode = float(sys.argv[1]), sys.argv[2]
 log = synthetic_log(np.random.default_rng(7), 3600.0, sensor_pose=SensorPose(0.1, -0.03, 0.4),

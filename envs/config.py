@@ -20,10 +20,31 @@ import numpy as np
 
 from excite.registration import DEFAULT_BUDGET
 
+#: The budget of an episode in target mode when none is given: long enough that good
+#: protocols stop before it (segments).
+TARGET_BUDGET = 150
+
 
 def _check_budget(value: Any) -> None:
+    if value is None:
+        return
     if int(value) < 1:
         raise ValueError(f"budget must be at least 1 segment, got {value}")
+
+
+def _check_target(value: Any) -> None:
+    if value is None:
+        return
+    if (not isinstance(value, numbers.Real) or isinstance(value, bool)
+            or not 0.0 < value < 1.0):
+        raise ValueError("target must be a relative error in (0, 1) (0.002 = 0.2%) or None, "
+                         f"got {value!r}")
+
+
+def _check_target_confidence(value: Any) -> None:
+    if (not isinstance(value, numbers.Real) or isinstance(value, bool)
+            or not 0.0 < value < 1.0):
+        raise ValueError(f"target_confidence must be in (0, 1), got {value!r}")
 
 
 def _check_information_scale(value: Any) -> None:
@@ -56,8 +77,9 @@ CONFIG_KEYS = (
     ConfigKey("ideal", False, "bool", "",
               "True: roll without slip or lag (the kinematic model is exact); False: pymunk "
               "physics with motor lag and friction-capped traction"),
-    ConfigKey("budget", DEFAULT_BUDGET, "int >= 1", "segments",
-              "segments per episode (the episode is truncated after them)", _check_budget),
+    ConfigKey("budget", None, "int >= 1 or None", "segments",
+              f"segments per episode (the episode is truncated after them); None: "
+              f"{DEFAULT_BUDGET}, or {TARGET_BUDGET} with a target", _check_budget),
     ConfigKey("segment_duration", 1.0, "float > 0, a multiple of 1 / physics_hz", "s",
               "how long each action's wheel-speed command is held"),
     ConfigKey("settle_time", 0.0, "float >= 0, a multiple of 1 / physics_hz", "s",
@@ -95,6 +117,17 @@ CONFIG_KEYS = (
               "hidden truth; training in simulation only)"),
     ConfigKey("target_sigma_min", None, "float or None", "sigma_min (dimensionless)",
               "terminate the episode once sigma_min reaches it; None: never"),
+    ConfigKey("target", None, "float in (0, 1) or None", "relative error",
+              "target mode: terminate the episode when the stopping rule "
+              "(excite.stopping.StoppingRule, the batch calibration of the segments so far) "
+              "says every parameter is within this relative error at target_confidence "
+              "(sensor x, y within target x b, its angle within target rad); None: off",
+              _check_target),
+    ConfigKey("target_confidence", 0.95, "float in (0, 1)", "",
+              "the stopping rule's confidence that every parameter is within the target",
+              _check_target_confidence),
+    ConfigKey("target_bonus", 0.0, "float", "reward",
+              "paid once, at the segment where the stopping rule says done"),
     ConfigKey("sensor_pose", None, "dict or None", "m, m, rad",
               'None: the pose sensor sits on the axle; else the ranges its hidden mounting is '
               'drawn from, uniformly per episode: {"x": (lo, hi), "y": (lo, hi), '
@@ -109,6 +142,14 @@ CONFIG_KEYS = (
     ConfigKey("record_sigma_theta", 2e-3, "float >= 0", "rad",
               "noise of each recorded pose's heading (standard deviation)"),
 )
+
+
+def episode_budget(cfg: Mapping[str, Any]) -> int:
+    """The segments of an episode: the key ``budget``, or its default (DEFAULT_BUDGET, or
+    TARGET_BUDGET in target mode)."""
+    if cfg["budget"] is not None:
+        return int(cfg["budget"])
+    return DEFAULT_BUDGET if cfg["target"] is None else TARGET_BUDGET
 
 
 def default_config() -> dict[str, Any]:

@@ -11,7 +11,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from envs.config import check_config, config_reference, make_config, sensor_ranges
+from envs.config import (
+    check_config,
+    config_reference,
+    episode_budget,
+    make_config,
+    sensor_ranges,
+)
 from envs.config import default_config as _default_config
 from envs.observation import (
     eigen,
@@ -26,6 +32,7 @@ from envs.recording import Recorder, Recording, RecordingConfig
 from envs.reward import reward_terms, uses_error
 from envs.robot import RobotSpec, robot_distribution
 from envs.simulation import Simulation, SimulationConfig
+from envs.target import decide, stopping_rule
 from excite.contracts import Estimator, EstimatorFactory, RobotKnowledge
 from excite.core.information import information_matrix
 from excite.core.kinematics import Params
@@ -186,7 +193,8 @@ class DiffDriveCalibEnv(gym.Env):
             sigma_theta=cfg["sigma_theta"]))
         self.sigma = self.sim.pose_sensor.sigma
         self.segment_duration = float(cfg["segment_duration"])
-        self.budget = int(cfg["budget"])
+        self.budget = episode_budget(cfg)
+        self._rule = stopping_rule(cfg, self.model)
         self.estimator_factory = estimator_factory or default_estimator
         self.recording_config = RecordingConfig(
             cfg["record_pose_hz"], cfg["record_sigma_xy"], cfg["record_sigma_theta"]
@@ -306,13 +314,16 @@ class DiffDriveCalibEnv(gym.Env):
         n = self._n
         config = self.config
         target = config["target_sigma_min"]
-        terminated = target is not None and self._sigma_min >= target
+        decision = None if self._rule is None else decide(self._rule, self._log[:n],
+                                                          self.nominal_theta)
+        done = decision is not None and decision.done
+        terminated = (target is not None and self._sigma_min >= target) or done
         truncated = n >= self.budget and not terminated
         if uses_error(config):
             self._error = self.max_relative_error
         terms = reward_terms(config, self._sigma_min - previous, outcome.collision,
                              left * left + right * right,
-                             (self._start_error, previous_error, self._error))
+                             (self._start_error, previous_error, self._error), done)
         info = {
             "reward_terms": terms,
             "sigma_min": self._sigma_min,
@@ -321,6 +332,8 @@ class DiffDriveCalibEnv(gym.Env):
             "estimate": self._theta.copy(),
             "n_segments": n,
         }
+        if decision is not None:
+            info["stop"] = decision.to_dict()
         if self.render_mode == "human":
             self.render()
         return self._observation(), float(sum(terms.values())), terminated, truncated, info

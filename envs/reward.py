@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 #: The reward's terms, in the order the envs report them in ``info["reward_terms"]``.
-REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy", "error")
+REWARD_TERMS = ("information", "collision", "effort", "time", "accuracy", "error", "stop")
 
 #: The error term's floor on relative errors (a robot drawn without spread starts at 0).
 ERROR_FLOOR = 1e-12
@@ -24,7 +24,8 @@ def uses_error(config: dict[str, Any]) -> bool:
 
 def reward_terms(config: dict[str, Any], sigma_gain: float | np.ndarray,
                  collision: bool | np.ndarray, effort: float | np.ndarray,
-                 errors: tuple[Any, Any, Any]) -> dict[str, Any]:
+                 errors: tuple[Any, Any, Any], done: bool | np.ndarray = False
+                 ) -> dict[str, Any]:
     """The reward's terms (see DiffDriveCalibEnv, "Reward") of one segment of one robot
     (floats) or of N robots (arrays (N,); ``time``, and ``accuracy`` and ``error`` when they
     are off, stay scalars for the caller to broadcast).
@@ -32,7 +33,8 @@ def reward_terms(config: dict[str, Any], sigma_gain: float | np.ndarray,
     config: the env's configuration; sigma_gain: sigma_min's increase (relative information
     units); collision: whether the chassis touched a wall; effort: the sum of the squared
     normalised wheel commands; errors: the max relative error at the episode's start, before
-    and after the segment (unused unless :func:`uses_error`)."""
+    and after the segment (unused unless :func:`uses_error`); done: whether the stopping rule
+    of target mode said done at this segment (:mod:`envs.target`)."""
     accuracy, area = config["accuracy_weight"], config["error_weight"]
     start, previous, error = errors
     return {
@@ -43,4 +45,5 @@ def reward_terms(config: dict[str, Any], sigma_gain: float | np.ndarray,
         "accuracy": -accuracy * 100.0 * (error - previous) if accuracy else 0.0,
         "error": -area * np.log(np.maximum(error, ERROR_FLOOR) / np.maximum(start, ERROR_FLOOR))
         if area else 0.0,
+        "stop": float(config["target_bonus"]) * done + 0.0,
     }

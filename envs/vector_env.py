@@ -17,10 +17,12 @@ from envs.env import DiffDriveCalibEnv
 from envs.observation import measure_poses, observations, read_estimate, sense_increments
 from envs.reward import REWARD_TERMS, reward_terms, uses_error
 from envs.simulation import BatchOutcome, BatchSimulation
+from envs.target import decide, stopping_rule
 from excite.contracts import Estimator, EstimatorFactory
 from excite.core.information import information_matrices
 from excite.core.kinematics import Params
 from excite.estimators.online import BatchOnlineEstimator
+from excite.stopping import StopDecision
 
 
 class DiffDriveCalibVectorEnv(VectorEnv):
@@ -99,6 +101,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self.sim = BatchSimulation(self.single.sim.config, self.num_envs)
         self.model = self.single.model
         self.budget = self.single.budget
+        self._rule = stopping_rule(self.config, self.model)
         n, p = self.num_envs, self.model.size
         self._generators: list[np.random.Generator | None] = [None] * n
         self._sensor_rngs: list[np.random.Generator | None] = [None] * n  # set by reset
@@ -192,6 +195,8 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         moving = ~resetting
         n_robots = self.num_envs
         terms = {name: np.zeros(n_robots) for name in REWARD_TERMS}
+        decisions: list[StopDecision | None] = [None] * n_robots
+        done = np.zeros(n_robots, dtype=bool)
         collision = np.zeros(n_robots, dtype=bool)
         rows = np.zeros((n_robots, 5))
         if moving.any():
@@ -203,11 +208,14 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             self._update_information(moving)
             if uses_error(config):
                 self._error = self.max_relative_errors
+            decisions = self._stop_decisions(moving)
+            done = np.array([d is not None and d.done for d in decisions])
             terms = {name: np.where(resetting, 0.0, value) for name, value in reward_terms(
                 config, self._sigma_min - previous, collision, (actions**2).sum(axis=1),
-                (self._start_error, previous_error, self._error)).items()}
+                (self._start_error, previous_error, self._error), done).items()}
         target = config["target_sigma_min"]
-        terminated = moving & (target is not None) & (self._sigma_min >= (target or 0.0))
+        terminated = moving & (((target is not None) & (self._sigma_min >= (target or 0.0)))
+                               | done)
         truncated = moving & (self._n >= self.budget) & ~terminated
         info = {
             "reward_terms": terms,
@@ -217,6 +225,8 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             "estimate": self._theta.copy(),
             "n_segments": self._n.copy(),
         }
+        if self._rule is not None:  # target mode: each robot's decision (None: not moving)
+            info["stop"] = [None if d is None else d.to_dict() for d in decisions]
         reward = sum(terms.values())
         ended = terminated | truncated
         if resetting.any():  # NEXT_STEP: the robots that ended last step start anew
@@ -235,6 +245,16 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         else:
             self._ended = ended
         return obs, reward, terminated, truncated, info
+
+    def _stop_decisions(self, moving: np.ndarray) -> list[StopDecision | None]:
+        """Target mode: the stopping rule's decision for each moving robot (mask (N,)) on its
+        segments so far; None for the others and when target mode is off."""
+        decisions: list[StopDecision | None] = [None] * self.num_envs
+        if self._rule is not None:
+            for i in np.flatnonzero(moving):
+                decisions[i] = decide(self._rule, self._log[i, :self._n[i]],
+                                      self.single.nominal_theta)
+        return decisions
 
     def _record(self, moving: np.ndarray, outcome: BatchOutcome,
                 actions: np.ndarray) -> np.ndarray:

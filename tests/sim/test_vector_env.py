@@ -33,7 +33,7 @@ def test_make_vec_returns_the_native_vector_env(mode):
     assert reward.shape == terminated.shape == truncated.shape == (3,)
     assert terminated.dtype == truncated.dtype == bool
     assert set(info["reward_terms"]) == {"information", "collision", "effort", "time",
-                                         "accuracy", "error"}
+                                         "accuracy", "error", "stop"}
     np.testing.assert_allclose(sum(info["reward_terms"].values()), reward)
 
 

@@ -1,0 +1,226 @@
+"""The stopping rule: is the calibration of the data so far good enough?
+
+A robot team drives until the calibration reaches a target, not for a fixed budget. The rule
+decides from the batch calibration of the data so far (:func:`excite.calibrate`: noise levels
+estimated from the data, the time-series GLS where segments share pose samples), never from an
+online filter's covariance, and it is meant to be asked after every segment.
+
+The target (docs/conventions.md for the relative scales):
+
+- r_L, r_R, b: each within ``target`` relative error (0.002 = 0.2%);
+- with the sensor pose estimated, its x and y within ``target`` x b (m) and its angle within
+  ``target`` rad: the same relative scale as sigma_min.
+
+*Done* when every parameter's half-width at the stated confidence is within its tolerance:
+
+    q * std_i <= tolerance_i    for every parameter i,
+
+with q a simultaneous (Bonferroni) normal quantile over the P parameters,
+Phi^{-1}(1 - (1 - confidence) / (2 P)), times an upper 95% confidence bound on the noise scale
+from the residual degrees of freedom (sqrt(dof / chi2_dof^{-1}(0.05)), dof = segments - P).
+With known noise levels, at any one look the chance that some parameter lies outside its
+tolerance while the rule says done is at most 1 - confidence. Asking after every segment is
+optional stopping: the half-widths depend on the driving and on the estimated noise levels,
+and a look at which the noise happens to look small would stop early; the bound on the noise
+scale is the margin against that. The false-stop rate is measured by Monte Carlo (tests and
+benchmarks).
+
+The rule also says *not yet* whenever the batch result cannot be trusted: parameters not
+determined (exit 3 of ``excite calibrate``), a model that does not fit (exit 4), or too few
+segments to estimate the noise levels. It predicts how many more segments the current way of
+driving needs from the growth of the information so far (std ~ 1 / sqrt(segments)).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.stats import chi2, norm
+
+from excite.calibration.options import SensorPoseOption
+from excite.calibration.pipeline import calibrate
+from excite.calibration.result import CalibrationResult
+from excite.core.kinematics import Params
+from excite.errors import ExciteError
+from excite.logs.segments import Segments
+
+__all__ = ["DEFAULT_CONFIDENCE", "DEFAULT_TARGET", "StopDecision", "StoppingRule"]
+
+#: The default target: the largest relative error of r_L, r_R, b (0.2%).
+DEFAULT_TARGET = 0.002
+#: The default confidence that every parameter is within the target when the rule stops.
+DEFAULT_CONFIDENCE = 0.95
+#: The confidence of the upper bound on the noise scale that widens every half-width: a look
+#: at which the estimated noise happens to be small would otherwise stop early.
+NOISE_BOUND_CONFIDENCE = 0.95
+
+
+@dataclass(frozen=True)
+class StopDecision:
+    """One decision of :class:`StoppingRule`.
+
+    Attributes
+    ----------
+    done : bool
+        Whether the calibration meets the target at the confidence.
+    statistic : float
+        The largest ratio of a parameter's half-width (q * std) to its tolerance
+        (dimensionless; done when <= 1; inf when the data do not determine a parameter or
+        the calibration failed).
+    reason : str
+        Why, in words.
+    n_segments : int
+        Segments the decision saw.
+    quantile : float
+        The simultaneous quantile q used, noise bound included (nan when no calibration).
+    half_widths : dict of str to float
+        Each parameter's half-width q * std, in its unit (m or rad); empty without a
+        calibration.
+    tolerances : dict of str to float
+        Each parameter's tolerance, in its unit (m or rad).
+    segments_to_go : float
+        Predicted further segments the current driving needs (0 when done; inf when unknown).
+    seconds_to_go : float or None
+        The same in seconds, from the mean duration of the segments so far (inf when unknown;
+        None without segment times).
+    result : CalibrationResult or None
+        The batch calibration the decision is based on (None when it failed).
+    """
+
+    done: bool
+    statistic: float
+    reason: str
+    n_segments: int
+    quantile: float
+    half_widths: dict[str, float]
+    tolerances: dict[str, float]
+    segments_to_go: float
+    seconds_to_go: float | None
+    result: CalibrationResult | None
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict (without the calibration result)."""
+        return {"done": self.done, "statistic": _finite_or_none(self.statistic),
+                "reason": self.reason, "n_segments": self.n_segments,
+                "quantile": _finite_or_none(self.quantile),
+                "half_widths": self.half_widths, "tolerances": self.tolerances,
+                "segments_to_go": _finite_or_none(self.segments_to_go),
+                "seconds_to_go": None if self.seconds_to_go is None
+                else _finite_or_none(self.seconds_to_go)}
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+@dataclass(frozen=True)
+class StoppingRule:
+    """Decides *done* or *not yet* for the data so far (see the module docstring).
+
+    Attributes
+    ----------
+    target : float
+        The largest relative error of r_L, r_R, b (dimensionless, > 0; 0.002 = 0.2%); with
+        the sensor pose estimated, its x, y within target * b (m) and its angle within target
+        (rad).
+    confidence : float
+        The confidence that every parameter is within its tolerance when done (in (0, 1)).
+    sensor_pose : "auto", "axle", "estimate" or SensorPose
+        Passed to :func:`excite.calibrate`.
+    ticks_per_rev : float or None
+        The encoders' resolution, for segments cut from a log (see :func:`excite.calibrate`).
+    """
+
+    target: float = DEFAULT_TARGET
+    confidence: float = DEFAULT_CONFIDENCE
+    sensor_pose: SensorPoseOption = "auto"
+    ticks_per_rev: float | None = None
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.target, (int, float)) and 0.0 < self.target < 1.0):
+            raise ValueError(f"target must be a relative error in (0, 1), got {self.target!r}")
+        if not (isinstance(self.confidence, (int, float)) and 0.0 < self.confidence < 1.0):
+            raise ValueError(f"confidence must be in (0, 1), got {self.confidence!r}")
+
+    def decide(self, segments: Segments, nominal: Params | ArrayLike | None = None
+               ) -> StopDecision:
+        """The decision for ``segments`` (all the data so far), the batch calibration
+        started at ``nominal`` (Params or (r_L, r_R, b) in m; None: its own start)."""
+        n = len(segments)
+        try:
+            result = calibrate(segments, initial=nominal, sensor_pose=self.sensor_pose,
+                               ticks_per_rev=self.ticks_per_rev)
+        except ExciteError as exc:  # too few segments for the noise levels, no motion, ...
+            return self._not_yet(n, f"no calibration yet: {exc}")
+        tolerances = self._tolerances(result)
+        if not result.identifiable:
+            return self._not_yet(n, "the data do not determine the parameters yet: "
+                                 f"{result.unidentifiable_direction}", tolerances, result)
+        if not result.fit.ok:
+            return self._not_yet(n, f"the model does not fit the data: {result.fit.message}",
+                                 tolerances, result)
+        std = _standard_deviations(result)
+        quantile = self._quantile(result)
+        half = {name: float(quantile * s) for name, s in std.items()}
+        ratios = {name: half[name] / tolerances[name] for name in half}
+        statistic = max(ratios.values())
+        worst = max(ratios, key=ratios.get)
+        done = bool(statistic <= 1.0)
+        to_go = 0.0 if done else _segments_to_go(n, statistic)
+        reason = (f"every parameter within its tolerance at {self.confidence:.0%} "
+                  f"(the widest, {worst}, at {statistic:.2f} of it)" if done else
+                  f"{worst} at {statistic:.2f} of its tolerance at {self.confidence:.0%}")
+        return StopDecision(done, statistic, reason, n, quantile, half, tolerances, to_go,
+                            _seconds(segments, to_go), result)
+
+    def _tolerances(self, result: CalibrationResult) -> dict[str, float]:
+        """Each parameter's tolerance in its unit: target x value for r_L, r_R, b (m); with
+        the sensor pose estimated, target x b for x, y (m) and target for theta (rad)."""
+        p = result.params
+        tol = {"r_L": self.target * abs(p.r_L), "r_R": self.target * abs(p.r_R),
+               "b": self.target * abs(p.b)}
+        if result.sensor_pose_std is not None:
+            tol |= {"x": self.target * abs(p.b), "y": self.target * abs(p.b),
+                    "theta": self.target}
+        return tol
+
+    def _quantile(self, result: CalibrationResult) -> float:
+        """The simultaneous two-sided normal quantile over the P estimated parameters,
+        times an upper confidence bound (NOISE_BOUND_CONFIDENCE) on the noise scale from the
+        residual degrees of freedom of one noise channel (segments less the parameters):
+        sqrt(dof / chi2_dof^{-1}(1 - NOISE_BOUND_CONFIDENCE))."""
+        count = len(result.parameter_names)
+        dof = max(result.n_segments - count, 1)
+        scale = math.sqrt(dof / chi2.ppf(1.0 - NOISE_BOUND_CONFIDENCE, dof))
+        return float(norm.ppf(1.0 - (1.0 - self.confidence) / (2 * count)) * scale)
+
+    def _not_yet(self, n: int, reason: str, tolerances: dict[str, float] | None = None,
+                 result: CalibrationResult | None = None) -> StopDecision:
+        return StopDecision(False, math.inf, reason, n, math.nan, {}, tolerances or {},
+                            math.inf, None, result)
+
+
+def _standard_deviations(result: CalibrationResult) -> dict[str, float]:
+    """The std of every estimated parameter, by name (m or rad)."""
+    std = dict(zip(("r_L", "r_R", "b"), map(float, result.std), strict=True))
+    if result.sensor_pose_std is not None:
+        std |= dict(zip(("x", "y", "theta"), map(float, result.sensor_pose_std), strict=True))
+    return std
+
+
+def _segments_to_go(n: int, statistic: float) -> float:
+    """Further segments for the statistic to fall to 1 when every std shrinks as
+    1 / sqrt(segments) (the information grows linearly with the current driving)."""
+    if not math.isfinite(statistic):
+        return math.inf
+    return float(max(math.ceil(n * statistic * statistic) - n, 1))
+
+
+def _seconds(segments: Segments, to_go: float) -> float | None:
+    """``to_go`` segments in seconds at the mean duration so far; None without times."""
+    if segments.t_start is None or segments.t_end is None:
+        return None
+    return to_go * float(np.mean(segments.t_end - segments.t_start))
