@@ -11,6 +11,11 @@ Episodes run in parallel worker processes or Ray tasks (:mod:`agents.backends`);
 finished task's rows are appended to ``DIR/segments.csv`` at once, so an interrupted run
 re-run with the same ``DIR`` continues where it stopped (per protocol, estimator and
 episode), losing and duplicating nothing.
+
+With a target (``CompareSettings.target``) every episode runs in the env's target mode: it
+ends where the stopping rule says done, or at the budget, and its rows carry the columns of
+:mod:`agents.target_record`; such an episode is complete when it ends at its stop or at the
+budget.
 """
 
 from __future__ import annotations
@@ -41,19 +46,23 @@ from agents.catalog import (
 )
 from agents.oracle import oracle_design
 from agents.protocols import Protocol, ProtocolError, check_action
+from agents.target_record import TARGET_COLUMNS, target_fields
 from excite.core.information import crlb_relative_std
 from excite.errors import ExciteError
 from excite.estimators import DEFAULT_ESTIMATOR, EstimatorSpec, estimator_factory
 from excite.estimators import check_distinct as check_distinct_estimators
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID
 from excite.stats.consistency import estimate_error, nees
+from excite.stopping import DEFAULT_CONFIDENCE
 
-#: The columns of DIR/segments.csv (see :mod:`agents.segment_record` for their meaning and units).
+#: The columns of DIR/segments.csv (see :mod:`agents.segment_record` for their meaning and units);
+#: with a target, followed by agents.target_record.TARGET_COLUMNS.
 COLUMNS = ("protocol", "estimator", "episode", "segment", "r_L_err", "r_R_err", "b_err",
            "sigma_min", "oracle_sigma_min", "rel_std_r_L", "rel_std_r_R", "rel_std_b",
            "nees", "nees_dof", "collision", "x", "y", "theta", "distance", "time")
 #: The text columns and the integer columns; every other column is a float.
-_TEXT, _INTEGER = ("protocol", "estimator"), ("episode", "segment", "nees_dof", "collision")
+_TEXT, _INTEGER = ("protocol", "estimator"), ("episode", "segment", "nees_dof", "collision",
+                                                "stop")
 #: One run of an episode: a protocol driving, an estimator estimating.
 Pair = tuple[ProtocolSpec, EstimatorSpec]
 #: The seed streams of episodes; stream i's env seeds lie in [i 2**32, (i + 1) 2**32).
@@ -75,6 +84,29 @@ class CompareSettings:
     robot: str = "default"  # a robot preset (envs.robot.PRESETS)
     stream: str = EVALUATION_STREAM  # the seed stream of the episodes (STREAMS)
     final_only: bool = False  # keep only each episode's last segment (all that tuning needs)
+    target: float | None = None  # target mode's relative error (None: off), see envs.target
+    target_confidence: float = DEFAULT_CONFIDENCE  # the stopping rule's confidence
+
+
+def settings_dict(settings: CompareSettings) -> dict:
+    """The settings as DIR/config.json stores them: without the target keys when the
+    target is off (the file of such a run is the one an excite without targets wrote)."""
+    out = asdict(settings)
+    if settings.target is None:
+        del out["target"], out["target_confidence"]
+    return out
+
+
+def columns_for(target: bool) -> tuple[str, ...]:
+    """The columns of DIR/segments.csv: COLUMNS, then TARGET_COLUMNS with a target."""
+    return COLUMNS + TARGET_COLUMNS if target else COLUMNS
+
+
+def target_config(settings: CompareSettings) -> dict:
+    """The env's target-mode keys of these settings (none when the target is off)."""
+    if settings.target is None:
+        return {}
+    return {"target": settings.target, "target_confidence": settings.target_confidence}
 
 
 def episode_seed(seed: int, episode: int, stream: str = EVALUATION_STREAM) -> int:
@@ -107,7 +139,8 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int,
     protocol raising, is a ProtocolError naming it. ``nees`` is the estimator's NEES
     against the hidden truth over the ``nees_dof`` parameters it reports a covariance for
     (:func:`excite.stats.consistency.estimate_error`), ``time`` the seconds driven since the
-    start."""
+    start. In the env's target mode each record also holds the columns of
+    :func:`agents.target_record.target_fields`."""
     label = label or type(protocol).__name__
     user = user_supplied(type(protocol).__module__)
     env.reset(seed=seed, options=options)
@@ -136,6 +169,7 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int,
             "nees": float(nees(error, covariance)), "nees_dof": error.size,
             "collision": int(info["collision"]), "x": x, "y": y, "theta": theta,
             "distance": distance, "time": info["n_segments"] * seconds_per_segment,
+            **(target_fields(env) if "stop" in info else {}),
         })
     return records
 
@@ -204,7 +238,8 @@ def run_episode(settings: CompareSettings, pairs: list[Pair], episode: int,
     for protocol, estimator in pairs:
         if estimator.label not in envs:
             envs[estimator.label] = make_env(settings.env_id, settings.segments,
-                                             settings.robot, estimator_factory=estimator)
+                                             settings.robot, estimator_factory=estimator,
+                                             **target_config(settings))
         env = envs[estimator.label]
         if oracle is None:  # the robot's design bound: the same for every pair
             env.reset(seed=seed)
@@ -224,10 +259,10 @@ def run_episode(settings: CompareSettings, pairs: list[Pair], episode: int,
 
 
 # -- the results file -----------------------------------------------------------------------
-def _parse(row: dict[str, str]) -> dict | None:
+def _parse(row: dict[str, str], columns: tuple[str, ...]) -> dict | None:
     try:
         out = {}
-        for key in COLUMNS:
+        for key in columns:
             kind = str if key in _TEXT else int if key in _INTEGER else float
             out[key] = kind(row[key])
     except (KeyError, TypeError, ValueError):
@@ -235,50 +270,61 @@ def _parse(row: dict[str, str]) -> dict | None:
     return out
 
 
-def read_complete_rows(path: Path, segments: int, final_only: bool = False) -> list[dict]:
+def read_complete_rows(path: Path, segments: int, final_only: bool = False,
+                       target: bool = False) -> list[dict]:
     """Rows of every (protocol, estimator, episode) present with all segments exactly once
     (or only the last, ``final_only``); partial episodes (an interrupted write) and malformed
-    lines are dropped. CompareError for a file with other columns (written by an older excite,
-    before estimators were an axis)."""
+    lines are dropped. An episode ends at the budget ``segments``, or with ``target`` (the
+    columns of :func:`columns_for` with a target) at the segment whose ``stop`` is 1.
+    CompareError for a file with other columns (written by an older excite, before
+    estimators were an axis)."""
     if not path.exists():
         return []
+    columns = columns_for(target)
     groups: dict[tuple[str, str, int], dict[int, dict]] = {}
     with open(path, newline="") as handle:
         reader = csv.DictReader(handle)
-        if reader.fieldnames is not None and tuple(reader.fieldnames) != COLUMNS:
+        if reader.fieldnames is not None and tuple(reader.fieldnames) != columns:
             raise CompareError(
                 f"{path}: columns {','.join(reader.fieldnames)} are not those of this excite "
-                f"version ({','.join(COLUMNS)}); it was written by an older excite: re-run "
+                f"version ({','.join(columns)}); it was written by an older excite: re-run "
                 "it into another --out")
         for raw in reader:
-            row = _parse(raw)
+            row = _parse(raw, columns)
             if row is not None:
                 key = (row["protocol"], row["estimator"], row["episode"])
                 groups.setdefault(key, {})[row["segment"]] = row
-    expected = [segments] if final_only else list(range(1, segments + 1))
-    complete = [g for g in groups.values() if sorted(g) == expected]
-    return [row for g in complete for _, row in sorted(g.items())]
+
+    def complete(group: dict[int, dict]) -> bool:
+        last = max(group)
+        ends = last == segments or (target and last < segments and group[last]["stop"] == 1)
+        return ends and sorted(group) == ([last] if final_only else list(range(1, last + 1)))
+
+    return [row for g in groups.values() if complete(g) for _, row in sorted(g.items())]
 
 
-def _write_rows(path: Path, rows: Iterable[dict], mode: str) -> None:
+def _write_rows(path: Path, rows: Iterable[dict], mode: str,
+                columns: tuple[str, ...] = COLUMNS) -> None:
     """Append rows (mode "a"), or replace the file by a header and rows (mode "w", atomic: a
     kill while writing leaves the old file)."""
-    target = path.with_name(path.name + ".partial") if mode == "w" else path
-    with open(target, mode, newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
+    out = path.with_name(path.name + ".partial") if mode == "w" else path
+    with open(out, mode, newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=columns)
         if mode == "w":
             writer.writeheader()
-        writer.writerows({k: _format(row[k]) for k in COLUMNS} for row in rows)
+        writer.writerows({k: _format(row[k]) for k in columns} for row in rows)
         handle.flush()
         os.fsync(handle.fileno())
     if mode == "w":
-        os.replace(target, path)
+        os.replace(out, path)
 
 
 def _format(value):
     """CSV text of a value: floats (numpy's too) in shortest round-trip form."""
     if isinstance(value, float | np.floating):
         value = float(value)
+        if math.isnan(value):
+            return "nan"
         return repr(value) if math.isfinite(value) else ("inf" if value > 0 else "-inf")
     if isinstance(value, np.integer):
         return int(value)
@@ -324,9 +370,10 @@ def _resumable_rows(out_dir: Path, settings: CompareSettings,
         if compared != asdict(settings):
             raise CompareError(
                 f"{out_dir} holds a comparison with other settings ({compared}); "
-                "use another --out or the same --env, --segments, --seed and --robot")
+                "use another --out or the same --env, --segments, --seed, --robot, --target "
+                "and --target-confidence")
     rows = read_complete_rows(out_dir / "segments.csv", settings.segments,
-                              settings.final_only)
+                              settings.final_only, settings.target is not None)
     known = dict((stored or {}).get(FILES_KEY, {}))
     present = {row["protocol"] for row in rows}
     for spec in specs:
@@ -346,7 +393,8 @@ def _resumable_rows(out_dir: Path, settings: CompareSettings,
                 "use another --out")
         known[spec.label] = digest
     if stored is None or known != stored.get(FILES_KEY, {}):
-        content = {**(stored or asdict(settings)), **({FILES_KEY: known} if known else {})}
+        content = {**(stored or settings_dict(settings)),
+                   **({FILES_KEY: known} if known else {})}
         config.write_text(json.dumps(content, indent=2) + "\n")
     return rows, known
 
@@ -383,7 +431,8 @@ def run_comparison(
     out.mkdir(parents=True, exist_ok=True)
     rows, digests = _resumable_rows(out, settings, specs)
     csv_path = out / "segments.csv"
-    _write_rows(csv_path, rows, "w")  # rewrite without partial episodes or duplicates
+    columns = columns_for(settings.target is not None)
+    _write_rows(csv_path, rows, "w", columns)  # rewrite without partial episodes or duplicates
     done = {(r["protocol"], r["estimator"], r["episode"]) for r in rows}
     todo = {e: [(p, m) for p in specs for m in estimator_specs
                 if (p.label, m.label, e) not in done] for e in range(episodes)}
@@ -394,7 +443,7 @@ def run_comparison(
 
         def record(episode_rows: list[list[dict]]) -> None:
             new_rows = [row for rows_of_one in episode_rows for row in rows_of_one]
-            _write_rows(csv_path, new_rows, "a")
+            _write_rows(csv_path, new_rows, "a", columns)
             rows.extend(new_rows)
             bar.update(len(episode_rows))
 
@@ -419,13 +468,15 @@ def run_comparison(
     estimator_rank = {spec.label: i for i, spec in enumerate(estimator_specs)}
     rows.sort(key=lambda r: (r["episode"], rank.get(r["protocol"], len(rank)),
                              estimator_rank.get(r["estimator"], len(estimator_rank))))
-    _write_rows(csv_path, rows, "w")
+    _write_rows(csv_path, rows, "w", columns)
     wanted = {(p.label, m.label) for p in specs for m in estimator_specs}
     return [r for r in rows
             if (r["protocol"], r["estimator"]) in wanted and r["episode"] < episodes]
 
 
 def columns_of(rows: Sequence[dict]) -> dict[str, np.ndarray]:
-    """Rows of a comparison as columns (equal-length arrays, one per COLUMNS key): the segment
-    record that :mod:`agents.summary` and :mod:`agents.plots` take."""
-    return {key: np.array([row[key] for row in rows]) for key in COLUMNS}
+    """Rows of a comparison as columns (equal-length arrays, one per COLUMNS key, and per
+    TARGET_COLUMNS key when the rows have them): the segment record that
+    :mod:`agents.summary` and :mod:`agents.plots` take."""
+    keys = columns_for(bool(rows) and "stop" in rows[0])
+    return {key: np.array([row[key] for row in rows]) for key in keys}

@@ -9,7 +9,8 @@ with the environment's estimator check.
   error stays below a threshold, censored (inf, flagged) when it never does;
 * :func:`error_time_area`: the area under the max relative error over time;
 * :func:`paired_ratio`: one policy's median over another's on the same episodes, with a
-  paired percentile bootstrap 95% interval.
+  paired percentile bootstrap 95% interval;
+* :func:`rate_interval`: a rate of events (e.g. false stops) with its Wilson 95% interval.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import trapezoid
+from scipy.stats import binomtest
 
 from excite.errors import MetricError
 from excite.stats.consistency import CONFIDENCE, check_confidence
@@ -31,6 +33,7 @@ __all__ = [
     "TimeToAccuracy",
     "error_time_area",
     "paired_ratio",
+    "rate_interval",
     "time_to_accuracy",
 ]
 
@@ -166,3 +169,16 @@ def paired_ratio(numerator: ArrayLike, denominator: ArrayLike, rng: np.random.Ge
     low, high = np.quantile(boot, [0.5 * alpha, 1.0 - 0.5 * alpha], method="inverted_cdf")
     return PairedRatio(float(_ratio_of_medians(num, den)), (float(low), float(high)),
                        confidence, int(n_boot))
+
+
+def rate_interval(events: int, trials: int, confidence: float = CONFIDENCE
+                  ) -> tuple[float | None, tuple[float, float]]:
+    """The rate events / trials (None without trials) and its Wilson score interval at
+    ``confidence`` ((0, 1) without trials: nothing is known)."""
+    if int(events) != events or int(trials) != trials or not 0 <= events <= trials:
+        raise MetricError(f"need whole numbers 0 <= events <= trials, got {events}, {trials}")
+    if trials == 0:
+        return None, (0.0, 1.0)
+    ci = binomtest(int(events), int(trials)).proportion_ci(check_confidence(confidence),
+                                                            "wilson")
+    return events / trials, (float(ci.low), float(ci.high))

@@ -1,4 +1,5 @@
-"""The plots of a comparison: errors, sigma_min and ANEES against segments, trajectories.
+"""The plots of a comparison: errors, sigma_min and ANEES against segments, trajectories,
+and with a target the survival curves of the time to target.
 
 :func:`plot_comparison` draws the segment record (:mod:`agents.segment_record`) as PNG files.
 matplotlib is imported when plotting, not with this module.
@@ -12,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.segment_record import by_episode, max_abs_error, oracle_median, pair_mask, pairs_of
+from agents.target_record import stops_of
 from excite.stats.consistency import anees_bounds
 
 ORACLE_LABEL = "oracle (E-optimal, true params)"
@@ -36,11 +38,13 @@ def plot_comparison(
     over episodes, log scale, with the 95% chi-square bounds of a consistent estimator
     dashed) and ``trajectories.png`` (the first episode's true path per protocol, with the
     first estimator that ran, in the square arena of side `arena_size` (m) centred at the
-    origin, collisions as red x). One line per (protocol, estimator), named by the labels
-    with their settings (:func:`pair_labels`), in one color across the figures.
+    origin, collisions as red x); with the target columns (``excite compare --target``)
+    also ``target_survival.png`` (:func:`_plot_survival`). One line per (protocol,
+    estimator), named by the labels with their settings (:func:`pair_labels`), in one color
+    across the figures.
 
     Returns:
-        The paths of the four files written.
+        The paths of the files written.
     """
     import matplotlib
 
@@ -109,7 +113,43 @@ def plot_comparison(
     paths.append(_plot_trajectories(columns, list(first.values()),
                                     {pair[0]: colors[pair] for pair in first.values()},
                                     out, arena_size))
+    if "stop" in columns:
+        paths.append(_plot_survival(columns, pairs, labels, colors, out))
     return paths
+
+
+def _plot_survival(columns: dict[str, np.ndarray], pairs: list[tuple[str, str]],
+                   labels: dict[tuple[str, str], str], colors: dict[tuple[str, str], str],
+                   out: Path) -> Path:
+    """``target_survival.png``: per pair the share of robots (episodes) the stopping rule has
+    not yet said done for, against the segments (left) and the seconds (right) driven; a
+    curve that ends above 0 ends at the budget (those robots are censored, not done within
+    it; the legend gives their number, as curves at 1 can hide each other). Call only after
+    `plot_comparison` has selected the Agg backend."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.4), sharey=True)
+    for pair in pairs:
+        stops = stops_of(columns, *pair)
+        for ax, driven in zip(axes, (stops.segments, stops.seconds), strict=True):
+            done = np.sort(driven[stops.stopped])
+            x = np.concatenate([[0.0], done, [driven.max()]])
+            share = 1.0 - np.arange(done.size + 1) / driven.size
+            ax.step(x, np.append(share, share[-1]), where="post", color=colors[pair],
+                    label=f"{labels[pair]} ({driven.size - done.size} of {driven.size} "
+                    "not done)")
+    for ax, unit in zip(axes, ("segments", "seconds (s)"), strict=True):
+        ax.set_xlabel(f"{unit} driven")
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(True, alpha=0.3)
+    axes[0].set_ylabel("share of robots not done yet")
+    axes[1].legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    fig.suptitle("Time to target: robots the stopping rule has not said done for")
+    fig.tight_layout()
+    path = out / "target_survival.png"
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
 
 
 def _plot_trajectories(

@@ -7,7 +7,9 @@ the hidden truth, the information measure ``sigma_min`` (dimensionless, see
 docs/conventions.md), the per-episode ceiling ``oracle_sigma_min``, the Cramér–Rao relative
 stds ``rel_std_r_L, rel_std_r_R, rel_std_b``, the estimator's ``nees`` against the truth over
 ``nees_dof`` parameters, ``collision`` (0/1), the true end pose ``x, y`` (m), ``theta`` (rad),
-the cumulative ``distance`` (m) and ``time`` (s) driven.
+the cumulative ``distance`` (m) and ``time`` (s) driven. With a target, episodes end at
+their stop or at the budget and the rows also hold the columns of
+:mod:`agents.target_record`.
 """
 
 from __future__ import annotations
@@ -68,10 +70,16 @@ def final_max_errors(columns: dict[str, np.ndarray], protocol: str,
 def by_episode(columns: dict[str, np.ndarray], mask: np.ndarray,
                values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Episode numbers, segment numbers 1..K and the (episodes, K) matrix of `values` over
-    the rows of `mask` (one pair, or one protocol). Missing (episode, segment) cells are
-    nan."""
+    the rows of `mask` (one pair, or one protocol), K the longest episode's segments. An
+    episode that ended earlier (at its stop, in target mode) keeps its last value after its
+    end: the calibration is done, it drives no further; other missing (episode, segment)
+    cells are nan."""
     episodes, ep_index = np.unique(np.asarray(columns["episode"])[mask], return_inverse=True)
     segment = np.asarray(columns["segment"], int)[mask]
     matrix = np.full((episodes.size, segment.max()), np.nan)
     matrix[ep_index, segment - 1] = np.asarray(values, float)[mask]
+    ends = np.zeros(episodes.size, int)
+    np.maximum.at(ends, ep_index, segment)
+    for row in np.flatnonzero(ends < segment.max()):
+        matrix[row, ends[row]:] = matrix[row, ends[row] - 1]
     return episodes, np.arange(1, segment.max() + 1), matrix

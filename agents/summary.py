@@ -37,13 +37,13 @@ RATIO_THRESHOLD = "0.2%"
 REFERENCE = "learned"
 
 
-def _json_float(value: float) -> float | None:
+def json_float(value: float) -> float | None:
     """A plain Python float, or None for inf / nan (so `json.dumps(allow_nan=False)` works)."""
     value = float(value)
     return value if math.isfinite(value) else None
 
 
-def _median_ci(values: np.ndarray, resample: np.ndarray) -> dict[str, float | list | None]:
+def median_ci(values: np.ndarray, resample: np.ndarray) -> dict[str, float | list | None]:
     """Median of `values` and the percentile bootstrap interval (CONFIDENCE) of the median.
 
     resample: (n_boot, n) indices into `values`, one bootstrap sample per row.
@@ -52,7 +52,7 @@ def _median_ci(values: np.ndarray, resample: np.ndarray) -> dict[str, float | li
     with np.errstate(invalid="ignore"):
         boot = np.median(values[resample], axis=1)
         lo, hi = np.percentile(boot, [tail, 100.0 - tail], method="inverted_cdf")
-    return {"median": _json_float(np.median(values)), "ci95": [_json_float(lo), _json_float(hi)]}
+    return {"median": json_float(np.median(values)), "ci95": [json_float(lo), json_float(hi)]}
 
 
 def _time_to_accuracy(max_error: np.ndarray, time: np.ndarray, distance: np.ndarray,
@@ -64,9 +64,9 @@ def _time_to_accuracy(max_error: np.ndarray, time: np.ndarray, distance: np.ndar
         reached = time_to_accuracy(max_error, threshold, time, distance)
         out[key] = {
             "threshold": threshold,
-            "segments": _median_ci(reached.segments, resample),
-            "seconds": _median_ci(reached.seconds, resample),
-            "metres": _median_ci(reached.metres, resample),
+            "segments": median_ci(reached.segments, resample),
+            "seconds": median_ci(reached.seconds, resample),
+            "metres": median_ci(reached.metres, resample),
             "censored": int(reached.censored.sum()),
         }
         segments[key] = reached.segments
@@ -83,7 +83,7 @@ def _consistency(nees: np.ndarray, dof: np.ndarray) -> dict:
         inside = (per_segment >= bounds[0]) & (per_segment <= bounds[1])
     final = float(per_segment[-1])
     return {
-        "final": _json_float(final),
+        "final": json_float(final),
         "bounds": list(bounds),
         "verdict": verdict(final, bounds),
         "parameters": parameters,
@@ -117,14 +117,14 @@ def _summarize_pair(columns: dict[str, np.ndarray], protocol: str, estimator: st
     summary = {
         "episodes": int(n),
         "segments": int(np.max(np.asarray(columns["segment"])[mask])),
-        "final_max_error": _median_ci(final, resample),
+        "final_max_error": median_ci(final, resample),
         "final_error": {
-            p: _json_float(np.median(np.abs(np.asarray(columns[f"{p}_err"], float)[last])))
+            p: json_float(np.median(np.abs(np.asarray(columns[f"{p}_err"], float)[last])))
             for p in PARAMETERS
         },
-        "sigma_min": _median_ci(sigma, resample),
-        "ratio_to_oracle": _median_ci(ratio, resample),
-        "distance_m": _json_float(np.median(np.asarray(columns["distance"], float)[last])),
+        "sigma_min": median_ci(sigma, resample),
+        "ratio_to_oracle": median_ci(ratio, resample),
+        "distance_m": json_float(np.median(np.asarray(columns["distance"], float)[last])),
         "collisions": {
             "total": int(round(collisions[mask].sum())),
             "per_episode": float(per_episode.mean()),
@@ -133,7 +133,7 @@ def _summarize_pair(columns: dict[str, np.ndarray], protocol: str, estimator: st
             p for p in PARAMETERS if not rel_std[p] <= UNDETERMINED_REL_STD  # nan counts too
         ],
         "time_to_accuracy": accuracy,
-        "error_time_area": _median_ci(error_time_area(max_error, time), resample),
+        "error_time_area": median_ci(error_time_area(max_error, time), resample),
         "anees": _consistency(nees, np.asarray(columns["nees_dof"])[mask]),
     }
     return summary, {"episode": episode, "final_max_error": final, **to_accuracy}
@@ -159,24 +159,34 @@ def _censored_bound(reference: np.ndarray, baseline: np.ndarray,
     return {}
 
 
+def paired_entry(reference: np.ndarray, baseline: np.ndarray, segments: int | None,
+                 rng: np.random.Generator, n_boot: int) -> dict:
+    """The reference's median over the baseline's on the same episodes (per-episode values,
+    paired by index), with its paired bootstrap interval: ``{"ratio", "ci95"}``
+    (:func:`agents.metrics.paired_ratio`; None where undefined). For times censored at
+    ``segments`` (inf: not reached within them) a ratio with one censored median is None,
+    and so is its interval, with the bound it still gives (:func:`_censored_bound`);
+    ``segments`` None: not a time."""
+    if not reference.size:
+        return {"ratio": None, "ci95": [None, None]}
+    result = paired_ratio(reference, baseline, rng, n_boot)
+    bound = {} if segments is None else _censored_bound(reference, baseline, segments)
+    ci = [None, None] if bound else [json_float(result.ci[0]), json_float(result.ci[1])]
+    return {"ratio": None if bound else json_float(result.ratio), "ci95": ci, **bound}
+
+
 def _paired(reference: dict[str, np.ndarray], baseline: dict[str, np.ndarray],
             segments: int, rng: np.random.Generator, n_boot: int) -> dict:
     """reference / baseline ratios of medians over their common episodes, with paired
-    bootstrap intervals: the final max error and the segments to RATIO_THRESHOLD (a ratio
-    with a censored median is None, with the bound it still gives, see _censored_bound)."""
+    bootstrap intervals: the final max error and the segments to RATIO_THRESHOLD (see
+    :func:`paired_entry`)."""
     common, ours, theirs = np.intersect1d(reference["episode"], baseline["episode"],
                                           return_indices=True)
     out: dict = {"episodes": int(common.size)}
     for key, name in (("final_max_error", "final_max_error"),
                       (RATIO_THRESHOLD, f"time_to_{RATIO_THRESHOLD}")):
-        if not common.size:
-            out[name] = {"ratio": None, "ci95": [None, None]}
-            continue
-        num, den = reference[key][ours], baseline[key][theirs]
-        result = paired_ratio(num, den, rng, n_boot)
-        bound = _censored_bound(num, den, segments) if key == RATIO_THRESHOLD else {}
-        ci = [None, None] if bound else [_json_float(result.ci[0]), _json_float(result.ci[1])]
-        out[name] = {"ratio": None if bound else _json_float(result.ratio), "ci95": ci, **bound}
+        out[name] = paired_entry(reference[key][ours], baseline[key][theirs],
+                                 segments if key == RATIO_THRESHOLD else None, rng, n_boot)
     return out
 
 
@@ -246,7 +256,7 @@ def summarize(columns: dict[str, np.ndarray], seed: int = 0, n_boot: int = N_BOO
                     protocols[protocol][estimator]["segments"], rng, n_boot)
     return {
         "protocols": protocols,
-        "oracle_sigma_min": {"median": _json_float(oracle_median(columns))},
+        "oracle_sigma_min": {"median": json_float(oracle_median(columns))},
         "reference": ref,
         "thresholds": dict(THRESHOLDS),
         "bootstrap": {"seed": int(seed), "n_boot": int(n_boot), "confidence": CONFIDENCE},

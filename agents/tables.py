@@ -1,8 +1,9 @@
 """Fixed-width text tables of a comparison's summary and of tuned settings.
 
 :func:`format_table` prints the summary of ``excite compare``
-(:func:`agents.summary.summarize`), :func:`format_tuning` a tuned-settings document
-(``excite tune``).
+(:func:`agents.summary.summarize`, with the target section of
+:func:`agents.target_summary.add_target` when there is one), :func:`format_tuning` a
+tuned-settings document (``excite tune``).
 """
 
 from __future__ import annotations
@@ -67,7 +68,13 @@ def _ratio_cell(entry: dict) -> str:
 def format_table(summary: dict) -> str:
     """Fixed-width text of a :func:`agents.summary.summarize` result: one row per (protocol,
     estimator), best (lowest error) first; then, when the reference ran, its paired ratios
-    over each baseline.
+    over each baseline; then, with a target (:func:`agents.target_summary.add_target`), the
+    time to target section: per pair the median segments, seconds and metres until the
+    stopping rule said done (with bootstrap 95% intervals; ">b" a lower bound when half the
+    episodes or more did not stop within the budget, "(n)" the episodes that did not), the
+    false stops over the stops with a Wilson 95% interval (%), the median max relative error
+    at the stop (%), and the reference's paired ratio of segments to target over each
+    baseline.
 
     maxerr% is the median over episodes of the final max |relative error| (%), with the 95%
     interval of that median; t<0.5%, t<0.2% the median segments until the max error stays
@@ -140,7 +147,65 @@ def format_table(summary: dict) -> str:
                  "bootstrap 95% CI]",
                  "below 1: the reference is better; <r: the baseline's median time is beyond "
                  "the budget", *_render(headers, rows, {0, 1} if several else {0})]
+    if any("target" in s for _, _, s in entries):
+        body += ["", *_target_lines([(p, e, s) for p, e, s in sorted(entries, key=sort_key)],
+                                    several, reference)]
     return "\n".join(body)
+
+
+def _driven_cell(entry: dict, censored: int, digits: int = 3) -> str:
+    """A median time to target with its interval: "m [lo, hi]"; ">b" (a lower bound) when
+    the median is censored; an interval's end beyond the budget is inf; "(n)" the censored
+    episodes."""
+    lo, hi = (_num(v, 2) if v is not None else "inf" for v in entry["ci95"])
+    cell = (f">{_num(entry['at_least'], digits)}" if entry["median"] is None
+            else f"{_num(entry['median'], digits)} [{lo}, {hi}]")
+    return cell + (f"({censored})" if censored else "")
+
+
+def _target_lines(entries: list[tuple[str, str, dict]], several: bool,
+                  reference: str | None) -> list[str]:
+    """The target section of :func:`format_table`: per pair the time to target (segments,
+    s, m), the false stops and the error at the stop; then, when the reference ran, its
+    paired ratio of time to target over each baseline."""
+    first = next(s["target"] for _, _, s in entries if "target" in s)
+    headers = ["protocol", *(["estimator"] if several else []), "segments", "seconds",
+               "metres", "false stops", "err@stop%"]
+    rows = []
+    for protocol, estimator, s in entries:
+        t = s.get("target")
+        if t is None:
+            continue
+        time, false, error = t["time_to_target"], t["false_stop_rate"], t["error_at_stop"]
+        lo, hi = false["ci95"]
+        err_lo, err_hi = error["ci95"]
+        rows.append([
+            protocol, *([estimator] if several else []),
+            *(_driven_cell(time[key], time["censored"]) for key in ("segments", "seconds",
+                                                                    "metres")),
+            f"{false['false_stops']}/{false['stops']} [{_pct(lo, 2)}, {_pct(hi, 2)}]%",
+            "n/a" if error["median"] is None else
+            f"{_pct(error['median'])} [{_pct(err_lo, 2)}, {_pct(err_hi, 2)}]",
+        ])
+    lines = [f"time to target: the stopping rule says every parameter is within "
+             f"{_pct(first['value'])}% at {first['confidence']:.0%} (budget "
+             f"{first['budget']} segments)",
+             "median [bootstrap 95% CI]; >b: half the robots or more not done (b a lower "
+             "bound); (n): not done",
+             "false stops: stopped with the truth outside the target / stops [Wilson 95% CI]",
+             "err@stop%: median max |relative error| of r_L, r_R, b at the stop [95% CI]",
+             *_render(headers, rows, {0, 1} if several else {0})]
+    ratios = [(p, e, s["target"]["vs_reference"]) for p, e, s in entries
+              if "vs_reference" in s.get("target", {})]
+    if reference and ratios:
+        headers = ["baseline", *(["estimator"] if several else []), "time to target"]
+        rows = [[p, *([e] if several else []), _ratio_cell(r["time_to_target"])]
+                for p, e, r in ratios]
+        lines += ["", f"reference: {reference}",
+                  "reference / baseline: median segments to target over the same episodes "
+                  "[paired bootstrap 95% CI]",
+                  *_render(headers, rows, {0, 1} if several else {0})]
+    return lines
 
 
 def format_tuning(document: dict) -> str:

@@ -22,7 +22,7 @@ import itertools
 import json
 import os
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +35,7 @@ from agents.compare import (
     columns_of,
     episode_seeds,
     run_comparison,
+    settings_dict,
 )
 from agents.protocols import ProtocolError
 from agents.segment_record import final_max_errors
@@ -112,7 +113,7 @@ def run_tuning(out: str | Path, specs: Sequence[ProtocolSpec], episodes: int,
     columns = columns_of(rows)
     document = {
         "excite_tuned": TUNED_FORMAT,
-        **asdict(settings),
+        **settings_dict(settings),
         "episodes": episodes,
         "tuning_seeds": episode_seeds(settings, episodes),
         "criterion": CRITERION,
@@ -154,14 +155,14 @@ def load_tuned(path: str | Path) -> dict:
 
 
 def mismatch(document: Mapping, settings: CompareSettings) -> str | None:
-    """How the episodes a tuned document was tuned on differ from a comparison's (env,
-    segments, robot), in words; None when they agree."""
+    """How the episodes a tuned document was tuned on differ from those of ``settings`` (a
+    comparison's or a simulation's: env, segments, robot), in words; None when they agree."""
     tuned = (document["env_id"], document["segments"], document["robot"])
     wanted = (settings.env_id, settings.segments, settings.robot)
     if tuned == wanted:
         return None
     return (f"tuned for {tuned[1]} segments of the {tuned[2]} robot on {tuned[0]}, this "
-            f"comparison runs {wanted[1]} segments of the {wanted[2]} robot on {wanted[0]}")
+            f"run drives {wanted[1]} segments of the {wanted[2]} robot on {wanted[0]}")
 
 
 def check_disjoint(document: Mapping, settings: CompareSettings, episodes: int) -> None:

@@ -45,6 +45,7 @@ from excite.estimators import (
 )
 from excite.estimators.online import BatchOnlineEstimator
 from excite.logs.segments import Segments
+from excite.stopping import StopDecision
 
 #: The environment's estimator factory given none: the built-in of
 #: :data:`excite.estimators.DEFAULT_ESTIMATOR` (:class:`excite.OnlineEstimator` started at the
@@ -136,7 +137,9 @@ class DiffDriveCalibEnv(gym.Env):
 
     ## Evaluation
     ``env.unwrapped.true_params`` (hidden truth), ``env.unwrapped.segments`` (the episode's
-    calibration log), ``env.unwrapped.estimator``.
+    calibration log), ``env.unwrapped.estimator``; in target mode ``env.unwrapped.last_stop``,
+    the stopping rule's last :class:`excite.stopping.StopDecision` with its batch calibration
+    (None before the first segment and when target mode is off).
 
     ``reset(options={"robot": RobotSpec, "sensor_pose": SensorPose, "pose": (x, y, theta)})``
     fixes the hidden robot, the hidden sensor mounting (sensor-pose envs) and/or the start
@@ -224,6 +227,7 @@ class DiffDriveCalibEnv(gym.Env):
                 sim_rng.spawn(1)[0], self.sim.pose, self.sim.wheel_angles)
         self._log = np.empty((self.budget, 5))  # calibration rows; grows if stepped past budget
         self._n = 0
+        self.last_stop: StopDecision | None = None
         self._paths: list[np.ndarray] = [self.sim.pose[None, :]]
         self._last_action = (0.0, 0.0)
         self._sigma_min = 0.0
@@ -316,6 +320,7 @@ class DiffDriveCalibEnv(gym.Env):
         target = config["target_sigma_min"]
         decision = None if self._rule is None else decide(self._rule, self._log[:n],
                                                           self.nominal_theta)
+        self.last_stop = decision
         done = decision is not None and decision.done
         terminated = (target is not None and self._sigma_min >= target) or done
         truncated = n >= self.budget and not terminated

@@ -63,9 +63,12 @@ class DiffDriveCalibVectorEnv(VectorEnv):
 
     Info (arrays over robots): ``reward_terms`` (a dict of (N,) arrays), ``sigma_min``,
     ``collision``, ``n_segments``, ``measurement`` (N, 5), ``estimate`` (N, P). For evaluation:
-    ``true_theta`` (N, P), ``true_params``, ``max_relative_errors`` (N,), ``segments_logged``.
-    The estimators: ``estimators``, a :class:`excite.estimators.online.BatchOnlineEstimator` (its
-    ``theta`` (N, P)) or a list of one estimator per robot.
+    ``true_theta`` (N, P), ``true_params``, ``max_relative_errors`` (N,), ``segments_logged``;
+    in target mode ``last_stops``, the stopping rule's decisions of the last step
+    (:class:`excite.stopping.StopDecision` with its batch calibration; None for a robot that did
+    not move). The estimators: ``estimators``, a
+    :class:`excite.estimators.online.BatchOnlineEstimator` (its ``theta`` (N, P)) or a list of
+    one estimator per robot.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -123,6 +126,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self._start_error = np.zeros(n)
         self._ended = np.zeros(n, dtype=bool)  # NEXT_STEP: reset these on the next step
         self._started = False
+        self.last_stops: list[StopDecision | None] = [None] * n
 
     # -- episodes --------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int | None] | None = None,
@@ -225,6 +229,7 @@ class DiffDriveCalibVectorEnv(VectorEnv):
             "estimate": self._theta.copy(),
             "n_segments": self._n.copy(),
         }
+        self.last_stops = decisions
         if self._rule is not None:  # target mode: each robot's decision (None: not moving)
             info["stop"] = [None if d is None else d.to_dict() for d in decisions]
         reward = sum(terms.values())

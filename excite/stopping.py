@@ -26,8 +26,10 @@ scale is the margin against that. The false-stop rate is measured by Monte Carlo
 benchmarks).
 
 The rule also says *not yet* whenever the batch result cannot be trusted: parameters not
-determined (exit 3 of ``excite calibrate``), a model that does not fit (exit 4), or too few
-segments to estimate the noise levels. It predicts how many more segments the current way of
+determined (exit 3 of ``excite calibrate``), a model that does not fit (exit 4), too few
+segments to estimate the noise levels (fewer than MIN_RESIDUAL_DOF residual degrees of
+freedom per channel), or a channel of independent segments fitted exactly (its noise level at
+its floor). It predicts how many more segments the current way of
 driving needs from the growth of the information so far (std ~ 1 / sqrt(segments)).
 """
 
@@ -56,6 +58,10 @@ DEFAULT_CONFIDENCE = 0.95
 #: The confidence of the upper bound on the noise scale that widens every half-width: a look
 #: at which the estimated noise happens to be small would otherwise stop early.
 NOISE_BOUND_CONFIDENCE = 0.95
+#: The fewest residual degrees of freedom per noise channel (segments less the estimated
+#: parameters) before the rule may say done: noise levels estimated from fewer residuals can
+#: be near zero by chance (a channel fitted almost exactly), and the std with them.
+MIN_RESIDUAL_DOF = 10
 
 
 @dataclass(frozen=True)
@@ -162,6 +168,16 @@ class StoppingRule:
         if not result.fit.ok:
             return self._not_yet(n, f"the model does not fit the data: {result.fit.message}",
                                  tolerances, result)
+        dof = result.n_segments - len(result.parameter_names)
+        if dof < MIN_RESIDUAL_DOF:
+            return self._not_yet(n, f"{dof} residual degrees of freedom per noise channel; the "
+                                 f"noise levels need at least {MIN_RESIDUAL_DOF}", tolerances,
+                                 result)
+        exact = [c for c in ("x", "y", "theta") if c in result.levels_at_floor]
+        if exact and result.pose_sigma is None:
+            return self._not_yet(n, f"the {', '.join(exact)} residuals vanish (a channel fitted "
+                                 "exactly): its noise level is not known yet", tolerances,
+                                 result)
         std = _standard_deviations(result)
         quantile = self._quantile(result)
         half = {name: float(quantile * s) for name, s in std.items()}

@@ -45,13 +45,19 @@ def write_ros2_yaml(
     nominal: Params | None = None,
     controller: str = "diff_drive_controller",
     sensor_pose: SensorPose | None = None,
+    unsafe: str | None = None,
 ) -> None:
     """Write the parameters as a ROS 2 parameter file (``controller: ros__parameters: ...``).
     With an estimated ``sensor_pose``, the file starts with the static transform of the
     sensor as a ready-to-run ``static_transform_publisher`` command (a YAML comment, so the
-    file stays a valid parameter file)."""
+    file stays a valid parameter file). ``unsafe``: why the values must not be loaded into a
+    controller (a failed calibration written anyway); the file then starts with a comment
+    ``# UNSAFE: ...`` saying so."""
     parameters = ros2_diff_drive_parameters(estimate, nominal)
     lines = []
+    if unsafe is not None:
+        lines += ["# UNSAFE: do not load these parameters into a controller: the calibration "
+                  "failed.", f"# Why: {' '.join(unsafe.split())}"]
     if sensor_pose is not None:
         lines += ["# The external sensor's pose in base_link (estimated by excite):",
                   f"# {static_transform_command(sensor_pose)}"]

@@ -5,12 +5,15 @@
   where the data put the sensor);
 * against given noise levels (linear loss): each channel's residual sum of squares against
   its chi-square quantile (Bonferroni over the channels);
-* for segments that share pose samples (noise levels estimated, linear loss): the Ljung-Box
-  test of serial correlation of the whitened residuals, the driving test (do r_L, r_R and b
-  differ where the wheels speed up or slow down?) and, when the model passes, the search for
-  a wandering heading error of the pose samples (:mod:`excite.calibration.wander`).
+* with the noise levels estimated (linear loss): the driving tests (do the parameters, and
+  the residuals, change with the acceleration, the turn rate or the wheel speed? slip,
+  :mod:`excite.calibration.slip_tests`) and, for segments that share pose samples, the
+  Ljung-Box test of serial correlation of the whitened residuals and, when the model passes,
+  the search for a wandering heading error of the pose samples
+  (:mod:`excite.calibration.wander`).
 
-Every test is at TEST_LEVEL (99.9%) except the wander's (5%, its own module).
+Every test is at TEST_LEVEL (99.9%) except the wander's (5%, its own module); the three
+driving tests are one family at TEST_LEVEL.
 """
 
 from __future__ import annotations
@@ -23,24 +26,26 @@ from numpy.typing import NDArray
 
 from excite.calibration.model_choice import ModelChoice
 from excite.calibration.model_fit import Fitter, ModelFit
-from excite.calibration.noise import ChainWhitener, NoiseLevels, cut_from_log
+from excite.calibration.noise import ChainWhitener, NoiseLevels
 from excite.calibration.noise_rounds import EstimatedNoise
 from excite.calibration.options import TEST_LEVEL, SensorPoseOption
-from excite.calibration.result import FitTest
+from excite.calibration.result import CalibrationResult, FitTest
+from excite.calibration.slip_tests import FAMILY_LEVEL, DrivingTest, driving_tests
 from excite.calibration.solver import Loss, Problem, complement, normal_system
 from excite.calibration.starts import Starts, sensor_pose_estimate
 from excite.calibration.wander import HeadingWander, estimate_wander
-from excite.core.information import inverse_information
 from excite.core.models import AXLE, SENSOR_POSE
 from excite.logs.segments import Segments
 from excite.stats.autocorrelation import ljung_box, runs_of
 from excite.stats.chi2 import chi2_quantile, chi2_survival
 
-__all__ = ["fit_verdict"]
+__all__ = ["fit_verdict", "pooled_over_kinds"]
 
 FloatArray = NDArray[np.float64]
 #: Whitened residuals correlate with |dtheta| "significantly" above this z value.
 _TREND_Z = 3.0
+#: How the fit line of the sensor-pose model chosen with estimated noise levels starts.
+_LARGEST = "the sensor-pose model is the largest model"
 
 
 def fit_verdict(choice: ModelChoice, fitter: Fitter, starts: Starts,
@@ -68,11 +73,13 @@ def fit_verdict(choice: ModelChoice, fitter: Fitter, starts: Starts,
             alternative = fitter.fit(SENSOR_POSE, np.append(sensor_wheels.as_array(),
                                                             sensor_start.as_array()))
     test = _model_test(chosen, alternative, statistic, name, threshold, sigma, loss, forced)
-    if noise is not None and loss == "linear":
-        test = replace(test, serial_correlation=ljung_box(
-            chosen.fit.ev.raw.T, runs_of(data.chained, len(data))))
-        test = _driving_test(test, data, chosen, noise.whitener)
-        if test.ok:  # a misfit would be taken for a wander
+    if sigma is None and loss == "linear":
+        if noise is not None:
+            test = replace(test, serial_correlation=ljung_box(
+                chosen.fit.ev.raw.T, runs_of(data.chained, len(data))))
+        test = _with_driving_tests(test, driving_tests(
+            data, chosen, None if noise is None else noise.whitener, test.serial_correlation))
+        if noise is not None and test.ok:  # a misfit would be taken for a wander
             test = replace(test, heading_wander=_heading_wander(data, chosen, noise.levels,
                                                                 noise.whitener))
     return test
@@ -163,82 +170,110 @@ def _model_test(chosen: ModelFit, alternative: ModelFit | None, statistic: float
                        f"({statistic_name} {statistic:.3g} <= {threshold:.3g})", None,
                        *numbers)
     if statistic is not None:
-        return FitTest(True, "the sensor-pose model is the largest model: nothing to test it "
-                       "against (noise levels estimated)", None, *numbers)
+        return FitTest(True, f"{_LARGEST}: nothing to test it against (noise levels "
+                       "estimated)", None, *numbers)
     return FitTest(True, "no alternative to test against (noise levels estimated)", None,
                    *numbers)
 
 
-
-def _driving_score(data: Segments, mf: ModelFit, whitener: ChainWhitener
-                   ) -> tuple[float, int, FloatArray] | None:
-    """Rao's score statistic (and its degrees of freedom) of the alternative "r_L, r_R, b
-    differ by a constant in the segments whose wheel speeds change the most" at the fitted
-    parameters: the segments above the median of |change of each wheel's speed| summed over
-    the wheels (first to last sub-step, rad/s) get three extra parameters, the score and
-    information of the augmented model are whitened like the fit's; the efficient score
-    statistic is chi-square with ``dof`` (the extra directions the data determine) when slip
-    does not depend on the acceleration. Also the one-step estimate of the extra parameters
-    (relative differences of r_L, r_R, b, changing minus steady). None without sub-steps or
-    with too few segments to split."""
-    count = data.sub_count
-    if not cut_from_log(data) or count is None or len(data) < 8:
-        return None
-    assert data.sub_dphi_L is not None and data.sub_dphi_R is not None
-    assert data.t_start is not None and data.t_end is not None
-    rows = np.arange(len(data))
-    last = np.maximum(count, 1) - 1
-    change = (np.abs(data.sub_dphi_L[rows, last] - data.sub_dphi_L[:, 0])
-              + np.abs(data.sub_dphi_R[rows, last] - data.sub_dphi_R[:, 0]))
-    rate = change * np.maximum(count, 1) / np.maximum(data.t_end - data.t_start, 1e-12)
-    changing = rate > np.median(rate)
-    if not changing.any() or changing.all():
-        return None
-    ev = mf.unwhitened  # whiten the augmented rows
-    augmented = np.concatenate([ev.jac, ev.jac[:, :3, :] * changing[None, None, :]], axis=1)
-    white, jac = whitener.whiten(ev.raw, augmented)
-    assert jac is not None
-    gradient = np.einsum("cpn,cn->p", jac, white)
-    information = np.einsum("cpn,cqn->pq", jac, jac)
-    p = mf.theta.size
-
-    def rank(a: FloatArray) -> int:
-        lam = np.linalg.eigvalsh(a)
-        return int(np.sum(lam > max(lam[-1], 0.0) * 1e-10))
-
-    dof = rank(information) - rank(information[:p, :p])
-    if dof <= 0:
-        return None
-    # the efficient score: what the fitted parameters cannot explain (the fit is not exactly
-    # stationary along the directions it holds at their start, fit_model's weak directions)
-    full = np.linalg.pinv(information, hermitian=True)
-    restricted = np.linalg.pinv(information[:p, :p], hermitian=True)
-    statistic = float(gradient @ full @ gradient - gradient[:p] @ restricted @ gradient[:p])
-    shift = -(full @ gradient)[p:]  # one Gauss-Newton step of the extra (relative) parameters
-    return statistic, dof, shift
-
-
-def _driving_test(test: FitTest, data: Segments, mf: ModelFit,
-                  whitener: ChainWhitener) -> FitTest:
-    """The fit test with :func:`_driving_score` added; a rejection fails the fit."""
-    score = _driving_score(data, mf, whitener)
-    if score is None:
+def _with_driving_tests(test: FitTest, tests: tuple[DrivingTest, ...]) -> FitTest:
+    """The fit test with the driving tests (:mod:`excite.calibration.slip_tests`) added; a
+    failing one (:func:`_reported`) fails the fit with its reason in words."""
+    if not tests:
         return test
-    statistic, dof, shift = score
-    test = replace(test, driving_statistic=statistic, driving_dof=dof)
-    threshold = chi2_quantile(TEST_LEVEL, dof)
-    if not test.ok or statistic <= threshold:
+    acceleration = next((t for t in tests if t.driving == "acceleration"), None)
+    test = replace(test, driving_tests=tests,
+                   driving_statistic=None if acceleration is None else acceleration.statistic,
+                   driving_dof=None if acceleration is None else acceleration.dof)
+    worst = _reported(tests)
+    if not test.ok or worst is None:
+        if test.ok and test.message.startswith(_LARGEST):
+            return replace(test, message=f"{_LARGEST}; the driving tests find no slip (the "
+                           "parameters do not change with the acceleration, turn rate or "
+                           "wheel speed)")
         return test
-    # material, not only significant: the difference exceeds the wheel parameters' own std
-    # (on a long log a tiny effect is significant and moves nothing)
-    relative_std = np.sqrt(np.diag(inverse_information(mf.fit.system.information))[:3])
-    if not np.any(np.abs(shift) > relative_std):
-        return test
-    return replace(test, ok=False, message=(
-        f"r_L, r_R and b differ between the segments whose wheels speed up or slow down and "
-        f"the steadier ones (score {statistic:.3g} > {threshold:.3g}, {dof} dof): the wheels "
-        "slip more when they accelerate, which biases the estimates beyond their std; "
-        "calibrate on gentler driving (smaller steps of the wheel speeds)"))
+    return replace(test, ok=False, message=_driving_words(worst))
+
+
+def _reported(tests: tuple[DrivingTest, ...]) -> DrivingTest | None:
+    """The failing driving test the fit's words give: the acceleration's, else a slipping
+    one (whose residuals grow the most), else the most significant; None when none fails."""
+    failed = [t for t in tests if t.failed]
+    if not failed:
+        return None
+    for t in failed:
+        if t.driving == "acceleration":
+            return t
+    slipping = [t for t in failed if t.slipping]
+    if slipping:
+        return max(slipping, key=lambda t: float(np.max(t.growth_ratio)))
+    return max(failed, key=lambda t: t.statistic / t.threshold)
+
+
+def _driving_words(t: DrivingTest) -> str:
+    """Why the driving test ``t`` fails the fit, in words."""
+    numbers = f"score {t.statistic:.3g} > {t.threshold:.3g}, {t.dof} dof"
+    if t.driving == "acceleration":
+        return (f"r_L, r_R and b differ between the segments whose wheels speed up or slow "
+                f"down and the steadier ones ({numbers}): the wheels slip more when they "
+                "accelerate, which biases the estimates beyond their std; calibrate on "
+                "gentler driving (smaller steps of the wheel speeds)")
+    gentler = "slower turns" if t.driving == "turn rate" else "lower speeds"
+    where = "in turns" if t.driving == "turn rate" else "at speed"
+    change = f"{_listed(t.moved)} {_verb(t.moved)} with the {t.driving}"
+    by = _by(t)
+    if not t.slipping:
+        return (f"{change} ({by}): the wheels slip or scrub {where}, which biases the "
+                f"estimates beyond their std; calibrate on gentler driving ({gentler}), or "
+                "on driving like the robot's everyday driving")
+    if t.growth < 1.0 - FAMILY_LEVEL:
+        grown = [f"{c} {r:.2g}x" for c, r in zip(("x", "y", "theta"), t.growth_ratio,
+                                                  strict=True) if r > 1.0]
+        why = (f"the residuals grow with the {t.driving} ({', '.join(grown)} their size at "
+               f"{gentler})" if grown else f"the residuals' size changes with the {t.driving}")
+    else:
+        why = (f"the sensor's pose would have to change with the {t.driving} (score "
+               f"{t.pose_statistic:.3g}, {t.pose_dof} dof), as a mounting does not")
+    return (f"{why}, and {_listed(t.moved)} {_verb(t.moved)} with it ({by}): the wheels "
+            f"slip {where}, which biases the estimates beyond their std; calibrate on "
+            f"gentler driving ({gentler})")
+
+
+def _listed(names: tuple[str, ...]) -> str:
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def _verb(names: tuple[str, ...]) -> str:
+    return "changes" if len(names) == 1 else "change"
+
+
+def _by(t: DrivingTest) -> str:
+    """How much and how sure: the largest change over one std of the driving and the
+    score."""
+    whose = "its" if len(t.moved) == 1 else "their"
+    return (f"by up to {t.shift:.3g} of {whose} std per std of the {t.driving}; score "
+            f"{t.statistic:.3g} > {t.threshold:.3g}, {t.dof} dof")
+
+
+def pooled_over_kinds(result: CalibrationResult) -> CalibrationResult:
+    """The result with its fit test passing again when the heterogeneity stage found the
+    kinds of motion of one log disagreeing and pooled them (random effects, whose std covers
+    the spread) and the fit failed only by a driving test that is not slipping: the change of
+    the parameters with the driving is the kinds' difference the pool covers
+    (:mod:`excite.calibration.slip_tests`, "The verdict"). Unchanged otherwise."""
+    h, fit = result.heterogeneity, result.fit
+    if (fit.ok or h is None or not h.detected or h.by != "motion"
+            or h.pooling != "random effects" or not fit.driving_tests):
+        return result
+    worst = _reported(fit.driving_tests)
+    if worst is None or any(t.failed and t.slipping for t in fit.driving_tests) \
+            or not fit.message.startswith(_driving_words(worst)):
+        return result
+    return replace(result, fit=replace(fit, ok=True, message=(
+        f"{_listed(worst.moved)} {_verb(worst.moved)} with the {worst.driving} "
+        f"({_by(worst)}) as the kinds of motion differ, which the random-effects pool "
+        "covers; the residuals do "
+        "not grow with the driving and the mounting does not move with it")))
 
 
 def _heading_wander(data: Segments, mf: ModelFit, levels: NoiseLevels,

@@ -5,8 +5,10 @@ do, without the command line).
 :func:`calibrate_logs` is a recipe of named stages: group the inputs and keep back whole logs
 for validation (``holdout``) -> read and segment each input -> check each one's wiring and
 pose source -> pool the segments -> calibrate (:func:`excite.calibration.pipeline.calibrate`)
--> validate on the held-out logs. :func:`validate_logs` dead-reckons logs with a calibrated
-and a nominal robot (:mod:`excite.validation.dead_reckoning`).
+-> with several inputs, test whether they agree (each calibrated alone,
+:func:`excite.calibration.heterogeneity.across_logs`) -> validate on the held-out logs.
+:func:`validate_logs` dead-reckons logs with a calibrated and a nominal robot
+(:mod:`excite.validation.dead_reckoning`).
 
 Nothing here prints: the notes for the user come back in the results, and are passed as they
 arise to an ``on_note`` function when one is given (the command line prints them so).
@@ -19,6 +21,7 @@ from dataclasses import dataclass
 
 from numpy.typing import ArrayLike
 
+from excite.calibration.heterogeneity import HeterogeneityOption, across_logs, applied
 from excite.calibration.options import SensorPoseOption
 from excite.calibration.pipeline import calibrate
 from excite.calibration.result import CalibrationResult
@@ -152,6 +155,7 @@ def calibrate_logs(
     trim: float = 0.0,
     holdout: float = 0.0,
     on_note: OnNote | None = None,
+    heterogeneity: HeterogeneityOption = "random",
 ) -> LogCalibration:
     """Calibrate r_L, r_R, b (and the sensor pose) on the segment files, time-series logs and
     bags of ``paths``, one data set (a pair of stream CSVs is one log); the stages are listed
@@ -163,7 +167,10 @@ def calibrate_logs(
     holdout: the fraction of the logs (whole logs, the last ones, at least one; segment files
     are never kept back) not calibrated on but validated on, against ``initial`` with the
     calibrated sensor pose; it needs ``initial`` and at least 2 logs. on_note: told each note
-    as it arises (they are in the result too).
+    as it arises (they are in the result too). heterogeneity: as
+    :func:`~excite.calibration.pipeline.calibrate` for one input (kinds of motion); with
+    several inputs the test is between them instead, each calibrated alone
+    (:func:`excite.calibration.heterogeneity.across_logs`).
 
     Raises DataError for bad inputs or settings: as the readers, segmentation and
     :func:`~excite.calibration.pipeline.calibrate` do, for miswired wheels or poses that are
@@ -178,8 +185,18 @@ def calibrate_logs(
     parts = segment_inputs(used, options, on_note=note)
     for part in parts:
         _check_part(part, initial, note)
-    result = calibrate(_pooled(parts), initial=initial, sigma=sigma, loss=loss,
-                       sensor_pose=sensor_pose, trim=trim, ticks_per_rev=options.ticks_per_rev)
+    several = len(parts) > 1
+
+    def fit(segments: Segments, pose: SensorPoseOption, test: HeterogeneityOption
+            ) -> CalibrationResult:
+        return calibrate(segments, initial=initial, sigma=sigma, loss=loss, sensor_pose=pose,
+                         trim=trim, ticks_per_rev=options.ticks_per_rev, heterogeneity=test)
+
+    result = fit(_pooled(parts), sensor_pose, "off" if several else heterogeneity)
+    if several and heterogeneity != "off":
+        test = across_logs([(part.source.name, part.segments) for part in parts], result,
+                           lambda segments, pose: fit(segments, pose, "off"), note)
+        result = applied(result, test, heterogeneity)
     validation = None
     if held:
         assert initial is not None  # checked above

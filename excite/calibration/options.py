@@ -17,13 +17,17 @@ from excite.core.models import SensorPose
 from excite.errors import DataError
 from excite.logs.segments import Segments
 
-__all__ = ["DEFAULT_MAX_RELATIVE_STD", "TEST_LEVEL", "FitOptions", "SensorPoseOption",
-           "checked_inputs"]
+__all__ = ["DEFAULT_MAX_RELATIVE_STD", "TEST_LEVEL", "CalibrationLoss", "FitOptions",
+           "SensorPoseOption", "checked_inputs", "solver_loss"]
 
 FloatArray = NDArray[np.float64]
 #: How the sensor pose is treated: "auto" (estimated when the data determine it and it fits
 #: significantly better than the axle model), "axle", "estimate", or a known SensorPose.
 SensorPoseOption = Literal["auto", "axle", "estimate"] | SensorPose
+#: The loss a calibration is asked for: "auto" (least squares, with gross errors found and
+#: left out, :mod:`excite.calibration.gross_errors`), "linear" (plain least squares) or
+#: "huber" (the Huber loss).
+CalibrationLoss = Literal["auto", "linear", "huber"]
 
 #: Data determine the parameters when the worst-direction relative std 1/sigma_min is at most
 #: this.
@@ -60,7 +64,14 @@ class FitOptions:
     max_relative_std: float
 
 
-def checked_inputs(segments: Segments | ArrayLike, sigma: ArrayLike | None, loss: Loss,
+def solver_loss(loss: CalibrationLoss) -> Loss:
+    """The loss of every fit: "huber" for "huber", else "linear" (the gross-error screen of
+    "auto" works on least-squares fits)."""
+    return "huber" if loss == "huber" else "linear"
+
+
+def checked_inputs(segments: Segments | ArrayLike, sigma: ArrayLike | None,
+                   loss: CalibrationLoss,
                    sensor_pose: SensorPoseOption, trim: float
                    ) -> tuple[Segments, FloatArray | None]:
     """The segments (an (N, 5) array in CSV column order becomes :class:`Segments`) and the
@@ -71,8 +82,8 @@ def checked_inputs(segments: Segments | ArrayLike, sigma: ArrayLike | None, loss
     seg = segments if isinstance(segments, Segments) else Segments.from_array(segments)
     if len(seg) < 3:
         raise DataError(f"{len(seg)} segment(s); at least 3 are needed")
-    if loss not in ("linear", "huber"):
-        raise ValueError(f"loss must be 'linear' or 'huber', got {loss!r}")
+    if loss not in ("auto", "linear", "huber"):
+        raise ValueError(f"loss must be 'auto', 'linear' or 'huber', got {loss!r}")
     if not (isinstance(sensor_pose, SensorPose) or sensor_pose in ("auto", "axle", "estimate")):
         raise ValueError("sensor_pose must be 'auto', 'axle', 'estimate' or a SensorPose, "
                          f"got {sensor_pose!r}")

@@ -13,12 +13,22 @@ No initial guess and no noise levels are needed. The stages, in order, each in i
    given or estimated within each fit, :mod:`excite.calibration.solver`).
 5. :func:`~excite.calibration.model_choice.fit_candidates`: each candidate model fitted under
    those noise levels (:mod:`excite.calibration.model_fit`).
+5a. :func:`~excite.calibration.gross_errors.without_gross_errors`: under ``loss="auto"`` (no
+   trimming), the gross errors found at the primary model's fit (bad pose samples of
+   segments that share them, :mod:`excite.calibration.gross_samples`); when any, stages 2, 4
+   and 5 again without them.
 6. :func:`~excite.calibration.model_choice.choose_model`: the axle or the sensor-pose model.
 7. :func:`~excite.calibration.fit_tests.fit_verdict`: whether the chosen model fits the data.
 8. :func:`~excite.calibration.covariance.reported_covariance`: the covariance under a
    wandering heading error and widened for serially correlated residuals.
+   8a. :func:`~excite.calibration.heterogeneity.motion_heterogeneity`: whether r_L, r_R, b
+   differ between kinds of motion.
 9. :func:`~excite.calibration.result.build_result`: the
    :class:`~excite.calibration.result.CalibrationResult`.
+10. :func:`~excite.calibration.heterogeneity.applied`: when the kinds of motion disagree,
+    r_L, r_R, b from their random-effects pool (or the fit failed, ``heterogeneity="common"``).
+11. :func:`~excite.calibration.fit_tests.pooled_over_kinds`: when that pool was made, a
+    driving test that is not slipping no longer fails the fit (the pool covers it).
 """
 
 from __future__ import annotations
@@ -26,19 +36,27 @@ from __future__ import annotations
 from numpy.typing import ArrayLike
 
 from excite.calibration.covariance import reported_covariance
-from excite.calibration.fit_tests import fit_verdict
+from excite.calibration.fit_tests import fit_verdict, pooled_over_kinds
+from excite.calibration.gross_errors import Fits, GrossErrors, without_gross_errors
+from excite.calibration.heterogeneity import (
+    HeterogeneityOption,
+    applied,
+    check_option,
+    motion_heterogeneity,
+)
 from excite.calibration.model_choice import choose_model, fit_candidates
 from excite.calibration.model_fit import UNIT_SIGMA, Fitter
 from excite.calibration.noise_rounds import estimated_noise
 from excite.calibration.options import (
     DEFAULT_MAX_RELATIVE_STD,
+    CalibrationLoss,
     FitOptions,
     SensorPoseOption,
     checked_inputs,
+    solver_loss,
 )
 from excite.calibration.result import CalibrationResult, build_result
-from excite.calibration.solver import Loss
-from excite.calibration.starts import first_estimates
+from excite.calibration.starts import Starts, first_estimates
 from excite.calibration.trimming import trimmed
 from excite.core.kinematics import Params
 from excite.logs.segments import Segments
@@ -50,7 +68,7 @@ def calibrate(
     segments: Segments | ArrayLike,
     initial: Params | ArrayLike | None = None,
     sigma: ArrayLike | None = None,
-    loss: Loss = "linear",
+    loss: CalibrationLoss = "auto",
     *,
     sensor_pose: SensorPoseOption = "auto",
     trim: float = 0.0,
@@ -58,6 +76,7 @@ def calibrate(
     tol: float = 1e-8,
     max_relative_std: float = DEFAULT_MAX_RELATIVE_STD,
     ticks_per_rev: float | None = None,
+    heterogeneity: HeterogeneityOption = "random",
 ) -> CalibrationResult:
     """Estimate p = (r_L, r_R, b), and the sensor pose, from segments by weighted maximum
     likelihood.
@@ -71,8 +90,13 @@ def calibrate(
         every iteration until they settle. Segments cut from one log (sharing pose samples)
         then need MIN_NOISE_DOF_PER_LEVEL residual degrees of freedom per noise level (about
         14 segments with the sensor pose), else DataError.
-    loss: "linear" (Gaussian maximum likelihood) or "huber" (robust to slip outliers; the
-        threshold is 1.345 whitened standard deviations).
+    loss: "auto" (default: Gaussian maximum likelihood, with gross errors found by a
+        contaminated-normal model, tested for at the 1% level and left out of the fits,
+        :mod:`excite.calibration.gross_errors`; the result's ``gross_errors`` says what was
+        found; independent segments without ``trim`` only; clean data are fitted exactly as
+        with "linear"), "linear" (Gaussian maximum likelihood on every segment) or "huber"
+        (robust to slip outliers; the threshold is 1.345 whitened standard deviations). The
+        default was "linear" before "auto" existed.
     sensor_pose: "auto" (default: estimate the sensor pose when the data determine it and it
         improves the fit significantly, a likelihood-ratio test at the 99.9% level; else the
         axle model), "axle" (the sensor is on the axle midpoint, facing forward), "estimate"
@@ -84,17 +108,43 @@ def calibrate(
         wheel revolution; None: angles not quantised): each angle sample's rounding error
         (variance (2 pi / ticks_per_rev)^2 / 12) is then part of the noise model of segments
         that share samples (:class:`excite.calibration.noise.WheelNoise`).
+    heterogeneity: "random" (default: test whether r_L, r_R, b differ between kinds of
+        motion; when they do, report their random-effects pool), "common" (test, keep common
+        parameters, which then fail the fit when they differ) or "off"
+        (:mod:`excite.calibration.heterogeneity`).
     """
+    check_option(heterogeneity)
     seg, given = checked_inputs(segments, sigma, loss, sensor_pose, trim)
-    options = FitOptions(loss, max_iterations, tol, max_relative_std)
+    options = FitOptions(solver_loss(loss), max_iterations, tol, max_relative_std)
     starts = first_estimates(seg, initial, sensor_pose)
     data = trimmed(seg, starts, given, trim, options)
+    n_trimmed = len(seg) - len(data)
+    fits = _fitted(data, starts, given, ticks_per_rev, options, sensor_pose)
+    gross: GrossErrors | None = None
+    if loss == "auto" and not trim:  # the calibration again, without the gross errors
+
+        def refit(kept: Segments) -> Fits:
+            return _fitted(kept, first_estimates(kept, initial, sensor_pose), given,
+                           ticks_per_rev, options, sensor_pose)
+
+        data, fits, gross = without_gross_errors(fits, refit, given, options)
+    starts, noise, fitter, candidates = fits
+    choice = choose_model(candidates, fitter)
+    test = fit_verdict(choice, fitter, starts, sensor_pose, given, noise)
+    relative, test = reported_covariance(choice.chosen, test, fitter)
+    kinds = (None if heterogeneity == "off"
+             else motion_heterogeneity(choice.chosen, fitter, relative))
+    result = build_result(data, choice, test, relative, given is None, n_trimmed, noise,
+                          options, loss=loss, gross_errors=gross)
+    return pooled_over_kinds(applied(result, kinds, heterogeneity))
+
+
+def _fitted(data: Segments, starts: Starts, given, ticks_per_rev: float | None,
+            options: FitOptions, sensor_pose: SensorPoseOption) -> Fits:
+    """Stages 4 and 5 on ``data`` from ``starts``: the noise levels, the fits' noise model
+    and the candidate models fitted under it."""
     noise = estimated_noise(data, starts, given, ticks_per_rev, options)
     # every fit from here on: whitened at the estimated levels, or per-channel sigma
     fitter = (Fitter(data, given, None, options) if noise is None
               else Fitter(data, UNIT_SIGMA, noise.whitener, options))
-    choice = choose_model(fit_candidates(fitter, starts, noise, sensor_pose), fitter)
-    test = fit_verdict(choice, fitter, starts, sensor_pose, given, noise)
-    relative, test = reported_covariance(choice.chosen, test, fitter)
-    return build_result(data, choice, test, relative, given is None, len(seg) - len(data),
-                        noise, options)
+    return Fits(starts, noise, fitter, fit_candidates(fitter, starts, noise, sensor_pose))

@@ -5,16 +5,18 @@ place a result is built.
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
+from excite.calibration.gross_errors import GrossErrors
+from excite.calibration.heterogeneity import Heterogeneity
 from excite.calibration.identifiability import describe_weak
 from excite.calibration.model_choice import ModelChoice
 from excite.calibration.noise_rounds import EstimatedNoise
 from excite.calibration.options import FitOptions
+from excite.calibration.slip_tests import DrivingTest
 from excite.calibration.wander import HeadingWander
 from excite.core.kinematics import Params
 from excite.core.models import AXLE, SENSOR_POSE, SensorPose
@@ -71,16 +73,17 @@ class FitTest:
         Newey-West covariance where that is larger, over this many segments, and the
         message says so (``ok`` is not changed by it); else None.
     driving_statistic : float or None
-        For segments cut from a log (noise levels estimated, linear loss), Rao's score
-        statistic of "r_L, r_R and b are the same in the segments whose wheels speed up or
-        slow down the most (above the median change of wheel speed) as in the others"
-        (dimensionless): slip that grows with acceleration makes them differ. Above the
-        chi-square quantile with ``driving_dof`` degrees of freedom at TEST_LEVEL it fails
-        the fit (``ok`` False) when the difference also exceeds the parameters' own std;
-        None when not tested.
+        With the noise levels estimated (linear loss), the acceleration's driving test: Rao's
+        score statistic of "r_L, r_R and b change with the change of the wheel speeds"
+        (dimensionless; :mod:`excite.calibration.slip_tests`); None when not tested.
     driving_dof : int or None
         The degrees of freedom of ``driving_statistic`` (the extra directions the data
         determine).
+    driving_tests : tuple of DrivingTest, or None
+        With the noise levels estimated (linear loss, at least 8 segments), the driving tests
+        of the acceleration, the turn rate and the wheel speed
+        (:class:`excite.calibration.slip_tests.DrivingTest`): slip, whose failing test fails
+        the fit (``ok`` False) with its reason; None when not tested.
     heading_wander : HeadingWander or None
         For segments with times that share pose samples (noise levels estimated, linear loss,
         at least 50 segments, the model passing its own test), the pose samples' heading
@@ -103,6 +106,7 @@ class FitTest:
     driving_statistic: float | None = None
     driving_dof: int | None = None
     heading_wander: HeadingWander | None = None
+    driving_tests: tuple[DrivingTest, ...] | None = None
 
     def to_dict(self) -> dict:
         """JSON-ready dict (the ``fit`` object of ``excite calibrate --json``)."""
@@ -120,7 +124,9 @@ class FitTest:
                     "std": self.heading_wander.std,
                     "correlation_time": self.heading_wander.correlation_time,
                     "statistic": self.heading_wander.statistic,
-                    "at_bound": self.heading_wander.at_bound}}
+                    "at_bound": self.heading_wander.at_bound},
+                "driving_tests": None if self.driving_tests is None else [
+                    t.to_dict() for t in self.driving_tests]}
 
 
 @dataclass(frozen=True)
@@ -209,7 +215,8 @@ class CalibrationResult:
         (:attr:`excite.calibration.noise.WheelNoise.timing_bound`; larger errors are not
         described, the std are then too narrow); None without timing.
     loss : str
-        "linear" or "huber".
+        The loss asked for: "auto" (least squares with the gross-error screen), "linear" or
+        "huber".
     converged : bool
         Whether the final fit converged.
     iterations : int
@@ -219,6 +226,22 @@ class CalibrationResult:
         Why the final fit stopped.
     residuals : ndarray, shape (N, 3)
         The raw residuals, predicted - measured, per segment (m, m, rad).
+    levels_at_floor : tuple of str
+        The estimated noise levels held at their floor, i.e. not found in the data (the
+        report prints them as "none"): any of "x", "y", "theta" (``sigma``), "pose_xy",
+        "pose_theta" (``pose_sigma``), "slip"; empty when ``sigma`` is given.
+    gross_errors : GrossErrors or None
+        Under ``loss="auto"`` (no trimming), what the gross-error screen found
+        (:class:`excite.calibration.gross_errors.GrossErrors`): the flagged segments' indices
+        (left out of the fit or, around a bad pose sample of a log, merged; not counted in
+        ``n_segments``), their times and the bad samples', the test and the words; None when
+        not screened.
+    heterogeneity : Heterogeneity or None
+        The test of agreement of r_L, r_R, b between the logs, or between kinds of motion
+        within one log (:class:`excite.calibration.heterogeneity.Heterogeneity`): each group's
+        estimate, the statistic and the words. When they disagree, ``params``, ``covariance``,
+        ``std`` and the wheel block of ``full_covariance`` are the random-effects pool (unless
+        common parameters were forced: then ``fit`` fails). None when not tested.
     """
 
     params: Params
@@ -252,6 +275,9 @@ class CalibrationResult:
     iterations: int
     message: str
     residuals: FloatArray = field(repr=False)
+    levels_at_floor: tuple[str, ...] = ()
+    gross_errors: GrossErrors | None = None
+    heterogeneity: Heterogeneity | None = None
 
     @property
     def sigma_min(self) -> float:
@@ -301,58 +327,47 @@ class CalibrationResult:
             "parameters": list(self.parameter_names),
             "full_covariance": [[finite(v) for v in row] for row in self.full_covariance],
             "fit": self.fit.to_dict(),
+            "levels_at_floor": list(self.levels_at_floor),
+            **_outliers_dict(self.gross_errors),
+            "heterogeneity": (None if self.heterogeneity is None
+                              else self.heterogeneity.to_dict()),
         }
 
-    def summary(self) -> str:
-        """Human-readable report."""
-        p = self.params.as_array()
-        lines = [f"excite calibration: {self.n_segments} segments, loss={self.loss}, "
-                 f"model={self.model}"]
-        for name, value, s in zip(AXLE.names, p, self.std, strict=True):
-            rel = f"({100 * s / value:.3f}%)" if np.isfinite(s) else "(undetermined)"
-            lines.append(f"  {name:<4}= {value:.6f} m  ± {s:.2e} m {rel}")
-        if self.sensor_pose is not None:
-            pose = self.sensor_pose.as_array()
-            std = self.sensor_pose_std
-            how = "given" if std is None else "estimated"
-            for name, unit, value, i in (("x", "m", pose[0], 0), ("y", "m", pose[1], 1),
-                                         ("theta", "rad", pose[2], 2)):
-                spread = "" if std is None else (
-                    f"  ± {std[i]:.2e} {unit}" if np.isfinite(std[i]) else "  (undetermined)")
-                extra = f" ({math.degrees(value):.2f} deg)" if name == "theta" else ""
-                lines.append(f"  sensor {name:<6}= {value:+.6f} {unit}{extra}{spread} ({how})")
-        sv = ", ".join(f"{s:.4g}" for s in self.singular_values)
-        lines += [
-            f"  model choice    = {self.model_choice}",
-            f"  sigma_min       = {self.sigma_min:.4g}  (worst-direction relative std "
-            f"{_inverse_or_inf(self.sigma_min):.3g})",
-            f"  singular values = {sv};  condition number = {self.condition_number:.4g}",
-            f"  identifiable    = {'yes' if self.identifiable else 'NO'}"
-            + (f": {self.unidentifiable_direction}" if self.unidentifiable_direction else ""),
-            f"  fit             = {'ok' if self.fit.ok else 'NO'}: {self.fit.message}",
-            "  residual RMS    = x {:.3e} m, y {:.3e} m, theta {:.3e} rad".format(
-                *self.rms_residual),
-            "  noise sigma     = x {:.3e} m, y {:.3e} m, theta {:.3e} rad ({})".format(
-                *self.sigma, "estimated" if self.sigma_estimated else "given")
-            + ("" if self.pose_sigma is None else " per segment; pose samples: xy "
-               "{:.3e} m, theta {:.3e} rad (shared by consecutive segments)".format(
-                   *self.pose_sigma))
-            + ("" if self.slip is None else f"; wheel slip {self.slip:.3e} rad/sqrt(s)")
-            + ("" if self.slip_share is None
-               else f" ({100 * self.slip_share:.2g}% of a segment's wheel turn)")
-            + ("" if not self.timing else f"; encoder timing {1e3 * self.timing:.2g} ms")
-            + (" (at its bound, a quarter of the encoder period: larger timing errors are not "
-               "described and the std are too narrow)" if self.timing_at_bound else ""),
-            f"  outliers        = {self.n_outliers}"
-            + (f"; trimmed {self.n_trimmed}" if self.n_trimmed else ""),
-            f"  converged       = {self.converged} after {self.iterations} iterations"
-            f" ({self.message})",
-        ]
-        return "\n".join(lines)
+    def summary(self, nominal: Params | None = None) -> str:
+        """Human-readable report (:func:`excite.calibration.report.report`); ``nominal``: the
+        robot's nominal wheel parameters (m), for the comparison in % and the multipliers."""
+        from excite.calibration.report import report
+
+        return report(self, nominal)
 
 
-def _inverse_or_inf(x: float) -> float:
-    return 1.0 / x if x > 0 else float("inf")
+def _levels_at_floor(sigma: FloatArray, pose: FloatArray | None, slip: float | None,
+                     floor: FloatArray, wheels, estimated: bool) -> tuple[str, ...]:
+    """CalibrationResult.levels_at_floor: the estimated levels within 1e-6 (relative) of
+    their floor ``floor`` (3,) (m, m, rad; the pose levels' floors are its position and
+    heading entries, slip's the heading floor over the wheels' scale)."""
+    if not estimated:
+        return ()
+    tolerance = 1.0 + 1e-6
+    names = [c for c, s, f in zip(_CHANNELS, sigma, floor, strict=True) if s <= f * tolerance]
+    if pose is not None:
+        names += [n for n, s, f in zip(("pose_xy", "pose_theta"), pose, floor[[0, 2]],
+                                       strict=True) if s <= f * tolerance]
+    if (slip is not None and wheels is not None
+            and slip <= floor[2] / max(wheels.scale, 1e-300) * tolerance):
+        names.append("slip")
+    return tuple(names)
+
+
+def _outliers_dict(gross: GrossErrors | None) -> dict:
+    """The ``outliers``, ``outlier_times`` and ``gross_errors`` keys of
+    :meth:`CalibrationResult.to_dict`."""
+    if gross is None:
+        return {"outliers": [], "outlier_times": None, "gross_errors": None}
+    times = None if gross.t_start is None or gross.t_end is None else [
+        [float(a), float(b)] for a, b in zip(gross.t_start, gross.t_end, strict=True)]
+    return {"outliers": [int(i) for i in gross.segments], "outlier_times": times,
+            "gross_errors": gross.to_dict()}
 
 
 def _slip_share(seg: Segments, slip: float) -> float | None:
@@ -370,11 +385,13 @@ def _slip_share(seg: Segments, slip: float) -> float | None:
 
 def build_result(data: Segments, choice: ModelChoice, test: FitTest, relative: FloatArray,
                  sigma_estimated: bool, n_trimmed: int, noise: EstimatedNoise | None,
-                 options: FitOptions) -> CalibrationResult:
+                 options: FitOptions, loss: str | None = None,
+                 gross_errors: GrossErrors | None = None) -> CalibrationResult:
     """The result of the chosen fit on ``data``: ``relative`` is the covariance of the
     parameters in relative units (:func:`excite.calibration.covariance.reported_covariance`),
     ``test`` the fit test, ``noise`` the estimated noise model (None: independent segments,
-    sigma given or estimated per channel)."""
+    sigma given or estimated per channel), ``loss`` the loss asked for (None: the fits'),
+    ``gross_errors`` what the gross-error screen found (None: not screened)."""
     mf = choice.chosen
     fit = mf.fit
     theta, info_rel = fit.theta, fit.system.information
@@ -429,9 +446,14 @@ def build_result(data: Segments, choice: ModelChoice, test: FitTest, relative: F
         slip_share=None if slip is None else _slip_share(data, slip),
         timing=timing,
         timing_at_bound=at_bound,
-        loss=options.loss,
+        loss=options.loss if loss is None else loss,
         converged=fit.converged,
         iterations=fit.iterations,
         message=fit.message,
         residuals=raw,
+        levels_at_floor=_levels_at_floor(
+            fit.sigma if levels is None else levels.sigma,
+            None if levels is None else levels.pose, slip, mf.problem.sigma_floor, wheels,
+            sigma_estimated),
+        gross_errors=gross_errors,
     )

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import get_args
+from typing import TYPE_CHECKING, get_args
 
-from excite.calibration.solver import Loss
+from excite.calibration.options import CalibrationLoss
 from excite.commands.args import (
     PARAMS_VALUES,
     POSE_VALUES,
@@ -19,6 +19,11 @@ from excite.commands.args import (
 )
 from excite.commands.exit_status import EXIT_MISFIT, EXIT_OK, EXIT_UNIDENTIFIABLE
 from excite.commands.logs import LOG_FILES, add_log_options
+
+if TYPE_CHECKING:
+    from excite.calibration.result import CalibrationResult
+    from excite.core.kinematics import Params
+    from excite.core.models import SensorPose
 
 #: What ``excite calibrate --help`` says the command does.
 DESCRIPTION = """Estimate the wheel radii r_L, r_R and the wheel separation b (m), and the external
@@ -37,9 +42,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="print one JSON object instead of the report")
     cal.add_argument("--sigma", metavar=SIGMA_VALUES,
                      help="noise std of dx, dy (m) and dtheta (rad); default: estimated")
-    cal.add_argument("--loss", choices=get_args(Loss), default="linear",
-                     help="linear (default): Gaussian maximum likelihood; huber: robust to "
-                     "slip outliers (Huber loss on the whitened residuals)")
+    cal.add_argument("--loss", choices=get_args(CalibrationLoss), default="auto",
+                     help="auto (default): Gaussian maximum likelihood, with gross errors "
+                     "(residuals far beyond the noise level) found, reported and left out; "
+                     "linear: Gaussian maximum likelihood on every segment; huber: robust "
+                     "to slip outliers (Huber loss on the whitened residuals)")
     cal.add_argument("--init", metavar=PARAMS_VALUES,
                      help="initial guess / nominal robot: wheel radii and separation (m); "
                      "default: found from the data")
@@ -52,27 +59,40 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      "residuals, 1%% per pass with a refit after each (default %(default)g)")
     cal.add_argument("--ros2-yaml", metavar="OUT.yaml",
                      help="write diff_drive_controller parameters (nominal from --init) and "
-                     "the sensor's static transform when estimated; default: none written")
+                     "the sensor's static transform when estimated; not written when the "
+                     "model does not fit (exit status 4) or the data do not determine every "
+                     "parameter (exit status 3), a note says so; default: none written")
+    cal.add_argument("--force-yaml", action="store_true",
+                     help="write --ros2-yaml even when the calibration failed (exit status 3 "
+                     "or 4); the file then starts with a comment saying it is unsafe and why")
     cal.add_argument("--holdout", type=fraction_arg, default=0.0, metavar="FRACTION",
                      help="keep back this fraction (0 to 0.5) of the logs (whole logs, the "
                      "last ones; at least one) and validate the calibration on them against "
                      "the nominal robot (--init) as excite validate does (default %(default)g: "
                      "none)")
+    cal.add_argument("--common-params", action="store_true",
+                     help="one set of r_L, r_R, b for every input (and kind of motion) even when "
+                     "they disagree beyond their std; the fit then fails (exit status 4). "
+                     "Default: when they disagree, report their random-effects pool, whose std "
+                     "cover the spread")
     add_log_options(cal)
     cal.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from excite.calibration.export import static_transform_command, write_ros2_yaml
+    from excite.calibration.export import static_transform_command
     from excite.calibration.logs import calibrate_logs
     from excite.commands.logs import log_options, print_note
 
+    if args.force_yaml and not args.ros2_yaml:
+        raise UsageError("--force-yaml needs --ros2-yaml OUT.yaml")
     sigma = sigma_arg(args.sigma) if args.sigma else None
     initial = params_arg(args.init) if args.init else None
     sensor_pose = sensor_pose_arg(args.sensor_pose)
     calibration = calibrate_logs(args.files, log_options(args), initial=initial, sigma=sigma,
                                  loss=args.loss, sensor_pose=sensor_pose, trim=args.trim,
-                                 holdout=args.holdout, on_note=print_note)
+                                 holdout=args.holdout, on_note=print_note,
+                                 heterogeneity="common" if args.common_params else "random")
     result, validation = calibration.result, calibration.holdout
     estimated_pose = result.sensor_pose if result.sensor_pose_std is not None else None
     if args.json:
@@ -87,21 +107,40 @@ def run(args: argparse.Namespace) -> int:
     else:
         for part in calibration.parts:
             print(part.describe())
-        print(result.summary())
+        print(result.summary(initial))
         if estimated_pose is not None:
             print(f"  sensor transform: {static_transform_command(estimated_pose)}")
         if validation is not None:
             print(f"\nheld-out logs ({len(validation.result.logs)}), nominal (--init) vs "
                   "calibrated:")
             print(validation.result.summary())
+    status = (EXIT_MISFIT if not result.fit.ok
+              else EXIT_OK if result.identifiable else EXIT_UNIDENTIFIABLE)
     if args.ros2_yaml:
-        try:
-            write_ros2_yaml(args.ros2_yaml, result.params, nominal=initial,
-                            sensor_pose=estimated_pose)
-        except OSError as exc:
-            raise UsageError(f"cannot write {args.ros2_yaml}: {exc.strerror}") from None
-        if not args.json:
-            print(f"wrote ROS 2 diff_drive_controller parameters to {args.ros2_yaml}")
-    if not result.fit.ok:
-        return EXIT_MISFIT
-    return EXIT_OK if result.identifiable else EXIT_UNIDENTIFIABLE
+        _export(args, result, initial, estimated_pose, status)
+    return status
+
+
+def _export(args: argparse.Namespace, result: CalibrationResult, initial: Params | None,
+            estimated_pose: SensorPose | None, status: int) -> None:
+    """--ros2-yaml: written when the calibration succeeded (exit status 0); otherwise only
+    with --force-yaml, marked unsafe with the reason, else a note says it was not written."""
+    from excite.calibration.export import write_ros2_yaml
+    from excite.calibration.report import unsafe_reason
+    from excite.commands.logs import print_note
+
+    reason = unsafe_reason(result)
+    if reason is not None and not args.force_yaml:
+        print_note(f"{args.ros2_yaml} not written (exit status {status}): {reason}; "
+                   "--force-yaml writes it anyway, marked unsafe")
+        return
+    unsafe = None if reason is None else (f"{reason} (exit status {status}; written only "
+                                          "because of --force-yaml)")
+    try:
+        write_ros2_yaml(args.ros2_yaml, result.params, nominal=initial,
+                        sensor_pose=estimated_pose, unsafe=unsafe)
+    except OSError as exc:
+        raise UsageError(f"cannot write {args.ros2_yaml}: {exc.strerror}") from None
+    if not args.json:
+        print(f"wrote ROS 2 diff_drive_controller parameters to {args.ros2_yaml}"
+              + ("" if unsafe is None else ", marked unsafe"))

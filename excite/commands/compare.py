@@ -6,17 +6,19 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from excite.commands.args import UsageError, output_folder
 from excite.commands.exit_status import EXIT_OK
 from excite.commands.options import (
     add_episode_options,
+    add_target_options,
+    add_tuned_option,
     check_backend_options,
     episode_settings,
     protocol_specs,
     runnable,
+    tuned_specs,
 )
 from excite.estimators import (
     DEFAULT_ESTIMATOR,
@@ -27,11 +29,7 @@ from excite.estimators import (
 )
 
 if TYPE_CHECKING:  # the heavy layers are imported inside the functions that run them
-    from agents.catalog import ProtocolSpec
     from agents.compare import CompareSettings
-
-#: --tuned values that are not files.
-TUNED_AUTO, TUNED_NONE = "auto", "none"
 
 #: What ``excite compare --help`` says the command does.
 DESCRIPTION = (
@@ -40,7 +38,9 @@ DESCRIPTION = (
     "written NAME[:KEY=VALUE...] (excite protocols lists the names and parameters). "
     "--estimators adds a second axis: every protocol runs with every estimator on the same "
     "episodes. Settings tuned by excite tune apply to the protocols written as they were "
-    "tuned (--tuned); by default the settings shipped for --env and --robot.")
+    "tuned (--tuned); by default the settings shipped for --env and --robot. --target runs "
+    "every episode until the stopping rule says the calibration is within the target and "
+    "reports how long that took, the false stops and the error at the stop.")
 #: The settings each built-in estimator takes (``name:key=value``), for the help.
 ESTIMATOR_SETTINGS = "; ".join(f"{name}: {', '.join(keys)}" for name, keys in OPTIONS.items())
 
@@ -48,16 +48,14 @@ ESTIMATOR_SETTINGS = "; ".join(f"{name}: {', '.join(keys)}" for name, keys in OP
 def add_parser(sub: argparse._SubParsersAction) -> None:
     cmp_ = sub.add_parser("compare", help="compare calibration protocols on the same robots",
                           description=DESCRIPTION)
-    add_episode_options(cmp_, episodes=20)
+    add_episode_options(cmp_, episodes=20, target=True)
+    add_target_options(cmp_)
     cmp_.add_argument("--estimators", default=None, metavar="E,F:KEY=VALUE,...",
                       help=f"estimators, each one of {', '.join(ESTIMATORS)} with optional "
                       f":KEY=VALUE settings ({ESTIMATOR_SETTINGS}), or a user's "
                       "module:factory; every protocol runs with each on the same episodes "
                       f"(default: {DEFAULT_ESTIMATOR})")
-    cmp_.add_argument("--tuned", default=TUNED_AUTO, metavar="TUNED.json",
-                      help="settings from excite tune for the protocols written as tuned; "
-                      f"{TUNED_AUTO} (default): those shipped for --env and --robot if tuned "
-                      f"for these segments; {TUNED_NONE}: the declared defaults")
+    add_tuned_option(cmp_)
     cmp_.add_argument("--out", type=output_folder, default="excite_compare", metavar="DIR",
                       help="the results folder (made if missing; default %(default)s); re-run "
                       "with the same settings to finish an interrupted comparison")
@@ -82,37 +80,6 @@ def check_estimators(estimators: list[EstimatorSpec], settings: CompareSettings)
             probe.reset(seed=0)  # a user's factory failing is an EstimatorError (named)
         finally:
             probe.close()
-
-
-def tuned_specs(specs: list[ProtocolSpec], tuned: str, settings: CompareSettings,
-                episodes: int) -> tuple[list[ProtocolSpec], dict[str, Any]]:
-    """The protocols with the settings ``--tuned`` gives them, and what was applied (the
-    summary's ``tuned`` entry: file, tuning episodes, protocols left at their defaults)."""
-    from agents.catalog import check_distinct
-    from agents.tuning import apply_tuned, check_disjoint, load_tuned, mismatch, shipped_path
-
-    def defaults(why: str) -> tuple[list[ProtocolSpec], dict[str, Any]]:
-        return specs, {"file": None, "note": f"declared defaults ({why})", "untuned": []}
-
-    if tuned == TUNED_NONE:
-        return defaults("--tuned none")
-    path = shipped_path(settings.env_id, settings.robot) if tuned == TUNED_AUTO else Path(tuned)
-    if tuned == TUNED_AUTO and not path.exists():
-        return defaults(f"no tuned settings are shipped for {settings.env_id} and the "
-                        f"{settings.robot} robot")
-    document = load_tuned(path)
-    if reason := mismatch(document, settings):
-        if tuned != TUNED_AUTO:
-            raise UsageError(f"--tuned {path}: {reason}; run excite tune for these settings "
-                             "or give --tuned none")
-        return defaults(f"the shipped settings were {reason}")
-    check_disjoint(document, settings, episodes)
-    specs, untuned = apply_tuned(specs, document, str(path))
-    note = (f"tuned by excite tune on {len(document['tuning_seeds'])} tuning episodes "
-            f"(seeds disjoint from these): {path}")
-    if untuned:
-        note += f"; not tuned there, at their defaults: {', '.join(untuned)}"
-    return check_distinct(specs), {"file": str(path), "note": note, "untuned": untuned}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -140,11 +107,20 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"cannot write to {exc.filename or out}: {exc.strerror}") from None
     columns = columns_of(rows)
     summary = summarize(columns, seed=args.seed)
-    summary["settings"] = {"env": settings.env_id, "segments": args.segments, "seed": args.seed,
+    if settings.target is not None:
+        from agents.target_summary import add_target
+
+        add_target(summary, columns, settings.target, settings.target_confidence,
+                   settings.segments, seed=args.seed)
+    summary["settings"] = {"env": settings.env_id, "segments": settings.segments,
+                           "seed": args.seed,
                            "episodes": args.episodes,
                            "protocols": [spec.label for spec in specs],
                            "estimators": [spec.label for spec in estimators],
                            "robot": settings.robot, "tuned": tuned}
+    if settings.target is not None:
+        summary["settings"] |= {"target": settings.target,
+                                "target_confidence": settings.target_confidence}
     summary["protocol_settings"] = {spec.label: spec.resolved() for spec in specs}
     try:
         (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")

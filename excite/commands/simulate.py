@@ -23,7 +23,12 @@ from excite.commands.args import (
     robot_preset,
 )
 from excite.commands.exit_status import EXIT_OK
-from excite.commands.options import add_robot_options, add_seed_option
+from excite.commands.options import (
+    add_robot_options,
+    add_seed_option,
+    add_tuned_option,
+    tuned_specs,
+)
 from excite.logs.bag_reader import BAG_SUFFIXES, JOINT_STATES
 from excite.logs.bag_writer import LEFT_WHEEL, POSE_TOPIC, RIGHT_WHEEL, STORAGES
 
@@ -35,7 +40,10 @@ CSV (encoder ticks at every physics tick, the sensor's noisy world pose at the r
 rate) or a ROS bag of the same streams. The hidden truth goes beside the log, to NAME.truth.json
 with NAME the log's name without its extension (log.csv: log.truth.json; run1.bag, or the rosbag2
 directory run1: run1.truth.json): the robot and sensor mounting, the noise levels, the encoder
-resolution and calibrate_args, the options excite calibrate needs to read the log."""
+resolution and calibrate_args, the options excite calibrate needs to read the log. A protocol
+written as tuned (umbmark, not umbmark:speed=0.5) drives with the settings excite compare would
+give it (--tuned: by default those shipped for --env and --robot when tuned for these
+segments); the output says which settings drove."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -54,6 +62,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      "(default: --seed's): logs with other --seed and one --robot-seed are "
                      "logs of one robot (e.g. held-out logs for excite validate)")
     add_robot_options(sim)
+    add_tuned_option(sim)
     sim.add_argument("--format", choices=FORMATS, default="segments",
                      help="segments (default): the segment CSV; timeseries: a time-series "
                      "CSV (encoder ticks, sensor poses); bag: a ROS bag of the same streams")
@@ -98,6 +107,11 @@ def _check_output(args: argparse.Namespace, out: Path) -> None:
                          f"give --out without the {out.suffix} suffix")
 
 
+def _settings_text(settings: dict[str, Any]) -> str:
+    """A protocol's resolved settings in words: ``(speed 0.16, speed_margin 0.35)``."""
+    return "(" + ", ".join(f"{key} {value}" for key, value in settings.items()) + ")"
+
+
 def truth_path(out: Path) -> Path:
     """Where the hidden truth of the log ``out`` goes: NAME.truth.json beside it, NAME being
     the log's name without its extension (log.csv, run1.bag, run1.mcap and the rosbag2
@@ -140,14 +154,17 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from agents.catalog import make_protocol, parse_protocol, with_policy
-    from agents.compare import make_env, run_protocol_episode
+    from agents.compare import CompareSettings, make_env, run_protocol_episode
 
     env = env_id(args.env)
     robot = robot_preset(args.robot)
-    [spec] = with_policy([parse_protocol(args.protocol)], args.policy)
-    protocol = make_protocol(spec)
     out = Path(args.out)
     _check_output(args, out)
+    [spec] = with_policy([parse_protocol(args.protocol)], args.policy)
+    # the settings compare would drive with (no evaluation episodes: 0)
+    [spec], tuned = tuned_specs([spec], args.tuned, CompareSettings(
+        env_id=env, segments=args.segments, seed=args.seed, robot=robot), 0)
+    protocol = make_protocol(spec)
     recording: dict[str, Any] = {}
     if args.format != "segments":
         recording["record"] = True
@@ -166,6 +183,7 @@ def run(args: argparse.Namespace) -> int:
              "robot": {k: float(v) for k, v in vars(base.robot).items()},
              "sigma": dict(zip(("x", "y", "theta"), base.sigma.tolist(), strict=True)),
              "env": env, "protocol": spec.label, "protocol_settings": spec.resolved(),
+             "tuned": {"file": tuned["file"], "note": tuned["note"]},
              "seed": args.seed,
              "robot_seed": args.seed if args.robot_seed is None else args.robot_seed,
              "segments": len(records),
@@ -178,4 +196,5 @@ def run(args: argparse.Namespace) -> int:
     truth_file = truth_path(out)
     truth_file.write_text(json.dumps(truth, indent=2) + "\n")
     print(f"wrote {what} to {out} and the hidden truth to {truth_file}")
+    print(f"settings: {spec.label} {_settings_text(spec.resolved())}, {tuned['note']}")
     return EXIT_OK

@@ -15,20 +15,28 @@ from excite.commands.args import (
     params_arg,
     sensor_pose_arg,
 )
-from excite.commands.exit_status import EXIT_OK
+from excite.commands.exit_status import EXIT_OK, EXIT_USAGE, EXIT_WORSE
 from excite.commands.logs import LOG_FILES, add_log_options
+from excite.validation.verdict import MARGIN
 
 #: What ``excite validate --help`` says the command does.
 DESCRIPTION = """Dead-reckon each log's encoders (exact arcs between encoder samples, from the log's
 first external pose) with the nominal and with the calibrated robot, and report per log and
 overall (mean over logs, ratio of the means): end-point position error (m), end-point heading
 error (rad), RMS path error (m) and the ratio calibrated / nominal; UMBmark's E_max,syst (m) when
-a log is a bidirectional square. Validation uses every pose sample (no segmentation)."""
+a log is a bidirectional square. Validation uses every pose sample (no segmentation). The
+report ends with a verdict per log and overall: better, no better or worse than nominal."""
+
+#: The epilog of ``excite validate --help``: the verdict's rule and the exit statuses.
+EPILOG = f"""Verdict: on the RMS path error, calibrated / nominal at most 1/{MARGIN:g} is better, at
+least {MARGIN:g} worse, in between no better (overall: the ratio of the means over the logs).
+Exit status: {EXIT_OK} when the calibrated robot is better or no better than the nominal one
+overall, {EXIT_WORSE} when it is worse, {EXIT_USAGE} for bad input."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     val = sub.add_parser("validate", help="does the calibration help? dead-reckon held-out logs",
-                         description=DESCRIPTION)
+                         description=DESCRIPTION, epilog=EPILOG)
     val.add_argument("logs", nargs="+", metavar="LOG",
                      help=f"{LOG_FILES}, not used for the calibration")
     val.add_argument("--params", required=True, metavar="RESULT.json",
@@ -80,4 +88,4 @@ def run(args: argparse.Namespace) -> int:
         print(result.summary())
         if args.plot:
             print(f"wrote the path overlay to {args.plot}")
-    return EXIT_OK
+    return EXIT_WORSE if result.verdict == "worse" else EXIT_OK

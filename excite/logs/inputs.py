@@ -7,11 +7,11 @@ holding both streams, a pair of adjacent time-series CSVs (one with the encoder 
 ``t,phi_L,phi_R``, the other with the pose stream ``t,x,y,theta``, in either order), or a ROS
 bag (``.bag``, ``.db3``, ``.mcap``, or a rosbag2 directory).
 
-Nothing here prints. What a user should hear about a log (the clock offset its data suggest
-when none was given; wheel angles that were unwrapped, for a log followed whole) comes back as
-notes, one line each (:attr:`Log.notes`), and is passed as it arises to an ``on_note``
-function when one is given (the command line prints them so, in order with everything else,
-also when a later step fails).
+Nothing here prints. What a user should hear about a log (a CSV's columns not read and units
+converted; the clock offset its data suggest when none was given; wheel angles that were
+unwrapped, for a log followed whole) comes back as notes, one line each (:attr:`Log.notes`),
+and is passed as it arises to an ``on_note`` function when one is given (the command line
+prints them so, in order with everything else, also when a later step fails).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from excite.logs.time_offset import (
     noticeable_time_offset,
 )
 from excite.logs.timeseries import TimeSeries, unwrapped_words
-from excite.logs.timeseries_csv import read_timeseries, timeseries_streams
+from excite.logs.timeseries_csv import header_hint, read_timeseries, timeseries_streams
 
 __all__ = ["LogOptions", "DEFAULT_LOG_OPTIONS", "Input", "Log", "Part", "OnNote",
            "note_taker", "group_inputs", "read_log", "segment_log", "segment_inputs",
@@ -180,7 +180,7 @@ def _kind(path: str) -> tuple[str, frozenset[str]]:
 def _lone_stream(path: str, streams: frozenset[str]) -> DataError:
     (only,) = streams
     return DataError(f"{path}: has only the {only} stream; give the file with the other "
-                     "stream right after it")
+                     f"stream right after it{header_hint(path)}")
 
 
 def _not_a_log(source: Input) -> DataError:
@@ -208,8 +208,10 @@ def group_inputs(paths: Sequence[str]) -> list[Input]:
     return inputs
 
 
-def _read_series(source: Input, options: LogOptions) -> tuple[TimeSeries, str | None]:
-    """The log of a time-series or bag input, and for a bag the messages skipped."""
+def _read_series(source: Input, options: LogOptions, note: OnNote
+                 ) -> tuple[TimeSeries, str | None]:
+    """The log of a time-series or bag input, and for a bag the messages skipped; a CSV's
+    notes (columns not read, units converted) told to ``note``."""
     if source.kind == "bag":
         if not options.left_wheel or not options.right_wheel:
             raise DataError(f"{source.name}: a bag needs --left-wheel and --right-wheel "
@@ -222,7 +224,8 @@ def _read_series(source: Input, options: LogOptions) -> tuple[TimeSeries, str | 
                            joint_states=options.joint_states)
         return bag.series, bag.skipped_text()
     if source.kind == "timeseries":
-        return read_timeseries(source.paths, ticks_per_rev=options.ticks_per_rev), None
+        return read_timeseries(source.paths, ticks_per_rev=options.ticks_per_rev,
+                               on_note=note), None
     raise _not_a_log(source)
 
 
@@ -244,9 +247,9 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
     followed whole (dead reckoning, not segments): a jump in either stream is an error, before
     anything is said about the clocks, and unwrapped wheel angles are noted (segmentation
     reports them instead). on_note: told each of the log's notes as it arises."""
-    series, skipped = _read_series(source, options)
     notes: list[str] = []
     note = note_taker(notes, on_note)
+    series, skipped = _read_series(source, options, note)
     if whole:
         check_continuity(series)
         unwrapped = unwrapped_words(series.unwrapped_wheels, series.unwrapped_counters)
@@ -275,7 +278,7 @@ def segment_inputs(inputs: Sequence[Input], options: LogOptions, *,
     parts = []
     for source in inputs:
         if source.kind == "segments":
-            parts.append(Part(source, load_segments(source.paths[0])))
+            parts.append(Part(source, load_segments(source.paths[0], on_note=on_note)))
         else:
             log = read_log(source, options, on_note=on_note)
             cut = segment_log(log, options)

@@ -2,8 +2,12 @@
 
 A segment CSV has the columns ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` (radians, radians,
 meters, meters, radians; the pose increment in the body frame at the segment's start, dtheta
-continuous), one row per segment. The header line is optional; blank lines and lines starting
-with ``#`` are ignored. Any other malformed line is an error naming the file and line.
+continuous), one row per segment, and optionally ``t_start,t_end`` (s). The header line is
+optional; with one, the columns may come in any order, carry units (``dx_gt [mm]``,
+``dtheta_gt (deg)``: converted) and be joined by columns that are not read (a note names
+them). Separated by commas, semicolons or tabs (:mod:`excite.logs.csv_table`). Blank lines
+and lines starting with ``#`` are ignored. Any other malformed line is an error naming the
+file and line.
 
 A Censi tuple file (Censi et al., "Simultaneous calibration of odometry and sensor parameters
 for mobile robots", T-RO 2013) is a stream of JSON objects (not a JSON array) separated by any
@@ -21,13 +25,23 @@ import json
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from excite.errors import DataError
+from excite.logs.csv_table import (
+    Header,
+    content_lines,
+    delimiter_of,
+    header_fields,
+    is_header,
+    parse_header,
+    plain_header,
+    read_columns,
+)
 
 __all__ = [
     "COLUMNS",
@@ -45,6 +59,11 @@ COLUMNS = ("dphi_L", "dphi_R", "dx_gt", "dy_gt", "dtheta_gt")
 #: Optional trailing columns of a segment CSV cut from a log: each segment's time span (s).
 TIME_COLUMNS = ("t_start", "t_end")
 MIN_SEGMENTS = 3
+_NAMES = {c.lower(): c for c in COLUMNS + TIME_COLUMNS}
+_QUANTITIES = {"dphi_L": "angle", "dphi_R": "angle", "dx_gt": "length", "dy_gt": "length",
+               "dtheta_gt": "angle", "t_start": "time", "t_end": "time"}
+FloatArray = NDArray[np.float64]
+OnNote = Callable[[str], None]
 _FIELDS = ("dphi_L", "dphi_R", "dx", "dy", "dtheta")
 TUPLE_SUFFIX = ".tuple"
 TUPLE_KEYS = ("T", "phi_l", "phi_r", "sm")
@@ -180,30 +199,22 @@ _OPTIONAL = (("t_start", float, 1), ("t_end", float, 1), ("chained", bool, 1),
              ("sub_dphi_L", float, 2), ("sub_dphi_R", float, 2), ("sub_count", np.int64, 1))
 
 
-def _header_columns(fields: list[str]) -> tuple[str, ...] | None:
-    """The columns a header line names (the lesson's five, optionally with the two time
-    columns), or None when the line is not a header."""
-    names = [f.strip().lower() for f in fields]
-    for columns in (COLUMNS, COLUMNS + TIME_COLUMNS):
-        if names == [c.lower() for c in columns]:
-            return columns
-    return None
-
-
-def _parse_line(fields: list[str], where: str, columns: tuple[str, ...] = COLUMNS
-                ) -> list[float]:
-    if len(fields) != len(columns):
-        raise DataError(f"{where}: expected {len(columns)} columns, found {len(fields)}")
-    values = []
-    for column, text in zip(columns, fields, strict=True):
-        try:
-            value = float(text)
-        except ValueError:
-            raise DataError(f"{where}: {column} is not a number: {text.strip()!r}") from None
-        if not math.isfinite(value):
-            raise DataError(f"{where}: {column} is not finite: {text.strip()!r}")
-        values.append(value)
-    return values
+def _segment_header(line: str, where: str) -> Header:
+    """The layout a segment CSV's header gives: the five columns (and optionally the two time
+    columns), any order, units allowed; DataError for a header without them."""
+    header = parse_header(line, _NAMES, _QUANTITIES, where)
+    present = set(header.labels)
+    if not present & set(COLUMNS):
+        raise DataError(f"{where}: the header names {header.found()}: neither a segment CSV "
+                        f"({','.join(COLUMNS)}) nor a time-series CSV (t with phi_L,phi_R or "
+                        "ticks_L,ticks_R, and x,y,theta; names and units: docs/formats.md)")
+    missing = [c for c in COLUMNS if c not in present]
+    if missing:
+        raise DataError(f"{where}: missing column {missing[0]} (a segment CSV's columns: "
+                        f"{','.join(COLUMNS)}); the header names {header.found()}")
+    if len(present & set(TIME_COLUMNS)) == 1:
+        raise DataError(f"{where}: the time columns {' and '.join(TIME_COLUMNS)} go together")
+    return header
 
 
 def check_not_utf16(name: str, start: bytes) -> None:
@@ -245,26 +256,27 @@ def _looks_like_tuples(text: str) -> bool:
     return False
 
 
-def _csv_rows(name: str, text: str) -> list[list[float]]:
-    """Rows of a segment CSV in column order (5 values, or 7 with the time columns the header
-    names); DataError naming file and line if malformed."""
-    rows: list[list[float]] = []
-    seen_content = False
-    columns = COLUMNS
-    for number, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
-        if not stripped or stripped.startswith("#"):
-            continue
-        fields = stripped.split(",")
-        if not seen_content and (named := _header_columns(fields)) is not None:
-            seen_content, columns = True, named
-            continue
-        seen_content = True
-        rows.append(_parse_line(fields, f"{name}:{number}", columns))
-    return rows
+def _csv_rows(name: str, text: str, on_note: OnNote | None = None) -> FloatArray:
+    """Rows (n, 5) of a segment CSV in column order, or (n, 7) with the time columns the
+    header names, in base units; on_note told the columns not read and the units converted.
+    DataError naming file and line if malformed."""
+    numbers, lines = content_lines(text)
+    if not lines:
+        return np.zeros((0, len(COLUMNS)))
+    delimiter = delimiter_of(lines[0])
+    if is_header(header_fields(lines[0], delimiter), delimiter):
+        header = _segment_header(lines[0], f"{name}:{numbers[0]}")
+        for note in header.notes(name) if on_note is not None else ():
+            on_note(note)
+        numbers, lines = numbers[1:], lines[1:]
+    else:
+        header = plain_header(COLUMNS, delimiter)
+    values, _ = read_columns(name, numbers, lines, header)
+    order = [header.labels.index(c) for c in COLUMNS + TIME_COLUMNS if c in header.labels]
+    return values[:, order]
 
 
-def _segments(rows: list[list[float]]) -> Segments:
+def _segments(rows: ArrayLike) -> Segments:
     """Segments from parsed rows; with time columns, segment k is chained to k - 1 when it
     starts exactly when k - 1 ends (the files excite segment writes: one pose sample)."""
     a = np.array(rows, dtype=float)
@@ -361,8 +373,10 @@ def _tuple_rows(name: str, text: str) -> list[list[float]]:
         rows.append(_tuple_row(obj, where))
 
 
-def _load_rows(path: str | os.PathLike[str]) -> tuple[str, list[list[float]]]:
-    """The file's name and its segment rows (CSV column order), in whichever format it is.
+def _load_rows(path: str | os.PathLike[str], on_note: OnNote | None = None
+               ) -> tuple[str, ArrayLike]:
+    """The file's name and its segment rows (CSV column order), in whichever format it is;
+    on_note told a CSV's columns not read and units converted.
 
     Raises DataError for an unreadable or malformed file or one without segments, but does
     not check the minimum number of segments.
@@ -375,8 +389,8 @@ def _load_rows(path: str | os.PathLike[str]) -> tuple[str, list[list[float]]]:
         if not rows:
             raise DataError(f"{name}: no segments (the tuple file has no JSON objects)")
     else:
-        rows = _csv_rows(name, text)
-        if not rows:
+        rows = _csv_rows(name, text, on_note)
+        if not len(rows):
             raise DataError(f"{name}: no segments (the file is empty or has only a header)")
     return name, rows
 
@@ -388,23 +402,30 @@ def _too_few(what: str, count: int, total: str = "") -> DataError:
     )
 
 
-def load_segments(path: str | os.PathLike[str]) -> Segments:
+def load_segments(path: str | os.PathLike[str], *, on_note: OnNote | None = None
+                  ) -> Segments:
     """Read a segment CSV or a Censi tuple file (see the module docstring), validating all.
 
     The format is chosen by the name (``*.tuple``) or else by the content (a first ``{``).
     For a tuple file dx, dy, dtheta are the sensor's motion in the sensor frame (m, m, rad).
+    on_note: told, one line each, a CSV's columns not read and units converted (each note
+    starts with the file's name).
     Raises DataError naming the file (and line, and for a tuple file the object number) for:
-    a missing or unreadable file, binary content, a wrong column count, text or NaN/inf in a
-    number, invalid JSON, a missing or bad key, T <= 0, fewer than 3 segments.
+    a missing or unreadable file, binary content, a header that is not a segment CSV's, a
+    unit that does not fit its column, a wrong column count, text or NaN/inf in a number,
+    decimal commas and points mixed, invalid JSON, a missing or bad key, T <= 0, fewer than
+    3 segments.
     """
-    name, rows = _load_rows(path)
+    name, rows = _load_rows(path, on_note)
     if len(rows) < MIN_SEGMENTS:
         raise _too_few(name, len(rows))
     return _segments(rows)
 
 
-def load_segment_files(paths: Sequence[str | os.PathLike[str]]) -> Segments:
-    """Read several files, each a segment CSV or a tuple file, as one data set, in order.
+def load_segment_files(paths: Sequence[str | os.PathLike[str]], *,
+                       on_note: OnNote | None = None) -> Segments:
+    """Read several files, each a segment CSV or a tuple file, as one data set, in order
+    (on_note: as :func:`load_segments`).
 
     Every file must parse and hold at least one segment (DataError naming it otherwise); the
     minimum of 3 segments applies to the total. Units and frames are those of each format.
@@ -416,7 +437,7 @@ def load_segment_files(paths: Sequence[str | os.PathLike[str]]) -> Segments:
     names: list[str] = []
     parts: list[Segments] = []
     for path in paths:
-        name, file_rows = _load_rows(path)
+        name, file_rows = _load_rows(path, on_note)
         names.append(name)
         parts.append(_segments(file_rows))
     total = sum(len(p) for p in parts)

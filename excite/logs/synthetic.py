@@ -9,15 +9,33 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from excite.core.information import DEFAULT_SIGMA, as_sigma
-from excite.core.kinematics import Params, predict_increment
+from excite.core.kinematics import Arc, Params, predict_increment
 from excite.core.models import SensorPose
 from excite.logs.segments import Segments
 from excite.logs.timeseries import TimeSeries, tick_angle
 
-__all__ = ["LESSON_TRUTH", "lesson_dataset", "SyntheticLog", "synthetic_log"]
+__all__ = ["LESSON_TRUTH", "lesson_dataset", "SyntheticLog", "synthetic_log", "scrubbed_increment"]
 
 #: The robot of the lesson's synthetic example (m).
 LESSON_TRUTH = Params(0.050, 0.051, 0.300)
+
+
+def scrubbed_increment(dphi_L: ArrayLike, dphi_R: ArrayLike, params: Params, scrub: float
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The body-frame increment (dx [m], dy [m], dtheta [rad]) of a robot whose effective
+    track grows with the turn: b (1 + scrub min(kappa b / 2, 1)), kappa b = 2 |s_R - s_L| /
+    |s_R + s_L| from the wheels' travel s = r dphi (b at straight runs, b (1 + scrub) at
+    spins and turns tighter than half the track: wheels that scrub in turns). scrub = 0 is
+    :func:`~excite.core.kinematics.predict_increment`."""
+    phi_L, phi_R = np.asarray(dphi_L, dtype=float), np.asarray(dphi_R, dtype=float)
+    left, right = params.r_L * phi_L, params.r_R * phi_R
+    travel = np.abs(right + left)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        turn = np.where(travel > 0, 2.0 * np.abs(right - left) / np.where(travel > 0, travel,
+                                                                           1.0), np.inf)
+    track = params.b * (1.0 + scrub * np.minimum(turn / 2.0, 1.0))
+    arc = Arc(phi_L, phi_R, params.r_L, params.r_R, track, derivatives=False)
+    return arc.dx, arc.dy, arc.dtheta
 
 
 def lesson_dataset(
@@ -26,14 +44,18 @@ def lesson_dataset(
     params: Params = LESSON_TRUTH,
     sigma: ArrayLike = DEFAULT_SIGMA,
     dphi_std: float = 0.4,
+    *,
+    scrub: float = 0.0,
 ) -> Segments:
     """The lesson's synthetic experiment: wheel increments ~ N(0, dphi_std^2) rad, exact
     kinematics at ``params``, plus Gaussian noise of std ``sigma`` = (sx [m], sy [m], sth [rad])
-    on the measured increment."""
+    on the measured increment. ``scrub``: the effective track grows with the turn
+    (:func:`scrubbed_increment`; 0: constant)."""
     s = as_sigma(sigma)
     dphi_L = rng.normal(0.0, dphi_std, n)
     dphi_R = rng.normal(0.0, dphi_std, n)
-    truth = np.column_stack(predict_increment(dphi_L, dphi_R, params))
+    truth = np.column_stack(predict_increment(dphi_L, dphi_R, params) if not scrub
+                            else scrubbed_increment(dphi_L, dphi_R, params, scrub))
     measured = truth + rng.normal(size=(n, 3)) * s
     return Segments(dphi_L, dphi_R, *measured.T)
 
@@ -105,6 +127,7 @@ def synthetic_log(
     encoder_jitter: float = 0.0,
     pose_jitter: float = 0.0,
     step: float = 1e-3,
+    scrub: float = 0.0,
 ) -> SyntheticLog:
     """A robot driving smooth random curves (exact arcs on a fine grid of ``step`` s), recorded
     as a time-series log.
@@ -123,7 +146,9 @@ def synthetic_log(
     Gaussian time error of this std (both wheels at once; a controller's or a serial link's
     timing), before its rounding. ``pose_jitter`` (s): each pose sample is taken at its stamp
     plus an independent Gaussian time error of this std (a motion-capture or network stamp),
-    before its noise. Rates should divide 1 / step so that samples fall on the grid.
+    before its noise. ``scrub``: the effective track grows with the turn of each step of the
+    grid (:func:`scrubbed_increment`; 0: constant). Rates should divide 1 / step so that
+    samples fall on the grid.
     """
     from excite.core import se2
     pose = sensor_pose if sensor_pose is not None else SensorPose(0.0, 0.0, 0.0)
@@ -138,7 +163,9 @@ def synthetic_log(
     ground_L = enc_L + slip * np.sqrt(step) * rng.normal(size=n)
     ground_R = enc_R + slip * np.sqrt(step) * rng.normal(size=n)
     start = np.array([0.0, 0.0, rng.uniform(-np.pi, np.pi)])
-    body = se2.compose(start, se2.accumulate(*predict_increment(ground_L, ground_R, params)))
+    moves = (predict_increment(ground_L, ground_R, params) if not scrub
+             else scrubbed_increment(ground_L, ground_R, params, scrub))
+    body = se2.compose(start, se2.accumulate(*moves))
     phi_L = rng.uniform(-10, 10) + np.concatenate(([0.0], np.cumsum(enc_L)))
     phi_R = rng.uniform(-10, 10) + np.concatenate(([0.0], np.cumsum(enc_R)))
     e = slice(0, None, max(1, int(round(1.0 / (encoder_rate * step)))))

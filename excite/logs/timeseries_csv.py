@@ -1,26 +1,37 @@
 """Time-series logs as CSV files: one file with both streams, or two files with one stream
 each, read into a :class:`~excite.logs.timeseries.TimeSeries` and written back.
 
-Columns (header required, any order, names case-insensitive): ``t`` (s), the wheel angles
-``phi_L,phi_R`` (rad) or encoder ticks ``ticks_L,ticks_R`` (with ticks_per_rev), and the pose
-``x,y`` (m), ``theta`` (rad, may be wrapped). In one file, a row leaves a stream's cells empty
-when that stream has no sample at its time. Blank lines and ``#`` comments are ignored. Every
-error is one line naming the file and line (docs/formats.md, "Time-series logs").
+Columns (header required, any order): ``t`` (s), the wheel angles ``phi_L,phi_R`` (rad) or
+encoder ticks ``ticks_L,ticks_R`` (with ticks_per_rev), and the pose ``x,y`` (m), ``theta``
+(rad, may be wrapped), each also under the names of :data:`ALIASES` and with a unit in the
+header (``t [ms]``, ``yaw (deg)``: converted to s, m, rad); other columns are not read, with a
+note naming them. Separated by commas, semicolons or tabs (:mod:`excite.logs.csv_table`). In
+one file, a row leaves a stream's cells empty when that stream has no sample at its time.
+Blank lines and ``#`` comments are ignored. Every error is one line naming the file and line
+(docs/formats.md, "Time-series logs").
 """
 
 from __future__ import annotations
 
-import operator
 import os
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from itertools import repeat
 
 import numpy as np
 from numpy.typing import NDArray
 
 from excite.errors import DataError
+from excite.logs.csv_table import (
+    Header,
+    content_lines,
+    delimiter_of,
+    header_fields,
+    is_separator_line,
+    label_of,
+    parse_header,
+    read_columns,
+)
 from excite.logs.segments import read_text
 from excite.logs.timeseries import (
     ANGLE_COLUMNS,
@@ -31,30 +42,55 @@ from excite.logs.timeseries import (
     unwrapped_counter,
 )
 
-__all__ = ["read_timeseries", "write_timeseries", "timeseries_streams", "is_timeseries_csv"]
+__all__ = ["ALIASES", "read_timeseries", "write_timeseries", "timeseries_streams",
+           "is_timeseries_csv", "header_hint"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 PathArg = str | os.PathLike[str]
+OnNote = Callable[[str], None]
 
-_CANONICAL = {c.lower(): c for c in ("t", *ANGLE_COLUMNS, *TICK_COLUMNS, *POSE_COLUMNS)}
+#: The header names read as each column (without case; a unit may follow in brackets, or
+#: after an underscore: ``t [ms]``, ``yaw_deg``). Only names that say what the column holds:
+#: ``left``/``right`` alone could be an angle, ticks, a distance or a speed, and are not read.
+ALIASES: dict[str, tuple[str, ...]] = {
+    "t": ("t", "time", "timestamp", "stamp"),
+    **{f"phi_{s}": (f"phi_{s}", f"phi_{side}", f"angle_{s}", f"angle_{side}", f"{side}_angle",
+                    f"{side}_wheel_angle") for s, side in (("L", "left"), ("R", "right"))},
+    **{f"ticks_{s}": (f"ticks_{s}", f"ticks_{side}", f"{side}_ticks", f"{side}_wheel_ticks")
+       for s, side in (("L", "left"), ("R", "right"))},
+    **{axis: (axis, f"pos_{axis}", f"position_{axis}", f"pose_{axis}") for axis in "xy"},
+    "theta": ("theta", "yaw", "heading"),
+}
+_NAMES = {alias.lower(): column for column, aliases in ALIASES.items() for alias in aliases}
+#: The quantity of each column (the units it may be written in: excite.logs.csv_table.UNITS).
+_QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
+               **dict.fromkeys(TICK_COLUMNS, "count"), "x": "length", "y": "length",
+               "theta": "angle"}
 _EXPECTED = "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two"
-_SPACE_AROUND_COMMA = re.compile(r"[ \t]*,[ \t]*")
+# Header names of columns not read that look like a wheel's or an orientation's.
+_WHEEL_LIKE = re.compile(r"left|right|wheel|enc|tick")
+_QUATERNION_LIKE = re.compile(r"^(q|quat|orientation)[_ .]?[xyzw]\b|^q[xyzw]$")
 
 
 @dataclass(frozen=True)
 class _Table:
-    """The data rows of one time-series CSV: values (n, k) with NaN in empty cells."""
+    """The data rows of one time-series CSV: values (n, k) of the columns read (base units),
+    NaN in empty cells."""
 
     name: str
-    columns: tuple[str, ...]
+    header: Header
     values: FloatArray
     empty: BoolArray
     lines: IntArray
     header_line: int
 
-    def has(self, names: Iterable[str]) -> bool:
+    @property
+    def columns(self) -> tuple[str, ...]:
+        return self.header.labels
+
+    def has(self, names: Sequence[str]) -> bool:
         return all(n in self.columns for n in names)
 
     @property
@@ -75,44 +111,36 @@ class _Table:
         return [self.values[rows, i] for i in index], self.lines[rows]
 
 
-def _content_lines(text: str) -> tuple[list[int], list[str]]:
-    """Line numbers and stripped text of the lines that are neither blank nor comments."""
-    stripped = [line.strip() for line in text.splitlines()]
-    numbers = [i for i, line in enumerate(stripped, start=1) if line and line[0] != "#"]
-    return numbers, [stripped[i - 1] for i in numbers]
+def _hint(header: Header) -> str:
+    """What the columns not read may have been meant as, when a wheel group or theta is
+    missing ('' when nothing looks so)."""
+    labels = set(header.labels)
+    wheels = [text for text in header.ignored if _WHEEL_LIKE.search(text.lower())
+              and not any(labels >= set(names) for names in (ANGLE_COLUMNS, TICK_COLUMNS))]
+    turns = [text for text in header.ignored if _QUATERNION_LIKE.search(text.lower())]
+    hints = []
+    if wheels:
+        hints.append(f"{', '.join(map(repr, wheels))} not read: wheel columns are named "
+                     "phi_L, phi_R (rad) or ticks_L, ticks_R (see docs/formats.md)")
+    if turns and "theta" not in labels:
+        hints.append(f"{', '.join(map(repr, turns))} not read: give the heading as theta "
+                     "(rad), not a quaternion")
+    return "".join(f"; {hint}" for hint in hints)
 
 
-def _header_names(line: str) -> list[str]:
-    """A header's names, lower case, without spaces or the double quotes of a quoted header."""
-    return [field.strip().strip('"').strip().lower() for field in line.split(",")]
+def _parse_header(line: str, where: str) -> Header:
+    """The layout of a time-series header; DataError for anything else."""
+    header = parse_header(line, _NAMES, _QUANTITIES, where)
+    if "t" not in header.labels:
+        raise DataError(f"{where}: no time column t (s); the header names {header.found()} "
+                        f"(expected {_EXPECTED}){_hint(header)}")
+    _check_column_set(header, where)
+    return header
 
 
-def _names_timeseries(names: set[str]) -> bool:
-    """Whether a header's names are a time-series CSV's: a ``t`` column, or any wheel or pose
-    column (a time column under another name is then an error naming it, not a segment CSV)."""
-    known = {n.lower() for n in ANGLE_COLUMNS + TICK_COLUMNS + POSE_COLUMNS}
-    return "t" in names or bool(names & known)
-
-
-def _parse_header(line: str, where: str) -> tuple[str, ...]:
-    """Canonical column names of a time-series header; DataError for anything else."""
-    names = _header_names(line)
-    if "t" not in names:
-        raise DataError(f"{where}: no time column t (s); the header names "
-                        f"{', '.join(repr(n) for n in names)} (expected {_EXPECTED})")
-    for name in names:
-        if name not in _CANONICAL:
-            raise DataError(f"{where}: unknown column {name!r} (time-series columns: t, "
-                            "phi_L, phi_R or ticks_L, ticks_R, x, y, theta)")
-        if names.count(name) > 1:
-            raise DataError(f"{where}: column {_CANONICAL[name]} appears twice")
-    columns = tuple(_CANONICAL[n] for n in names)
-    _check_column_set(columns, where)
-    return columns
-
-
-def _check_column_set(columns: tuple[str, ...], where: str) -> None:
+def _check_column_set(header: Header, where: str) -> None:
     """A complete encoder group (angles or ticks), a complete pose group, or both."""
+    columns = header.labels
     angles, ticks = set(ANGLE_COLUMNS) & set(columns), set(TICK_COLUMNS) & set(columns)
     if angles and ticks:
         raise DataError(f"{where}: both wheel angles (phi_L, phi_R) and ticks "
@@ -122,48 +150,13 @@ def _check_column_set(columns: tuple[str, ...], where: str) -> None:
                                                          POSE_COLUMNS)) if present]
     if not groups:
         raise DataError(f"{where}: neither encoder (phi_L, phi_R) nor pose (x, y, theta) "
-                        f"columns (expected {_EXPECTED})")
+                        f"columns (expected {_EXPECTED}); the header names {header.found()}"
+                        f"{_hint(header)}")
     for present, expected in groups:
         missing = [c for c in expected if c not in present]
         if missing:
-            raise DataError(f"{where}: missing column {missing[0]} (expected {_EXPECTED})")
-
-
-def _is_number(cell: str) -> bool:
-    try:
-        float(cell)
-    except ValueError:
-        return False
-    return True
-
-
-def _parse_cells(name: str, columns: tuple[str, ...], numbers: list[int],
-                 lines: list[str]) -> tuple[FloatArray, BoolArray]:
-    """(values, empty) arrays (n, k) of the (stripped) data lines, NaN in empty cells;
-    DataError at the first bad line."""
-    k = len(columns)
-    if not lines:
-        return np.zeros((0, k)), np.zeros((0, k), dtype=bool)
-    counts = np.fromiter(map(str.count, lines, repeat(",")), dtype=np.int64,
-                         count=len(lines)) + 1
-    wrong = np.flatnonzero(counts != k)
-    if wrong.size:
-        i = int(wrong[0])
-        raise DataError(f"{name}:{numbers[i]}: expected {k} columns, found {counts[i]}")
-    joined = ",".join(lines)
-    if " " in joined or "\t" in joined:
-        joined = _SPACE_AROUND_COMMA.sub(",", joined)
-    cells = joined.split(",")
-    empty = np.fromiter(map(operator.not_, cells), dtype=bool, count=len(cells))
-    try:
-        values = np.fromiter(map(float, [c or "nan" for c in cells]), dtype=float,
-                             count=len(cells))
-    except ValueError:
-        index = next(i for i, cell in enumerate(cells) if cell and not _is_number(cell))
-        row, column = divmod(index, k)
-        raise DataError(f"{name}:{numbers[row]}: {columns[column]} is not a number: "
-                        f"{cells[index]!r}") from None
-    return values.reshape(-1, k), empty.reshape(-1, k)
+            raise DataError(f"{where}: missing column {missing[0]} (expected {_EXPECTED}); "
+                            f"the header names {header.found()}{_hint(header)}")
 
 
 def _check_empty_cells(table: _Table) -> None:
@@ -188,55 +181,86 @@ def _check_empty_cells(table: _Table) -> None:
         raise DataError(f"{table.name}:{table.lines[row]}: the row has only a time, no values")
 
 
-def _read_table(path: PathArg) -> _Table:
-    """Read and check one time-series CSV (header required)."""
+def _read_table(path: PathArg, note: OnNote) -> _Table:
+    """Read and check one time-series CSV (header required), telling ``note`` the columns not
+    read and the units converted."""
     name = os.fspath(path)
     text = read_text(name)
-    numbers, lines = _content_lines(text)
+    numbers, lines = content_lines(text)
     if not lines:
         raise DataError(f"{name}: empty file (expected a header {_EXPECTED})")
-    columns = _parse_header(lines[0], f"{name}:{numbers[0]}")
-    values, empty = _parse_cells(name, columns, numbers[1:], lines[1:])
-    table = _Table(name, columns, values, empty, np.asarray(numbers[1:], dtype=np.int64),
+    header = _parse_header(lines[0], f"{name}:{numbers[0]}")
+    for line in header.notes(name):
+        note(line)
+    values, empty = read_columns(name, numbers[1:], lines[1:], header, allow_empty=True)
+    table = _Table(name, header, values, empty, np.asarray(numbers[1:], dtype=np.int64),
                    numbers[0])
     _check_empty_cells(table)
     return table
 
 
-def _header_of(path: PathArg) -> set[str] | None:
-    """The lower-case names of a text file's first line that is neither blank nor a comment;
-    None when the file cannot be read as text or has no such line."""
+def _first_line(path: PathArg) -> str | None:
+    """A text file's first line that is neither blank nor a comment nor a separator line
+    (stripped); None when the file cannot be read as text or has no such line."""
     try:
         with open(os.fspath(path), encoding="utf-8-sig") as handle:
             for line in handle:
                 stripped = line.strip()
-                if stripped and not stripped.startswith("#"):
-                    return None if "\x00" in stripped else set(_header_names(stripped))
+                if stripped and not stripped.startswith("#") and not is_separator_line(
+                        stripped):
+                    return None if "\x00" in stripped else stripped
     except (OSError, UnicodeDecodeError):
         return None
     return None
 
 
+def _labels(line: str) -> set[str]:
+    """The time-series columns (:data:`ALIASES`) a header line names."""
+    labels = (label_of(field, _NAMES)[0] for field in header_fields(line, delimiter_of(line)))
+    return {label for label in labels if label is not None}
+
+
 def timeseries_streams(path: PathArg) -> frozenset[str]:
-    """The streams a time-series CSV holds, from its header: a subset of {"encoder", "pose"};
-    empty when the header names neither a ``t`` column nor a wheel or pose column (a segment
-    CSV, header
-    ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none) or the file cannot be read as text.
-    Reads only up to the header."""
-    names = _header_of(path)
-    if not names or not _names_timeseries(names):
+    """The streams a time-series CSV holds, from its header: {"encoder"} or {"pose"} for a
+    file of one stream (a ``t`` column, one complete group of :data:`ALIASES` columns, none of
+    the other), {"encoder", "pose"} for any other header naming a time-series column (both
+    streams, or a header with a problem: read alone, the error names it); empty for a segment
+    CSV (header ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none) or a file that cannot be read
+    as text. Reads only up to the header."""
+    line = _first_line(path)
+    labels = _labels(line) if line is not None else set()
+    if not labels:
         return frozenset()
-    wheels = {n.lower() for n in ANGLE_COLUMNS + TICK_COLUMNS}
-    return frozenset(kind for kind, columns in (("encoder", wheels), ("pose", set(POSE_COLUMNS)))
-                     if names & columns)
+    groups = {"encoder": (ANGLE_COLUMNS, TICK_COLUMNS), "pose": (POSE_COLUMNS,)}
+    complete = {kind for kind, options in groups.items()
+                if any(labels >= set(names) for names in options)}
+    present = {kind for kind, options in groups.items()
+               if any(labels & set(names) for names in options)}
+    try:
+        parse_header(line, _NAMES, _QUANTITIES, os.fspath(path))
+    except DataError:
+        return frozenset(groups)
+    if "t" in labels and len(complete) == 1 and present == complete:
+        return frozenset(complete)
+    return frozenset(groups)
+
+
+def header_hint(path: PathArg) -> str:
+    """What a time-series CSV's columns that are not read may have been meant as: wheel
+    columns under names that are not read (``left``, ``enc_right``), a quaternion instead of
+    theta; '' when nothing looks so. Starts with '; ' (to end an error message)."""
+    line = _first_line(path)
+    try:
+        return _hint(parse_header(line, _NAMES, _QUANTITIES, "")) if line else ""
+    except DataError:
+        return ""
 
 
 def is_timeseries_csv(path: PathArg) -> bool:
-    """Whether a file's header names a ``t`` column or a wheel or pose column: a time-series
+    """Whether a file's header names a time-series column (:data:`ALIASES`): a time-series
     CSV, as opposed to a segment CSV (header ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none);
     False when the file cannot be read as text."""
-    names = _header_of(path)
-    return bool(names) and _names_timeseries(names)
+    return bool(timeseries_streams(path))
 
 
 def _path_list(paths: PathArg | Sequence[PathArg]) -> list[PathArg]:
@@ -254,7 +278,8 @@ def _pick_streams(tables: list[_Table]) -> tuple[_Table, _Table]:
         have, need = (("encoder", "t,x,y,theta") if table.encoder_columns
                       else ("pose", "t,phi_L,phi_R"))
         raise DataError(f"{table.name}: only {have} columns; give the other stream too "
-                        f"(a second file with {need}, or all columns in one file)")
+                        f"(a second file with {need}, or all columns in one file)"
+                        f"{_hint(table.header)}")
     for table in tables:
         if table.encoder_columns and table.has_pose:
             raise DataError(f"{table.name}: has both encoder and pose columns; "
@@ -293,20 +318,26 @@ def _encoder_angles(table: _Table, ticks_per_rev: float | None
 
 
 def read_timeseries(paths: PathArg | Sequence[PathArg],
-                    ticks_per_rev: float | None = None) -> TimeSeries:
+                    ticks_per_rev: float | None = None, *,
+                    on_note: OnNote | None = None) -> TimeSeries:
     """Read a time-series log from one CSV file or two.
 
-    One file: header ``t,phi_L,phi_R,x,y,theta`` (any column order); a row may leave one
-    stream's cells empty when that stream has no sample at its time. Two files, in any order:
+    One file: header ``t,phi_L,phi_R,x,y,theta`` (any column order, names as
+    :data:`ALIASES`, separated by commas, semicolons or tabs); a row may leave one stream's
+    cells empty when that stream has no sample at its time. Two files, in any order:
     ``t,phi_L,phi_R`` and ``t,x,y,theta`` (recognised by their headers). Wheel columns
     ``ticks_L,ticks_R`` instead of ``phi_L,phi_R`` are encoder ticks: angles = ticks * 2 pi /
     ticks_per_rev (ticks without ticks_per_rev are an error). Units: t in s, angles in rad,
-    x, y in m; theta may be wrapped. Blank lines and ``#`` comments are ignored.
+    x, y in m, unless the header gives another unit (``t [ms]``, ``x (mm)``, ``theta [deg]``:
+    converted); theta may be wrapped. Other columns are not read. Blank lines and ``#``
+    comments are ignored. on_note: told, one line each, the columns not read and the units
+    converted (each note starts with the file's name).
 
     Raises DataError (one line naming the file and line) for: a missing, unreadable or
-    binary file; a file that is neither kind; a missing, unknown or repeated column; a wrong
-    cell count; text in a number; NaN or inf; time not strictly increasing in a stream; fewer
-    than 2 samples in a stream.
+    binary file; a file that is neither kind; a missing or repeated column; a unit that does
+    not fit its column; a wrong cell count; text in a number; decimal commas and points
+    mixed; NaN or inf; time not strictly increasing in a stream; fewer than 2 samples in a
+    stream.
     """
     if ticks_per_rev is not None:
         tick_angle(ticks_per_rev)  # checked before any file is read
@@ -314,7 +345,8 @@ def read_timeseries(paths: PathArg | Sequence[PathArg],
     if not 1 <= len(files) <= 2:
         raise DataError(f"a time-series log is one CSV file or two (encoders and poses), "
                         f"got {len(files)} files")
-    encoders, poses = _pick_streams([_read_table(p) for p in files])
+    note = on_note if on_note is not None else (lambda text: None)
+    encoders, poses = _pick_streams([_read_table(p, note) for p in files])
     (t_enc, phi_L, phi_R), enc_lines, counters = _encoder_angles(encoders, ticks_per_rev)
     (t_pose, x, y, theta), pose_lines = poses.stream(POSE_COLUMNS)
     return TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,

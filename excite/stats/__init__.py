@@ -1,2 +1,3 @@
-"""Generic statistics: chi-square helpers, serial correlation, estimator consistency (NEES).
+"""Generic statistics: chi-square helpers, serial correlation, estimator consistency (NEES),
+pooling groups' estimates (meta-analysis).
 """

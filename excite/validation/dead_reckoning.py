@@ -2,8 +2,9 @@
 
 Each log's encoders are dead-reckoned twice, with the nominal and with the calibrated robot
 (wheel parameters and sensor pose), and the predicted sensor poses are compared with the
-external ones. Computation only: :mod:`excite.commands.validate` presents the results and
-:mod:`excite.validation.plot` draws them.
+external ones. Computation only: :mod:`excite.validation.report` writes the results as text
+(with the verdict of :mod:`excite.validation.verdict`) and :mod:`excite.validation.plot`
+draws them.
 
 Dead reckoning (one choice, everywhere)
 ---------------------------------------
@@ -75,6 +76,7 @@ from excite.errors import DataError
 from excite.logs.continuity import check_continuity
 from excite.logs.segments import read_text
 from excite.logs.timeseries import TimeSeries
+from excite.validation.verdict import METRIC, Verdict, judge
 
 __all__ = [
     "Loop",
@@ -101,6 +103,11 @@ Robot = tuple[Params, SensorPose | None]
 Direction = Literal["cw", "ccw"]
 
 _METRICS = ("end_position_error", "end_heading_error", "rms_path_error")
+
+
+def _verdict(nominal: PathErrors, calibrated: PathErrors) -> Verdict:
+    """The verdict of :mod:`excite.validation.verdict` on its metric."""
+    return judge(getattr(nominal, METRIC), getattr(calibrated, METRIC))
 
 
 def _ratio(calibrated: float, nominal: float) -> float | None:
@@ -342,9 +349,15 @@ class LogValidation:
         """calibrated / nominal of each metric."""
         return self.calibrated.ratio(self.nominal)
 
+    @property
+    def verdict(self) -> Verdict:
+        """better, no better or worse than nominal (:mod:`excite.validation.verdict`)."""
+        return _verdict(self.nominal, self.calibrated)
+
     def to_dict(self) -> dict:
         return {"file": self.file, "nominal": self.nominal.to_dict(),
                 "calibrated": self.calibrated.to_dict(), "ratio": self.ratio,
+                "verdict": self.verdict,
                 "umbmark": None if self.umbmark is None else self.umbmark.to_dict()}
 
 
@@ -392,41 +405,25 @@ class ValidationResult:
         """Overall calibrated / nominal: the ratio of the means."""
         return self.calibrated.ratio(self.nominal)
 
+    @property
+    def verdict(self) -> Verdict:
+        """Overall: better, no better or worse than nominal, on the means over the logs
+        (:mod:`excite.validation.verdict`)."""
+        return _verdict(self.nominal, self.calibrated)
+
     def to_dict(self) -> dict:
         """The ``excite validate --json`` object."""
         return {"logs": [log.to_dict() for log in self.logs],
                 "overall": {"nominal": self.nominal.to_dict(),
-                            "calibrated": self.calibrated.to_dict(), "ratio": self.ratio}}
+                            "calibrated": self.calibrated.to_dict(), "ratio": self.ratio,
+                            "verdict": self.verdict}}
 
     def summary(self) -> str:
-        """A table per log and overall (text)."""
+        """A table per log and overall, and the verdict (text,
+        :func:`excite.validation.report.summary`)."""
+        from excite.validation.report import summary
 
-        def number(value: float | None) -> str:
-            return f"{'-' if value is None else f'{value:.4g}':>15}"
-
-        def rows(label: str, nominal: PathErrors, calibrated: PathErrors) -> list[str]:
-            ratio = calibrated.ratio(nominal)
-            return [label,
-                    *(f"  {what:<12}" + "".join(number(values[m]) for m in _METRICS)
-                      for what, values in (("nominal", nominal.to_dict()),
-                                           ("calibrated", calibrated.to_dict()),
-                                           ("ratio", ratio)))]
-
-        header = (f"  {'':<12}{'end pos [m]':>15}{'end head [rad]':>15}"
-                  f"{'RMS path [m]':>15}")
-        lines = [f"excite validation: {len(self.logs)} log(s), dead reckoning from each "
-                 "log's first external pose", header]
-        for log in self.logs:
-            lines += rows(log.file, log.nominal, log.calibrated)
-            if log.umbmark is not None:
-                u = log.umbmark
-                lines.append(
-                    f"  UMBmark E_max,syst [m] ({u.count('cw')} cw, {u.count('ccw')} ccw "
-                    f"loops): nominal {u.nominal.e_max_syst:.4g}, calibrated "
-                    f"{u.calibrated.e_max_syst:.4g}, ratio {number(u.ratio).strip()}")
-        lines += rows("overall (mean over logs; ratio of the means)", self.nominal,
-                      self.calibrated)
-        return "\n".join(lines)
+        return summary(self)
 
 
 def summarize(validations: Sequence[LogValidation]) -> ValidationResult:

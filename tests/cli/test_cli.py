@@ -24,6 +24,7 @@ def good_csv(tmp_path, rng):
 def test_report_and_exit_zero(capsys, good_csv):
     code, out, err = run_cli(capsys, "calibrate", good_csv)
     assert code == 0 and err == ""
+    assert out.splitlines()[2].startswith("verdict: calibrated: use these values")
     for word in ("r_L", "r_R", "b ", "sigma_min", "condition number", "identifiable    = yes",
                  "residual RMS", "outliers"):
         assert word in out

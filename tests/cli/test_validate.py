@@ -210,14 +210,16 @@ def test_json_schema(capsys, tmp_path, log_files, params_file, rng):
     assert set(d) == {"logs", "overall"}
     metrics = {"end_position_error", "end_heading_error", "rms_path_error"}
     for entry in d["logs"]:
-        assert set(entry) == {"file", "nominal", "calibrated", "ratio", "umbmark"}
+        assert set(entry) == {"file", "nominal", "calibrated", "ratio", "verdict", "umbmark"}
+        assert entry["verdict"] == "better"
         for key in ("nominal", "calibrated", "ratio"):
             assert set(entry[key]) == metrics
         assert entry["calibrated"]["end_position_error"] < 0.1 * entry["nominal"][
             "end_position_error"]
     assert d["logs"][0]["file"] == "+".join(log_files) and d["logs"][0]["umbmark"] is None
     assert d["logs"][1]["umbmark"]["calibrated"]["e_max_syst"] < 0.02
-    assert set(d["overall"]) == {"nominal", "calibrated", "ratio"}
+    assert set(d["overall"]) == {"nominal", "calibrated", "ratio", "verdict"}
+    assert d["overall"]["verdict"] == "better"
     mean = np.mean([e["nominal"]["rms_path_error"] for e in d["logs"]])
     assert d["overall"]["nominal"]["rms_path_error"] == pytest.approx(mean)
     assert d["overall"]["ratio"]["rms_path_error"] == pytest.approx(

@@ -80,8 +80,10 @@ def test_bad_targets_are_refused():
 @pytest.mark.statistical
 def test_false_stops_when_asked_after_every_segment_stay_within_the_bound():
     """Asked after every segment from the 6th, 60 sequences of noisy segments: the rule stops
-    in each, and the truth lies outside the 1% target at the stop in at most 7 of 60 (at a
-    false-stop rate of 5%, more than 7 has probability 1.6%)."""
+    in nearly all (a sequence whose residuals happen to look serially correlated gets its std
+    widened and may not reach the target within 150 segments), and the truth lies outside the
+    1% target at the stop in at most 7 (at a false-stop rate of 5%, more than 7 of 60 has
+    probability 1.6%)."""
     rule = StoppingRule(target=0.01, confidence=0.95, sensor_pose="axle")
     false = stops = 0
     for run in range(60):
@@ -93,7 +95,7 @@ def test_false_stops_when_asked_after_every_segment_stay_within_the_bound():
                 error = np.abs(decision.result.params.as_array() - TRUTH) / TRUTH
                 false += bool(np.max(error) > 0.01)
                 break
-    assert stops == 60
+    assert stops >= 55
     assert false <= 7
 
 
@@ -103,3 +105,18 @@ def test_nominal_start_is_used():
     a = rule.decide(seg, nominal=Params(0.05, 0.05, 0.3))
     b = rule.decide(seg)
     assert a.done == b.done and a.statistic == pytest.approx(b.statistic, rel=1e-6)
+
+
+def test_a_channel_fitted_exactly_or_too_few_residuals_is_not_done():
+    """x measured without noise: its level sits at the floor and the std with it; the rule
+    does not take that for precision. And 12 segments (9 residual degrees of freedom per
+    channel) are too few, however loose the target."""
+    rng = np.random.default_rng(5)
+    noisy = lesson_dataset(rng, 60, dphi_std=2.0)
+    exact_x = predict_increment(noisy.dphi_L, noisy.dphi_R, LESSON_TRUTH)[0]
+    seg = Segments(noisy.dphi_L, noisy.dphi_R, exact_x, noisy.dy, noisy.dtheta)
+    decision = StoppingRule(target=0.5, sensor_pose="axle").decide(seg)
+    assert not decision.done and "fitted exactly" in decision.reason
+    few = StoppingRule(target=0.5, sensor_pose="axle").decide(
+        lesson_dataset(rng, 12, dphi_std=2.0))
+    assert not few.done and "degrees of freedom" in few.reason

@@ -42,7 +42,7 @@ def test_round_trip_is_exact(tmp_path, rng):
         (ROWS + "1,2,abc,4,5\n", ":4: dx_gt is not a number: 'abc'"),
         (ROWS + "1,2,3,nan,5\n", ":4: dy_gt is not finite: 'nan'"),
         (ROWS + "1,2,3,4,-inf\n", ":4: dtheta_gt is not finite: '-inf'"),
-        ("1;2;3;4;5\n" + ROWS, ":1: expected 5 columns, found 1"),
+        ("1;2;3;4;5\n" + ROWS, ":2: expected 5 columns separated by semicolons, found 1"),
         (HEADER + "1,2,3,4,5\n" + HEADER + ROWS, ":3: dphi_L is not a number"),
         (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", "binary data"),
         (HEADER.encode() + b"1,2,3,4,\xff\xfe\n", ":2: not UTF-8 text"),

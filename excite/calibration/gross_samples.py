@@ -1,0 +1,205 @@
+"""Gross errors of segments that share pose samples (cut from one log, noise levels estimated
+by the chain model of :mod:`excite.calibration.noise`): a bad pose sample is flagged, not the
+two segments it spoils.
+
+A pose sample at the boundary of chained segments k - 1 and k enters both increments: a gross
+error of that sample (a scan matcher's bad match, a marker swap, a jump the segmentation let
+through) moves both, in opposite senses. Segment k's residual r_k (predicted - measured, m, m,
+rad) has the marginal covariance C_kk, the diagonal block of the chain covariance at the
+estimated levels; u_k = L_kk^-1 r_k (L_kk its Cholesky factor) is N(0, I) without gross errors
+and z_k^2 = |u_k|^2 chi-square with 3 degrees of freedom.
+
+* **The test** (at :data:`excite.calibration.gross_errors.GROSS_TEST_LEVEL`): the largest z_k^2
+  against the chi-square(3) quantile at 1 - level / N, as for independent segments (the
+  Bonferroni bound holds for dependent segments too).
+* **The candidates** (when it rejects): the gross errors inflate the estimated pose levels and
+  hide each other, so each channel of u is first scaled by its robust std (the median absolute
+  value); the contaminated normal's EM on these sizes (the fit held) gives each segment's
+  posterior probability of being gross; above 1/2 it is a candidate, unless the candidates are
+  too many or follow the driving (:mod:`excite.calibration.gross_errors`).
+* **The repair.** A run of consecutive chained candidates shares its inner pose samples: they
+  are the gross errors, and the run becomes one segment from the run's first sample to its last
+  (its measured increment the composition of theirs, in which the inner samples cancel
+  exactly; its wheel increments and sub-steps theirs, one after the other). A candidate whose
+  neighbours are not candidates (an error of the segment itself, or of a sample at the end of
+  a chain) is left out. The noise levels and the fits are then estimated again on the repaired
+  segments, and the test repeats on them (at most :data:`PASSES` times) until it no longer
+  rejects.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from excite.calibration.gross_errors import (
+    Fits,
+    GrossErrors,
+    declined_reason,
+    mixture,
+    size_range,
+    test_threshold,
+)
+from excite.calibration.noise import chain_band
+from excite.core import se2
+from excite.logs.segments import Segments
+from excite.stats.robust import MEDIAN_ABS_NORMAL
+
+__all__ = ["PASSES", "marginal_sizes", "merged", "screen_chain"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+#: Most rounds of (test, find the candidates, repair, estimate the levels and fit again).
+PASSES = 3
+
+
+def marginal_sizes(fits: Fits) -> FloatArray:
+    """u (3, N): each segment's residual of the primary fit whitened by its own marginal
+    covariance C_kk at the estimated levels (dimensionless; N(0, I) without gross errors)."""
+    primary, noise = fits.candidates.primary, fits.noise
+    assert noise is not None
+    data = fits.fitter.data
+    band = chain_band(data, noise.levels, noise.whitener.wheels)
+    n = len(data)
+    blocks = np.zeros((n, 3, 3))
+    for a in range(3):
+        for b in range(a + 1):
+            blocks[:, a, b] = blocks[:, b, a] = band[a - b, 3 * np.arange(n) + b]
+    factor = np.linalg.cholesky(blocks)
+    residual = primary.fit.ev.residual.T[:, :, None]
+    return np.linalg.solve(factor, residual)[:, :, 0].T
+
+
+def _candidates(u: FloatArray) -> tuple[IntArray, float, float, FloatArray]:
+    """The candidates from marginal sizes u (3, N): each channel scaled by its median absolute
+    value's std, then the contaminated normal's EM (the fit held); with eps, k and the sizes
+    sqrt(z^2 / 3) of the candidates."""
+    scale = np.maximum(np.median(np.abs(u), axis=1) / MEDIAN_ABS_NORMAL, 1e-300)
+    z2 = np.sum((u / scale[:, None]) ** 2, axis=0)
+    posterior, fraction, spread = mixture(z2)
+    chosen = np.flatnonzero(posterior > 0.5).astype(np.int64)
+    return chosen, fraction, spread, np.sqrt(z2[chosen] / 3.0)
+
+
+def _runs(data: Segments, flagged: NDArray[np.bool_]) -> list[IntArray]:
+    """The flagged segments split into runs of consecutive chained segments."""
+    chosen = np.flatnonzero(flagged)
+    if chosen.size == 0:
+        return []
+    chained = np.zeros(len(data), dtype=bool) if data.chained is None else data.chained
+    breaks = np.flatnonzero((np.diff(chosen) != 1) | ~chained[chosen[1:]]) + 1
+    return np.split(chosen, breaks)
+
+
+def merged(data: Segments, flagged: NDArray[np.bool_],
+           left_out: NDArray[np.bool_] | None = None) -> tuple[Segments, list[IntArray]]:
+    """``data`` repaired around the ``flagged`` segments: each run of two or more consecutive
+    chained flagged segments made one segment, each single flagged segment and every
+    ``left_out`` one left out; and the segments of ``data`` each repaired segment is made of.
+    A merged segment's measured increment is the composition of its parts' (m, m, rad; the
+    pose samples inside the run cancel exactly), its wheel increments and sub-steps its
+    parts' in order, its times the first part's start and the last's end; it is chained to
+    the segment before it as its first part was, unless that segment was left out."""
+    n = len(data)
+    dropped = np.zeros(n, dtype=bool) if left_out is None else left_out.copy()
+    runs = _runs(data, flagged & ~dropped)
+    head_of = {}
+    for run in runs:
+        if run.size == 1:
+            dropped[run] = True
+        else:
+            head_of[int(run[0])] = run
+    inner = np.zeros(n, dtype=bool)
+    for run in head_of.values():
+        inner[run[1:]] = True
+    kept = np.flatnonzero(~dropped & ~inner)
+    parts = [head_of.get(int(k), np.array([k])) for k in kept]
+    rows = data.as_array()[kept].copy()
+    for i, part in enumerate(parts):
+        if part.size > 1:
+            pose = data.measured[part[0]]
+            for k in part[1:]:
+                pose = se2.compose(pose, data.measured[k])
+            rows[i, :2] = data.as_array()[part, :2].sum(axis=0)
+            rows[i, 2:] = pose
+    optional: dict = {}
+    if data.t_start is not None and data.t_end is not None:
+        optional.update(t_start=data.t_start[kept],
+                        t_end=np.array([data.t_end[part[-1]] for part in parts]))
+    if data.chained is not None:
+        after_dropped = np.zeros(kept.size, dtype=bool)
+        after_dropped[kept > 0] = dropped[kept[kept > 0] - 1]
+        optional["chained"] = data.chained[kept] & ~after_dropped
+    counts = data.substep_counts
+    if counts is not None:
+        assert data.sub_dphi_L is not None and data.sub_dphi_R is not None
+        count = np.array([int(counts[part].sum()) for part in parts], dtype=np.int64)
+        subs = []
+        for wheel in (data.sub_dphi_L, data.sub_dphi_R):
+            rows_sub = np.zeros((kept.size, int(count.max())))
+            for i, part in enumerate(parts):
+                own = np.concatenate([wheel[k, :counts[k]] for k in part])
+                rows_sub[i, :own.size] = own
+            subs.append(rows_sub)
+        optional.update(sub_dphi_L=subs[0], sub_dphi_R=subs[1], sub_count=count)
+    return Segments(*rows.T, **optional), parts
+
+
+def screen_chain(fits: Fits, refit: Callable[[Segments], Fits]
+                 ) -> tuple[Segments, Fits, GrossErrors]:
+    """The gross errors of segments that share pose samples (module doc): the repaired
+    segments, their fits and what was found (the flagged segments' indices in the order of
+    ``fits.fitter.data``, the bad samples' times). A repaired segment that is a candidate
+    again (its run's first or last sample is bad too) is left out."""
+    original = data = fits.fitter.data
+    n = len(original)
+    parts = [np.array([k]) for k in range(n)]
+    flagged = np.zeros(n, dtype=bool)
+    left_out = np.zeros(n, dtype=bool)
+    plain = fits
+    found: GrossErrors | None = None
+    sizes: list[FloatArray] = []
+    for _ in range(PASSES):
+        u = marginal_sizes(fits)
+        z2 = np.sum(u * u, axis=0)
+        statistic, threshold = float(np.max(z2)), test_threshold(len(data))
+        if found is None:
+            found = GrossErrors(np.zeros(0, dtype=np.int64), n, statistic, threshold)
+        if statistic <= threshold:
+            break
+        chosen, fraction, spread, size = _candidates(u)
+        if chosen.size == 0:
+            break
+        more, out = flagged.copy(), left_out.copy()
+        for c in chosen:
+            (out if more[parts[c]].all() else more)[parts[c]] = True
+        if not found.candidates.size:  # the first pass: are these gross errors at all?
+            candidates = np.flatnonzero(more).astype(np.int64)
+            why = declined_reason(original, candidates)
+            found = replace(found, candidates=candidates, fraction=fraction, spread=spread,
+                            ratio=size_range(size), declined=why)
+            if why is not None:
+                return original, plain, found
+        if np.array_equal(more, flagged) and np.array_equal(out, left_out):
+            break
+        flagged, left_out = more, out
+        sizes.append(size)
+        data, parts = merged(original, flagged, left_out)
+        fits = refit(data)
+    assert found is not None
+    if not flagged.any():
+        return original, plain, found
+    segments = np.flatnonzero(flagged).astype(np.int64)
+    runs = _runs(original, flagged & ~left_out)
+    samples = (None if original.t_start is None else
+               np.array([t for run in runs for t in original.t_start[run[1:]]]))
+    alone = int(np.sum(left_out)) + sum(run.size == 1 for run in runs)
+    found = replace(found, segments=segments, candidates=segments,
+                    ratio=size_range(np.concatenate(sizes)),
+                    t_start=None if original.t_start is None else original.t_start[segments],
+                    t_end=None if original.t_end is None else original.t_end[segments],
+                    samples=samples, dropped=alone)
+    return data, fits, found

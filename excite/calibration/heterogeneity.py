@@ -1,0 +1,528 @@
+"""Do r_L, r_R and b agree between logs, and between kinds of motion within one log?
+(docs/method.md, "Logs that disagree").
+
+A robot's effective wheel parameters depend on how it is driven (the wheels scrub in tight
+turns), and files given together may come from different robots. The groups: several
+inputs, each calibrated alone with its own noise levels (:func:`across_logs`); or one
+input's segments by the kind of motion (:func:`motion_kinds`, from the wheels only: spins,
+tight turns, wide arcs, straight runs by kappa b = 2 |s_R - s_L| / |s_R + s_L|, s = r dphi),
+kinds merged in that order until each has MIN_KIND_SEGMENTS segments and determines r_L,
+r_R, b alone (:func:`motion_heterogeneity`: one Gauss-Newton step from the common fit of the
+model with r_L, r_R, b per group, under the fit's own noise model). Only r_L, r_R, b are
+compared: the sensor mounting is shared by every group (between inputs, each input's
+estimate is combined under one mounting by generalised least squares, so its uncertainty is
+carried into the wheels'). The test: Cochran's Q of the groups' estimates, chi-square with
+3 (G - 1) degrees of freedom under agreement (F with estimated noise levels), at LEVEL
+(:mod:`excite.stats.meta_analysis`). When they disagree (:func:`applied`): r_L, r_R, b and
+their covariance from the random-effects pool (Knapp-Hartung's covariance for few groups),
+its std covering the spread (``heterogeneity="random"``), or the common
+fit failing its fit test (``"common"``); the words say which parameters differ and how, and
+name the groups that disagree most.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from excite.calibration.model_fit import Fitter, ModelFit
+from excite.calibration.options import SensorPoseOption
+from excite.calibration.solver import Evaluation, normal_system
+from excite.core.information import inverse_information
+from excite.core.kinematics import Params
+from excite.core.models import AXLE, SENSOR_POSE
+from excite.errors import DataError
+from excite.logs.segments import Segments
+from excite.stats.meta_analysis import leave_one_out, pairwise_z, pool
+
+if TYPE_CHECKING:
+    from excite.calibration.result import CalibrationResult, FitTest
+
+__all__ = ["LEVEL", "MIN_KIND_SEGMENTS", "KINDS", "HeterogeneityOption", "Group",
+           "Heterogeneity", "check_option", "motion_kinds", "motion_heterogeneity",
+           "across_logs", "applied"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+#: What to do about groups that disagree: "random" (test; a random-effects pool when they
+#: disagree), "common" (test; keep common parameters, which then fail the fit) or "off".
+HeterogeneityOption = Literal["random", "common", "off"]
+#: The level of the heterogeneity test.
+LEVEL = 0.05
+#: A kind of motion is a group of its own with at least this many segments.
+MIN_KIND_SEGMENTS = 20
+#: The kinds of motion, from the tightest turns to the straightest runs.
+KINDS = ("spins", "tight turns", "wide arcs", "straight runs")
+#: kappa b above which a moving segment is a spin, a tight turn, a wide arc (else straight).
+KIND_BOUNDS = (2.0, 0.5, 0.05)
+_NAMES = AXLE.names
+#: Two groups' estimates of a parameter this many combined std apart are named as differing.
+_NAMED_Z = 2.0
+
+
+@dataclass(frozen=True)
+class Group:
+    """One group's own estimate: ``name`` (an input's name, or a kind of motion),
+    ``params`` (3,) r_L, r_R, b (m), ``std`` (3,) (m), ``n_segments``."""
+
+    name: str
+    params: FloatArray
+    std: FloatArray
+    n_segments: int
+
+    def to_dict(self) -> dict:
+        return {"name": self.name,
+                "params": dict(zip(_NAMES, map(float, self.params), strict=True)),
+                "std": dict(zip(_NAMES, map(float, self.std), strict=True)),
+                "n_segments": self.n_segments}
+
+
+@dataclass(frozen=True)
+class Heterogeneity:
+    """The test of agreement between groups (module docstring).
+
+    by: "logs" or "motion" (kinds of motion within one log). detected: whether the groups
+    disagree beyond their std (p_value < LEVEL). statistic: Cochran's Q (dimensionless),
+    chi-square with ``dof`` degrees of freedom under agreement; p_value. groups: each group's
+    estimate. between_std (3,): the std of r_L, r_R, b between groups (m, the square root of
+    the diagonal of the method-of-moments between-group covariance). pooling: what the
+    result's r_L, r_R, b are: "common" (the common fit: the groups agree, or common
+    parameters were forced) or "random effects". most_different: the groups that disagree
+    most (the largest distance from the others' common estimate; both with two groups);
+    empty when they agree. differences: which parameters differ and how, in words; empty when
+    they agree. random_params (3,), random_covariance (3, 3): the random-effects estimate
+    (m, m^2). group_covariance (3G, 3G): the joint covariance of the groups' estimates (m^2,
+    group-major; the groups of one log are correlated). group_fits: between logs, each log's
+    own fit test (ok, message), in the order of ``groups``; empty for kinds of motion.
+    """
+
+    by: str
+    detected: bool
+    statistic: float
+    dof: int
+    p_value: float
+    groups: tuple[Group, ...]
+    between_std: FloatArray
+    pooling: str
+    most_different: tuple[str, ...]
+    differences: str
+    random_params: FloatArray
+    random_covariance: FloatArray
+    group_covariance: FloatArray
+    group_fits: tuple[tuple[bool, str], ...] = ()
+
+    @property
+    def what(self) -> str:
+        """The groups in words ("the 3 logs", "the kinds of motion")."""
+        return f"the {len(self.groups)} logs" if self.by == "logs" else "the kinds of motion"
+
+    def to_dict(self) -> dict:
+        """The ``heterogeneity`` object of ``excite calibrate --json``."""
+        return {"detected": self.detected, "by": self.by, "statistic": self.statistic,
+                "dof": self.dof, "p_value": self.p_value, "level": LEVEL,
+                "pooling": self.pooling,
+                "between_std": dict(zip(_NAMES, map(float, self.between_std), strict=True)),
+                "most_different": list(self.most_different),
+                "differences": self.differences,
+                "groups": [group.to_dict() for group in self.groups]}
+
+    def plain_lines(self) -> list[str]:
+        """The report's line among what a user acts on: empty when the groups agree."""
+        if not self.detected:
+            return []
+        how = ("the values above pool them, their std cover the spread"
+               if self.pooling == "random effects" else "the values above do not fit them all")
+        return [f"  {'disagreement':<19} r_L, r_R, b differ between {self.what}: "
+                f"{self.differences}; {how}"]
+
+    def summary_lines(self) -> list[str]:
+        """The report's lines among the statistics: the verdict, then each group's
+        estimate."""
+        numbers = f"Q {self.statistic:.3g}, {self.dof} dof, p {_p_text(self.p_value)}"
+        if not self.detected:
+            lines = [f"  agreement       = yes: {self.what} agree within their std "
+                     f"({numbers})"]
+        else:
+            lines = [f"  agreement       = NO: r_L, r_R, b differ between {self.what} beyond "
+                     f"their std ({numbers}); most different: {', '.join(self.most_different)}",
+                     f"                    {self.differences}"]
+            if self.pooling == "random effects":
+                spread = ", ".join(f"{n} {1e3 * s:.2g} mm"
+                                   for n, s in zip(_NAMES, self.between_std, strict=True))
+                lines.append("                    r_L, r_R, b above pool them with their "
+                             f"spread (random effects; between-group std {spread}): their std "
+                             "cover it; --common-params forces one set")
+            else:
+                lines.append("                    common parameters forced (--common-params): "
+                             "they do not fit every group")
+        for group in self.groups:
+            values = ", ".join(f"{n} {_millimetres(v, s)}"
+                               for n, v, s in zip(_NAMES, group.params, group.std, strict=True))
+            lines.append(f"    {group.name}: {values} ({group.n_segments} segments)")
+        return lines
+
+
+def _p_text(p_value: float) -> str:
+    """A p-value in the report: two significant digits, or "< 1e-15" below that."""
+    return "< 1e-15" if p_value < 1e-15 else f"{p_value:.2g}"
+
+
+def check_option(option: str) -> None:
+    """ValueError unless ``option`` is a :data:`HeterogeneityOption`."""
+    if option not in ("random", "common", "off"):
+        raise ValueError(f"heterogeneity must be 'random', 'common' or 'off', got {option!r}")
+
+
+def motion_kinds(seg: Segments, params: Params) -> IntArray:
+    """Each segment's kind of motion, an index into KINDS from kappa b (module docstring),
+    or -1 for a segment whose wheels do not move."""
+    left, right = params.r_L * seg.dphi_L, params.r_R * seg.dphi_R
+    turn, travel = 2.0 * np.abs(right - left), np.abs(right + left)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(travel > 0, turn / np.where(travel > 0, travel, 1.0), np.inf)
+    kinds = np.full(len(seg), len(KINDS) - 1, dtype=np.int64)
+    for kind, bound in reversed(list(enumerate(KIND_BOUNDS))):
+        kinds[ratio > bound] = kind
+    kinds[(left == 0) & (right == 0)] = -1
+    return kinds
+
+
+@dataclass(frozen=True)
+class _Comparison:
+    """Groups' estimates of r_L, r_R, b in relative units about ``center`` (3,) (m), with
+    ``scale`` (3,) (m per relative unit): ``estimates`` (G, 3), ``covariance`` (3G, 3G);
+    ``residual_dof``: the degrees of freedom of the noise levels behind it (inf: given)."""
+
+    by: str
+    names: tuple[str, ...]
+    counts: tuple[int, ...]
+    center: FloatArray
+    scale: FloatArray
+    estimates: FloatArray
+    covariance: FloatArray
+    residual_dof: float
+
+
+def _merged_kinds(counts: IntArray, block: Callable[[list[int]], FloatArray],
+                  max_relative_std: float) -> list[list[int]]:
+    """The kinds (indices) merged into groups (module docstring): a group closes once it has
+    MIN_KIND_SEGMENTS segments and its information ``block(kinds)`` (3 x 3, relative)
+    determines r_L, r_R, b; what is left at the end joins the last group."""
+    groups: list[list[int]] = []
+    current: list[int] = []
+    for kind in range(len(KINDS)):
+        if counts[kind] == 0:
+            continue
+        current.append(kind)
+        enough = sum(int(counts[k]) for k in current) >= MIN_KIND_SEGMENTS
+        if enough and np.linalg.eigvalsh(block(current))[0] * max_relative_std**2 >= 1.0:
+            groups.append(current)
+            current = []
+    if current and groups:
+        groups[-1] = groups[-1] + current
+    return groups
+
+
+def _widening(relative: FloatArray, information: FloatArray) -> float:
+    """The largest ratio (>= 1) of the reported covariance of r_L, r_R, b to the
+    information's inverse, over directions."""
+    plain = inverse_information(information)[:3, :3]
+    root = np.linalg.cholesky(plain)
+    ratio = np.linalg.solve(root, np.linalg.solve(root, relative[:3, :3]).T)
+    return max(1.0, float(np.linalg.eigvalsh(0.5 * (ratio + ratio.T))[-1]))
+
+
+def _kind_system(chosen: ModelFit, fitter: Fitter, kinds: IntArray
+                 ) -> tuple[FloatArray, FloatArray]:
+    """The information and gradient (relative units) of the model with r_L, r_R, b per kind
+    of motion (3 columns per kind of KINDS, then the sensor pose's), at the common fit, with
+    its noise model and loss. Independent segments: assembled from each kind's own normal
+    system (kinds share no noise); segments that share pose samples: the augmented Jacobian
+    whitened as the fit's."""
+    sigma, loss = chosen.fit.sigma, fitter.options.loss
+    if fitter.whitener is None:
+        ev = chosen.fit.ev  # not whitened: raw residuals and relative Jacobian rows
+        p = ev.jac.shape[1]
+        size = 3 * len(KINDS) + p - 3
+        information, gradient = np.zeros((size, size)), np.zeros(size)
+        for k in range(len(KINDS)):
+            mask = kinds == k
+            if not mask.any():
+                continue
+            system = normal_system(Evaluation(ev.theta, ev.scale, ev.raw[:, mask],
+                                              ev.jac[:, :, mask]), sigma, loss)
+            rows = np.r_[3 * k:3 * k + 3, 3 * len(KINDS):size]
+            information[np.ix_(rows, rows)] += system.information
+            gradient[rows] += system.gradient
+        return information, gradient
+    ev = chosen.unwhitened
+    columns = [ev.jac[:, :3, :] * (kinds == k)[None, None, :] for k in range(len(KINDS))]
+    raw, jac = fitter.whitener.whiten(ev.raw, np.concatenate(columns + [ev.jac[:, 3:, :]],
+                                                              axis=1))
+    assert jac is not None
+    system = normal_system(Evaluation(ev.theta, ev.scale, raw, jac), sigma, loss)
+    return system.information, system.gradient
+
+
+def motion_heterogeneity(chosen: ModelFit, fitter: Fitter, relative: FloatArray
+                         ) -> Heterogeneity | None:
+    """The test between kinds of motion of the chosen fit's segments, with the fit's noise
+    model and loss (module docstring); ``relative`` is the reported relative covariance.
+    None when not tested (a direction undetermined, fewer than two groups)."""
+    data = fitter.data
+    if (not chosen.identifiable or not np.all(np.isfinite(relative))
+            or len(data) < 2 * MIN_KIND_SEGMENTS):
+        return None
+    theta = chosen.theta
+    kinds = motion_kinds(data, Params(*theta[:3]))
+    counts = np.bincount(kinds[kinds >= 0], minlength=len(KINDS))
+    if np.count_nonzero(counts >= MIN_KIND_SEGMENTS) < 1:
+        return None
+    information, gradient = _kind_system(chosen, fitter, kinds)
+    k3 = 3 * len(KINDS)
+
+    def block(group: list[int]) -> FloatArray:
+        rows = np.concatenate([np.arange(3 * k, 3 * k + 3) for k in group])
+        sub = information[np.ix_(rows, rows)]
+        return sub.reshape(len(group), 3, len(group), 3).sum(axis=(0, 2))
+
+    merged = _merged_kinds(counts, block, fitter.options.max_relative_std)
+    if len(merged) < 2:
+        return None
+    extra = information.shape[0] - k3  # the sensor pose, shared
+    mapping = np.zeros((information.shape[0], 3 * len(merged) + extra))
+    for g, group in enumerate(merged):
+        for k in group:
+            mapping[3 * k:3 * k + 3, 3 * g:3 * g + 3] = np.eye(3)
+    mapping[k3:, 3 * len(merged):] = np.eye(extra)
+    grouped = mapping.T @ information @ mapping
+    inverse = np.linalg.pinv(grouped, hermitian=True)
+    step = -(inverse @ (mapping.T @ gradient))  # one Gauss-Newton step, relative units
+    g3 = 3 * len(merged)
+    covariance = inverse[:g3, :g3] * _widening(relative, chosen.fit.system.information)
+    names = tuple(" and ".join(KINDS[k] for k in group) for group in merged)
+    given = fitter.whitener is None and fitter.sigma is not None
+    comparison = _Comparison("motion", names,
+                             tuple(int(sum(counts[k] for k in group)) for group in merged),
+                             theta[:3].copy(), chosen.fit.ev.scale[:3].copy(),
+                             step[:g3].reshape(-1, 3), covariance,
+                             math.inf if given else 3 * len(data) - grouped.shape[0])
+    return _assessed(comparison)
+
+
+def _relative(result: CalibrationResult, center: CalibrationResult
+              ) -> tuple[FloatArray, FloatArray] | None:
+    """A log's estimate (P,) and covariance (P, P) in the relative units of the pooled fit
+    ``center`` (about its estimate); None when the log does not determine them alone."""
+    if not result.identifiable or not np.all(np.isfinite(result.full_covariance)):
+        return None
+    theta = _theta(result)
+    middle = _theta(center)
+    if theta.size != middle.size:
+        return None
+    model = SENSOR_POSE if theta.size == 6 else AXLE
+    scale = model.column_scale(middle)
+    difference = theta - middle
+    if theta.size == 6:
+        difference[5] = math.remainder(difference[5], 2 * math.pi)
+    return difference / scale, result.full_covariance / np.outer(scale, scale)
+
+
+def _theta(result: CalibrationResult) -> FloatArray:
+    """Every estimated parameter of a result, in the order of its full covariance."""
+    wheels = result.params.as_array()
+    if len(result.parameter_names) == 3:
+        return wheels
+    assert result.sensor_pose is not None
+    return np.concatenate([wheels, result.sensor_pose.as_array()])
+
+
+def _shared_mounting(estimates: list[FloatArray], covariances: list[FloatArray]
+                     ) -> tuple[FloatArray, FloatArray]:
+    """The logs' r_L, r_R, b (G, 3) and their joint covariance (3G, 3G) under one sensor
+    mounting: generalised least squares of each log's (wheels, mounting) estimate with the
+    wheels per log and the mounting shared (relative units)."""
+    count = len(estimates)
+    y = np.concatenate(estimates)
+    weight = np.zeros((6 * count, 6 * count))
+    design = np.zeros((6 * count, 3 * count + 3))
+    for i, covariance in enumerate(covariances):
+        weight[6 * i:6 * i + 6, 6 * i:6 * i + 6] = np.linalg.inv(covariance)
+        design[6 * i:6 * i + 3, 3 * i:3 * i + 3] = np.eye(3)
+        design[6 * i + 3:6 * i + 6, 3 * count:] = np.eye(3)
+    joint = np.linalg.inv(design.T @ weight @ design)
+    joint = 0.5 * (joint + joint.T)
+    beta = joint @ (design.T @ weight @ y)
+    return beta[:3 * count].reshape(count, 3), joint[:3 * count, :3 * count]
+
+
+def across_logs(parts: Sequence[tuple[str, Segments]], pooled: CalibrationResult,
+                fit_alone: Callable[[Segments, SensorPoseOption], CalibrationResult],
+                note: Callable[[str], None]) -> Heterogeneity | None:
+    """The test between the inputs ``parts`` (name, segments) of the pooled fit ``pooled``:
+    each calibrated alone by ``fit_alone(segments, sensor_pose)`` with the pooled fit's
+    model (its sensor pose estimated again, or the given one, or the axle). A log that cannot
+    be calibrated alone or does not determine the parameters alone is left out, with a note;
+    None (with a note) when fewer than two logs are left."""
+    if not pooled.identifiable:
+        return None
+    pose: SensorPoseOption = (
+        "axle" if pooled.model == "axle"
+        else "estimate" if len(pooled.parameter_names) == 6
+        else pooled.sensor_pose if pooled.sensor_pose is not None else "axle")
+    names, counts, estimates, covariances, fits, dofs = [], [], [], [], [], []
+    for name, segments in parts:
+        try:
+            own = fit_alone(segments, pose)
+            alone = _relative(own, pooled)
+        except DataError as exc:
+            note(f"{name}: left out of the logs' agreement test (cannot be calibrated alone: "
+                 f"{exc})")
+            continue
+        if alone is None:
+            note(f"{name}: left out of the logs' agreement test (it does not determine the "
+                 "parameters alone)")
+            continue
+        names.append(name)
+        fits.append((own.fit.ok, own.fit.message))
+        dofs.append(3 * own.n_segments - len(own.parameter_names) if own.sigma_estimated
+                    else math.inf)
+        counts.append(len(segments))
+        estimates.append(alone[0])
+        covariances.append(alone[1])
+    if len(names) < 2:
+        note("the logs were not tested for agreement: fewer than two of them determine the "
+             "parameters alone")
+        return None
+    if estimates[0].size == 6:
+        wheels, covariance = _shared_mounting(estimates, covariances)
+    else:
+        wheels = np.stack(estimates)
+        covariance = np.zeros((3 * len(names), 3 * len(names)))
+        for i, c in enumerate(covariances):
+            covariance[3 * i:3 * i + 3, 3 * i:3 * i + 3] = c
+    center = pooled.params.as_array()
+    comparison = _Comparison("logs", tuple(names), tuple(counts), center,
+                             AXLE.column_scale(center), wheels, covariance, min(dofs))
+    return replace(_assessed(comparison), group_fits=tuple(fits))
+
+
+def _millimetres(value: float, std: float) -> str:
+    """``value ± std`` in mm, to the std's second significant digit."""
+    digits = max(0, 1 - math.floor(math.log10(max(1e3 * std, 1e-12))))
+    return f"{1e3 * value:.{digits}f} ± {1e3 * std:.{digits}f} mm"
+
+
+def _differences(c: _Comparison, params: FloatArray, std: FloatArray) -> str:
+    """Which parameters differ and how, in words: for each parameter whose most distant two
+    groups are at least _NAMED_Z combined std apart (at least the most distant one), the two
+    estimates; then the likely cause."""
+    z = np.abs(pairwise_z(c.estimates, c.covariance))
+    largest = z.reshape(-1, 3).max(axis=0)
+    order = [j for j in np.argsort(-largest) if largest[j] >= _NAMED_Z] or [
+        int(np.argmax(largest))]
+    prefix = "" if c.by == "logs" else "the "
+    parts = []
+    for j in order:
+        g, h = np.unravel_index(np.argmax(z[:, :, j]), z.shape[:2])
+        low, high = (g, h) if params[g, j] <= params[h, j] else (h, g)
+        parts.append(f"{_NAMES[j]} from {prefix}{c.names[low]} "
+                     f"{_millimetres(params[low, j], std[low, j])}, from {prefix}"
+                     f"{c.names[high]} {_millimetres(params[high, j], std[high, j])} "
+                     f"({largest[j]:.2g} combined std apart)")
+    differing = {_NAMES[j] for j in order}
+    cause = ("the effective track depends on how the robot turns (wheel scrub)" if "b" in
+             differing else "the effective wheel radii depend on the driving (load, speed, "
+             "floor)")
+    if c.by == "logs":
+        cause += "; or the logs are of different robots, wheels or floors"
+    return (f"{'; '.join(parts)}: {cause}; calibrate on driving like the robot's everyday "
+            "driving")
+
+
+def _assessed(c: _Comparison) -> Heterogeneity:
+    """The test and the pools of a comparison (module docstring)."""
+    pooled = pool(c.estimates, c.covariance, c.residual_dof)
+    detected = pooled.p_value < LEVEL
+    scale2 = np.outer(c.scale, c.scale)
+    params = c.center + c.estimates * c.scale
+    block = np.einsum("gigj->gij", c.covariance.reshape(len(c.names), 3, len(c.names), 3))
+    std = np.sqrt(np.einsum("gii->gi", block)) * c.scale
+    groups = tuple(Group(n, p, s, k)
+                   for n, p, s, k in zip(c.names, params, std, c.counts, strict=True))
+    most: tuple[str, ...] = ()
+    words = ""
+    if detected:
+        distance = leave_one_out(c.estimates, c.covariance)
+        most = (c.names if len(c.names) == 2
+                else (c.names[int(np.argmax(distance))],))
+        words = _differences(c, params, std)
+    return Heterogeneity(
+        by=c.by, detected=bool(detected), statistic=pooled.statistic, dof=pooled.dof,
+        p_value=pooled.p_value, groups=groups,
+        between_std=np.sqrt(np.diag(pooled.between)) * c.scale,
+        pooling="random effects" if detected else "common", most_different=most,
+        differences=words, random_params=c.center + pooled.random_mean * c.scale,
+        random_covariance=pooled.adjusted_covariance * scale2,
+        group_covariance=c.covariance * np.tile(scale2, (len(c.names), len(c.names))))
+
+
+def _carried_over(full: FloatArray, wheels: FloatArray) -> FloatArray:
+    """The joint covariance ``full`` (P, P) with its r_L, r_R, b block replaced by
+    ``wheels`` (3, 3), the correlations with the rest carried over: the congruence
+    diag(S, I) full diag(S, I)^T with S = wheels^(1/2) A^(-1/2), A the old block (positive
+    semi-definite whenever ``full`` is)."""
+    def root(a: FloatArray, power: float) -> FloatArray:
+        lam, vec = np.linalg.eigh(0.5 * (a + a.T))
+        return (vec * np.maximum(lam, 1e-300) ** power) @ vec.T
+
+    s = root(wheels, 0.5) @ root(full[:3, :3], -0.5)
+    transform = np.eye(full.shape[0])
+    transform[:3, :3] = s
+    out = transform @ full @ transform.T
+    out[:3, :3] = wheels
+    return 0.5 * (out + out.T)
+
+
+def _own_fits(fit: FitTest, heterogeneity: Heterogeneity) -> FitTest:
+    """The fit test of logs that disagree: their own fits' (the common fit's test does not
+    apply to parameters that differ between them); unchanged for kinds of motion."""
+    if not heterogeneity.group_fits:
+        return fit
+    for group, (ok, message) in zip(heterogeneity.groups, heterogeneity.group_fits,
+                                    strict=True):
+        if not ok:
+            return replace(fit, ok=False, message=f"{group.name} alone: {message}")
+    return replace(fit, ok=True, message=(
+        f"each of {heterogeneity.what} fits alone (their own fit tests); the common fit's "
+        "test does not apply to logs whose parameters differ"))
+
+
+def applied(result: CalibrationResult, heterogeneity: Heterogeneity | None,
+            option: HeterogeneityOption) -> CalibrationResult:
+    """The result with the test attached: unchanged without one; with ``detected`` and
+    ``option`` "random", r_L, r_R, b and their covariance from the random-effects pool (the
+    sensor pose and the rest kept); with "common", the common fit failing its fit test."""
+    if heterogeneity is None:
+        return result
+    if not heterogeneity.detected:
+        return replace(result, heterogeneity=heterogeneity)
+    if option == "common":
+        heterogeneity = replace(heterogeneity, pooling="common")
+        fit = replace(result.fit, ok=False, message=(
+            f"r_L, r_R, b differ between {heterogeneity.what} beyond their std (Q "
+            f"{heterogeneity.statistic:.3g}, {heterogeneity.dof} dof, p "
+            f"{_p_text(heterogeneity.p_value)}): common parameters (--common-params) do not fit "
+            f"them; {heterogeneity.differences}"))
+        return replace(result, fit=fit, heterogeneity=heterogeneity)
+    covariance = heterogeneity.random_covariance
+    full = _carried_over(result.full_covariance, covariance)
+    return replace(result, params=Params(*heterogeneity.random_params), covariance=covariance,
+                   fit=_own_fits(result.fit, heterogeneity),
+                   std=np.sqrt(np.diag(covariance)), full_covariance=full,
+                   heterogeneity=heterogeneity)

@@ -1,0 +1,70 @@
+"""excite calibrate with several inputs that disagree: the report says so and names the file,
+--json carries the per-file estimates, --common-params fails the fit."""
+
+import json
+
+import numpy as np
+import pytest
+
+from excite import Params, save_segments
+from excite.logs.synthetic import lesson_dataset
+from tests.conftest import TRUTH, run_cli
+
+OTHER = Params(TRUTH.r_L, TRUTH.r_R, 0.311)  # another robot: a wider track
+
+
+@pytest.fixture
+def two_robots(tmp_path):
+    paths = []
+    for name, params, seed in (("robot_a.csv", TRUTH, 1), ("robot_b.csv", OTHER, 2)):
+        path = tmp_path / name
+        save_segments(path, lesson_dataset(np.random.default_rng(seed), 150, params))
+        paths.append(str(path))
+    return paths
+
+
+def test_two_files_that_disagree_are_said_so_with_exit_zero(capsys, two_robots):
+    code, out, err = run_cli(capsys, "calibrate", *two_robots)
+    assert code == 0
+    lines = out.splitlines()
+    disagreement = next(line for line in lines if line.lstrip().startswith("disagreement"))
+    assert "b from " in disagreement and "their std cover the spread" in disagreement
+    assert two_robots[0] in disagreement and two_robots[1] in disagreement
+    agreement = next(line for line in lines if "agreement       = NO" in line)
+    assert "most different" in agreement and "2 logs" in agreement
+    assert sum(line.startswith(f"    {path}: r_L ") for path in two_robots
+               for line in lines) == 2
+    fit = next(line for line in lines if line.lstrip().startswith("fit "))
+    assert "fit             = ok: each of the 2 logs fits alone" in fit
+
+
+def test_json_gives_each_file_and_the_pool(capsys, two_robots):
+    code, out, _ = run_cli(capsys, "calibrate", *two_robots, "--json")
+    assert code == 0
+    report = json.loads(out)
+    h = report["heterogeneity"]
+    assert h["detected"] and h["by"] == "logs" and h["pooling"] == "random effects"
+    assert h["p_value"] < h["level"] and h["statistic"] > 0
+    assert [g["name"] for g in h["groups"]] == two_robots
+    assert [g["n_segments"] for g in h["groups"]] == [150, 150]
+    b = [g["params"]["b"] for g in h["groups"]]
+    assert abs(b[0] - TRUTH.b) < 5 * h["groups"][0]["std"]["b"]
+    assert abs(b[1] - OTHER.b) < 5 * h["groups"][1]["std"]["b"]
+    # the pooled b lies between the two robots' and its std covers the spread
+    assert min(b) < report["params"]["b"] < max(b)
+    assert report["std"]["b"] > 0.25 * abs(b[1] - b[0])
+
+
+def test_common_params_fail_the_fit(capsys, two_robots):
+    code, out, _ = run_cli(capsys, "calibrate", *two_robots, "--common-params")
+    assert code == 4
+    fit = next(line for line in out.splitlines() if line.lstrip().startswith("fit "))
+    assert "fit             = NO: r_L, r_R, b differ between the 2 logs" in fit
+    assert "--common-params" in fit
+
+
+def test_one_file_of_one_robot_is_tested_between_kinds_of_motion(capsys, two_robots):
+    code, out, _ = run_cli(capsys, "calibrate", two_robots[0], "--json")
+    assert code == 0
+    h = json.loads(out)["heterogeneity"]
+    assert h["by"] == "motion" and len(h["groups"]) >= 2

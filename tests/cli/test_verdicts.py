@@ -1,0 +1,212 @@
+"""Results a user can act on safely: no controller file from a failed calibration unless
+forced (and then marked unsafe), implausible nominal values refused with the likely unit, a
+calibrate report that leads with what to do, and validate's verdict with its exit status."""
+
+import json
+
+import numpy as np
+import pytest
+
+from excite import save_segments
+from excite.commands.args import plausible_params
+from excite.commands.exit_status import EXIT_WORSE
+from excite.errors import ExciteError
+from excite.logs.synthetic import lesson_dataset, synthetic_log
+from excite.validation.verdict import MARGIN, judge, tally
+from tests.cli.test_cli import off_axle_csv
+from tests.cli.test_validate import NOMINAL, SENSOR, TRUTH, write_log, write_params
+from tests.conftest import TRUTH as LESSON_TRUTH
+from tests.conftest import assert_one_line_error, run_cli, straight_segments
+
+INIT = ["--init", "0.05,0.05,0.3"]
+
+
+def misfit_args(tmp_path, rng):
+    """A calibration that ends with exit status 4: the axle model forced on off-axle data."""
+    return [off_axle_csv(tmp_path, rng), "--sensor-pose", "axle"]
+
+
+def undetermined_args(tmp_path, rng):
+    """A calibration that ends with exit status 3: no segment turns."""
+    path = tmp_path / "straight.csv"
+    save_segments(path, straight_segments(rng))
+    return [path]
+
+
+# --------------------------------------------------------------------------- --ros2-yaml
+
+
+@pytest.mark.parametrize("make, status, why", [
+    (misfit_args, 4, "the model does not fit the data"),
+    (undetermined_args, 3, "the data do not determine every parameter: b: no segment turns"),
+])
+@pytest.mark.parametrize("json_out", [False, True])
+def test_no_controller_file_from_a_failed_calibration(capsys, tmp_path, rng, make, status,
+                                                      why, json_out):
+    out_yaml = tmp_path / "ddc.yaml"
+    extra = ["--json"] if json_out else []
+    code, out, err = run_cli(capsys, "calibrate", *make(tmp_path, rng), *INIT, *extra,
+                             "--ros2-yaml", out_yaml)
+    assert code == status and not out_yaml.exists()
+    [note] = err.splitlines()
+    assert note.startswith(f"excite: note: {out_yaml} not written (exit status {status}): "
+                           f"{why}") and note.endswith("--force-yaml writes it anyway, "
+                                                       "marked unsafe")
+    if json_out:
+        assert json.loads(out)["identifiable"] == (status != 3)
+    else:
+        assert "wrote ROS 2" not in out
+
+
+@pytest.mark.parametrize("make, status, why", [
+    (misfit_args, 4, "the model does not fit the data: "),
+    (undetermined_args, 3, "the data do not determine every parameter: "),
+])
+def test_a_forced_controller_file_says_it_is_unsafe_and_why(capsys, tmp_path, rng, make,
+                                                            status, why):
+    out_yaml = tmp_path / "ddc.yaml"
+    code, out, err = run_cli(capsys, "calibrate", *make(tmp_path, rng), *INIT, "--ros2-yaml",
+                             out_yaml, "--force-yaml")
+    assert code == status and err == ""
+    assert f"wrote ROS 2 diff_drive_controller parameters to {out_yaml}, marked unsafe" in out
+    lines = out_yaml.read_text().splitlines()
+    assert lines[0].startswith("# UNSAFE: do not load these parameters into a controller")
+    assert lines[1].startswith(f"# Why: {why}")
+    assert f"(exit status {status}; written only because of --force-yaml)" in lines[1]
+    body = [line for line in lines if not line.startswith("#")]
+    assert body[:2] == ["diff_drive_controller:", "  ros__parameters:"]
+
+
+def test_a_successful_calibration_writes_an_unmarked_file_with_the_report_s_multipliers(
+        capsys, tmp_path, rng):
+    path = tmp_path / "log.csv"
+    save_segments(path, lesson_dataset(rng, 200, LESSON_TRUTH))
+    out_yaml = tmp_path / "ddc.yaml"
+    code, out, err = run_cli(capsys, "calibrate", path, *INIT, "--ros2-yaml", out_yaml,
+                             "--force-yaml")
+    assert code == 0 and err == "" and "marked unsafe" not in out
+    text = out_yaml.read_text()
+    assert not text.startswith("#")
+    lines = out.splitlines()
+    assert lines[2] == "verdict: calibrated: set these diff_drive_controller multipliers"
+    [multipliers] = [line for line in lines if line.startswith("  multipliers")]
+    for key in ("left_wheel_radius_multiplier", "right_wheel_radius_multiplier",
+                "wheel_separation_multiplier"):
+        in_file = float(text.split(f"{key}: ")[1].split()[0])
+        in_report = float(multipliers.split(f"{key} ")[1].split()[0].rstrip(","))
+        assert in_report == pytest.approx(in_file, rel=1e-5)
+
+
+def test_force_yaml_needs_ros2_yaml(capsys, tmp_path, rng):
+    code, _, err = run_cli(capsys, "calibrate", *undetermined_args(tmp_path, rng),
+                           "--force-yaml")
+    assert_one_line_error(code, err, "--force-yaml needs --ros2-yaml")
+
+
+# --------------------------------------------------------------------------- nominal values
+
+
+@pytest.mark.parametrize("values, fragment", [
+    ("5,5,30", "a wheel radius of 5 m is implausible (centimetres given as metres? "
+               "5 cm = 0.05)"),
+    ("165,165,555", "a wheel radius of 165 m is implausible (millimetres given as metres? "
+                    "165 mm = 0.165)"),
+    ("65,65,300", "(centimetres or millimetres given as metres? 65 cm = 0.65, "
+                  "65 mm = 0.065)"),
+    ("2500,2500,10", "a wheel radius of 2500 m is implausible (wheel radii are 5 mm to 2 m)"),
+    ("0.0005,0.0005,0.003", "a wheel radius of 0.0005 m is implausible (wheel radii are "
+                            "5 mm to 2 m; RL,RR,B are in metres)"),
+    ("0.05,0.004,0.3", "a wheel radius of 0.004 m is implausible"),
+    ("0.05,0.5,0.3", "wheel radii of 0.05 m and 0.5 m are implausible (they differ by a "
+                     "factor 10;"),
+    ("0.05,0.05,30", "a wheel separation of 30 m is implausible (centimetres given as "
+                     "metres? 30 cm = 0.3)"),
+    ("0.05,0.05,0.04", "a wheel separation of 0.04 m, no longer than the wheel radius "
+                       "0.05 m, is implausible"),
+    ("0.3,0.3,0.3", "a wheel separation of 0.3 m, no longer than the wheel radius 0.3 m"),
+])
+def test_implausible_nominal_values_are_one_line_errors_with_the_likely_unit(
+        capsys, tmp_path, values, fragment):
+    code, out, err = run_cli(capsys, "calibrate", tmp_path / "never_read.csv", "--init",
+                             values)
+    assert out == ""
+    assert_one_line_error(code, err, f"--init {values}: ", fragment)
+    params = write_params(tmp_path / "result.json", TRUTH)
+    code, _, err = run_cli(capsys, "validate", tmp_path / "never_read.csv", "--params",
+                           params, "--nominal", values)
+    assert_one_line_error(code, err, f"--nominal {values}: ", fragment)
+
+
+@pytest.mark.parametrize("values", [
+    (0.0205, 0.0205, 0.053),   # e-puck
+    (0.033, 0.033, 0.16),      # TurtleBot3 Burger
+    (0.1651, 0.1651, 0.555),   # Husky
+    (0.005, 0.005, 0.0051),    # at the lower bounds
+    (2.0, 1.0, 20.0),          # at the upper bounds
+])
+def test_real_robots_and_the_bounds_themselves_are_plausible(values):
+    plausible_params(values, "", "--init")
+
+
+@pytest.mark.parametrize("values", [(0.0049, 0.005, 0.3), (2.01, 2.0, 5.0),
+                                    (0.05, 0.1001, 0.3), (0.05, 0.05, 20.01)])
+def test_just_outside_the_bounds_is_implausible(values):
+    with pytest.raises(ExciteError, match="implausible"):
+        plausible_params(values, "", "--init")
+
+
+# --------------------------------------------------------------------------- validate
+
+
+def test_the_verdict_rule_and_its_margin():
+    assert judge(1.0, 1.0 / MARGIN) == "better" and judge(1.0, 0.5) == "better"
+    assert judge(1.0, 0.95) == judge(1.0, 1.0) == judge(1.0, 1.05) == "no better"
+    assert judge(1.0, MARGIN) == "worse" and judge(1.0, 2.6) == "worse"
+    assert judge(0.0, 0.0) == "no better" and judge(0.0, 1e-3) == "worse"
+    assert tally(["worse", "better", "better"]) == "better on 2, worse on 1 of 3 logs"
+    assert tally(["no better"]) == "no better on 1 of 1 log"
+
+
+@pytest.fixture(scope="module")
+def held_out(tmp_path_factory):
+    """Two held-out logs of the robot TRUTH (5% off NOMINAL)."""
+    folder = tmp_path_factory.mktemp("held_out")
+    rng = np.random.default_rng(7)
+    return [path for name in ("a", "b") for path in write_log(
+        folder, name, synthetic_log(rng, 30.0, TRUTH, SENSOR, pose_noise=(0.002, 0.001),
+                                    step=0.002).series)]
+
+
+def nominal_option(params) -> list[str]:
+    return ["--nominal", ",".join(f"{v:.9g}" for v in params.as_array())]
+
+
+@pytest.mark.parametrize("calibrated, nominal, verdict, status", [
+    (TRUTH, NOMINAL, "better", 0),
+    (TRUTH, TRUTH, "no better", 0),
+    (NOMINAL, TRUTH, "worse", EXIT_WORSE),
+])
+def test_validate_ends_with_a_verdict_and_its_exit_status(capsys, tmp_path, held_out,
+                                                          calibrated, nominal, verdict,
+                                                          status):
+    params = write_params(tmp_path / "result.json", calibrated)
+    code, out, err = run_cli(capsys, "validate", *held_out, "--params", params,
+                             *nominal_option(nominal))
+    assert code == status and err == ""
+    last = out.splitlines()[-1]
+    assert last.startswith(f"verdict: the calibrated robot dead-reckons {verdict} than the "
+                           f"nominal one (RMS path error x")
+    assert f"; {verdict} on 2 of 2 logs)" in last
+    assert out.count(f"  verdict     {verdict} than nominal (RMS path error x") == 2
+    code, out, _ = run_cli(capsys, "validate", *held_out, "--params", params,
+                           *nominal_option(nominal), "--json")
+    d = json.loads(out)
+    assert code == status and d["overall"]["verdict"] == verdict
+    assert [log["verdict"] for log in d["logs"]] == [verdict, verdict]
+
+
+def test_validate_help_documents_the_verdict_and_its_exit_status(capsys):
+    with pytest.raises(SystemExit):
+        run_cli(capsys, "validate", "--help")
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"at least {MARGIN:g} worse" in text and f"{EXIT_WORSE} when it is worse" in text

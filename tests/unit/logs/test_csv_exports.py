@@ -1,0 +1,357 @@
+"""CSV files as real exports write them (docs/formats.md, "CSV exports"): semicolons and tabs,
+decimal commas, units and other names in the header, columns excite does not read, for
+time-series CSVs and segment CSVs alike. Each export is written from the same numbers as a
+plain CSV, and must read back as those numbers (bit for bit when no unit is converted, to
+rounding when one is), with the notes the user is told; anything ambiguous is a one-line
+error naming the file, line and column."""
+
+import math
+
+import numpy as np
+import pytest
+
+from excite import DataError, load_segments
+from excite.core.kinematics import Params
+from excite.core.models import SensorPose
+from excite.logs.inputs import LogOptions, group_inputs, segment_inputs
+from excite.logs.segments import load_segment_files
+from excite.logs.synthetic import synthetic_log
+from excite.logs.timeseries_csv import (
+    header_hint,
+    read_timeseries,
+    timeseries_streams,
+    write_timeseries,
+)
+
+STREAMS = ("t_enc", "phi_L", "phi_R", "t_pose", "x", "y", "theta")
+
+
+@pytest.fixture(scope="module")
+def plain(tmp_path_factory):
+    """A plain time-series CSV t,phi_L,phi_R,x,y,theta (10 s, encoders at 100 Hz, poses at
+    50 Hz: rows with empty pose cells) and its cells: (path, header, rows)."""
+    series = synthetic_log(np.random.default_rng(7), 10.0, Params(0.05, 0.051, 0.3),
+                           SensorPose(0.1, 0.02, 0.3), pose_noise=(0.002, 0.002)).series
+    path = tmp_path_factory.mktemp("plain") / "plain.csv"
+    write_timeseries(path, series)
+    header, *rows = [line.split(",") for line in path.read_text().splitlines()]
+    assert header == ["t", "phi_L", "phi_R", "x", "y", "theta"]
+    assert any(row[3] == "" for row in rows) and all(row[0] for row in rows)
+    return path, header, rows
+
+
+def export(path, header, rows, sep=",", decimal_comma=False):
+    """Write a table: fields joined by ``sep``, a decimal comma for a point when asked."""
+    def line(cells):
+        return sep.join(c.replace(".", ",") if decimal_comma else c for c in cells)
+    path.write_text("\n".join([sep.join(header)] + [line(row) for row in rows]) + "\n")
+    return path
+
+
+def read(path, **kwargs):
+    notes = []
+    series = read_timeseries(path, on_note=notes.append, **kwargs)
+    return series, notes
+
+
+def assert_same(series, reference, rtol=0.0):
+    for name in STREAMS:
+        a, b = getattr(series, name), getattr(reference, name)
+        if rtol:
+            np.testing.assert_allclose(a, b, rtol=rtol, atol=1e-12, err_msg=name)
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=name)
+
+
+@pytest.mark.parametrize("sep, decimal_comma", [
+    (";", False), (";", True), ("\t", False), ("\t", True), (", ", False), (",\t", False),
+    (" ; ", True),
+])
+def test_separators_and_decimal_commas_read_the_same_numbers(tmp_path, plain, sep,
+                                                             decimal_comma):
+    path, header, rows = plain
+    reference = read_timeseries(path)
+    series, notes = read(export(tmp_path / "log.csv", header, rows, sep, decimal_comma))
+    assert_same(series, reference)
+    assert notes == []
+
+
+@pytest.mark.parametrize("sep", [";", "\t", ","])
+def test_a_spreadsheets_separator_line_is_skipped(tmp_path, plain, sep):
+    path, header, rows = plain
+    out = export(tmp_path / "log.csv", header, rows, sep, decimal_comma=sep != ",")
+    out.write_text(f"sep={sep}\n" + out.read_text())
+    assert timeseries_streams(out) == {"encoder", "pose"}
+    assert_same(read_timeseries(out), read_timeseries(path))
+    segments = export(tmp_path / "s.csv", SEGMENT_HEADER, SEGMENT_ROWS, sep)
+    segments.write_text(f"SEP={sep}\n" + segments.read_text())
+    plain_segments = export(tmp_path / "p.csv", SEGMENT_HEADER, SEGMENT_ROWS)
+    np.testing.assert_array_equal(load_segments(segments).as_array(),
+                                  load_segments(plain_segments).as_array())
+
+
+@pytest.mark.parametrize("header", [
+    ["t [s]", "phi_L [rad]", "phi_R(rad)", "x (m)", "y [ m ]", "theta[rad]"],
+    ["time", "phi_left", "phi_right", "pos_x", "pos_y", "yaw"],
+    ["timestamp", "left_angle", "right_angle", "position_x", "Position Y", "heading"],
+    ["Stamp", "Left-Wheel-Angle", "right_wheel_angle", "pose.x", "pose_y", "Yaw"],
+    ["t_s", "angle_l", "angle_r", "x_m", "y_m", "theta_rad"],
+    ['"time [s]"', '"phi_L"', '"phi_R"', '"x"', '"y"', '"yaw"'],
+    ["TIME (S)", "PHI_L (RAD)", "PHI_R (RAD)", "X (M)", "Y (M)", "YAW (RAD)"],
+])
+def test_other_names_and_base_units_read_the_same_numbers_without_a_note(tmp_path, plain,
+                                                                         header):
+    path, _, rows = plain
+    for sep in (",", ";"):
+        series, notes = read(export(tmp_path / "log.csv", header, rows, sep))
+        assert_same(series, read_timeseries(path))
+        assert notes == []
+
+
+def test_columns_not_read_are_named_in_a_note_and_never_parsed(tmp_path, plain):
+    """z, qw, battery, a frame id holding the separator (quoted), a date: not read, even where
+    they are not numbers; a separator closing every line makes an unnamed column."""
+    path, header, rows = plain
+    extra = ["z", "frame", "qw", "battery", "date"]
+    cells = ["0.1", '"map;base"', "1.0", "12.5", "2026-11-26 10:00:00"]
+    table = [header[:3] + extra[:2] + header[3:] + extra[2:]]
+    table += [row[:3] + cells[:2] + row[3:] + cells[2:] for row in rows]
+    path_out = tmp_path / "extra.csv"
+    path_out.write_text("\n".join(";".join(r) for r in table) + "\n")
+    series, notes = read(path_out)
+    assert_same(series, read_timeseries(path))
+    assert notes == [f"{path_out}: columns not read: z, frame, qw, battery, date"]
+    trailing = export(tmp_path / "trailing.csv", header + [""], [row + [""] for row in rows],
+                      "\t")
+    series, notes = read(trailing)
+    assert_same(series, read_timeseries(path))
+    assert notes == [f"{trailing}: columns not read: (unnamed column 7)"]
+
+
+def scaled(rows, factors):
+    """The rows with each filled cell multiplied by its column's factor (written as the
+    shortest text of the product)."""
+    return [[repr(float(c) * f) if c else "" for c, f in zip(row, factors, strict=True)]
+            for row in rows]
+
+
+@pytest.mark.parametrize("header, factors, converted", [
+    (["t [ms]", "phi_L", "phi_R", "x [mm]", "y (cm)", "theta [deg]"],
+     [1e3, 1, 1, 1e3, 1e2, 180 / math.pi],
+     "t from ms to s, x from mm to m, y from cm to m, theta from deg to rad"),
+    (["time_ns", "phi_L_deg", "phi_R (degrees)", "x", "y", "yaw_deg"],
+     [1e9, 180 / math.pi, 180 / math.pi, 1, 1, 180 / math.pi],
+     "t from ns to s, phi_L from deg to rad, phi_R from degrees to rad, theta from deg to rad"),
+    (["stamp (µs)", "phi_L", "phi_R", "x", "y", "heading (°)"],
+     [1e6, 1, 1, 1, 1, 180 / math.pi], "t from µs to s, theta from ° to rad"),
+])
+def test_units_are_converted_to_s_m_rad_with_a_note(tmp_path, plain, header, factors,
+                                                    converted):
+    path, _, rows = plain
+    out = export(tmp_path / "units.csv", header, scaled(rows, factors), ";", True)
+    series, notes = read(out)
+    assert_same(series, read_timeseries(path), rtol=1e-12)
+    assert notes == [f"{out}: units converted: {converted}"]
+
+
+def test_ticks_with_a_count_unit_and_a_pair_of_exported_stream_files(tmp_path, plain):
+    """An encoder file (semicolons, decimal commas, ms, tick counts) and a pose file (tabs,
+    mm, degrees) given together: one log, equal to the plain file's, a note for each file."""
+    _, header, rows = plain
+    ticks = [[row[0], str(round(float(row[1]) * 2048 / math.pi)),
+              str(round(float(row[2]) * 2048 / math.pi))] for row in rows]
+    reference = tmp_path / "ticks.csv"
+    export(reference, ["t", "ticks_L", "ticks_R"], ticks)
+    enc = export(tmp_path / "enc.csv", ["time [ms]", "left_ticks [ticks]", "right_ticks"],
+                 scaled(ticks, [1e3, 1, 1]), ";", True)
+    pose_rows = [[row[0], *row[3:]] for row in rows if row[3]]
+    poses = export(tmp_path / "poses.csv", ["t", "x [mm]", "y [mm]", "yaw [deg]", "qw"],
+                   [r + ["1"] for r in scaled(pose_rows, [1, 1e3, 1e3, 180 / math.pi])], "\t")
+    export(tmp_path / "pose_ref.csv", ["t", "x", "y", "theta"], pose_rows)
+    assert timeseries_streams(enc) == {"encoder"} and timeseries_streams(poses) == {"pose"}
+    (log,) = group_inputs([str(poses), str(enc)])
+    assert log.kind == "timeseries" and log.paths == (str(poses), str(enc))
+    series, notes = read([poses, enc], ticks_per_rev=4096)
+    expected = read_timeseries([reference, tmp_path / "pose_ref.csv"], ticks_per_rev=4096)
+    assert_same(series, expected, rtol=1e-12)
+    assert notes == [f"{poses}: columns not read: qw",
+                     f"{poses}: units converted: x from mm to m, y from mm to m, "
+                     "theta from deg to rad",
+                     f"{enc}: units converted: t from ms to s"]
+
+
+GOOD_ROWS = "0;0;0;0;0;0\n0.1;1;1;0.05;0;0\n0.2;2;2;0.1;0;0\n"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("t [m],phi_L,phi_R,x,y,theta\n", "log.csv:1: column 't [m]': unit 'm' is not a unit of "
+     "time (s, sec, secs, second, seconds, ms, us, µs, μs, ns)"),
+    ("t,phi_L,phi_R,x [ft],y,theta\n", "log.csv:1: column 'x [ft]': unit 'ft' is not a unit "
+     "of length (m, cm, mm)"),
+    ("t,phi_L,phi_R,x,y,theta [rad/s]\n", "column 'theta [rad/s]': unit 'rad/s' is not a unit "
+     "of angle"),
+    ("t,ticks_L [rad],ticks_R,x,y,theta\n", "column 'ticks_L [rad]': unit 'rad' is not a unit "
+     "of count"),
+    ("t,time,phi_L,phi_R,x,y,theta\n", "log.csv:1: columns 't' and 'time' are both t; keep one"),
+    ("t;phi_L;phi_R;x;y;theta;yaw\n", "columns 'theta' and 'yaw' are both theta; keep one"),
+    ("t,phi_L,phi_R,x,y,theta,T\n", "log.csv:1: column t appears twice"),
+    ("t;phi_L;phi_R;x;y;theta\n0;0;0;0;0;0\n0,1;1;1;0.05;0;0\n",
+     "log.csv:3: x has a decimal point ('0.05') but other numbers have decimal commas"),
+    ("t;phi_L;phi_R;x;y;theta\n0,0,0,0,0,0\n", "log.csv:2: expected 6 columns separated by "
+     "semicolons, found 1"),
+    ("t\tphi_L\tphi_R\tx\ty\ttheta\n0\t0\t0\t0\t0\n", "log.csv:2: expected 6 columns "
+     "separated by tabs, found 5"),
+    ("t;phi_L;phi_R;x;y;theta\n" + GOOD_ROWS + "0.3;3;abc;0.15;0;0\n",
+     "log.csv:5: phi_R is not a number: 'abc'"),
+    ("t;phi_L;phi_R;x;y;theta;z\n" + "0.3;3;3;nan;0;0;0\n", "log.csv:2: x is not finite: 'nan'"),
+    ("time;left;right;x;y;yaw\n0;0;0;0;0;0\n", "log.csv: only pose columns; give the other "
+     "stream too (a second file with t,phi_L,phi_R, or all columns in one file); 'left', "
+     "'right' not read: wheel columns are named phi_L, phi_R (rad) or ticks_L, ticks_R"),
+    ("time,enc_left,enc_right,x,y,qz,qw\n", "log.csv:1: missing column theta (expected "
+     "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two); the header "
+     "names 'time', 'enc_left', 'enc_right', 'x', 'y', 'qz', 'qw'; 'enc_left', 'enc_right' not "
+     "read: wheel columns are named phi_L, phi_R (rad) or ticks_L, ticks_R (see "
+     "docs/formats.md); 'qz', 'qw' not read: give the heading as theta (rad), not a "
+     "quaternion"),
+    ("Zeit;X;Y;Gier\n", "log.csv:1: no time column t (s); the header names 'Zeit', 'X', 'Y', "
+     "'Gier' (expected t,phi_L,phi_R,x,y,theta in one file"),
+    ("time;battery\n", "log.csv:1: neither encoder (phi_L, phi_R) nor pose (x, y, theta) "
+     "columns (expected t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta "
+     "in two); the header names 'time', 'battery'"),
+])
+def test_what_cannot_be_read_safely_is_a_one_line_error(tmp_path, text, message):
+    path = tmp_path / "log.csv"
+    path.write_text(text)
+    with pytest.raises(DataError) as info:
+        read_timeseries(path)
+    assert str(info.value).startswith(str(path)) and message in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("header, streams", [
+    ("time;x (m);y (m);yaw [deg];z", {"pose"}),
+    ("stamp\tleft_ticks\tright_ticks\tbattery", {"encoder"}),
+    ('"Time [s]","Phi_L","Phi_R"', {"encoder"}),
+    ("time;left;right;x;y;yaw", {"pose"}),
+    ("x;y;yaw", {"encoder", "pose"}),  # no time: read alone, the error names it
+    ("t,x,y,theta,phi_L", {"encoder", "pose"}),  # a partial wheel group: likewise
+    ("t,x [ft],y,theta", {"encoder", "pose"}),  # a bad unit: likewise
+    ("time;phi_L;phi_R;x;y;yaw;qw", {"encoder", "pose"}),
+    ("dphi_L;dphi_R;dx_gt [mm];dy_gt;dtheta_gt", set()),
+    ("1;1;0,05;0;0", set()),
+    ("foo;bar", set()),
+])
+def test_what_kind_of_file_a_real_header_is(tmp_path, header, streams):
+    path = tmp_path / "log.csv"
+    path.write_text(header + "\n")
+    assert timeseries_streams(path) == streams
+
+
+def test_a_lone_pose_file_with_wheel_like_columns_hints_at_their_names(tmp_path):
+    path = tmp_path / "log.csv"
+    path.write_text("time;left;right;x;y;yaw\n")
+    assert header_hint(path) == ("; 'left', 'right' not read: wheel columns are named phi_L, "
+                                 "phi_R (rad) or ticks_L, ticks_R (see docs/formats.md)")
+    with pytest.raises(DataError, match="has only the pose stream; give the file with the other "
+                       "stream right after it; 'left', 'right' not read"):
+        group_inputs([str(path)])
+    path.write_text("t,phi_L,phi_R,left_current\n")
+    assert header_hint(path) == ""  # the wheels are there: nothing is missing
+
+
+# --------------------------------------------------------------------------- segment CSVs
+
+SEGMENT_HEADER = ["dphi_L", "dphi_R", "dx_gt", "dy_gt", "dtheta_gt"]
+SEGMENT_ROWS = [["1.5", "1.25", "0.075", "0.0012", "-0.0425"],
+                ["2", "1", "0.07", "0.01", "-0.17"],
+                ["-1", "1", "0", "0", "0.33"],
+                ["0.5", "0.75", "0.031", "-0.002", "0.05"]]
+
+
+def load(path):
+    notes = []
+    return load_segments(path, on_note=notes.append), notes
+
+
+@pytest.fixture
+def segment_reference(tmp_path):
+    return load_segments(export(tmp_path / "plain.csv", SEGMENT_HEADER, SEGMENT_ROWS)).as_array()
+
+
+@pytest.mark.parametrize("sep, decimal_comma, with_header", [
+    (";", False, True), (";", True, True), ("\t", True, True), ("\t", False, False),
+    (";", True, False), ("; ", True, False),
+])
+def test_segment_csv_separators_and_decimal_commas(tmp_path, segment_reference, sep,
+                                                   decimal_comma, with_header):
+    path = export(tmp_path / "s.csv", SEGMENT_HEADER if with_header else [], SEGMENT_ROWS, sep,
+                  decimal_comma)
+    if not with_header:
+        path.write_text(path.read_text().lstrip("\n"))
+    segments, notes = load(path)
+    np.testing.assert_array_equal(segments.as_array(), segment_reference)
+    assert notes == []
+
+
+def test_segment_csv_with_units_any_order_and_columns_not_read(tmp_path, segment_reference):
+    """A header in another order, with units (converted) and columns not read: the same
+    segments to rounding, and notes naming what was done."""
+    header = ["index", "dtheta_gt [deg]", "dx_gt (mm)", "dy_gt [m]", "dphi_L [rad]",
+              "dphi_R (deg)", "note"]
+    rows = [[str(i), repr(math.degrees(float(r[4]))), repr(float(r[2]) * 1e3), r[3], r[0],
+             repr(math.degrees(float(r[1]))), '"a; b"'] for i, r in enumerate(SEGMENT_ROWS)]
+    path = export(tmp_path / "s.csv", header, rows, ";")
+    segments, notes = load(path)
+    np.testing.assert_allclose(segments.as_array(), segment_reference, rtol=1e-14, atol=1e-17)
+    assert notes == [f"{path}: columns not read: index, note",
+                     f"{path}: units converted: dtheta_gt from deg to rad, dx_gt from mm to "
+                     "m, dphi_R from deg to rad"]
+    many = []
+    load_segment_files([path, path], on_note=many.append)
+    assert many == notes + notes
+
+
+def test_segment_csv_time_columns_with_units(tmp_path):
+    rows = [r + [repr(i * 1000.0), repr((i + 1) * 1000.0)] for i, r in enumerate(SEGMENT_ROWS)]
+    path = export(tmp_path / "s.csv", SEGMENT_HEADER + ["t_end [ms]", "t_start_ms"],
+                  [r[:5] + [r[6], r[5]] for r in rows], "\t")
+    segments, notes = load(path)
+    np.testing.assert_array_equal(segments.t_start, np.arange(4.0))
+    np.testing.assert_array_equal(segments.t_end, np.arange(1.0, 5.0))
+    assert segments.chained[1:].all()
+    assert notes == [f"{path}: units converted: t_end from ms to s, t_start from ms to s"]
+
+
+@pytest.mark.parametrize("header, message", [
+    ("foo;bar", ":1: the header names 'foo', 'bar': neither a segment CSV "
+     "(dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt) nor a time-series CSV (t with phi_L,phi_R or "
+     "ticks_L,ticks_R, and x,y,theta; names and units: docs/formats.md)"),
+    ("dphi_L;dphi_R;dx_gt;dtheta_gt;z", ":1: missing column dy_gt (a segment CSV's columns: "
+     "dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt); the header names 'dphi_L', 'dphi_R', 'dx_gt', "
+     "'dtheta_gt', 'z'"),
+    ("dphi_L;dphi_R;dx_gt;dy_gt;dtheta_gt;t_start", ":1: the time columns t_start and t_end "
+     "go together"),
+    ("dphi_L;dphi_R;dx_gt [deg];dy_gt;dtheta_gt", ":1: column 'dx_gt [deg]': unit 'deg' is "
+     "not a unit of length (m, cm, mm)"),
+])
+def test_segment_csv_headers_that_cannot_be_read(tmp_path, header, message):
+    path = tmp_path / "s.csv"
+    path.write_text(header + "\n1;1;0;0;0;0\n")
+    with pytest.raises(DataError) as info:
+        load_segments(path)
+    assert str(info.value) == f"{path}{message}"
+
+
+def test_notes_of_segment_files_and_logs_reach_on_note(tmp_path, plain):
+    """Through the inputs of excite calibrate: a segment CSV's and a log's notes, in order."""
+    _, header, rows = plain
+    segments = export(tmp_path / "s.csv", SEGMENT_HEADER + ["quality"],
+                      [r + ["1"] for r in SEGMENT_ROWS], ";")
+    log = export(tmp_path / "log.csv", header + ["battery"], [r + ["12"] for r in rows], "\t")
+    notes = []
+    parts = segment_inputs(group_inputs([str(segments), str(log)]), LogOptions(),
+                           on_note=notes.append)
+    assert len(parts) == 2
+    assert notes[:2] == [f"{segments}: columns not read: quality",
+                         f"{log}: columns not read: battery"]
+    assert parts[1].log is not None and parts[1].log.notes[0] == notes[1]
