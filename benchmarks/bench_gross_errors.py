@@ -112,7 +112,7 @@ def _one(args) -> np.ndarray:
     segments flagged, gross count, any flagged; with loss linear: relative errors (6); the
     clean CRLB (6); seconds of the default calibration; the default's relative errors on the
     same data set without the gross errors (6)."""
-    kind, sigma, fraction, seed = args
+    kind, sigma, fraction, seed, options = args
     rng = np.random.default_rng(seed)
     truth = _truth_theta(kind)
     seg = (lesson_dataset(rng, N_SEGMENTS, LESSON_TRUTH, sigma=sigma) if kind == "lesson"
@@ -122,24 +122,24 @@ def _one(args) -> np.ndarray:
         seg.dphi_L, seg.dphi_R, truth, sigma, model=model)))
     dirty, bad = contaminate(rng, seg, fraction)
     t0 = time.perf_counter()
-    result = calibrate(dirty)
+    result = calibrate(dirty, **options)
     seconds = time.perf_counter() - t0
     rel, nees = _errors(result, truth)
     flagged = (np.zeros(0, dtype=int) if result.gross_errors is None
                else result.gross_errors.segments)
     hit = np.isin(bad, flagged).sum()
     false = np.setdiff1d(flagged, bad).size
-    linear, _ = _errors(calibrate(dirty, loss="linear"), truth)
-    twin = rel if fraction == 0.0 else _errors(calibrate(seg), truth)[0]
+    linear, _ = _errors(calibrate(dirty, loss="linear", **options), truth)
+    twin = rel if fraction == 0.0 else _errors(calibrate(seg, **options), truth)[0]
     pad = np.zeros(6 - truth.size)
     return np.concatenate([rel, pad, [nees, hit, false, bad.size, float(flagged.size > 0)],
                            linear, pad, crlb, pad, [seconds], twin, pad])
 
 
-def segments_cells(datasets: int, workers: int) -> dict:
+def segments_cells(datasets: int, workers: int, options: dict) -> dict:
     cells = [(kind, name, fraction) for kind in KINDS for name in REGIMES
              for fraction in FRACTIONS]
-    jobs = [(kind, REGIMES[name], fraction, 7_000_000 + 10_000 * c + i)
+    jobs = [(kind, REGIMES[name], fraction, 7_000_000 + 10_000 * c + i, options)
             for c, (kind, name, fraction) in enumerate(cells) for i in range(datasets)]
     with ProcessPoolExecutor(workers) as pool:
         rows = np.array(list(pool.map(_one, jobs, chunksize=10)))
@@ -218,7 +218,7 @@ def _one_log(args) -> np.ndarray:
     seconds; the default's relative errors on the same log without the gross errors (6)."""
     from bench_logs import pose_noise_fit
 
-    regime, fraction, seed = args
+    regime, fraction, seed, options = args
     noise = TS_REGIMES[regime]
     rng = np.random.default_rng(seed)
     log = synthetic_log(rng, 120.0, sensor_pose=TS_SENSOR, pose_noise=noise)
@@ -229,7 +229,7 @@ def _one_log(args) -> np.ndarray:
     series, bad = contaminate_log(rng, log.series, boundaries, fraction)
     seg = segment_timeseries(series).segments
     t0 = time.perf_counter()
-    result = calibrate(seg)
+    result = calibrate(seg, **options)
     seconds = time.perf_counter() - t0
     rel, nees = _errors(result, truth)
     gross = result.gross_errors
@@ -244,15 +244,15 @@ def _one_log(args) -> np.ndarray:
     false = int(np.sum(~near_bad[flagged_segments]))
     scale = SENSOR_POSE.column_scale(truth)
     crlb = np.sqrt(np.diag(bound)) / scale
-    twin = rel if fraction == 0.0 else _errors(calibrate(clean), truth)[0]
+    twin = rel if fraction == 0.0 else _errors(calibrate(clean, **options), truth)[0]
     return np.concatenate([rel, [nees, bad.size, hit, int(np.sum(~on_boundary)), false,
                                  int(np.sum(~near_bad)), float(flagged_segments.size > 0)],
                            crlb, [seconds], twin])
 
 
-def logs_cells(datasets: int, workers: int, regimes: tuple[str, ...]) -> dict:
+def logs_cells(datasets: int, workers: int, regimes: tuple[str, ...], options: dict) -> dict:
     cells = [(regime, fraction) for regime in regimes for fraction in FRACTIONS]
-    jobs = [(regime, fraction, 8_000_000 + 10_000 * c + i)
+    jobs = [(regime, fraction, 8_000_000 + 10_000 * c + i, options)
             for c, (regime, fraction) in enumerate(cells) for i in range(datasets)]
     with ProcessPoolExecutor(workers) as pool:
         rows = np.array(list(pool.map(_one_log, jobs, chunksize=2)))
@@ -307,14 +307,19 @@ def main(argv=None) -> dict:
                         help="the time-series regimes, comma-separated (of: "
                         f"{', '.join(TS_REGIMES)})")
     parser.add_argument("--only", choices=("segments", "logs"), default=None)
+    parser.add_argument("--heterogeneity", default=None,
+                        help="passed to every calibrate() (e.g. off: the motion-heterogeneity "
+                        "stage left out, to isolate the gross errors' effect); default: the "
+                        "default flags")
     args = parser.parse_args(argv)
+    options = {} if args.heterogeneity is None else {"heterogeneity": args.heterogeneity}
     results = {}
     if args.only != "logs":
-        results["segments"] = segments_cells(args.datasets, args.workers)
+        results["segments"] = segments_cells(args.datasets, args.workers, options)
         _print_segments(results["segments"])
     if args.only != "segments" and args.logs:
         regimes = tuple(r.strip() for r in args.log_regimes.split(","))
-        results["logs"] = logs_cells(args.logs, args.workers, regimes)
+        results["logs"] = logs_cells(args.logs, args.workers, regimes, options)
         _print_logs(results["logs"])
     return results
 

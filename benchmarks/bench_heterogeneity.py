@@ -7,9 +7,9 @@ effective track grows with the turn (``scrub``: b (1 + scrub min(kappa b / 2, 1)
 Cells (``--cases`` data sets each, seeds 0..cases-1 of each cell's own stream):
 
 * ``ts-*``: time-series logs (:func:`excite.logs.synthetic.synthetic_log`, 100 Hz encoders,
-  50 Hz poses with 1 mm / 2 mrad noise, 1 s windows; no wheel slip: with a slip of 0.001 to
-  0.003 rad/sqrt(s) the calibration's own std of such a log are too narrow, a third of the
-  logs outside their 95% ellipse, and a test of agreement beyond them would measure that), of two
+  50 Hz poses with 1 mm / 2 mrad noise, 1 s windows; no wheel slip: with slip the
+  calibration's own std of such logs are too narrow (BENCHMARKS.md), and a test of agreement
+  beyond them would measure that), of two
   maneuvers: ``tight`` (0.08 m/s, turn rate up to 1.5 rad/s) and ``wide`` (0.3 m/s, up to
   0.4 rad/s), or a maneuver drawn per log (speed and turn rate log-uniform between those).
 * ``seg-*``: segment CSVs (independent segments, noise 2 mm, 2 mm, 1 mrad): ``tight``

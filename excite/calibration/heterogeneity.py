@@ -4,20 +4,16 @@
 A robot's effective wheel parameters depend on how it is driven (the wheels scrub in tight
 turns), and files given together may come from different robots. The groups: several
 inputs, each calibrated alone with its own noise levels (:func:`across_logs`); or one
-input's segments by the kind of motion (:func:`motion_kinds`, from the wheels only: spins,
-tight turns, wide arcs, straight runs by kappa b = 2 |s_R - s_L| / |s_R + s_L|, s = r dphi),
-kinds merged in that order until each has MIN_KIND_SEGMENTS segments and determines r_L,
-r_R, b alone (:func:`motion_heterogeneity`: one Gauss-Newton step from the common fit of the
-model with r_L, r_R, b per group, under the fit's own noise model). Only r_L, r_R, b are
-compared: the sensor mounting is shared by every group (between inputs, each input's
-estimate is combined under one mounting by generalised least squares, so its uncertainty is
-carried into the wheels'). The test: Cochran's Q of the groups' estimates, chi-square with
-3 (G - 1) degrees of freedom under agreement (F with estimated noise levels), at LEVEL
-(:mod:`excite.stats.meta_analysis`). When they disagree (:func:`applied`): r_L, r_R, b and
-their covariance from the random-effects pool (Knapp-Hartung's covariance for few groups),
-its std covering the spread (``heterogeneity="random"``), or the common
-fit failing its fit test (``"common"``); the words say which parameters differ and how, and
-name the groups that disagree most.
+input's segments by the kind of motion (:mod:`excite.calibration.motion_kinds`). Only r_L,
+r_R, b are compared: the sensor mounting is shared by every group (between inputs, each
+input's estimate is combined under one mounting by generalised least squares, so its
+uncertainty is carried into the wheels'). The test: Cochran's Q of the groups' estimates,
+chi-square with 3 (G - 1) degrees of freedom under agreement (F with estimated noise
+levels), at LEVEL (:mod:`excite.stats.meta_analysis`). When they disagree (:func:`applied`):
+r_L, r_R, b and their covariance from the random-effects pool (Knapp-Hartung's covariance
+for few groups), its std covering the spread (``heterogeneity="random"``), or the common fit
+failing its fit test (``"common"``); the words say which parameters differ and how, and name
+the groups that disagree most.
 """
 
 from __future__ import annotations
@@ -30,10 +26,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from excite.calibration.model_fit import Fitter, ModelFit
 from excite.calibration.options import SensorPoseOption
-from excite.calibration.solver import Evaluation, normal_system
-from excite.core.information import inverse_information
 from excite.core.kinematics import Params
 from excite.core.models import AXLE, SENSOR_POSE
 from excite.errors import DataError
@@ -43,9 +36,8 @@ from excite.stats.meta_analysis import leave_one_out, pairwise_z, pool
 if TYPE_CHECKING:
     from excite.calibration.result import CalibrationResult, FitTest
 
-__all__ = ["LEVEL", "MIN_KIND_SEGMENTS", "KINDS", "HeterogeneityOption", "Group",
-           "Heterogeneity", "check_option", "motion_kinds", "motion_heterogeneity",
-           "across_logs", "applied"]
+__all__ = ["LEVEL", "HeterogeneityOption", "Group", "Heterogeneity", "Comparison",
+           "check_option", "assessed", "across_logs", "applied"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -54,12 +46,6 @@ IntArray = NDArray[np.int64]
 HeterogeneityOption = Literal["random", "common", "off"]
 #: The level of the heterogeneity test.
 LEVEL = 0.05
-#: A kind of motion is a group of its own with at least this many segments.
-MIN_KIND_SEGMENTS = 20
-#: The kinds of motion, from the tightest turns to the straightest runs.
-KINDS = ("spins", "tight turns", "wide arcs", "straight runs")
-#: kappa b above which a moving segment is a spin, a tight turn, a wide arc (else straight).
-KIND_BOUNDS = (2.0, 0.5, 0.05)
 _NAMES = AXLE.names
 #: Two groups' estimates of a parameter this many combined std apart are named as differing.
 _NAMED_Z = 2.0
@@ -88,7 +74,8 @@ class Heterogeneity:
 
     by: "logs" or "motion" (kinds of motion within one log). detected: whether the groups
     disagree beyond their std (p_value < LEVEL). statistic: Cochran's Q (dimensionless),
-    chi-square with ``dof`` degrees of freedom under agreement; p_value. groups: each group's
+    chi-square with ``dof`` degrees of freedom under agreement; p_value: its tail probability
+    (of Q / dof under F with estimated noise levels). groups: each group's
     estimate. between_std (3,): the std of r_L, r_R, b between groups (m, the square root of
     the diagonal of the method-of-moments between-group covariance). pooling: what the
     result's r_L, r_R, b are: "common" (the common fit: the groups agree, or common
@@ -96,9 +83,10 @@ class Heterogeneity:
     most (the largest distance from the others' common estimate; both with two groups);
     empty when they agree. differences: which parameters differ and how, in words; empty when
     they agree. random_params (3,), random_covariance (3, 3): the random-effects estimate
-    (m, m^2). group_covariance (3G, 3G): the joint covariance of the groups' estimates (m^2,
-    group-major; the groups of one log are correlated). group_fits: between logs, each log's
-    own fit test (ok, message), in the order of ``groups``; empty for kinds of motion.
+    (m, m^2; Knapp-Hartung's covariance for few groups). group_covariance (3G, 3G): the
+    joint covariance of the groups' estimates (m^2, group-major; the groups of one log are
+    correlated). group_fits: between logs, each log's own fit test (ok, message), in the
+    order of ``groups``; empty for kinds of motion.
     """
 
     by: str
@@ -178,22 +166,8 @@ def check_option(option: str) -> None:
         raise ValueError(f"heterogeneity must be 'random', 'common' or 'off', got {option!r}")
 
 
-def motion_kinds(seg: Segments, params: Params) -> IntArray:
-    """Each segment's kind of motion, an index into KINDS from kappa b (module docstring),
-    or -1 for a segment whose wheels do not move."""
-    left, right = params.r_L * seg.dphi_L, params.r_R * seg.dphi_R
-    turn, travel = 2.0 * np.abs(right - left), np.abs(right + left)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(travel > 0, turn / np.where(travel > 0, travel, 1.0), np.inf)
-    kinds = np.full(len(seg), len(KINDS) - 1, dtype=np.int64)
-    for kind, bound in reversed(list(enumerate(KIND_BOUNDS))):
-        kinds[ratio > bound] = kind
-    kinds[(left == 0) & (right == 0)] = -1
-    return kinds
-
-
 @dataclass(frozen=True)
-class _Comparison:
+class Comparison:
     """Groups' estimates of r_L, r_R, b in relative units about ``center`` (3,) (m), with
     ``scale`` (3,) (m per relative unit): ``estimates`` (G, 3), ``covariance`` (3G, 3G);
     ``residual_dof``: the degrees of freedom of the noise levels behind it (inf: given)."""
@@ -206,113 +180,6 @@ class _Comparison:
     estimates: FloatArray
     covariance: FloatArray
     residual_dof: float
-
-
-def _merged_kinds(counts: IntArray, block: Callable[[list[int]], FloatArray],
-                  max_relative_std: float) -> list[list[int]]:
-    """The kinds (indices) merged into groups (module docstring): a group closes once it has
-    MIN_KIND_SEGMENTS segments and its information ``block(kinds)`` (3 x 3, relative)
-    determines r_L, r_R, b; what is left at the end joins the last group."""
-    groups: list[list[int]] = []
-    current: list[int] = []
-    for kind in range(len(KINDS)):
-        if counts[kind] == 0:
-            continue
-        current.append(kind)
-        enough = sum(int(counts[k]) for k in current) >= MIN_KIND_SEGMENTS
-        if enough and np.linalg.eigvalsh(block(current))[0] * max_relative_std**2 >= 1.0:
-            groups.append(current)
-            current = []
-    if current and groups:
-        groups[-1] = groups[-1] + current
-    return groups
-
-
-def _widening(relative: FloatArray, information: FloatArray) -> float:
-    """The largest ratio (>= 1) of the reported covariance of r_L, r_R, b to the
-    information's inverse, over directions."""
-    plain = inverse_information(information)[:3, :3]
-    root = np.linalg.cholesky(plain)
-    ratio = np.linalg.solve(root, np.linalg.solve(root, relative[:3, :3]).T)
-    return max(1.0, float(np.linalg.eigvalsh(0.5 * (ratio + ratio.T))[-1]))
-
-
-def _kind_system(chosen: ModelFit, fitter: Fitter, kinds: IntArray
-                 ) -> tuple[FloatArray, FloatArray]:
-    """The information and gradient (relative units) of the model with r_L, r_R, b per kind
-    of motion (3 columns per kind of KINDS, then the sensor pose's), at the common fit, with
-    its noise model and loss. Independent segments: assembled from each kind's own normal
-    system (kinds share no noise); segments that share pose samples: the augmented Jacobian
-    whitened as the fit's."""
-    sigma, loss = chosen.fit.sigma, fitter.options.loss
-    if fitter.whitener is None:
-        ev = chosen.fit.ev  # not whitened: raw residuals and relative Jacobian rows
-        p = ev.jac.shape[1]
-        size = 3 * len(KINDS) + p - 3
-        information, gradient = np.zeros((size, size)), np.zeros(size)
-        for k in range(len(KINDS)):
-            mask = kinds == k
-            if not mask.any():
-                continue
-            system = normal_system(Evaluation(ev.theta, ev.scale, ev.raw[:, mask],
-                                              ev.jac[:, :, mask]), sigma, loss)
-            rows = np.r_[3 * k:3 * k + 3, 3 * len(KINDS):size]
-            information[np.ix_(rows, rows)] += system.information
-            gradient[rows] += system.gradient
-        return information, gradient
-    ev = chosen.unwhitened
-    columns = [ev.jac[:, :3, :] * (kinds == k)[None, None, :] for k in range(len(KINDS))]
-    raw, jac = fitter.whitener.whiten(ev.raw, np.concatenate(columns + [ev.jac[:, 3:, :]],
-                                                              axis=1))
-    assert jac is not None
-    system = normal_system(Evaluation(ev.theta, ev.scale, raw, jac), sigma, loss)
-    return system.information, system.gradient
-
-
-def motion_heterogeneity(chosen: ModelFit, fitter: Fitter, relative: FloatArray
-                         ) -> Heterogeneity | None:
-    """The test between kinds of motion of the chosen fit's segments, with the fit's noise
-    model and loss (module docstring); ``relative`` is the reported relative covariance.
-    None when not tested (a direction undetermined, fewer than two groups)."""
-    data = fitter.data
-    if (not chosen.identifiable or not np.all(np.isfinite(relative))
-            or len(data) < 2 * MIN_KIND_SEGMENTS):
-        return None
-    theta = chosen.theta
-    kinds = motion_kinds(data, Params(*theta[:3]))
-    counts = np.bincount(kinds[kinds >= 0], minlength=len(KINDS))
-    if np.count_nonzero(counts >= MIN_KIND_SEGMENTS) < 1:
-        return None
-    information, gradient = _kind_system(chosen, fitter, kinds)
-    k3 = 3 * len(KINDS)
-
-    def block(group: list[int]) -> FloatArray:
-        rows = np.concatenate([np.arange(3 * k, 3 * k + 3) for k in group])
-        sub = information[np.ix_(rows, rows)]
-        return sub.reshape(len(group), 3, len(group), 3).sum(axis=(0, 2))
-
-    merged = _merged_kinds(counts, block, fitter.options.max_relative_std)
-    if len(merged) < 2:
-        return None
-    extra = information.shape[0] - k3  # the sensor pose, shared
-    mapping = np.zeros((information.shape[0], 3 * len(merged) + extra))
-    for g, group in enumerate(merged):
-        for k in group:
-            mapping[3 * k:3 * k + 3, 3 * g:3 * g + 3] = np.eye(3)
-    mapping[k3:, 3 * len(merged):] = np.eye(extra)
-    grouped = mapping.T @ information @ mapping
-    inverse = np.linalg.pinv(grouped, hermitian=True)
-    step = -(inverse @ (mapping.T @ gradient))  # one Gauss-Newton step, relative units
-    g3 = 3 * len(merged)
-    covariance = inverse[:g3, :g3] * _widening(relative, chosen.fit.system.information)
-    names = tuple(" and ".join(KINDS[k] for k in group) for group in merged)
-    given = fitter.whitener is None and fitter.sigma is not None
-    comparison = _Comparison("motion", names,
-                             tuple(int(sum(counts[k] for k in group)) for group in merged),
-                             theta[:3].copy(), chosen.fit.ev.scale[:3].copy(),
-                             step[:g3].reshape(-1, 3), covariance,
-                             math.inf if given else 3 * len(data) - grouped.shape[0])
-    return _assessed(comparison)
 
 
 def _relative(result: CalibrationResult, center: CalibrationResult
@@ -407,9 +274,9 @@ def across_logs(parts: Sequence[tuple[str, Segments]], pooled: CalibrationResult
         for i, c in enumerate(covariances):
             covariance[3 * i:3 * i + 3, 3 * i:3 * i + 3] = c
     center = pooled.params.as_array()
-    comparison = _Comparison("logs", tuple(names), tuple(counts), center,
+    comparison = Comparison("logs", tuple(names), tuple(counts), center,
                              AXLE.column_scale(center), wheels, covariance, min(dofs))
-    return replace(_assessed(comparison), group_fits=tuple(fits))
+    return replace(assessed(comparison), group_fits=tuple(fits))
 
 
 def _millimetres(value: float, std: float) -> str:
@@ -418,7 +285,7 @@ def _millimetres(value: float, std: float) -> str:
     return f"{1e3 * value:.{digits}f} ± {1e3 * std:.{digits}f} mm"
 
 
-def _differences(c: _Comparison, params: FloatArray, std: FloatArray) -> str:
+def _differences(c: Comparison, params: FloatArray, std: FloatArray) -> str:
     """Which parameters differ and how, in words: for each parameter whose most distant two
     groups are at least _NAMED_Z combined std apart (at least the most distant one), the two
     estimates; then the likely cause."""
@@ -445,7 +312,7 @@ def _differences(c: _Comparison, params: FloatArray, std: FloatArray) -> str:
             "driving")
 
 
-def _assessed(c: _Comparison) -> Heterogeneity:
+def assessed(c: Comparison) -> Heterogeneity:
     """The test and the pools of a comparison (module docstring)."""
     pooled = pool(c.estimates, c.covariance, c.residual_dof)
     detected = pooled.p_value < LEVEL

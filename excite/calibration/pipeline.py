@@ -21,7 +21,7 @@ No initial guess and no noise levels are needed. The stages, in order, each in i
 7. :func:`~excite.calibration.fit_tests.fit_verdict`: whether the chosen model fits the data.
 8. :func:`~excite.calibration.covariance.reported_covariance`: the covariance under a
    wandering heading error and widened for serially correlated residuals.
-   8a. :func:`~excite.calibration.heterogeneity.motion_heterogeneity`: whether r_L, r_R, b
+   8a. :func:`~excite.calibration.motion_kinds.motion_heterogeneity`: whether r_L, r_R, b
    differ between kinds of motion.
 9. :func:`~excite.calibration.result.build_result`: the
    :class:`~excite.calibration.result.CalibrationResult`.
@@ -38,14 +38,10 @@ from numpy.typing import ArrayLike
 from excite.calibration.covariance import reported_covariance
 from excite.calibration.fit_tests import fit_verdict, pooled_over_kinds
 from excite.calibration.gross_errors import Fits, GrossErrors, without_gross_errors
-from excite.calibration.heterogeneity import (
-    HeterogeneityOption,
-    applied,
-    check_option,
-    motion_heterogeneity,
-)
+from excite.calibration.heterogeneity import HeterogeneityOption, applied, check_option
 from excite.calibration.model_choice import choose_model, fit_candidates
 from excite.calibration.model_fit import UNIT_SIGMA, Fitter
+from excite.calibration.motion_kinds import motion_heterogeneity
 from excite.calibration.noise_rounds import estimated_noise
 from excite.calibration.options import (
     DEFAULT_MAX_RELATIVE_STD,

@@ -10,8 +10,9 @@ from scipy import stats
 from scipy.linalg import block_diag
 
 from excite import Params, Segments, calibrate, save_segments
-from excite.calibration.heterogeneity import LEVEL, motion_kinds
+from excite.calibration.heterogeneity import LEVEL
 from excite.calibration.logs import calibrate_logs
+from excite.calibration.motion_kinds import motion_kinds
 from excite.logs.synthetic import lesson_dataset, scrubbed_increment
 from excite.stats.chi2 import chi2_quantile
 from excite.stats.meta_analysis import leave_one_out, pool
