@@ -30,7 +30,8 @@ test-core:
 	$(PYTHON) -m venv $(CORE_VENV)
 	$(CORE_VENV)/bin/python -m pip install -q --upgrade pip
 	$(CORE_VENV)/bin/python -m pip install -q -c constraints.txt .
-	$(CORE_VENV)/bin/python tests/core_only.py
+	# -P: not tests/ on sys.path (its tests/agents/ would shadow the installed agents package)
+	$(CORE_VENV)/bin/python -P tests/core_only.py
 
 # The documentation site (mkdocs.yml, docs/): warnings are errors; written to build/site.
 docs: $(STAMP)
