@@ -4,7 +4,7 @@ PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
-.PHONY: install demo test test-fast test-core bench lint clean docs
+.PHONY: install demo test test-fast test-core test-live bench lint clean docs
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -22,7 +22,23 @@ test: $(STAMP) test-core docs
 	$(VENV)/bin/ruff check excite envs agents tests benchmarks examples docs/hooks
 	# one BLAS thread per test worker: two workers with two threads each on two cores made the
 	# many small dense factorisations (excite/calibration/wander.py) 2-3x slower
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 --dist loadgroup tests
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 --dist loadgroup --ignore=tests/live tests
+	$(MAKE) test-live
+
+# excite live over real DDS, in a venv of its own with the ROS 2 wheels (the ros2 extra): their
+# start-up hook re-runs every Python process of the venv with the ROS libraries on
+# LD_LIBRARY_PATH, which the main suite's workers, Ray and torch need not live with. One test
+# at a time: each runs a simulated robot and a live node faster than real time.
+ROS_VENV  := .venv-ros
+ROS_STAMP := $(ROS_VENV)/.installed
+$(ROS_STAMP): pyproject.toml constraints.txt
+	$(PYTHON) -m venv $(ROS_VENV)
+	$(ROS_VENV)/bin/python -m pip install -q --upgrade pip
+	$(ROS_VENV)/bin/python -m pip install -q -c constraints.txt -e '.[sim,ros2,dev]'
+	touch $(ROS_STAMP)
+
+test-live: $(ROS_STAMP)
+	EXCITE_LIVE_TESTS=1 OPENBLAS_NUM_THREADS=1 $(ROS_VENV)/bin/python -m pytest tests/live
 
 # A core-only install (numpy, scipy; no extras) in its own venv runs calibrate/segment/validate.
 CORE_VENV := .venv-core
@@ -41,7 +57,7 @@ docs: $(STAMP)
 # training); under a minute on 2 cores.
 test-fast: $(STAMP)
 	$(VENV)/bin/ruff check excite envs agents tests benchmarks examples docs/hooks
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -m "not slow" tests
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 -m "not slow" --ignore=tests/live tests
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
@@ -50,4 +66,4 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check excite envs agents tests benchmarks examples docs/hooks
 
 clean:
-	rm -rf $(VENV) $(CORE_VENV) demo_out .pytest_cache .hypothesis
+	rm -rf $(VENV) $(CORE_VENV) $(ROS_VENV) demo_out .pytest_cache .hypothesis

@@ -111,7 +111,7 @@ class GreedyPlanner(Protocol):
         two_step = np.full(score.shape, -np.inf)
         for index, end in zip(best, ends, strict=True):
             safe = is_safe(predicted_poses(end, second_dphi, knowledge.estimate),
-                           knowledge.arena_size,
+                           knowledge.arena,
                            action_margin(self.candidates, self.speed_margin),
                            knowledge.chassis)
             if not safe.any():

@@ -42,12 +42,15 @@ def predicted_poses(pose: np.ndarray, dphi: np.ndarray, params: Params,
     return np.stack([x + c * dx - s * dy, y + s * dx + c * dy, th + dth], axis=-1)
 
 
-def is_safe(poses: np.ndarray, arena_size: float, margin: float | np.ndarray = MARGIN,
+def is_safe(poses: np.ndarray, arena: float | tuple[float, float],
+            margin: float | np.ndarray = MARGIN,
             chassis: tuple[float, float] = DEFAULT_CHASSIS) -> np.ndarray:
-    """Whether the footprint at every pose (n, m, 3) stays inside the square arena, ``margin``
-    (m, a scalar or one per candidate) from the walls."""
+    """Whether the footprint at every pose (n, m, 3) stays inside the arena centred at the
+    origin, ``margin`` (m, a scalar or one per candidate) from the walls. arena: the side of a
+    square (m), or (width along x, height along y) (``RobotKnowledge.arena``)."""
     margin = np.reshape(margin, (-1,) + (1,) * (poses.ndim - 2))
-    inside = Arena(arena_size, arena_size).contains_footprint(
+    width, height = (arena, arena) if np.isscalar(arena) else arena
+    inside = Arena(width, height).contains_footprint(
         poses[..., 0], poses[..., 1], poses[..., 2], margin, chassis)
     return inside.all(axis=-1)
 
@@ -65,7 +68,7 @@ def safe_actions(actions: np.ndarray, knowledge: RobotKnowledge,
     dphi = wheel_increments(actions, knowledge)
     margin = action_margin(actions, speed_margin)
     return np.logical_and.reduce([
-        is_safe(predicted_poses(knowledge.pose, dphi, params), knowledge.arena_size, margin,
+        is_safe(predicted_poses(knowledge.pose, dphi, params), knowledge.arena, margin,
                 knowledge.chassis)
         for params in (knowledge.estimate, knowledge.nominal)])
 

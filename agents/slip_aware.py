@@ -246,7 +246,7 @@ class SlipAwarePlanner(Protocol):
                 break
             commands = commands + np.clip(targets - commands, -self.max_step, self.max_step)
             path = predicted_poses(poses, wheel_increments(commands, knowledge), params)
-            clear &= is_safe(path, knowledge.arena_size,
+            clear &= is_safe(path, knowledge.arena,
                              action_margin(commands, self.speed_margin), knowledge.chassis)
             poses = path[:, -1]
         return clear

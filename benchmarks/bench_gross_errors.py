@@ -37,7 +37,6 @@ Usage: python benchmarks/bench_gross_errors.py [--datasets 500] [--logs 100] [--
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -49,6 +48,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 from bench_calibration import REGIMES  # noqa: E402
 from bench_sensor_pose import TRUTH as SENSOR_TRUTH  # noqa: E402
 from bench_sensor_pose import sensor_dataset  # noqa: E402
+from common import monte_carlo_parser  # noqa: E402
 
 from excite import Segments, calibrate  # noqa: E402
 from excite.core.information import crlb_relative_std, fisher_information, scaled_jacobian  # noqa: E402
@@ -168,7 +168,7 @@ def segments_cells(datasets: int, workers: int, options: dict) -> dict:
 
 
 def _print_segments(results: dict) -> None:
-    print(f"\nSegment CSVs ({N_SEGMENTS} segments), default flags: RMSE/CRLB (clean bound) "
+    print(f"\nSegment CSVs ({N_SEGMENTS} segments): RMSE/CRLB (clean bound) "
           "r_L r_R b [l_x l_y l_theta] | inside 95% | gross flagged | clean flagged | "
           "data sets with a flag | median time | RMSE over the default's on the same data "
           "sets without the gross errors | RMSE/CRLB of --loss linear")
@@ -280,7 +280,7 @@ def logs_cells(datasets: int, workers: int, regimes: tuple[str, ...], options: d
 
 
 def _print_logs(results: dict) -> None:
-    print("\nTime-series logs (120 s, 1 s windows, sensor (0.1, -0.03, 0.4)), default flags: "
+    print("\nTime-series logs (120 s, 1 s windows, sensor (0.1, -0.03, 0.4)): "
           "RMSE/CRLB (the clean pose-noise bound) r_L r_R b l_x l_y l_theta | inside 95% | "
           "bad samples flagged (of those reaching the calibration; dropped by the "
           "segmentation) | clean segments flagged | data sets with a flag | median time | "
@@ -298,9 +298,7 @@ def _print_logs(results: dict) -> None:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--datasets", type=int, default=500)
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser = monte_carlo_parser(__doc__, datasets=500)
     parser.add_argument("--logs", type=int, default=100,
                         help="time-series logs per cell (0: none)")
     parser.add_argument("--log-regimes", default=",".join(TS_REGIMES),
@@ -314,6 +312,7 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     options = {} if args.heterogeneity is None else {"heterogeneity": args.heterogeneity}
     results = {}
+    print(f"calibrate() options: {options or 'the defaults'}")
     if args.only != "logs":
         results["segments"] = segments_cells(args.datasets, args.workers, options)
         _print_segments(results["segments"])

@@ -22,7 +22,6 @@ Usage: python benchmarks/bench_sensor_pose.py [--datasets 1000] [--workers 2]
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
@@ -32,6 +31,7 @@ from tqdm import tqdm
 
 sys.path.insert(0, os.path.dirname(__file__))
 from bench_calibration import REGIMES, _median_time, update_latency  # noqa: E402
+from common import monte_carlo_parser  # noqa: E402
 from lesson_baseline import lesson_calibrate  # noqa: E402
 
 from excite import OnlineEstimator, Segments, calibrate  # noqa: E402
@@ -184,9 +184,7 @@ def online_latency() -> dict:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--datasets", type=int, default=1000)
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser = monte_carlo_parser(__doc__, datasets=1000)
     parser.add_argument("--seed-offset", type=int, default=0,
                         help="shift the off-axle data sets' seeds (an independent re-run)")
     parser.add_argument("--off-axle-only", metavar="REGIME", default=None,

@@ -27,10 +27,9 @@ from envs.observation import (
     read_estimate,
     sense_increments,
 )
-from envs.physics import traction_of
 from envs.recording import Recorder, Recording, RecordingConfig
 from envs.reward import reward_terms, uses_error
-from envs.robot import RobotSpec, robot_distribution
+from envs.robot import RobotSpec, robot_distribution, traction_of
 from envs.simulation import Simulation, SimulationConfig
 from envs.target import decide, stopping_rule
 from excite.contracts import Estimator, EstimatorFactory, RobotKnowledge

@@ -26,24 +26,14 @@ import numpy as np
 import pymunk
 import pymunk.batch
 
-from envs.robot import RobotSpec
+from envs.robot import GRAVITY, RobotSpec
 from envs.traction_kernel import PATH_FIELDS, STATE_FIELDS, TRACTION_FIELDS, traction_tick
-from excite.contracts import Traction
 from excite.core.arena import Arena
 
-GRAVITY = 9.81  # m/s^2
 WALL_RADIUS = 0.05  # m, half-thickness of the arena's wall segments
 _CHASSIS_TYPE, _WALL_TYPE = 1, 2  # pymunk collision types
 _PHI = slice(STATE_FIELDS.index("phi_L"), STATE_FIELDS.index("phi_R") + 1)  # state columns
 _POSE = slice(STATE_FIELDS.index("x"), STATE_FIELDS.index("theta") + 1)
-
-
-def traction_of(robot: RobotSpec) -> Traction:
-    """What a planner may know of ``robot``'s traction (:class:`excite.contracts.Traction`):
-    its motor lag, its grip mu g (load fraction on the wheels) and its spin inertia
-    I / (m (b/2)^2), the quantities the physics' slip model uses."""
-    return Traction(robot.motor_tau, robot.mu * GRAVITY * robot.wheel_load_fraction,
-                    robot.inertia / (robot.mass * (0.5 * robot.b) ** 2))
 
 
 def traction_constants(robot: RobotSpec, dt: float) -> tuple[float, ...]:

@@ -14,6 +14,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from excite.contracts import Traction
 from excite.core.arena import DEFAULT_CHASSIS_SIZE
 
 
@@ -375,3 +376,15 @@ def _pair(name: str, value: object) -> tuple[float, float]:
         return (float(low), float(high))
     except (TypeError, ValueError):
         raise ValueError(f"robot {name} must be a (low, high) pair, got {value!r}") from None
+
+
+#: m/s^2, the acceleration of gravity (the wheels' grip is mu g per unit load).
+GRAVITY = 9.81
+
+
+def traction_of(robot: RobotSpec) -> Traction:
+    """What a planner may know of ``robot``'s traction (:class:`excite.contracts.Traction`):
+    its motor lag, its grip mu g (load fraction on the wheels) and its spin inertia
+    I / (m (b/2)^2), the quantities the physics' slip model uses."""
+    return Traction(robot.motor_tau, robot.mu * GRAVITY * robot.wheel_load_fraction,
+                    robot.inertia / (robot.mass * (0.5 * robot.b) ** 2))

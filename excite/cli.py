@@ -25,8 +25,10 @@ from excite import __version__
 from excite.commands import (
     calibrate,
     compare,
+    live,
     protocols,
     segment,
+    sim_robot,
     simulate,
     sweep,
     train,
@@ -46,12 +48,14 @@ from excite.errors import ExciteError
 
 __all__ = ["main", "build_parser"]
 
-COMMANDS = (calibrate, segment, validate, simulate, protocols, compare, tune, train, sweep)
+COMMANDS = (calibrate, segment, validate, simulate, protocols, compare, tune, train, sweep, live,
+            sim_robot)
 
 #: The optional extra that provides each third-party module a subcommand may import.
 EXTRA_OF_MODULE = {"rosbags": "ros", "gymnasium": "sim", "pymunk": "sim", "matplotlib": "sim",
                    "tqdm": "sim", "yaml": "sim", "stable_baselines3": "rl", "torch": "rl",
-                   "ray": "ray"}
+                   "ray": "ray", "rclpy": "ros2", "geometry_msgs": "ros2",
+                   "sensor_msgs": "ros2", "nav_msgs": "ros2", "rosgraph_msgs": "ros2"}
 
 #: What ``excite --help`` says excite is.
 DESCRIPTION = textwrap.fill(
@@ -67,7 +71,8 @@ EPILOG = "\n".join([
       for status, meaning in MEANINGS.items()),
     "",
     textwrap.fill("simulate, compare, tune, train and sweep need the sim extra (pip install "
-                  "'excite[sim]'), train and sweep also rl, sweep also ray; ROS bags need ros. "
+                  "'excite[sim]'), train and sweep also rl, sweep also ray; ROS bags need ros; "
+                  "live needs ros2, sim-robot sim and ros2. "
                   "excite COMMAND --help describes a command and its options.", 79),
 ])
 
@@ -118,7 +123,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
         handler: Callable[[argparse.Namespace], int] | None = getattr(args, "handler", None)
         if handler is None:
-            names = ", ".join(c.__name__.rsplit(".", 1)[1] for c in COMMANDS)
+            names = ", ".join(c.__name__.rsplit(".", 1)[1].replace("_", "-") for c in COMMANDS)
             raise UsageError(f"a command is required ({names}); see excite --help")
         with warnings.catch_warnings(), _terminate_as_interrupt():
             if not os.environ.get("EXCITE_DEBUG"):

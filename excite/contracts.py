@@ -111,7 +111,11 @@ class RobotKnowledge:
     relative Fisher information of the log at the estimate (P x P). log: (n, 5) calibration
     rows. pose: the body's measured world pose (x, y, theta). nominal: the nominal robot.
     sigma: sensor noise (m, m, rad). max_wheel_speed: motor limit (rad/s); segment_duration
-    (s); arena_size (m); budget (segments); chassis: the nominal footprint (length, width, m).
+    (s); arena_size (m): the side of the square arena centred at the world origin (the
+    observation's unit of position); budget (segments); chassis: the nominal footprint
+    (length, width, m). arena_extent: the arena's (width along x, height along y) in m when it
+    is a rectangle other than the square of arena_size (a live session's area); None: that
+    square.
     model: the segment model; theta / nominal_theta:
     the current estimate and the nominal values of all its P parameters. traction: the
     nominal robot's motor lag and grip (None when unknown; the simulator always gives it).
@@ -133,12 +137,20 @@ class RobotKnowledge:
     theta: np.ndarray | None = None
     nominal_theta: np.ndarray | None = None
     traction: Traction | None = None
+    arena_extent: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.theta is None:
             object.__setattr__(self, "theta", self.estimate.as_array())
         if self.nominal_theta is None:
             object.__setattr__(self, "nominal_theta", self.nominal.as_array())
+
+    @property
+    def arena(self) -> tuple[float, float]:
+        """The arena's (width along x, height along y) in m, centred at the world origin."""
+        if self.arena_extent is not None:
+            return self.arena_extent
+        return (self.arena_size, self.arena_size)
 
     @property
     def n_segments(self) -> int:

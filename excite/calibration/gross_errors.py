@@ -46,7 +46,6 @@ from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
 
 from excite.calibration.model_choice import Candidates
 from excite.calibration.model_fit import Fitter, ModelFit
@@ -54,6 +53,7 @@ from excite.calibration.noise_rounds import EstimatedNoise
 from excite.calibration.options import FitOptions
 from excite.calibration.solver import Problem, levenberg_marquardt
 from excite.calibration.starts import Starts
+from excite.core.arrays import BoolArray, FloatArray, IntArray
 from excite.logs.segments import Segments
 from excite.stats.chi2 import chi2_quantile
 from excite.stats.robust import MEDIAN_ABS_NORMAL
@@ -62,8 +62,6 @@ __all__ = ["DRIVING_TEST_LEVEL", "EM_ROUNDS", "EM_TOL", "GROSS_TEST_LEVEL", "MAX
            "MIN_SPREAD", "Fits", "GrossErrors", "declined_reason", "mixture", "screen",
            "size_range", "test_threshold", "without_gross_errors"]
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 #: Level of the test of "no gross error" (eps = 0): the largest whitened squared residual
 #: against the chi-square(3) quantile at 1 - GROSS_TEST_LEVEL / N.
 GROSS_TEST_LEVEL = 0.01
@@ -191,7 +189,7 @@ class GrossErrors:
                 "samples": None if self.samples is None else [float(t) for t in self.samples],
                 "dropped": self.dropped}
 
-    def kept(self) -> NDArray[np.bool_]:
+    def kept(self) -> BoolArray:
         """Which of the screened segments are kept (n_segments,)."""
         keep = np.ones(self.n_segments, dtype=bool)
         keep[self.segments] = False
@@ -326,7 +324,7 @@ def without_gross_errors(fits: Fits, refit: Callable[[Segments], Fits],
     return kept, refit(kept), found
 
 
-def _rank_sum_z(values: FloatArray, chosen: NDArray[np.bool_]) -> float:
+def _rank_sum_z(values: FloatArray, chosen: BoolArray) -> float:
     """The z value of Wilcoxon's rank-sum statistic of ``values[chosen]`` against the rest
     (midranks for ties, the variance corrected for them); 0 when every value ties."""
     n, m = values.size, int(chosen.sum())

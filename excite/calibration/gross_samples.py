@@ -16,15 +16,18 @@ and z_k^2 = |u_k|^2 chi-square with 3 degrees of freedom.
   hide each other, so each channel of u is first scaled by its robust std (the median absolute
   value); the contaminated normal's EM on these sizes (the fit held) gives each segment's
   posterior probability of being gross; above 1/2 it is a candidate, unless the candidates are
-  too many or follow the driving (:mod:`excite.calibration.gross_errors`).
+  too many or follow the driving (:mod:`excite.calibration.gross_errors`). A bad sample makes
+  a pair: a candidate alone counts only when its own z^2 exceeds the test's quantile, and is
+  then paired with its chained neighbour of the larger z^2 (the sample they share is the
+  likely bad one), or left alone at the end of a chain.
 * **The repair.** A run of consecutive chained candidates shares its inner pose samples: they
   are the gross errors, and the run becomes one segment from the run's first sample to its last
   (its measured increment the composition of theirs, in which the inner samples cancel
-  exactly; its wheel increments and sub-steps theirs, one after the other). A candidate whose
-  neighbours are not candidates (an error of the segment itself, or of a sample at the end of
-  a chain) is left out. The noise levels and the fits are then estimated again on the repaired
-  segments, and the test repeats on them (at most :data:`PASSES` times) until it no longer
-  rejects.
+  exactly; its wheel increments and sub-steps theirs, one after the other). A candidate left
+  alone at the end of a chain (its end sample bad) is left out. The noise levels and the fits
+  are then estimated again on the repaired segments, and the test repeats on them (at most
+  :data:`PASSES` times) until it no longer rejects; a repaired segment that is a candidate
+  again (its run's first or last sample was bad too) is then left out whole.
 """
 
 from __future__ import annotations
@@ -75,13 +78,39 @@ def marginal_sizes(fits: Fits) -> FloatArray:
 
 def _candidates(u: FloatArray) -> tuple[IntArray, float, float, FloatArray]:
     """The candidates from marginal sizes u (3, N): each channel scaled by its median absolute
-    value's std, then the contaminated normal's EM (the fit held); with eps, k and the sizes
-    sqrt(z^2 / 3) of the candidates."""
+    value's std, then the contaminated normal's EM (the fit held); with eps, k and every
+    segment's size sqrt(z^2 / 3) on that scale."""
     scale = np.maximum(np.median(np.abs(u), axis=1) / MEDIAN_ABS_NORMAL, 1e-300)
     z2 = np.sum((u / scale[:, None]) ** 2, axis=0)
     posterior, fraction, spread = mixture(z2)
     chosen = np.flatnonzero(posterior > 0.5).astype(np.int64)
-    return chosen, fraction, spread, np.sqrt(z2[chosen] / 3.0)
+    return chosen, fraction, spread, np.sqrt(z2 / 3.0)
+
+
+def _attributed(data: Segments, chosen: IntArray, z2: FloatArray, threshold: float
+                ) -> IntArray:
+    """The segments to repair for the candidates ``chosen``: every run of two or more
+    consecutive chained candidates (their inner samples are bad); a single candidate only
+    when its own z^2 exceeds ``threshold`` (the test's quantile: a false alarm otherwise),
+    then with its chained neighbour of the larger z^2 (the sample they share is the likely bad
+    one), or alone at the end of a chain (its end sample is)."""
+    mask = np.zeros(len(data), dtype=bool)
+    mask[chosen] = True
+    chained = np.zeros(len(data), dtype=bool) if data.chained is None else data.chained
+    out = np.zeros(len(data), dtype=bool)
+    for run in _runs(data, mask):
+        if run.size > 1:
+            out[run] = True
+            continue
+        k = int(run[0])
+        if z2[k] <= threshold:
+            continue
+        neighbours = [j for j, ok in ((k - 1, chained[k]),
+                                      (k + 1, k + 1 < len(data) and chained[k + 1])) if ok]
+        out[k] = True
+        if len(neighbours) == 2:
+            out[max(neighbours, key=lambda j: z2[j])] = True
+    return np.flatnonzero(out).astype(np.int64)
 
 
 def _runs(data: Segments, flagged: NDArray[np.bool_]) -> list[IntArray]:
@@ -171,8 +200,10 @@ def screen_chain(fits: Fits, refit: Callable[[Segments], Fits]
         if statistic <= threshold:
             break
         chosen, fraction, spread, size = _candidates(u)
+        chosen = _attributed(data, chosen, z2, threshold)
         if chosen.size == 0:
             break
+        size = size[chosen]
         more, out = flagged.copy(), left_out.copy()
         for c in chosen:
             (out if more[parts[c]].all() else more)[parts[c]] = True

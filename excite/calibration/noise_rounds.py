@@ -12,7 +12,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from excite.calibration.model_fit import UNIT_SIGMA, fit_model
 from excite.calibration.noise import ChainWhitener, NoiseLevels, WheelNoise, cut_from_log
@@ -20,6 +19,7 @@ from excite.calibration.options import FitOptions
 from excite.calibration.reml import moment_noise, reml_noise
 from excite.calibration.solver import Problem, complement
 from excite.calibration.starts import Starts
+from excite.core.arrays import FloatArray
 from excite.core.models import SegmentModel
 from excite.errors import DataError
 from excite.logs.segments import Segments
@@ -28,7 +28,6 @@ from excite.logs.timeseries import tick_angle
 __all__ = ["MIN_NOISE_DOF_PER_LEVEL", "NOISE_ROUNDS", "NOISE_RTOL", "EstimatedNoise",
            "estimated_noise"]
 
-FloatArray = NDArray[np.float64]
 #: Most rounds of (estimate the noise levels, refit) for segments that share pose samples.
 NOISE_ROUNDS = 8
 #: The noise levels have settled when no level moves by more than this fraction.
@@ -43,6 +42,9 @@ MIN_NOISE_DOF_PER_LEVEL = 5
 @dataclass(frozen=True)
 class EstimatedNoise:
     """The noise model of segments that share pose samples, estimated with the parameters.
+
+    The calibration's fits then run at unit sigma, whitened by ``whitener``
+    (:class:`excite.calibration.model_fit.Fitter`), the primary model started at ``theta``.
 
     Attributes
     ----------

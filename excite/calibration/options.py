@@ -8,10 +8,11 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from excite.calibration.solver import Loss
 from excite.calibration.wiring import check_wiring
+from excite.core.arrays import FloatArray
 from excite.core.information import as_sigma
 from excite.core.models import SensorPose
 from excite.errors import DataError
@@ -20,7 +21,6 @@ from excite.logs.segments import Segments
 __all__ = ["DEFAULT_MAX_RELATIVE_STD", "TEST_LEVEL", "CalibrationLoss", "FitOptions",
            "SensorPoseOption", "checked_inputs", "solver_loss"]
 
-FloatArray = NDArray[np.float64]
 #: How the sensor pose is treated: "auto" (estimated when the data determine it and it fits
 #: significantly better than the axle model), "axle", "estimate", or a known SensorPose.
 SensorPoseOption = Literal["auto", "axle", "estimate"] | SensorPose
@@ -41,6 +41,9 @@ TEST_LEVEL = 0.999
 @dataclass(frozen=True)
 class FitOptions:
     """The settings every Levenberg-Marquardt fit of one calibration shares.
+
+    :func:`excite.calibration.pipeline.calibrate` makes them once from its arguments (its
+    ``loss`` through :func:`solver_loss`) and hands them to every stage that fits.
 
     Attributes
     ----------

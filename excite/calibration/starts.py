@@ -17,10 +17,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from excite.calibration.options import SensorPoseOption
 from excite.calibration.solver import solve_psd
+from excite.core.arrays import FloatArray
 from excite.core.kinematics import Params, sinc_family
 from excite.core.models import (
     AXLE,
@@ -35,7 +36,6 @@ from excite.logs.segments import Segments
 __all__ = ["DEFAULT_NOMINAL", "Starts", "body_frame_estimate", "first_estimates",
            "initial_estimate", "sensor_pose_estimate"]
 
-FloatArray = NDArray[np.float64]
 
 #: Used only for directions the data cannot determine when no initial guess is given.
 DEFAULT_NOMINAL = Params(0.05, 0.05, 0.30)

@@ -43,10 +43,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from excite.calibration.noise import ChainWhitener, NoiseLevels, WheelNoise, chain_band
 from excite.calibration.reml import level_bounds
+from excite.core.arrays import FloatArray, IntArray
 from excite.logs.segments import Segments
 from excite.stats.autocorrelation import runs_of
 from excite.stats.chi2 import chi_bar_square_quantile
@@ -54,8 +54,6 @@ from excite.stats.chi2 import chi_bar_square_quantile
 __all__ = ["HeadingWander", "estimate_wander", "wander_covariance", "CHUNK_SEGMENTS",
            "MAX_CHUNKS", "MIN_WANDER_SEGMENTS", "WANDER_TEST_LEVEL"]
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 #: Segments per chunk of the dense restricted likelihood (a 3n x 3n covariance per chunk).
 CHUNK_SEGMENTS = 150

@@ -32,9 +32,9 @@ class UsageError(ExciteError):
     """Bad input or usage: reported as one line, exit status EXIT_USAGE (2)."""
 
 
-def floats(text: str, names: str, what: str) -> tuple[float, ...]:
-    """Comma-separated positive finite numbers, one per name of ``names`` (comma-separated,
-    such as PARAMS_VALUES; ``what`` is the option)."""
+def floats(text: str, names: str, what: str, positive: bool = True) -> tuple[float, ...]:
+    """Comma-separated finite numbers, one per name of ``names`` (comma-separated, such as
+    PARAMS_VALUES; ``what`` is the option), each > 0 unless ``positive`` is False."""
     expected = names.split(",")
     parts = text.split(",")
     if len(parts) != len(expected):
@@ -46,10 +46,22 @@ def floats(text: str, names: str, what: str) -> tuple[float, ...]:
             value = float(part)
         except ValueError:
             raise UsageError(f"{what}: {name} is not a number: {part!r}") from None
-        if not (value > 0 and value < float("inf")):
-            raise UsageError(f"{what}: {name} must be positive and finite, got {part!r}")
+        if not math.isfinite(value) or (positive and value <= 0):
+            raise UsageError(f"{what}: {name} must be {'positive and ' if positive else ''}"
+                             f"finite, got {part!r}")
         values.append(value)
     return tuple(values)
+
+
+def positive_number(text: str) -> float:
+    """A finite number > 0 (an argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0 < value < math.inf:
+        raise argparse.ArgumentTypeError(f"must be positive and finite, got {text!r}")
+    return value
 
 
 def sigma_arg(text: str) -> tuple[float, ...]:

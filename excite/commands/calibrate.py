@@ -19,11 +19,11 @@ from excite.commands.args import (
 )
 from excite.commands.exit_status import EXIT_MISFIT, EXIT_OK, EXIT_UNIDENTIFIABLE
 from excite.commands.logs import LOG_FILES, add_log_options
+from excite.commands.options import add_result_options
 
 if TYPE_CHECKING:
     from excite.calibration.result import CalibrationResult
     from excite.core.kinematics import Params
-    from excite.core.models import SensorPose
 
 #: What ``excite calibrate --help`` says the command does.
 DESCRIPTION = """Estimate the wheel radii r_L, r_R and the wheel separation b (m), and the external
@@ -38,8 +38,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     cal.add_argument("files", nargs="+", metavar="FILE",
                      help=f"segment CSV, Censi tuple file (*.tuple), {LOG_FILES}; all of them "
                      "are one data set")
-    cal.add_argument("--json", action="store_true",
-                     help="print one JSON object instead of the report")
     cal.add_argument("--sigma", metavar=SIGMA_VALUES,
                      help="noise std of dx, dy (m) and dtheta (rad); default: estimated")
     cal.add_argument("--loss", choices=get_args(CalibrationLoss), default="auto",
@@ -57,14 +55,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     cal.add_argument("--trim", type=fraction_arg, default=0.0, metavar="FRACTION",
                      help="drop this fraction (0 to 0.5) of segments with the largest "
                      "residuals, 1%% per pass with a refit after each (default %(default)g)")
-    cal.add_argument("--ros2-yaml", metavar="OUT.yaml",
-                     help="write diff_drive_controller parameters (nominal from --init) and "
-                     "the sensor's static transform when estimated; not written when the "
-                     "model does not fit (exit status 4) or the data do not determine every "
-                     "parameter (exit status 3), a note says so; default: none written")
-    cal.add_argument("--force-yaml", action="store_true",
-                     help="write --ros2-yaml even when the calibration failed (exit status 3 "
-                     "or 4); the file then starts with a comment saying it is unsafe and why")
+    add_result_options(cal, "--init")
     cal.add_argument("--holdout", type=fraction_arg, default=0.0, metavar="FRACTION",
                      help="keep back this fraction (0 to 0.5) of the logs (whole logs, the "
                      "last ones; at least one) and validate the calibration on them against "
@@ -117,17 +108,20 @@ def run(args: argparse.Namespace) -> int:
     status = (EXIT_MISFIT if not result.fit.ok
               else EXIT_OK if result.identifiable else EXIT_UNIDENTIFIABLE)
     if args.ros2_yaml:
-        _export(args, result, initial, estimated_pose, status)
+        export_yaml(args, result, initial, status)
     return status
 
 
-def _export(args: argparse.Namespace, result: CalibrationResult, initial: Params | None,
-            estimated_pose: SensorPose | None, status: int) -> None:
+def export_yaml(args: argparse.Namespace, result: CalibrationResult, initial: Params | None,
+                status: int) -> None:
     """--ros2-yaml: written when the calibration succeeded (exit status 0); otherwise only
-    with --force-yaml, marked unsafe with the reason, else a note says it was not written."""
+    with --force-yaml, marked unsafe with the reason, else a note says it was not written
+    (``args``: ros2_yaml, force_yaml, json)."""
     from excite.calibration.export import write_ros2_yaml
     from excite.calibration.report import unsafe_reason
     from excite.commands.logs import print_note
+
+    estimated_pose = result.sensor_pose if result.sensor_pose_std is not None else None
 
     reason = unsafe_reason(result)
     if reason is not None and not args.force_yaml:

@@ -10,14 +10,16 @@ line, naming the option (``argument --seed: ...``).
 from __future__ import annotations
 
 __all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_UNIDENTIFIABLE", "EXIT_MISFIT",
-           "EXIT_WORSE", "EXIT_INTERRUPTED", "MEANINGS"]
+           "EXIT_OUT_OF_TIME", "EXIT_ABORTED", "EXIT_WORSE", "EXIT_INTERRUPTED", "MEANINGS"]
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_USAGE = 2
 EXIT_UNIDENTIFIABLE = 3
 EXIT_MISFIT = 4
-EXIT_WORSE = 7  # 5 and 6 are the live session's (out of time, aborted)
+EXIT_OUT_OF_TIME = 5
+EXIT_ABORTED = 6
+EXIT_WORSE = 7
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
 
 #: Each exit status and what it means, in words (the epilog of ``excite --help``).
@@ -28,6 +30,11 @@ MEANINGS = {
     EXIT_UNIDENTIFIABLE: "calibrate: the data cannot determine every parameter (the report "
                          "names the direction)",
     EXIT_MISFIT: "calibrate: the model does not fit the data (the report gives the reason)",
+    EXIT_OUT_OF_TIME: "live: the time ran out before the target was reached (the report is "
+                      "still printed and written)",
+    EXIT_ABORTED: "live: the session was aborted, the robot stopped (a stream silent too "
+                  "long, wheels that do not follow the command; one line says why); what "
+                  "was recorded is kept",
     EXIT_WORSE: "validate: the calibrated robot dead-reckons worse than the nominal one on "
                 "the logs (the verdict line)",
     EXIT_INTERRUPTED: "interrupted (Ctrl-C or SIGTERM); compare, tune and sweep keep "

@@ -12,6 +12,7 @@ import sys
 from dataclasses import fields
 from typing import Any
 
+from excite.commands.args import positive_number
 from excite.logs.inputs import DEFAULT_LOG_OPTIONS, LogOptions
 
 __all__ = ["LOG_FILES", "add_log_options", "log_options", "print_note"]
@@ -20,13 +21,13 @@ __all__ = ["LOG_FILES", "add_log_options", "log_options", "print_note"]
 LOG_FILES = "time-series CSV (or a pair of stream CSVs) or ROS bag"
 
 
-def _positive(text: str) -> float:
+def _finite(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not 0 < value < math.inf:
-        raise argparse.ArgumentTypeError(f"must be positive and finite, got {text!r}")
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
     return value
 
 
@@ -59,13 +60,13 @@ def _wheel_joint(side: str) -> dict[str, Any]:
 #: The options that cut logs into segments: a field of LogOptions and add_argument's keywords
 #: but the flag (--FIELD-NAME) and the default (the field's).
 _SEGMENTATION: dict[str, dict[str, Any]] = {
-    "window": {"type": _positive, "metavar": "S",
+    "window": {"type": positive_number, "metavar": "S",
                "help": "segment duration in s (default %(default)g)"},
-    "min_distance": {"type": _positive, "metavar": "M",
+    "min_distance": {"type": positive_number, "metavar": "M",
                      "help": "keyframes instead of fixed windows: a new segment once the sensor "
                      "has moved M meters from the last keyframe (or turned --min-angle; "
                      "default: fixed windows)"},
-    "min_angle": {"type": _positive, "metavar": "RAD",
+    "min_angle": {"type": positive_number, "metavar": "RAD",
                   "help": "keyframes instead of fixed windows: a new segment once the sensor has "
                   "turned RAD radians from the last keyframe (or moved --min-distance; default: "
                   "fixed windows)"},
@@ -76,7 +77,7 @@ _SEGMENTATION: dict[str, dict[str, Any]] = {
 }
 #: The options that read logs and bags, written as those that cut them.
 _READING: dict[str, dict[str, Any]] = {
-    "ticks_per_rev": {"type": _positive, "metavar": "N",
+    "ticks_per_rev": {"type": positive_number, "metavar": "N",
                       "help": "encoder resolution in ticks per wheel revolution: converts "
                       "ticks_L,ticks_R columns to rad, and calibrate models the encoders' "
                       "rounding (one tick) in the noise of the segments cut from logs (default: "
@@ -84,7 +85,7 @@ _READING: dict[str, dict[str, Any]] = {
     "time_offset": {"type": _offset, "metavar": "S|estimate",
                     "help": "pose time + S = encoder time (s, default 0; a note tells when the "
                     "data suggest otherwise), or 'estimate' it from the data"},
-    "max_time_offset": {"type": _positive, "metavar": "S",
+    "max_time_offset": {"type": positive_number, "metavar": "S",
                         "help": "estimated time offsets are searched within +-S s (default "
                         "%(default)g)"},
     "joint_states": {"metavar": "TOPIC",
@@ -96,6 +97,11 @@ _READING: dict[str, dict[str, Any]] = {
                    "help": "bag topic of the sensor's pose in the world frame, x, y in m "
                    "(PoseStamped, PoseWithCovarianceStamped or Odometry); a bag needs this or "
                    "--tf (no default)"},
+    "start": {"type": _finite, "metavar": "S",
+              "help": "read only the samples stamped from S on (s, the log's own stamps; "
+              "default: from the first)"},
+    "end": {"type": _finite, "metavar": "S",
+            "help": "read only the samples stamped up to S (s; default: to the last)"},
     "tf": {"type": _frame_pair, "metavar": "PARENT:CHILD",
            "help": "the sensor's pose from /tf instead: CHILD's pose in PARENT (m, rad), direct "
            "transforms only (bags; no default)"},

@@ -56,6 +56,24 @@ ENV_HELP = ("gymnasium id of the simulated environment: "
             + f", or an id a user registered with excite's environment class ({ENTRY_POINT})")
 
 
+def add_result_options(parser, nominal: str) -> None:
+    """--json, --ros2-yaml OUT.yaml and --force-yaml: how calibrate and live give their
+    result. ``nominal``: the option giving the nominal robot the multipliers are relative to
+    (``--init``, ``--nominal``)."""
+    parser.add_argument("--json", action="store_true",
+                        help="print one JSON object instead of the report")
+    parser.add_argument("--ros2-yaml", metavar="OUT.yaml",
+                        help=f"write diff_drive_controller parameters (nominal from {nominal}) "
+                        "and the sensor's static transform when estimated; not written when "
+                        "the model does not fit (exit status 4) or the data do not determine "
+                        "every parameter (exit status 3), a note says so; default: none "
+                        "written")
+    parser.add_argument("--force-yaml", action="store_true",
+                        help="write --ros2-yaml even when the calibration failed (exit status "
+                        "3 or 4); the file then starts with a comment saying it is unsafe and "
+                        "why")
+
+
 def add_seed_option(parser: argparse.ArgumentParser, text: str) -> None:
     """--seed S, a whole number >= 0 (default DEFAULT_SEED); ``text`` is its help: what it
     seeds."""

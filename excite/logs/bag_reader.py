@@ -186,7 +186,7 @@ class _Joints(_Stream):
         return list(self.table(3).T)
 
 
-def _headings(where: str, t: np.ndarray, q: np.ndarray) -> np.ndarray:
+def headings(where: str, t: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Headings (rad, in (-pi, pi]) of orientation quaternions ``q`` (n, 4: x, y, z, w) stamped
     ``t`` (s): the rotation about z of their ZYX Euler angles, i.e. the direction of the body
     x axis projected on the world xy plane. The quaternions need not have unit length (the
@@ -227,7 +227,7 @@ class _PoseStream(_Stream):
     def columns(self) -> list[np.ndarray]:
         """[t (s), x, y (m), theta (rad, wrapped)]."""
         t, x, y, *q = self.table(7).T
-        return [t, x, y, _headings(self.where, t, np.column_stack(q))]
+        return [t, x, y, headings(self.where, t, np.column_stack(q))]
 
 
 class _Poses(_PoseStream):

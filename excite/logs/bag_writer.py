@@ -122,6 +122,15 @@ class BagWriter:
             orientation=types["geometry_msgs/msg/Quaternion"](
                 x=0.0, y=0.0, z=math.sin(0.5 * theta), w=math.cos(0.5 * theta)))
 
+    def twist_stamped(self, t: float, v: float, omega: float, frame_id: str = "") -> Any:
+        """A geometry_msgs TwistStamped stamped ``t`` s: forward speed ``v`` (m/s) and turn
+        rate ``omega`` (rad/s)."""
+        vector = self.types["geometry_msgs/msg/Vector3"]
+        twist = self.types["geometry_msgs/msg/Twist"](linear=vector(x=v, y=0.0, z=0.0),
+                                                      angular=vector(x=0.0, y=0.0, z=omega))
+        return self.types["geometry_msgs/msg/TwistStamped"](header=self.header(t, frame_id),
+                                                            twist=twist)
+
     def pose_stamped(self, t: float, x: float, y: float, theta: float,
                      frame_id: str = WORLD_FRAME) -> Any:
         """A PoseStamped stamped ``t`` s: `pose` (x, y, theta) in ``frame_id``."""

@@ -32,7 +32,7 @@ from excite.logs.time_offset import (
     estimate_time_offset,
     noticeable_time_offset,
 )
-from excite.logs.timeseries import TimeSeries, unwrapped_words
+from excite.logs.timeseries import TimeSeries, during, unwrapped_words
 from excite.logs.timeseries_csv import header_hint, read_timeseries, timeseries_streams
 
 __all__ = ["LogOptions", "DEFAULT_LOG_OPTIONS", "Input", "Log", "Part", "OnNote",
@@ -59,7 +59,8 @@ class LogOptions:
     joint_states, the topic of the JointState messages; left_wheel, right_wheel, the wheel
     joint names in them (required); the sensor's poses from exactly one of pose_topic (a
     PoseStamped, PoseWithCovarianceStamped or Odometry topic) and tf, (parent, child): the
-    child frame's pose in the parent frame from /tf.
+    child frame's pose in the parent frame from /tf. start, end (s): read only the samples
+    stamped within [start, end] (each stream's own stamps; None: from the first, to the last).
     """
 
     window: float = 1.0
@@ -74,6 +75,8 @@ class LogOptions:
     right_wheel: str | None = None
     pose_topic: str | None = None
     tf: tuple[str, str] | None = None
+    start: float | None = None
+    end: float | None = None
 
 
 #: The options the command line starts from (its defaults are read from here).
@@ -250,6 +253,7 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
     notes: list[str] = []
     note = note_taker(notes, on_note)
     series, skipped = _read_series(source, options, note)
+    series = during(series, options.start, options.end)
     if whole:
         check_continuity(series)
         unwrapped = unwrapped_words(series.unwrapped_wheels, series.unwrapped_counters)

@@ -189,6 +189,27 @@ class TimeSeries:
         return _where(self.source[k], self.lines[k], (self.t_enc, self.t_pose)[k], index)
 
 
+def during(series: TimeSeries, start: float | None = None, end: float | None = None
+           ) -> TimeSeries:
+    """The samples of both streams stamped within [start, end] (s, each stream's own stamps;
+    None: unbounded). Raises DataError naming the source when a stream keeps fewer than 2."""
+    if start is None and end is None:
+        return series
+    lo = -math.inf if start is None else start
+    hi = math.inf if end is None else end
+    keep = [(t >= lo) & (t <= hi) for t in (series.t_enc, series.t_pose)]
+    for k, (name, mask) in enumerate(zip(("encoder", "pose"), keep, strict=True)):
+        if mask.sum() < 2:
+            raise DataError(f"{series.source[k]}: fewer than 2 {name} samples between "
+                            f"{lo:g} and {hi:g} s")
+    lines = tuple(None if a is None else a[m] for a, m in zip(series.lines, keep, strict=True))
+    (enc, pose) = keep
+    return TimeSeries(series.t_enc[enc], series.phi_L[enc], series.phi_R[enc],
+                      series.t_pose[pose], series.x[pose], series.y[pose],
+                      series.theta[pose], source=series.source, lines=lines,
+                      unwrapped_counters=series.unwrapped_counters)
+
+
 def tick_angle(ticks_per_rev: float) -> float:
     """The angle of one encoder tick, 2 pi / ticks_per_rev (rad); DataError unless
     ticks_per_rev is positive and finite."""

@@ -19,8 +19,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from excite.core.arrays import BoolArray, FloatArray, IntArray
 from excite.errors import DataError
 from excite.logs.csv_table import (
     Header,
@@ -45,9 +45,6 @@ from excite.logs.timeseries import (
 __all__ = ["ALIASES", "read_timeseries", "write_timeseries", "timeseries_streams",
            "is_timeseries_csv", "header_hint"]
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
-BoolArray = NDArray[np.bool_]
 PathArg = str | os.PathLike[str]
 OnNote = Callable[[str], None]
 

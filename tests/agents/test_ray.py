@@ -58,6 +58,7 @@ def _fail(message: str) -> None:
     raise BackendError(message)
 
 
+@pytest.mark.slow
 def test_an_excite_error_in_a_ray_task_is_raised_as_itself(ray_cluster):
     """Not Ray's wrapper, whose text carries the remote traceback: the CLI prints excite's
     errors on one line."""
@@ -162,6 +163,7 @@ def test_unreachable_ray_address_is_a_one_line_error_at_once(tmp_path):
         assert ("127.0.0.1:1" in lines[0]) or ("'nonsense' is not HOST:PORT" in lines[0])
 
 
+@pytest.mark.slow
 def test_connect_ray_uses_the_ray_already_initialised(ray_cluster):
     assert connect_ray("127.0.0.1:1") is False  # already connected: no new connection
 

@@ -13,8 +13,8 @@ from agents.compare import make_env
 from agents.motion import safe_actions
 from agents.slip_aware import SlipAwarePlanner, nominal_segment, predicted_bias
 from agents.tuning import candidates
-from envs.physics import PymunkDrive, traction_of
-from envs.robot import robot_distribution
+from envs.physics import PymunkDrive
+from envs.robot import robot_distribution, traction_of
 from excite.contracts import RobotKnowledge
 from excite.core.arena import Arena
 from excite.core.kinematics import Params

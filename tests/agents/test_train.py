@@ -227,6 +227,7 @@ def test_a_used_out_folder_needs_resume_and_resume_takes_no_new_settings(
                    "--n-envs", 2, "--out", tmp_path / "empty")[0] == 0
 
 
+@pytest.mark.slow
 def test_the_config_names_the_algorithm_unless_the_command_line_does(tmp_path, small_config):
     """A config's algo: is used without --algo (the shipped sac.yaml says sac); --algo against
     it is an error; a config without algo: but with SAC's hyperparameters is a PPO config with

@@ -42,6 +42,7 @@ def test_json_object(capsys, good_csv):
                                TRUTH.as_array(), rtol=0.03)
 
 
+@pytest.mark.slow
 def test_ros2_yaml(capsys, good_csv, tmp_path):
     out_yaml = tmp_path / "ddc.yaml"
     code, out, _ = run_cli(capsys, "calibrate", good_csv, "--init", "0.05,0.05,0.3",
@@ -127,6 +128,7 @@ def test_usage_errors(capsys, tmp_path):
     assert_one_line_error(*run_cli(capsys, "calibrate", tmp_path)[::2], "is a directory")
 
 
+@pytest.mark.slow
 def test_console_script_has_no_traceback_and_version(tmp_path):
     exe = [sys.executable, "-m", "excite.cli"]
     bad = tmp_path / "bad.csv"
@@ -224,6 +226,7 @@ def test_all_zero_log_is_a_one_line_error(capsys, tmp_path):
     assert_one_line_error(*run_cli(capsys, "calibrate", path)[::2], "no segment moves")
 
 
+@pytest.mark.slow
 def test_noise_free_log_gives_the_exact_parameters_without_warnings(tmp_path, rng):
     from tests.conftest import exact_segments
 

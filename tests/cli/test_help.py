@@ -30,7 +30,7 @@ def flat(text: str) -> str:
 
 def test_every_command_is_listed_and_every_option_has_a_help_text():
     parsers = subcommands()
-    assert list(parsers) == [c.__name__.rsplit(".", 1)[1] for c in COMMANDS]
+    assert list(parsers) == [c.__name__.rsplit(".", 1)[1].replace("_", "-") for c in COMMANDS]
     for name, parser in parsers.items():
         assert parser.description, name
         for action in parser._actions:
@@ -89,6 +89,7 @@ def loaded_after(argvs: list[list[str]], modules: tuple[str, ...]) -> list[str]:
     return ast.literal_eval(done.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_help_imports_no_heavy_layer_and_version_not_even_the_registries():
     argvs = [["--help"], *([name, "--help"] for name in subcommands())]
     assert loaded_after(argvs, HEAVY) == []

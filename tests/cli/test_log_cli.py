@@ -55,6 +55,7 @@ def test_segment_writes_times_and_calibrate_reads_them_back(capsys, logs, tmp_pa
     assert json.loads(out)["pose_sigma"] is not None
 
 
+@pytest.mark.slow
 def test_holdout_validates_on_the_logs_kept_back(capsys, logs):
     code, out, _ = run_cli(capsys, "calibrate", *logs, "--holdout", "0.3", "--init",
                        "0.0525,0.0485,0.31", "--json")
@@ -203,7 +204,7 @@ def test_too_few_segments_to_estimate_the_noise_levels(capsys, tmp_path):
     assert code == 0 and "identifiable    = yes" in out
 
 
-@pytest.mark.parametrize("slip", [0.0, 0.05])
+@pytest.mark.parametrize("slip", [pytest.param(0.0, marks=pytest.mark.slow), 0.05])
 def test_the_slip_share_is_reported(capsys, tmp_path, slip):
     """slip_share: the slip's std over a segment against the wheel turn (0.05 rad/sqrt(s) on
     ~6 rad per 1 s segment: ~0.8%), in --json and on the noise line; 0 without slip."""
@@ -286,14 +287,21 @@ def bag_log():
     return dataclasses.replace(series, t_enc=series.t_enc + 1.0, t_pose=series.t_pose + 1.0)
 
 
-@pytest.mark.parametrize("storage", ["sqlite3", "mcap", "ros1"])
-@pytest.mark.parametrize("extra, fragment", [
+BAD_BAG_OPTIONS = [
     (["--left-wheel", "front_left"], "/joint_states: no joint 'front_left'; joints present: "
                                      "left_wheel_joint, right_wheel_joint"),
     (["--pose-topic", "/joint_states"], "topic /joint_states has type "
                                         "sensor_msgs/msg/JointState, not supported for poses"),
     (["--pose-topic", "/odom"], "no topic /odom (poses); the bag has: /joint_states"),
-])
+]
+
+
+@pytest.mark.parametrize("extra, fragment, storage", [
+    # every option with every storage; the fast subset takes each of both once
+    pytest.param(extra, fragment, storage, id=f"extra{i}-{fragment}-{storage}",
+                 marks=() if i == j else pytest.mark.slow)
+    for j, storage in enumerate(["sqlite3", "mcap", "ros1"])
+    for i, (extra, fragment) in enumerate(BAD_BAG_OPTIONS)])
 def test_bad_bag_options_through_the_cli(capsys, tmp_path, bag_log, storage, extra, fragment):
     from excite.logs.bag_writer import write_bag
 

@@ -230,6 +230,7 @@ def test_a_misbehaving_user_estimator_is_a_one_line_error_naming_it(plugins, tmp
     assert f"estimator plugin_estimators:{factory}: {fragment}" in message
 
 
+@pytest.mark.slow
 def test_a_learned_policy_with_discrete_actions_is_refused(tmp_path, capsys):
     from stable_baselines3 import PPO
 

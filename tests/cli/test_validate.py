@@ -268,6 +268,7 @@ def test_params_from_calibrate_and_plot(capsys, tmp_path, rng, log_files):
     assert png.read_bytes()[:8] == PNG_SIGNATURE
 
 
+@pytest.mark.slow
 def test_core_path_does_not_import_matplotlib(log_files, params_file):
     argv = ["validate", *log_files, "--params", str(params_file), "--nominal",
             "0.05,0.05,0.3", "--json"]

@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[2]
 #: excite's layers, lowest first: a module may import its own layer and the ones before it.
 #: commands and cli, the composition root, may import any layer (the heavy ones lazily).
 LAYERS = ("errors", "core", "contracts", "stats", "logs", "validation", "calibration",
-          "stopping", "estimators", "registration", "commands", "cli")
+          "stopping", "estimators", "registration", "live", "commands", "cli")
 
 
 def _imports(path: Path, top_level_only: bool = False) -> list[str]:

@@ -233,6 +233,21 @@ def test_merging_a_run_removes_its_inner_samples_exactly(rng):
     np.testing.assert_array_equal(repaired.chained, [False, True, False, False])
 
 
+def test_a_bad_sample_makes_a_pair_of_candidates(rng):
+    """Runs are repaired as they are; a single candidate only when significant on its own,
+    then with its neighbour of the larger z^2, or alone at the end of a chain."""
+    from excite.calibration.gross_samples import _attributed
+
+    seg = _chain(np.cumsum(rng.normal(0.0, 0.2, (11, 3)), axis=0), rng)
+    z2 = np.ones(10)
+    z2[[1, 2]] = 50.0  # a pair
+    z2[4], z2[5] = 30.0, 8.0  # alone, significant: with its larger neighbour 5
+    z2[7] = 5.0  # alone, not significant: a false alarm
+    z2[9] = 40.0  # alone at the end of the chain
+    chosen = np.array([1, 2, 4, 7, 9])
+    np.testing.assert_array_equal(_attributed(seg, chosen, z2, 20.0), [1, 2, 4, 5, 9])
+
+
 def _log_with_bad_samples(seed: int, times: list[float]):
     """A 90 s synthetic log (2 mm / 2 mrad pose noise, off-axle sensor) and the same with the
     pose samples at ``times`` (s, segment boundaries of 1 s windows) moved by 5 cm and

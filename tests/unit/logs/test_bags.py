@@ -3,6 +3,7 @@ mcap, ROS 1) from the simulated log of the time-series tests, read back with rea
 
 from __future__ import annotations
 
+import itertools
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -30,10 +31,19 @@ from tests.unit.logs.test_timeseries import assert_same, make_log, simulate  # n
 
 LEFT, RIGHT = "wheel_left_joint", "wheel_right_joint"
 BAG_STORAGES = ["sqlite3", "sqlite3-file", "mcap", "mcap-file", "ros1"]
+POSE_KINDS = ["pose", "pose_cov", "odom", "tf"]
 TF_MSG = "geometry_msgs/TransformStamped[] transforms\n"
 Messages = Callable[[BagWriter], list[tuple[str, float, object]]]
 #: A pose sample's orientation quaternion (x, y, z, w), from its index and heading (rad).
 Orientation = Callable[[int, float], tuple[float, float, float, float]]
+
+
+def slow_but(fast: set[tuple[str, ...]], *axes: list[str]) -> list:
+    """Every combination of the values of ``axes`` (its id: the values joined by "-"), marked
+    slow but the ``fast`` ones: a few that between them take every value of every axis."""
+    return [pytest.param(*combo, id="-".join(combo),
+                         marks=() if combo in fast else pytest.mark.slow)
+            for combo in itertools.product(*axes)]
 
 
 @pytest.fixture(scope="module")
@@ -154,8 +164,9 @@ def assert_same_log(ts: TimeSeries, expected: TimeSeries) -> None:
     np.testing.assert_allclose(ts.theta, expected.theta, rtol=0, atol=1e-13)
 
 
-@pytest.mark.parametrize("storage", BAG_STORAGES)
-@pytest.mark.parametrize("pose_kind", ["pose", "pose_cov", "odom", "tf"])
+@pytest.mark.parametrize("pose_kind, storage", slow_but(
+    {("pose", "sqlite3"), ("pose_cov", "mcap"), ("odom", "ros1"), ("tf", "sqlite3-file"),
+     ("tf", "mcap-file")}, POSE_KINDS, BAG_STORAGES))
 def test_bags_read_back_the_simulated_log(tmp_path, log, storage, pose_kind):
     path = make_bag(tmp_path, storage, lambda bag: log_messages(bag, log, pose_kind))
     if pose_kind == "tf":
@@ -317,7 +328,8 @@ def test_without_rosbags_the_error_names_the_extra(monkeypatch, good_bag):
         "reading bags needs the ros extra: pip install 'excite[ros]'")
 
 
-@pytest.mark.parametrize("storage", ["sqlite3", "mcap", "ros1"])
+@pytest.mark.parametrize("storage", slow_but({("sqlite3",), ("ros1",)},
+                                              ["sqlite3", "mcap", "ros1"]))
 def test_unused_topics_with_unreadable_definitions_do_not_matter(tmp_path, log, storage):
     """A bag whose unused topics carry definitions rosbags cannot use (a rosserial bridge's
     empty one, a stale custom type's wrong hash) reads like the clean bag: only the
@@ -477,7 +489,7 @@ def part_of(ts: TimeSeries, encoders: np.ndarray | slice = slice(None),
                       ts.t_pose[poses], ts.x[poses], ts.y[poses], ts.theta[poses])
 
 
-@pytest.mark.parametrize("pose_kind", ["pose", "pose_cov", "odom", "tf"])
+@pytest.mark.parametrize("pose_kind", slow_but({("pose",), ("tf",)}, POSE_KINDS))
 def test_the_heading_does_not_depend_on_the_quaternion_length(tmp_path, log, pose_kind):
     """Publishers that do not normalise: |q| from 0.5 to 3 and either sign give the heading
     to float precision (1 - 2(y^2 + z^2) would read |q| = 1.02 as another angle)."""
@@ -489,8 +501,8 @@ def test_the_heading_does_not_depend_on_the_quaternion_length(tmp_path, log, pos
     assert_same_log(read_bag(path, LEFT, RIGHT, **pose_source(pose_kind)), log)
 
 
-@pytest.mark.parametrize("pose_kind", ["pose", "pose_cov", "odom", "tf"])
-@pytest.mark.parametrize("tilt", ["ramp", "43 degrees"])
+@pytest.mark.parametrize("tilt, pose_kind", slow_but(
+    {("ramp", "pose_cov"), ("43 degrees", "tf")}, ["ramp", "43 degrees"], POSE_KINDS))
 def test_roll_and_pitch_below_the_limit_keep_the_heading(tmp_path, log, pose_kind, tilt):
     """A ramp (roll and pitch up to 0.05 rad, varying) or a constant 43 degree roll: the
     heading read is the ZYX yaw, exactly."""
@@ -539,8 +551,11 @@ def test_a_tilted_pose_is_refused_naming_the_largest_tilt(tmp_path, log, pose_ki
         in message
 
 
-@pytest.mark.parametrize("bad", [(0.0, 0.0, 0.0, 0.0), (1e-4, 0.0, 0.0, 0.0),
-                                 (np.nan, 0.0, 0.0, 1.0), (0.0, 0.0, np.inf, 1.0)])
+@pytest.mark.parametrize("bad", [
+    pytest.param((0.0, 0.0, 0.0, 0.0), id="bad0"),
+    pytest.param((1e-4, 0.0, 0.0, 0.0), id="bad1", marks=pytest.mark.slow),
+    pytest.param((np.nan, 0.0, 0.0, 1.0), id="bad2"),
+    pytest.param((0.0, 0.0, np.inf, 1.0), id="bad3", marks=pytest.mark.slow)])
 def test_an_orientation_that_is_no_rotation_is_named(tmp_path, log, bad):
     """All zeros (never set), almost zero, or not finite."""
     def broken(j: int, theta: float) -> tuple[float, float, float, float]:
@@ -605,8 +620,9 @@ def test_joint_states_never_with_positions_or_malformed(tmp_path, log):
                                    "for 2 joint names")
 
 
-@pytest.mark.parametrize("storage", ["sqlite3", "ros1"])
-@pytest.mark.parametrize("topic", ["/joint_states", "/sensor_pose"])
+@pytest.mark.parametrize("topic, storage", slow_but(
+    {("/joint_states", "sqlite3"), ("/sensor_pose", "ros1")}, ["/joint_states", "/sensor_pose"],
+    ["sqlite3", "ros1"]))
 def test_leading_unstamped_messages_are_skipped_and_counted(tmp_path, log, storage, topic):
     """The first 3 messages of a topic stamped zero (published before the clock ran, e.g.
     before /clock in simulation)."""

@@ -610,8 +610,9 @@ def test_noticeable_time_offset(offset, noticed):
             assert found is None
 
 
-@pytest.mark.parametrize("encoder_rate, pose_rate", [(100.0, 50.0), (200.0, 200.0),
-                                                     (10.0, 100.0), (100.0, 10.0)])
+@pytest.mark.parametrize("encoder_rate, pose_rate", [
+    (100.0, 50.0), pytest.param(200.0, 200.0, marks=pytest.mark.slow), (10.0, 100.0),
+    pytest.param(100.0, 10.0, marks=pytest.mark.slow)])
 def test_no_offset_is_noticed_in_logs_recorded_without_one(encoder_rate, pose_rate):
     """Logs recorded without an offset (one minute, 4096-tick encoders, 2 mm / 4 mrad pose
     noise, 16 random paths each) are never noted, though their estimates stray by several ms

@@ -1,0 +1,293 @@
+"""``excite live``: drive a robot over ROS 2 with a protocol's maneuvers until the calibration
+reaches the target (:mod:`excite.live`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from excite.commands.args import (
+    PARAMS_VALUES,
+    POSE_VALUES,
+    UsageError,
+    check_output_file,
+    floats,
+    params_arg,
+    positive_number,
+    robot_preset,
+    sensor_pose_arg,
+)
+from excite.commands.exit_status import (
+    EXIT_ABORTED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_OUT_OF_TIME,
+)
+from excite.commands.options import add_result_options, add_seed_option
+
+#: The protocol a live session drives by default: the strongest planner of the time-to-target
+#: comparison (BENCHMARKS.md).
+DEFAULT_PROTOCOL = "slip_aware"
+
+DESCRIPTION = """Drive a differential-drive robot over ROS 2 with a protocol's maneuvers until the
+stopping rule says its wheel radii and separation (and the pose sensor's mounting) are within the
+target, then calibrate the whole session offline and report it as excite calibrate does. Subscribes
+the wheel joints (JointState) and an external pose (PoseStamped, PoseWithCovarianceStamped or
+Odometry), publishes the command (TwistStamped or Twist) at --rate Hz, keeps the robot inside the
+safe area, and stops it on every way out. Exit status 0 when done, 5 when the time ran out first, 6
+when the session was aborted (a stream silent too long, wheels that do not follow the command), 130
+when interrupted, 2 for bad input. Needs the ros2 extra: pip install 'excite[ros2]'."""
+
+
+def _default(cls_name: str, name: str):
+    """A field's default of LiveSettings or LiveTopics (each default defined once)."""
+    from dataclasses import fields
+
+    from excite.live import settings
+
+    return next(f.default for f in fields(getattr(settings, cls_name)) if f.name == name)
+
+
+#: The numeric options of a session: (flag, LiveSettings field, metavar, help).
+_SESSION_NUMBERS = (
+    ("--segment-duration", "segment_duration", "S",
+     "how long each maneuver is held (s), also the calibration window"),
+    ("--target", "target", "T", "stop when r_L, r_R, b are within relative error T (sensor x, "
+     "y within T x b, angle within T rad)"),
+    ("--target-confidence", "confidence", "C", "at this confidence"),
+    ("--max-time", "max_time", "S", "give up after this long (s; exit status 5)"),
+    ("--silence-timeout", "silence_timeout", "S",
+     "stop the robot while the poses or the wheel angles are silent this long (s)"),
+    ("--abort-timeout", "abort_timeout", "S", "abort when a silence lasts this long (s)"),
+    ("--response-time", "response_time", "S", "how long the controller and motors take to "
+     "follow a command (s; the wheels are judged against the command after it)"),
+)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("live", help="drive a robot over ROS 2 until it is calibrated",
+                       description=DESCRIPTION)
+    topics = p.add_argument_group("topics")
+    topics.add_argument("--left-wheel", required=True, metavar="JOINT",
+                        help="the left wheel's joint name in the JointState messages")
+    topics.add_argument("--right-wheel", required=True, metavar="JOINT",
+                        help="the right wheel's joint name")
+    topics.add_argument("--joint-states", default=_default("LiveTopics", "joint_states"),
+                        metavar="TOPIC", help="the JointState topic (default %(default)s)")
+    topics.add_argument("--pose-topic", required=True, metavar="TOPIC",
+                        help="the external pose: PoseStamped, PoseWithCovarianceStamped or "
+                        "Odometry, reliable or best effort")
+    topics.add_argument("--cmd-vel", default=_default("LiveTopics", "cmd_vel"),
+                        metavar="TOPIC", help="the command topic (default %(default)s)")
+    topics.add_argument("--cmd-type", choices=("twist_stamped", "twist"),
+                        default=_default("LiveTopics", "cmd_type"),
+                        help="geometry_msgs TwistStamped (default, diff_drive_controller's "
+                        "since Jazzy) or Twist")
+    topics.add_argument("--rate", type=positive_number, metavar="HZ",
+                        default=_default("LiveTopics", "rate"),
+                        help="command rate, at least 20 (default %(default)g)")
+    topics.add_argument("--use-sim-time", action="store_true",
+                        help="follow /clock (a simulator's time) instead of the wall clock")
+    topics.add_argument("--wait", type=positive_number, metavar="S",
+                        default=_default("LiveTopics", "wait"),
+                        help="how long to wait for the topics at the start (default "
+                        "%(default)g s)")
+    robot = p.add_argument_group("robot")
+    robot.add_argument("--nominal", metavar=PARAMS_VALUES,
+                       help="the nominal wheel radii and separation (m), as the controller "
+                       "is configured")
+    robot.add_argument("--robot", type=robot_preset, metavar="PRESET",
+                       help="a preset's nominal robot, speed limit, traction and footprint: "
+                       "%(robot_presets)s")
+    robot.add_argument("--max-wheel-speed", type=positive_number,
+                       metavar="RAD/S", help="the wheels' speed limit (rad/s); required with "
+                       "--nominal, the preset's with --robot")
+    robot.add_argument("--speed-fraction", type=positive_number,
+                       default=_default("LiveSettings", "speed_fraction"), metavar="F",
+                       help="the share of --max-wheel-speed the protocol may command, in "
+                       "(0, 1] (default %(default)g)")
+    robot.add_argument("--max-wheel-accel", type=positive_number,
+                       default=_default("LiveSettings", "max_wheel_acceleration"),
+                       metavar="RAD/S2", help="the largest change of a wheel's commanded "
+                       "speed (rad/s^2; default: none, the controller's limits apply)")
+    robot.add_argument("--motor-tau", type=positive_number, metavar="S",
+                       help="the motors' time constant (s), for planners that plan around "
+                       "slip (the preset's with --robot)")
+    robot.add_argument("--grip", type=positive_number, metavar="M/S2",
+                       help="the largest acceleration the floor gives a wheel before it "
+                       "slides, mu g (m/s^2) (the preset's with --robot)")
+    robot.add_argument("--sensor-pose", default=_default("LiveSettings", "sensor_pose"),
+                       metavar=f"auto|axle|estimate|{POSE_VALUES}",
+                       help="the pose sensor's mounting (as excite calibrate; default "
+                       "%(default)s)")
+    session = p.add_argument_group("session")
+    session.add_argument("--protocol", default=DEFAULT_PROTOCOL, metavar="NAME[:KEY=VALUE]",
+                         help="the maneuvers: %(protocols)s, or module:Class (default "
+                         "%(default)s)")
+    session.add_argument("--area", metavar="X0,Y0,X1,Y1",
+                         help="the rectangle (m, the pose frame) the robot never leaves")
+    session.add_argument("--radius", type=positive_number, metavar="R",
+                         help="instead of --area: stay within R m of the start; default: a "
+                         "square of the simulated arena's size for the robot, centred on "
+                         "the start")
+    for flag, field, metavar, text in _SESSION_NUMBERS:
+        session.add_argument(flag, dest=field, type=positive_number, metavar=metavar,
+                             default=_default("LiveSettings", field),
+                             help=f"{text} (default %(default)g)")
+    add_seed_option(session, "seed of the protocol's random choices (default %(default)s)")
+    out = p.add_argument_group("output")
+    add_result_options(out, "--nominal or --robot")
+    out.add_argument("--out", type=Path, metavar="RESULT.json",
+                     help="also write the JSON object (excite calibrate --json's, with a live "
+                     "section) to a file")
+    out.add_argument("--record", type=Path, metavar="SESSION.mcap",
+                     help="record the session (joint states, poses, commands) as a rosbag2 "
+                     "(mcap; sqlite3 for another name) that excite calibrate reads")
+    p.set_defaults(handler=run)
+
+
+def _robot(args: argparse.Namespace):
+    """The nominal Params, wheel speed limit, traction, footprint and default area side."""
+    from excite.contracts import Traction
+    from excite.core.arena import DEFAULT_CHASSIS
+
+    if (args.nominal is None) == (args.robot is None):
+        raise UsageError("give the nominal robot: --nominal RL,RR,B (with --max-wheel-speed) "
+                         "or --robot PRESET")
+    if args.robot is not None:
+        from envs.robot import PRESETS, traction_of
+
+        dist = PRESETS[args.robot]
+        spec = dist.nominal()
+        nominal = params_arg(",".join(map(str, spec.kinematic_params())), "--robot")
+        traction = traction_of(spec)
+        speed = args.max_wheel_speed or spec.max_wheel_speed
+        chassis = spec.chassis
+        side = dist.arena_size(args.segment_duration)
+        if args.motor_tau or args.grip:
+            traction = Traction(args.motor_tau or traction.motor_tau,
+                                args.grip or traction.grip, traction.spin_inertia)
+        return nominal, speed, traction, chassis, side
+    nominal = params_arg(args.nominal, "--nominal")
+    if args.max_wheel_speed is None:
+        raise UsageError("--nominal needs --max-wheel-speed RAD/S (the wheels' limit)")
+    traction = (Traction(args.motor_tau, args.grip) if args.motor_tau and args.grip else None)
+    if bool(args.motor_tau) != bool(args.grip):
+        raise UsageError("--motor-tau and --grip go together")
+    side = round(max(4 * nominal.as_array()[:2].mean() * args.max_wheel_speed
+                     * args.segment_duration, 10 * max(DEFAULT_CHASSIS)), 3)
+    return nominal, args.max_wheel_speed, traction, DEFAULT_CHASSIS, side
+
+
+def settings_from(args: argparse.Namespace):
+    """The session's LiveSettings from the command line (UsageError on bad values)."""
+    from excite.live import Area, LiveSettings
+
+    nominal, speed, traction, chassis, side = _robot(args)
+    area = None
+    if args.area is not None and args.radius is not None:
+        raise UsageError("give --area or --radius, not both")
+    if args.area is not None:
+        area = floats(args.area, "X0,Y0,X1,Y1", "--area", positive=False)
+    if args.rate < 20:
+        raise UsageError(f"--rate must be at least 20 Hz, got {args.rate:g}")
+    try:
+        if area is not None:
+            area = Area(*area)
+        return LiveSettings(
+            nominal=nominal, max_wheel_speed=speed, speed_fraction=args.speed_fraction,
+            area=area, radius=args.radius, area_size=side, chassis=chassis, traction=traction,
+            max_wheel_acceleration=args.max_wheel_accel,
+            sensor_pose=sensor_pose_arg(args.sensor_pose),
+            **{field: getattr(args, field) for _, field, _, _ in _SESSION_NUMBERS})
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _protocol(text: str, settings):
+    """The protocol, checked against what the session knows (traction for slip_aware)."""
+    from agents.catalog import make_protocol, parse_protocol
+
+    spec = parse_protocol(text)
+    if spec.name == "slip_aware" and settings.traction is None:
+        raise UsageError("slip_aware needs the motors' lag and the grip: --motor-tau S and "
+                         "--grip M/S2, or --robot PRESET (or another --protocol)")
+    return make_protocol(spec)
+
+
+def run(args: argparse.Namespace) -> int:
+    from excite.commands.logs import print_note
+    from excite.live import LiveSession
+    from excite.live.report import closing_lines, result_dict, status_line
+
+    settings = settings_from(args)
+    protocol = _protocol(args.protocol, settings)
+    for path in (args.out, Path(args.ros2_yaml) if args.ros2_yaml else None):
+        if path is not None:
+            check_output_file(path)
+    if args.record is not None and args.record.exists():
+        raise UsageError(f"cannot record to {args.record}: it exists")
+    if args.force_yaml and not args.ros2_yaml:
+        raise UsageError("--force-yaml needs --ros2-yaml OUT.yaml")
+    from excite.live.ros2 import INTERRUPTED, run_live
+    from excite.live.settings import LiveTopics
+
+    topics = LiveTopics(joint_states=args.joint_states, left_wheel=args.left_wheel,
+                        right_wheel=args.right_wheel, pose_topic=args.pose_topic,
+                        cmd_vel=args.cmd_vel, cmd_type=args.cmd_type, rate=args.rate,
+                        use_sim_time=args.use_sim_time, wait=args.wait)
+    session = LiveSession(settings, protocol, seed=args.seed)
+
+    def on_status(status) -> None:
+        if not args.json:
+            print(status_line(status), flush=True)
+
+    recorder = _recorder(args.record)
+    try:
+        result = run_live(session, topics, recorder, on_status)
+    finally:
+        if recorder is not None:
+            recorder.__exit__(None, None, None)
+    report = result_dict(result, settings.nominal)
+    if args.out is not None:
+        args.out.write_text(json.dumps(report, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        for line in closing_lines(result):
+            print(line)
+        if result.calibration is not None:
+            print(result.calibration.summary(settings.nominal))
+        if args.record is not None:
+            print_note(f"session recorded in {args.record}: excite calibrate {args.record} "
+                       f"--left-wheel {args.left_wheel} --right-wheel {args.right_wheel} "
+                       f"--pose-topic {args.pose_topic} --split-at-gaps"
+                       + (f" --window {args.segment_duration:g}"
+                          if args.segment_duration != 1.0 else "")
+                       + (f" --start {result.calibrated_from!r}"
+                          if result.calibrated_from is not None else ""))
+    if args.ros2_yaml and result.calibration is not None:
+        from excite.commands.calibrate import export_yaml
+
+        export_yaml(args, result.calibration, settings.nominal, _status(result))
+    return {"done": EXIT_OK, "out_of_time": EXIT_OUT_OF_TIME}.get(
+        result.outcome, EXIT_INTERRUPTED if result.reason == INTERRUPTED else EXIT_ABORTED)
+
+
+def _status(result) -> int:
+    from excite.commands.exit_status import EXIT_MISFIT, EXIT_UNIDENTIFIABLE
+
+    calibration = result.calibration
+    return (EXIT_MISFIT if not calibration.fit.ok
+            else EXIT_OK if calibration.identifiable else EXIT_UNIDENTIFIABLE)
+
+
+def _recorder(path: Path | None):
+    """An open BagWriter at ``path`` (mcap for a .mcap name), or None."""
+    if path is None:
+        return None
+    from excite.logs.bag_writer import BagWriter
+
+    writer = BagWriter(path, storage="mcap" if path.suffix == ".mcap" else "sqlite3")
+    return writer.__enter__()

@@ -1,0 +1,75 @@
+"""What a live session shows people: one status line per segment, the closing lines, and
+the result as JSON (``excite calibrate --json``'s object with a ``live`` section)."""
+
+from __future__ import annotations
+
+import math
+
+from excite.live.session import LiveResult, LiveStatus
+
+__all__ = ["status_line", "result_dict", "closing_lines"]
+
+
+def _value(x: float, s: float | None) -> str:
+    return f"{x:.5f}" if s is None else f"{x:.5f}±{s:.5f}"
+
+
+def status_line(status: LiveStatus) -> str:
+    """One line: segment, time, estimate ± std (m), the stopping statistic, the predicted
+    time left and the clearance to the area's edges."""
+    std = status.std or (None, None, None)
+    names = ("r_L", "r_R", "b")
+    estimate = "  ".join(f"{n} {_value(x, s)}" for n, x, s in zip(names, status.estimate, std,
+                                                                   strict=True))
+    stat = "-" if not math.isfinite(status.statistic) else f"{status.statistic:.2f}"
+    to_go = ("?" if status.seconds_to_go is None or not math.isfinite(status.seconds_to_go)
+             else f"{status.seconds_to_go:.0f} s")
+    clearance = "?" if status.clearance is None else f"{status.clearance:.2f} m"
+    return (f"segment {status.segments:3d}  t {status.elapsed:6.1f} s  {estimate}  "
+            f"stop statistic {stat} (done at 1)  to go {to_go}  clearance {clearance}")
+
+
+def closing_lines(result: LiveResult) -> list[str]:
+    """How the session ended, and where its calibration stands."""
+    segments = result.statuses[-1].segments if result.statuses else 0
+    lines = [f"live session {result.outcome.replace('_', ' ')} after {result.duration:.1f} s "
+             f"({segments} segments): {result.reason}"]
+    if result.calibration is None:
+        lines.append(f"no calibration of the session: {result.calibration_error}")
+    return lines
+
+
+def result_dict(result: LiveResult, nominal=None) -> dict:
+    """``calibrate --json``'s object for the session's calibration (null fields without
+    one) with a ``live`` section: outcome, reason, duration (s), segments, area (m, pose
+    frame: x0, y0, x1, y1), calibrated_from (the stamp in s the calibration starts at, null:
+    all), slowdowns ([stamp, speed share] each), the last stopping decision, and every
+    status."""
+    out = result.calibration.to_dict() if result.calibration is not None else {
+        "calibration_error": result.calibration_error}
+    if nominal is not None:
+        out["nominal"] = dict(zip(("r_L", "r_R", "b"), nominal.as_array().tolist(),
+                                  strict=True))
+    area = result.area
+    out["live"] = {
+        "outcome": result.outcome, "reason": result.reason, "duration": result.duration,
+        "segments": result.statuses[-1].segments if result.statuses else 0,
+        "area": None if area is None else [area.x0, area.y0, area.x1, area.y1],
+        "calibrated_from": result.calibrated_from,
+        "slowdowns": [list(x) for x in result.slowdowns],
+        "decision": None if result.decision is None else result.decision.to_dict(),
+        "statuses": [_status_dict(s) for s in result.statuses],
+    }
+    return out
+
+
+def _finite(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def _status_dict(s: LiveStatus) -> dict:
+    return {"state": s.state, "elapsed": s.elapsed, "segments": s.segments,
+            "calibrated_segments": s.calibrated_segments, "estimate": list(s.estimate),
+            "std": None if s.std is None else list(s.std), "statistic": _finite(s.statistic),
+            "seconds_to_go": _finite(s.seconds_to_go), "clearance": s.clearance,
+            "reason": s.reason}

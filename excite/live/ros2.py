@@ -1,0 +1,285 @@
+"""``excite live`` as a ROS 2 node (rclpy; the ``ros2`` extra): the transport of a
+:class:`excite.live.session.LiveSession`.
+
+It subscribes the wheel joints' JointState messages and the external pose (PoseStamped,
+PoseWithCovarianceStamped or Odometry; best-effort publishers such as motion capture
+included: the subscriptions are best effort, which matches both kinds), publishes the
+session's command on the command topic (``geometry_msgs/TwistStamped``, or ``Twist``) at
+``rate`` Hz on the node's clock (``/clock`` with ``use_sim_time``), and records every message
+it receives or sends in a bag (rosbags' writer) when asked.
+
+Safety: a zero command is published on every way out (done, out of time, a fault, Ctrl-C,
+SIGTERM, an exception); the session stops the robot while a stream is silent. A clock that
+stops (the simulator's ``/clock`` gone) aborts the session after ``abort_timeout`` seconds of
+wall time.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.duration import Duration
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import JointState
+
+from excite.errors import DataError
+from excite.live.session import Command, LiveResult, LiveSession
+from excite.live.settings import LiveTopics
+from excite.logs.bag_reader import headings
+
+__all__ = ["INTERRUPTED", "POSE_TYPES", "run_live"]
+
+#: How much lower the decisions' process runs than the node (os.nice): on a busy computer
+#: the node must keep up with the streams and the commands; a decision may wait.
+DECISION_NICENESS = 10
+#: The reason of a session ended by SIGINT or SIGTERM.
+INTERRUPTED = "interrupted (SIGINT or SIGTERM)"
+
+#: The pose message types the node reads, by ROS type name, with how to get the pose.
+POSE_TYPES: dict[str, tuple[type, Callable[[Any], Any]]] = {
+    "geometry_msgs/msg/PoseStamped": (PoseStamped, lambda m: m.pose),
+    "geometry_msgs/msg/PoseWithCovarianceStamped": (PoseWithCovarianceStamped,
+                                                    lambda m: m.pose.pose),
+    "nav_msgs/msg/Odometry": (Odometry, lambda m: m.pose.pose),
+}
+JOINT_STATE = "sensor_msgs/msg/JointState"
+#: Best effort matches best-effort and reliable publishers alike; deep enough for 1 kHz.
+SENSOR_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
+                        history=HistoryPolicy.KEEP_LAST)
+
+
+def _seconds(stamp: Any) -> float:
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+@contextmanager
+def _signals() -> Iterator[threading.Event]:
+    """SIGINT and SIGTERM set an event (the loop then stops the robot and ends)."""
+    event = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield event
+        return
+    previous = {s: signal.signal(s, lambda *_: event.set()) for s in (signal.SIGINT,
+                                                                       signal.SIGTERM)}
+    try:
+        yield event
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+class LiveNode:
+    """The node around a session (see the module docstring), in the rclpy ``context``.
+    ``recorder``: a
+    :class:`excite.logs.bag_writer.BagWriter` already open, or None. ``on_status``: told
+    every status the session adds (one per segment)."""
+
+    def __init__(self, session: LiveSession, topics: LiveTopics, context: rclpy.Context,
+                 recorder=None, on_status: Callable[[Any], None] | None = None) -> None:
+        self.session, self.topics, self.recorder = session, topics, recorder
+        self.on_status = on_status or (lambda status: None)
+        overrides = [Parameter("use_sim_time", Parameter.Type.BOOL, topics.use_sim_time)]
+        self.node = Node("excite_live", context=context, parameter_overrides=overrides)
+        stamped = topics.cmd_type == "twist_stamped"
+        self._cmd_class = TwistStamped if stamped else Twist
+        self.publisher = self.node.create_publisher(self._cmd_class, topics.cmd_vel, 10)
+        self._wheel_index: tuple[int, int] | None = None
+        self._joints_seen: set[str] = set()
+        self._first_joint_state: float | None = None
+        self._pose_type: str | None = None
+        self._statuses = 0
+        self._last_clock = (None, time.monotonic())
+        self.error: str | None = None
+
+    # -- start --------------------------------------------------------------------------------
+    def _topics(self) -> dict[str, list[str]]:
+        return dict(self.node.get_topic_names_and_types())
+
+    def _topic_list(self, seen: dict[str, list[str]]) -> str:
+        shown = [f"{name} [{', '.join(types)}]" for name, types in sorted(seen.items())
+                 if not name.startswith(("/rosout", "/parameter_events"))]
+        return ", ".join(shown) or "none"
+
+    def connect(self, executor: SingleThreadedExecutor) -> None:
+        """Wait (``topics.wait`` s of wall time) for the topics, then subscribe; DataError
+        naming the topics and types seen when one is missing or of another type."""
+        t = self.topics
+        deadline = time.monotonic() + t.wait
+        while True:
+            seen = self._topics()
+            joint_ok = JOINT_STATE in seen.get(t.joint_states, [])
+            pose_types = [k for k in seen.get(t.pose_topic, []) if k in POSE_TYPES]
+            if joint_ok and pose_types:
+                break
+            if time.monotonic() > deadline:
+                missing = [f"{name} ({kind})" for name, kind, ok in (
+                    (t.joint_states, "sensor_msgs/msg/JointState", joint_ok),
+                    (t.pose_topic, "PoseStamped, PoseWithCovarianceStamped or Odometry",
+                     bool(pose_types))) if not ok]
+                raise DataError(f"no {' nor '.join(missing)} after {t.wait:g} s; topics "
+                                f"seen: {self._topic_list(seen)}")
+            executor.spin_once(timeout_sec=0.1)
+        self._pose_type = pose_types[0]
+        pose_class, _ = POSE_TYPES[self._pose_type]
+        self.node.create_subscription(JointState, t.joint_states, self._on_joints, SENSOR_QOS)
+        self.node.create_subscription(pose_class, t.pose_topic, self._on_pose, SENSOR_QOS)
+        if self.recorder is not None:
+            self.recorder.add_topic(t.joint_states, JOINT_STATE)
+            self.recorder.add_topic(t.pose_topic, "geometry_msgs/msg/PoseStamped")
+
+    # -- input --------------------------------------------------------------------------------
+    def _now(self) -> float:
+        return self.node.get_clock().now().nanoseconds * 1e-9
+
+    def _on_joints(self, msg: JointState) -> None:
+        t = _seconds(msg.header.stamp) or self._now()
+        names = list(msg.name)
+        self._joints_seen.update(names)
+        if self._first_joint_state is None:
+            self._first_joint_state = time.monotonic()
+        wheels = (self.topics.left_wheel, self.topics.right_wheel)
+        if not all(w in names for w in wheels) or len(msg.position) != len(names):
+            return
+        i, j = names.index(wheels[0]), names.index(wheels[1])
+        self._wheel_index = (i, j)
+        self.session.add_wheels(t, float(msg.position[i]), float(msg.position[j]))
+        if self.recorder is not None:
+            self.recorder.write(self.topics.joint_states, t, self.recorder.joint_state(
+                t, names, [float(p) for p in msg.position]))
+
+    def _on_pose(self, msg: Any) -> None:
+        t = _seconds(msg.header.stamp) or self._now()
+        pose = POSE_TYPES[self._pose_type][1](msg)
+        q = pose.orientation
+        try:
+            theta = float(headings(f"{self.topics.pose_topic}", np.array([t]),
+                                   np.array([[q.x, q.y, q.z, q.w]]))[0])
+        except DataError as exc:
+            self.session.abort(str(exc))
+            return
+        x, y = float(pose.position.x), float(pose.position.y)
+        self.session.add_pose(t, x, y, theta)
+        if self.recorder is not None:  # as PoseStamped, whatever the topic's type
+            self.recorder.write(self.topics.pose_topic, t, self.recorder.pose_stamped(
+                t, x, y, theta, msg.header.frame_id or "map"))
+
+    # -- output -------------------------------------------------------------------------------
+    def publish(self, command: Command) -> None:
+        twist = Twist()
+        twist.linear.x, twist.angular.z = command.v, command.omega
+        if self._cmd_class is TwistStamped:
+            msg = TwistStamped()
+            msg.header.stamp = self.node.get_clock().now().to_msg()
+            msg.header.frame_id = self.topics.frame_id
+            msg.twist = twist
+        else:
+            msg = twist
+        self.publisher.publish(msg)
+        if self.recorder is not None:  # as TwistStamped, whatever the topic's type
+            t = self._now()
+            self.recorder.write(self.topics.cmd_vel, t, self.recorder.twist_stamped(
+                t, command.v, command.omega, self.topics.frame_id))
+
+    def tick(self) -> None:
+        """One command: the session's at the node's time."""
+        now = self._now()
+        self._check_wheel_names()
+        self._check_clock(now)
+        self.publish(self.session.command(now))
+        statuses = self.session.statuses
+        for status in statuses[self._statuses:]:
+            self.on_status(status)
+        self._statuses = len(statuses)
+
+    def _check_wheel_names(self) -> None:
+        """JointState messages for 2 s, none of them naming both wheels: a wrong name
+        (DataError before the session started)."""
+        if self._wheel_index is not None or self._first_joint_state is None:
+            return
+        if time.monotonic() - self._first_joint_state > 2.0:
+            missing = [w for w in (self.topics.left_wheel, self.topics.right_wheel)
+                       if w not in self._joints_seen]
+            joints = ", ".join(sorted(self._joints_seen)) or "none"
+            what = (f"no joint {' nor '.join(map(repr, missing))}" if missing
+                    else "no positions for the wheel joints")
+            text = (f"the JointState messages on {self.topics.joint_states} have {what} "
+                    f"(joints: {joints}); check --left-wheel, --right-wheel")
+            if self.session.state == "waiting":
+                raise DataError(text)  # never started: bad input
+            self.session.abort(text)
+
+    def _check_clock(self, now: float) -> None:
+        """The node's clock stopped (no /clock with use_sim_time) for abort_timeout s."""
+        last, since = self._last_clock
+        wall = time.monotonic()
+        if now != last:
+            self._last_clock = (now, wall)
+        elif wall - since > self.session.settings.abort_timeout:
+            self.session.abort(f"the clock stopped for {wall - since:.1f} s (is /clock "
+                               "published? use_sim_time is "
+                               f"{'on' if self.topics.use_sim_time else 'off'})")
+
+    def stop(self, repeats: int = 3, timeout: float = 1.0) -> None:
+        """Publish a zero command (a few times), and wait up to ``timeout`` s for the
+        subscribers to acknowledge it: a node destroyed right after publishing may take its
+        last messages with it."""
+        zero = Command(0.0, 0.0, 0.0, 0.0)
+        for _ in range(repeats):
+            self.publish(zero)
+        self.publisher.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9)))
+
+
+def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
+             on_status: Callable[[Any], None] | None = None,
+             domain_id: int | None = None) -> LiveResult:
+    """Run ``session`` over ROS 2 until it ends, Ctrl-C or SIGTERM (the session then ends
+    *aborted*, "interrupted"); the robot is commanded to zero on every way out. Returns the
+    session's result (:meth:`LiveSession.finish`). Raises DataError when a topic is missing at
+    the start (the robot was never commanded)."""
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id,
+               signal_handler_options=SignalHandlerOptions.NO)
+    # The stopping rule's batch calibration runs in a process of its own: in a thread it
+    # would hold the interpreter while the callbacks fall behind the streams.
+    pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=os.nice, initargs=(DECISION_NICENESS,))
+    session.executor = pool
+    executor = SingleThreadedExecutor(context=context)
+    node: LiveNode | None = None
+    try:
+        with _signals() as interrupted:
+            node = LiveNode(session, topics, context, recorder, on_status)
+            executor.add_node(node.node)
+            node.connect(executor)
+            period = 1.0 / topics.rate
+            node.node.create_timer(period, node.tick)
+            while not session.ended and not interrupted.is_set():
+                executor.spin_once(timeout_sec=min(period, 0.05))
+            if interrupted.is_set():
+                session.abort(INTERRUPTED)
+            node.stop()
+            return session.finish()
+    finally:
+        if node is not None:
+            node.stop()
+            executor.remove_node(node.node)
+            node.node.destroy_node()
+        pool.shutdown(wait=False, cancel_futures=True)
+        executor.shutdown(timeout_sec=1.0)
+        context.try_shutdown()

@@ -1,0 +1,581 @@
+"""A live calibration session: drive a robot with a protocol's maneuvers until the stopping
+rule says the calibration is done. Transport-agnostic and light (numpy, scipy and the
+protocol contracts: no ROS, no simulator).
+
+Feed it the wheel angles and the external poses as they arrive, with their stamps; ask it for
+the command to send now; read its status; finish it::
+
+    session = LiveSession(settings, protocol)
+    while not session.ended:
+        for t, phi_L, phi_R in new_wheel_angles():
+            session.add_wheels(t, phi_L, phi_R)
+        for t, x, y, theta in new_poses():
+            session.add_pose(t, x, y, theta)
+        send(session.command(now()))
+    result = session.finish()
+
+Each call of :meth:`LiveSession.command` is one pass of a pipeline of named stages:
+
+1. **watch**: the streams' silence (stop the robot after ``silence_timeout``, resume when
+   they return, abort after ``abort_timeout``), the time limit, and whether the wheels follow
+   the command (:mod:`excite.live.watch`);
+2. **segment end**, once per ``segment_duration``: the data so far are cut into segments
+   with the offline code (:func:`excite.logs.segmentation.segment_timeseries`, fixed windows
+   of ``segment_duration``), the stopping rule decides on them
+   (:class:`excite.stopping.StoppingRule`: the batch calibration), and the protocol is asked
+   for the next command through the simulator's contract
+   (:class:`excite.contracts.RobotKnowledge` built from live data: the body's pose in the
+   area, the latest estimate and its information, the nominal traction). When the rule's
+   batch calibration finds that the model does not fit (the wheels slip, most often), the
+   session slows down to half its speed (at most twice, to ``MIN_SPEED_SCALE``) and
+   calibrates on the data from then on only;
+3. **ramp**: the commanded wheel speeds approach the protocol's at most at
+   ``max_wheel_acceleration``.
+
+A session ends *done* (the rule said so), *out_of_time* (``max_time``) or *aborted* (a
+silence too long, wheels that do not follow, or :meth:`LiveSession.abort`); from then on the
+command is zero. :meth:`LiveSession.finish` runs the full offline calibration of the whole
+session since its last slowdown (:func:`excite.calibrate` on the session's log cut as
+``excite calibrate --window segment_duration --split-at-gaps --start T`` cuts it): the answer
+is the batch one, with its fit tests.
+
+Frames and units: stamps in s on one clock for both streams; poses of the external sensor in
+its world frame (x, y in m, theta in rad); wheel angles in rad (cumulative); commands in rad/s
+per wheel, and as (v in m/s, omega in rad/s) with the nominal geometry.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Callable
+from concurrent.futures import Executor, Future
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from excite.calibration.pipeline import calibrate
+from excite.calibration.result import CalibrationResult
+from excite.contracts import RobotKnowledge
+from excite.core import se2
+from excite.core.information import information_matrix
+from excite.core.models import SensorPose
+from excite.errors import ExciteError
+from excite.live.area import Area
+from excite.live.settings import LiveSettings
+from excite.live.watch import MotionWatch
+from excite.logs.segmentation import segment_timeseries
+from excite.logs.segments import Segments
+from excite.logs.timeseries import TimeSeries
+from excite.stopping import StopDecision, StoppingRule
+
+__all__ = ["Command", "LiveResult", "LiveSession", "LiveStatus", "OUTCOMES"]
+
+#: How a session ends.
+OUTCOMES = ("done", "out_of_time", "aborted")
+#: The lowest share of the speed limit a session slows down to when the model does not fit.
+MIN_SPEED_SCALE = 0.25
+
+
+@dataclass(frozen=True)
+class Command:
+    """The command to send now: wheel speeds ``left``, ``right`` (rad/s), and the same as
+    ``v`` (m/s) and ``omega`` (rad/s) with the nominal geometry."""
+
+    left: float
+    right: float
+    v: float
+    omega: float
+
+    @property
+    def is_zero(self) -> bool:
+        return self.left == 0.0 and self.right == 0.0
+
+
+@dataclass(frozen=True)
+class LiveStatus:
+    """Where a session stands.
+
+    Attributes
+    ----------
+    state : str
+        "waiting" (no data yet), "running", "paused" (a stream is silent), or the outcome
+        ("done", "out_of_time", "aborted").
+    elapsed : float
+        Seconds since the session started driving.
+    segments : int
+        Commands the protocol has given so far.
+    calibrated_segments : int
+        Segments of the log the last decision saw.
+    estimate : (float, float, float)
+        r_L, r_R, b (m): the last batch calibration's, or the nominal values before one.
+    std : (float, float, float) or None
+        Their standard deviations (m); None before a calibration.
+    statistic : float
+        The stopping statistic (done at <= 1; inf before a calibration).
+    seconds_to_go : float or None
+        The predicted further driving (s) at the current way of driving.
+    clearance : float or None
+        The smallest distance (m) from the footprint to the area's edges.
+    reason : str
+        The stopping rule's reason, or why the session paused or ended.
+    """
+
+    state: str
+    elapsed: float
+    segments: int
+    calibrated_segments: int
+    estimate: tuple[float, float, float]
+    std: tuple[float, float, float] | None
+    statistic: float
+    seconds_to_go: float | None
+    clearance: float | None
+    reason: str
+
+
+@dataclass(frozen=True)
+class LiveResult:
+    """What a finished session leaves.
+
+    Attributes
+    ----------
+    outcome : str
+        "done", "out_of_time" or "aborted".
+    reason : str
+        Why it ended, in one line.
+    calibration : CalibrationResult or None
+        The full offline calibration of the whole session; None when the data did not allow
+        one (``calibration_error`` says why).
+    calibration_error : str or None
+        Why there is no calibration.
+    decision : StopDecision or None
+        The stopping rule's last decision during the session.
+    series : TimeSeries or None
+        The session's wheel angles and poses (None without data).
+    area : Area or None
+        The safe area (pose frame).
+    statuses : tuple of LiveStatus
+        The status after every segment.
+    duration : float
+        Seconds of driving.
+    calibrated_from : float or None
+        The stamp (s) from which the session's data are calibrated: the last slowdown (the
+        model did not fit the faster driving before it), or None for all of them
+        (``excite calibrate --start`` on the recorded bag gives the same calibration).
+    slowdowns : tuple of (float, float)
+        Each slowdown's stamp (s) and the share of the speed limit driven from then on.
+    """
+
+    outcome: str
+    reason: str
+    calibration: CalibrationResult | None
+    calibration_error: str | None
+    decision: StopDecision | None
+    series: TimeSeries | None
+    area: Area | None
+    statuses: tuple[LiveStatus, ...]
+    duration: float
+    calibrated_from: float | None = None
+    slowdowns: tuple[tuple[float, float], ...] = ()
+
+
+def cut(series: TimeSeries, window: float) -> Segments:
+    """A session's log cut into segments as ``excite calibrate --window WINDOW
+    --split-at-gaps`` cuts it (ExciteError when it cannot be, e.g. too few segments)."""
+    return segment_timeseries(series, window=window, on_gap="split").segments
+
+
+def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal
+               ) -> StopDecision | None:
+    """The stopping rule's decision on a session's log so far; None while it cannot be cut
+    into segments yet."""
+    try:
+        segments = cut(series, window)
+    except ExciteError:
+        return None
+    return rule.decide(segments, nominal)
+
+
+class _Stream:
+    """Samples of one stream with strictly increasing stamps (late or repeated ones are
+    counted and left out)."""
+
+    def __init__(self, width: int) -> None:
+        self.t: list[float] = []
+        self.values: list[tuple[float, ...]] = []
+        self.width = width
+        self.out_of_order = 0
+
+    def add(self, t: float, values: tuple[float, ...]) -> bool:
+        if not (math.isfinite(t) and all(map(math.isfinite, values))):
+            raise ValueError(f"a sample must be finite, got t={t!r}, {values!r}")
+        if self.t and t <= self.t[-1]:
+            self.out_of_order += 1
+            return False
+        self.t.append(float(t))
+        self.values.append(tuple(map(float, values)))
+        return True
+
+    @property
+    def last(self) -> float | None:
+        return self.t[-1] if self.t else None
+
+    def at(self, t: float) -> np.ndarray | None:
+        """The values linearly interpolated at ``t``; None outside the samples."""
+        if len(self.t) < 2 or not (self.t[0] <= t <= self.t[-1]):
+            return None
+        k = bisect.bisect_left(self.t, t)
+        if self.t[k] == t:
+            return np.array(self.values[k])
+        w = (t - self.t[k - 1]) / (self.t[k] - self.t[k - 1])
+        return (1 - w) * np.array(self.values[k - 1]) + w * np.array(self.values[k])
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.array(self.t), np.array(self.values).reshape(-1, self.width)
+
+
+class LiveSession:
+    """Drives a robot with ``protocol`` until calibrated (see the module docstring).
+
+    settings: :class:`excite.live.settings.LiveSettings`. protocol: an object with
+    ``reset(rng)`` and ``act(knowledge) -> [-1, 1]^2`` (every protocol of ``agents``).
+    seed: the protocol's random generator's seed. observe: builds the observation vector a
+    learned policy reads from the knowledge and the last action (None: an empty one).
+    executor: where the stopping rule's batch calibration runs (e.g. a one-thread
+    ThreadPoolExecutor, so a transport's command loop never waits for it; the decision is
+    then taken up at a later segment end); None: in the caller's thread.
+    """
+
+    def __init__(self, settings: LiveSettings, protocol, seed: int | None = None,
+                 observe: Callable[[RobotKnowledge, np.ndarray], np.ndarray] | None = None,
+                 executor: Executor | None = None) -> None:
+        self.settings = settings
+        self.protocol = protocol
+        self.protocol.reset(np.random.default_rng(seed))
+        self.rule = StoppingRule(target=settings.target, confidence=settings.confidence,
+                                 sensor_pose=settings.sensor_pose)
+        self._observe = observe
+        self.executor = executor
+        self._pending: Future | None = None
+        self._wheels = _Stream(2)
+        self._poses = _Stream(3)
+        self._watch = MotionWatch(settings.motion_window, settings.response_time,
+                                  settings.command_speed)
+        self._state = "waiting"
+        self._reason = "waiting for the wheel angles and the poses"
+        self._start: float | None = None
+        self._now: float | None = None
+        self._segment_start: float | None = None
+        self._segment_end: float | None = None
+        self._segments = 0
+        self._action = np.zeros(2)
+        self._target = np.zeros(2)
+        self._sent = np.zeros(2)
+        self._sent_at: float | None = None
+        self._rows = np.zeros((0, 5))
+        self._decision: StopDecision | None = None
+        self._area: Area | None = None
+        self._statuses: list[LiveStatus] = []
+        self._silent_since: float | None = None
+        self._speed_scale = 1.0
+        self._epoch: float | None = None
+        self._pending_epoch: float | None = None
+        self._slowdowns: list[tuple[float, float]] = []
+
+    # -- input --------------------------------------------------------------------------------
+    def add_wheels(self, t: float, phi_L: float, phi_R: float) -> None:
+        """The wheel angles (rad, cumulative) at stamp ``t`` (s)."""
+        self._wheels.add(t, (phi_L, phi_R))
+
+    def add_pose(self, t: float, x: float, y: float, theta: float) -> None:
+        """The external sensor's pose (x, y in m, theta in rad) at stamp ``t`` (s)."""
+        self._poses.add(t, (x, y, theta))
+
+    def abort(self, reason: str) -> None:
+        """End the session now as *aborted* (e.g. interrupted); the command becomes zero."""
+        if not self.ended:
+            self._end("aborted", reason)
+
+    # -- the loop -----------------------------------------------------------------------------
+    def command(self, now: float) -> Command:
+        """The command to send at time ``now`` (s, the streams' clock)."""
+        self._now = now
+        if not self.ended:
+            self._watch_streams(now)
+        if self._state == "running" and now >= self._segment_end:
+            self._end_segment(now)
+        if self._state != "running":
+            self._target[:] = 0.0
+        return self._ramp(now)
+
+    def _watch_streams(self, now: float) -> None:
+        """Stage 1: start, silence, time limit, and the wheels against the command."""
+        if self._wheels.last is None or self._poses.last is None:
+            return
+        age = max(now - self._wheels.last, now - self._poses.last)
+        if age > self.settings.silence_timeout:
+            self._silent_since = self._silent_since or now - age
+            if now - self._silent_since > self.settings.abort_timeout:
+                self._end("aborted", self._silence_text(now) + " for longer than "
+                          f"{self.settings.abort_timeout:g} s")
+            elif self._state == "running":
+                self._state, self._reason = "paused", self._silence_text(now)
+            return
+        self._silent_since = None
+        if self._state in ("waiting", "paused"):
+            self._begin(now)
+            return
+        if self._start is not None and now - self._start >= self.settings.max_time:
+            self._end("out_of_time", f"the time limit of {self.settings.max_time:g} s ran out "
+                      "before the target was reached")
+            return
+        fault = self._watch.check(min(now, self._wheels.last), self._wheels.at)
+        if fault is not None:
+            self._end("aborted", str(fault))
+
+    def _silence_text(self, now: float) -> str:
+        silent = [name for name, last in (("the wheel angles", self._wheels.last),
+                                          ("the poses", self._poses.last))
+                  if now - last > self.settings.silence_timeout]
+        return f"{' and '.join(silent)} silent; robot stopped"
+
+    def _begin(self, now: float) -> None:
+        """Start (or resume after a silence): a new segment from now."""
+        if self._start is None:
+            self._start = now
+            self._area = self.settings.area_at(self._body_pose())
+        self._state, self._reason = "running", "driving"
+        self._next_action(now)
+
+    def _end_segment(self, now: float) -> None:
+        """Stage 2: the segment's row for the planner, the decision on the log so far, the
+        protocol's next command."""
+        row = self._row(self._segment_start, now)
+        if row is not None:
+            self._rows = np.vstack([self._rows, row])
+        self._take_decision(wait=self.executor is None)
+        self._start_decision()
+        self._take_decision(wait=self.executor is None)
+        if self._decision is not None:
+            self._reason = self._decision.reason
+        self._slow_down(now)
+        self._statuses.append(self.status)
+        if self._decision is not None and self._decision.done:
+            self._end("done", self._decision.reason)
+            return
+        self._next_action(now)
+
+    def _row(self, start: float, end: float) -> np.ndarray | None:
+        """The planner's row (dphi_L, dphi_R, dx, dy, dtheta) of the command held over
+        [start, end] (s): between the last pose samples at or before each time, the wheel
+        angles interpolated there (rad) and the sensor's motion in its frame at the first
+        (m, m, rad), as excite.logs.segmentation forms a segment."""
+        t = self._poses.t
+        a, b = bisect.bisect_right(t, start) - 1, bisect.bisect_right(t, end) - 1
+        if a < 0 or b <= a:
+            return None
+        wheels_a, wheels_b = self._wheels.at(t[a]), self._wheels.at(t[b])
+        if wheels_a is None or wheels_b is None:
+            return None
+        increment = se2.between(np.array(self._poses.values[a]),
+                                np.array(self._poses.values[b]))
+        return np.concatenate([wheels_b - wheels_a, increment])
+
+    def _next_action(self, now: float) -> None:
+        knowledge = self.knowledge()
+        action = np.clip(np.asarray(self.protocol.act(knowledge), dtype=float), -1.0, 1.0)
+        self._action = action
+        self._target = action * self.settings.command_speed * self._speed_scale
+        self._segment_start, self._segment_end = now, now + self.settings.segment_duration
+        self._segments += 1
+
+    def _ramp(self, now: float) -> Command:
+        """Stage 3: the wheel speeds sent: zero at once unless running, else at most
+        max_wheel_acceleration from the last."""
+        if self._state != "running":
+            sent = np.zeros(2)
+        elif self._sent_at is None or not math.isfinite(self.settings.max_wheel_acceleration):
+            sent = self._target.copy()
+        else:
+            step = self.settings.max_wheel_acceleration * max(now - self._sent_at, 0.0)
+            sent = self._sent + np.clip(self._target - self._sent, -step, step)
+        self._sent, self._sent_at = sent, now
+        self._watch.commanded(now, float(sent[0]), float(sent[1]))
+        v, omega = self.settings.twist(float(sent[0]), float(sent[1]))
+        return Command(float(sent[0]), float(sent[1]), v, omega)
+
+    def _end(self, outcome: str, reason: str) -> None:
+        self._state, self._reason = outcome, reason
+        self._target[:] = 0.0
+
+    # -- what the robot knows ---------------------------------------------------------------
+    def _series(self, start: float | None = None) -> TimeSeries | None:
+        """The session's wheel angles and poses (from ``start``, s; None: all); None while
+        too few."""
+        t_enc, wheels = self._wheels.arrays()
+        t_pose, poses = self._poses.arrays()
+        if start is not None:
+            wheels, poses = wheels[t_enc >= start], poses[t_pose >= start]
+            t_enc, t_pose = t_enc[t_enc >= start], t_pose[t_pose >= start]
+        if len(t_enc) < 2 or len(t_pose) < 2:
+            return None
+        return TimeSeries(t_enc, wheels[:, 0], wheels[:, 1], t_pose, *poses.T,
+                          source=("wheel angles", "poses"))
+
+    def _segmented(self) -> Segments:
+        """The session's log since the last slowdown cut into segments as ``excite calibrate
+        --start`` cuts it (raises ExciteError when it cannot be, e.g. too few segments)."""
+        series = self._series(self._epoch)
+        if series is None:
+            raise ExciteError("no wheel angles and poses yet")
+        return cut(series, self.settings.segment_duration)
+
+    def _start_decision(self) -> None:
+        """The stopping rule on the log so far (:func:`decide_log`), in the caller's thread
+        or on the executor (one at a time: this segment's data wait for the next end)."""
+        series = self._series(self._epoch)
+        if self._pending is not None or series is None:
+            return
+        args = (self.rule, series, self.settings.segment_duration, self.settings.nominal)
+        self._pending_epoch = self._epoch
+        if self.executor is None:
+            self._accept(decide_log(*args))
+        else:
+            self._pending = self.executor.submit(decide_log, *args)
+
+    def _take_decision(self, wait: bool) -> None:
+        if self._pending is not None and (wait or self._pending.done()):
+            decision, self._pending = self._pending.result(), None
+            self._accept(decision)
+
+    def _accept(self, decision: StopDecision | None) -> None:
+        """Take a decision on the data since the current slowdown (an older one is stale)."""
+        if decision is not None and self._pending_epoch == self._epoch:
+            self._decision = decision
+
+    def _slow_down(self, now: float) -> None:
+        """The model does not fit the data since the last slowdown (the wheels slip, most
+        often): drive gentler, at half the speed (down to MIN_SPEED_SCALE), and calibrate on
+        the data from now on only."""
+        d = self._decision
+        if d is None or d.result is None or d.result.fit.ok:
+            return
+        if self._speed_scale <= MIN_SPEED_SCALE:
+            self._reason = f"{d.reason}; already at the lowest speed"
+            return
+        self._speed_scale = max(0.5 * self._speed_scale, MIN_SPEED_SCALE)
+        self._epoch, self._decision = now, None
+        self._slowdowns.append((now, self._speed_scale))
+        self._reason = (f"{d.reason}: driving at {self._speed_scale:.0%} of the speed from "
+                        "now on, calibrating on the data from here")
+
+    def _calibration(self) -> CalibrationResult | None:
+        d = self._decision
+        return None if d is None or d.result is None or not d.result.identifiable else d.result
+
+    def _mount(self) -> np.ndarray:
+        """The sensor's pose on the body (x, y, theta): given, estimated, or on the axle."""
+        if isinstance(self.settings.sensor_pose, SensorPose):
+            return self.settings.sensor_pose.as_array()
+        result = self._calibration()
+        if result is not None and result.sensor_pose is not None:
+            return result.sensor_pose.as_array()
+        return np.zeros(3)
+
+    def _body_pose(self) -> np.ndarray:
+        """The body's (axle midpoint's) latest pose in the pose frame."""
+        sensor = np.array(self._poses.values[-1])
+        return se2.compose(sensor, se2.inverse(self._mount()))
+
+    def knowledge(self) -> RobotKnowledge:
+        """What a planner may use now (the simulator's contract, from live data)."""
+        s = self.settings
+        result = self._calibration()
+        estimate = result.params if result is not None else s.nominal
+        sigma = (np.asarray(result.sigma, dtype=float)[:3] if result is not None
+                 else np.array(s.sigma))
+        sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, s.sigma)
+        rows = self._rows
+        information = (information_matrix(rows[:, 0], rows[:, 1], estimate, sigma,
+                                          scale=s.nominal) if len(rows) else np.zeros((3, 3)))
+        extent = self._area.extent
+        budget = max(int(s.max_time / s.segment_duration), 1)
+        knowledge = RobotKnowledge(
+            observation=np.zeros(0, dtype=np.float32), estimate=estimate,
+            information=information, log=rows.copy(),
+            pose=self._area.to_local(self._body_pose()), nominal=s.nominal, sigma=sigma,
+            max_wheel_speed=s.command_speed * self._speed_scale,
+            segment_duration=s.segment_duration,
+            arena_size=min(extent), budget=budget, chassis=s.chassis, traction=s.traction,
+            arena_extent=extent)
+        if self._observe is not None:
+            knowledge = replace(knowledge, observation=self._observe(knowledge, self._action))
+        return knowledge
+
+    # -- status and result --------------------------------------------------------------------
+    @property
+    def ended(self) -> bool:
+        return self._state in OUTCOMES
+
+    @property
+    def state(self) -> str:
+        return self._state
+
+    @property
+    def reason(self) -> str:
+        return self._reason
+
+    @property
+    def area(self) -> Area | None:
+        return self._area
+
+    @property
+    def decision(self) -> StopDecision | None:
+        return self._decision
+
+    @property
+    def statuses(self) -> tuple[LiveStatus, ...]:
+        """The status after every segment so far."""
+        return tuple(self._statuses)
+
+    @property
+    def status(self) -> LiveStatus:
+        """Where the session stands now."""
+        d = self._decision
+        result = self._calibration()
+        nominal = tuple(map(float, self.settings.nominal.as_array()))
+        clearance = None
+        if self._area is not None and self._poses.t:
+            clearance = self._area.clearance(self._body_pose(), self.settings.chassis)
+        now = self._now if self._now is not None else 0.0
+        return LiveStatus(
+            state=self._state,
+            elapsed=0.0 if self._start is None else now - self._start,
+            segments=self._segments,
+            calibrated_segments=0 if d is None else d.n_segments,
+            estimate=nominal if result is None else tuple(map(float, result.params.as_array())),
+            std=None if result is None else tuple(map(float, result.std)),
+            statistic=math.inf if d is None else d.statistic,
+            seconds_to_go=None if d is None else d.seconds_to_go,
+            clearance=clearance, reason=self._reason)
+
+    def finish(self) -> LiveResult:
+        """End the session (as *aborted* if it is still running) and run the full offline
+        calibration of everything it recorded."""
+        if not self.ended:
+            self._end("aborted", "the session was finished before it ended")
+        if self._pending is not None:
+            self._take_decision(wait=True)
+        calibration, error = None, None
+        try:
+            segments = self._segmented()
+            calibration = calibrate(segments, initial=self.settings.nominal,
+                                    sensor_pose=self.settings.sensor_pose)
+        except ExciteError as exc:
+            error = str(exc)
+        duration = 0.0 if self._start is None or self._now is None else self._now - self._start
+        return LiveResult(outcome=self._state, reason=self._reason, calibration=calibration,
+                          calibration_error=error, decision=self._decision,
+                          series=self._series(), area=self._area,
+                          statuses=tuple(self._statuses), duration=duration,
+                          calibrated_from=self._epoch, slowdowns=tuple(self._slowdowns))

@@ -1,0 +1,62 @@
+"""Every bad input of ``excite live`` and ``excite sim-robot`` is one line and exit status 2,
+found before anything talks to ROS (these run without the ros2 extra)."""
+
+import pytest
+
+from tests.conftest import assert_one_line_error, run_cli
+
+TOPICS = ["--left-wheel", "l", "--right-wheel", "r", "--pose-topic", "/pose"]
+
+
+@pytest.mark.parametrize("args, words", [
+    ([], "--nominal RL,RR,B"),
+    (["--nominal", "0.05,0.05,0.3"], "--max-wheel-speed"),
+    (["--nominal", "0.05,0.05,0.3", "--robot", "default"], "--nominal"),
+    (["--nominal", "5,5,30", "--max-wheel-speed", "20"], "--nominal"),
+    (["--robot", "default", "--area", "0,0,1"], "--area"),
+    (["--robot", "default", "--area", "1,0,0,1"], "X0 < X1"),
+    (["--robot", "default", "--area", "0,0,1,1", "--radius", "1"], "--area or --radius"),
+    (["--robot", "default", "--rate", "10"], "at least 20 Hz"),
+    (["--robot", "default", "--speed-fraction", "1.5"], "speed_fraction"),
+    (["--robot", "default", "--target", "2"], "target"),
+    (["--robot", "default", "--target", "0"], "--target"),
+    (["--nominal", "0.05,0.05,0.3", "--max-wheel-speed", "20"], "slip_aware needs"),
+    (["--nominal", "0.05,0.05,0.3", "--max-wheel-speed", "20", "--motor-tau", "0.05"],
+     "go together"),
+    (["--robot", "default", "--protocol", "nosuch"], "nosuch"),
+    (["--robot", "nosuch"], "unknown robot preset"),
+    (["--robot", "default", "--force-yaml"], "--force-yaml needs --ros2-yaml"),
+    (["--robot", "default", "--sensor-pose", "1,2"], "--sensor-pose"),
+    (["--robot", "default", "--silence-timeout", "5", "--abort-timeout", "1"],
+     "abort_timeout"),
+])
+def test_bad_live_input(capsys, args, words):
+    code, _, err = run_cli(capsys, "live", *TOPICS, *args)
+    assert_one_line_error(code, err, words)
+
+
+def test_live_refuses_to_record_over_a_bag(capsys, tmp_path):
+    (tmp_path / "s.mcap").mkdir()
+    code, _, err = run_cli(capsys, "live", *TOPICS, "--robot", "default", "--record",
+                           tmp_path / "s.mcap")
+    assert_one_line_error(code, err, "exists")
+
+
+def test_live_refuses_an_output_in_a_missing_folder(capsys, tmp_path):
+    code, _, err = run_cli(capsys, "live", *TOPICS, "--robot", "default", "--out",
+                           tmp_path / "no" / "r.json")
+    assert_one_line_error(code, err, "no such directory")
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--cut", "pose:1"], "--cut"),
+    (["--cut", "wheels:1:2"], "--cut"),
+    (["--cut", "pose:-1:2"], "START >= 0"),
+    (["--mount", "1,2"], "--mount"),
+    (["--pose-noise", "-1,0"], "--pose-noise"),
+    (["--speed", "0"], "--speed"),
+    (["--robot", "nosuch"], "unknown robot preset"),
+])
+def test_bad_sim_robot_input(capsys, args, words):
+    code, _, err = run_cli(capsys, "sim-robot", *args)
+    assert_one_line_error(code, err, words)

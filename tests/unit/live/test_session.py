@@ -1,0 +1,244 @@
+"""The live session without ROS: a made-up transport around a kinematic robot
+(examples/live_session.py), its watchdogs, its area and its result."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agents.catalog import make_protocol
+from excite import Params
+from excite.contracts import Traction
+from excite.live import Area, LiveSession, LiveSettings
+from excite.live.watch import judge
+from excite.logs.timeseries import during
+
+ROOT = Path(__file__).resolve().parents[3]
+NOMINAL = Params(0.05, 0.05, 0.30)
+TRUTH = Params(0.0505, 0.0497, 0.306)
+TRACTION = Traction(motor_tau=0.05, grip=5.0)
+
+
+def _example():
+    spec = importlib.util.spec_from_file_location("live_session",
+                                                  ROOT / "examples" / "live_session.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+EXAMPLE = _example()
+
+
+def _settings(**changes) -> LiveSettings:
+    base = dict(nominal=NOMINAL, max_wheel_speed=20.0, target=0.005, sensor_pose="axle",
+                max_time=120.0, traction=TRACTION)
+    return LiveSettings(**{**base, **changes})
+
+
+def _drive(session, robot, dt=0.02, until=math.inf, poses=True, wheels=True, follow=True):
+    """Run the made-up transport until the session ends or time ``until``; the commands
+    sent (t, left, right)."""
+    sent = []
+    while not session.ended and robot.t < until:
+        robot.step(dt)
+        if wheels:
+            session.add_wheels(*robot.wheel_angles())
+        if poses:
+            session.add_pose(*robot.measured_pose())
+        command = session.command(robot.t)
+        if follow:
+            robot.speeds = np.array([command.left, command.right])
+        sent.append((robot.t, command.left, command.right))
+    return np.array(sent)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_session_reaches_the_target_with_the_truth_inside(seed):
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=seed)
+    session = LiveSession(_settings(), make_protocol("slip_aware"), seed=seed)
+    sent = _drive(session, robot)
+    result = session.finish()
+    assert result.outcome == "done", result.reason
+    assert np.all(sent[-1, 1:] == 0.0)  # the last command is zero
+    z = (result.calibration.params.as_array() - TRUTH.as_array()) / result.calibration.std
+    assert np.all(np.abs(z) < 3), z
+    assert len(result.statuses) >= 10
+    assert result.statuses[-1].statistic <= 1.0 or result.decision.done
+    # the area: a square of area_size around the start, never left
+    assert result.area.extent == (4.0, 4.0)
+    assert min(s.clearance for s in result.statuses) > 0
+
+
+def test_the_final_calibration_is_excite_calibrate_of_the_recorded_log(tmp_path, capsys):
+    import json
+
+    from excite.cli import main
+
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=2)
+    session = LiveSession(_settings(), make_protocol("slip_aware"), seed=2)
+    _drive(session, robot)
+    result = session.finish()
+    s = result.series
+    path = tmp_path / "session.csv"
+    enc = np.column_stack([s.t_enc, s.phi_L, s.phi_R])
+    pose = np.column_stack([s.t_pose, s.x, s.y, s.theta])
+    np.savetxt(tmp_path / "enc.csv", enc, delimiter=",", header="t,phi_L,phi_R", comments="",
+               fmt="%.17g")
+    np.savetxt(path, pose, delimiter=",", header="t,x,y,theta", comments="", fmt="%.17g")
+    start = [] if result.calibrated_from is None else ["--start", repr(result.calibrated_from)]
+    code = main(["calibrate", str(tmp_path / "enc.csv"), str(path), "--split-at-gaps",
+                 "--init", "0.05,0.05,0.3", "--sensor-pose", "axle", "--json", *start])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0
+    np.testing.assert_allclose([out["params"][k] for k in ("r_L", "r_R", "b")],
+                               result.calibration.params.as_array(), rtol=1e-9)
+
+
+def test_silent_streams_stop_the_robot_then_it_resumes_or_aborts():
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=3)
+    session = LiveSession(_settings(abort_timeout=3.0), make_protocol("arcs"), seed=3)
+    _drive(session, robot, until=4.0)
+    assert session.state == "running"
+    # the poses stop: the command is zero within the silence timeout (plus one tick)
+    sent = _drive(session, robot, until=6.0, poses=False)
+    moving = sent[np.any(sent[:, 1:] != 0, axis=1), 0]
+    assert moving.max() <= 4.0 + 0.5 + 0.02
+    assert session.state == "paused"
+    assert "poses silent" in session.reason
+    # they return: the session drives again
+    sent = _drive(session, robot, until=8.0)
+    assert session.state == "running" and np.any(sent[:, 1:] != 0)
+    # silent for longer than the abort timeout: aborted, zero
+    sent = _drive(session, robot, until=13.0, wheels=False)
+    assert session.state == "aborted" and "wheel angles silent" in session.reason
+    assert np.all(sent[-1, 1:] == 0.0)
+    assert session.command(robot.t + 1.0).is_zero
+
+
+def test_the_time_limit_ends_the_session_out_of_time():
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=4)
+    session = LiveSession(_settings(max_time=5.0), make_protocol("slip_aware"), seed=4)
+    sent = _drive(session, robot)
+    assert session.state == "out_of_time"
+    assert np.all(sent[-1, 1:] == 0.0)
+    assert sent[-1, 0] <= 5.0 + 0.1
+
+
+@pytest.mark.parametrize("mapping, words", [
+    (np.zeros((2, 2)), "do not turn"),
+    (np.array([[0.0, 1.0], [1.0, 0.0]]), "against the command"),
+    (np.diag([-1.0, 1.0]), "left wheel turns backwards"),
+])
+def test_wheels_that_do_not_follow_abort_within_two_seconds(mapping, words):
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=5)
+    session = LiveSession(_settings(), make_protocol("arcs"), seed=5)
+    sent = []
+    while not session.ended and robot.t < 10.0:
+        robot.step(0.02)
+        session.add_wheels(*robot.wheel_angles())
+        session.add_pose(*robot.measured_pose())
+        command = session.command(robot.t)
+        robot.speeds = mapping @ np.array([command.left, command.right])
+        sent.append((robot.t, command.left, command.right))
+    sent = np.array(sent)
+    assert session.state == "aborted" and words in session.reason, session.reason
+    first = sent[np.argmax(np.any(sent[:, 1:] != 0, axis=1)), 0]
+    assert robot.t - first <= 2.0
+    assert np.all(sent[-1, 1:] == 0.0)
+
+
+def test_judge():
+    assert judge(np.array([10.0, 5.0]), np.array([9.0, 4.8])) is None
+    assert "do not turn" in judge(np.array([10.0, 5.0]), np.array([0.1, 0.0]))
+    assert "swapped" in judge(np.array([10.0, 5.0]), np.array([5.0, 10.0]))
+    assert "both wheels" in judge(np.array([10.0, 5.0]), np.array([-10.0, -5.0]))
+    # a straight command cannot tell swapped wheels, and need not
+    assert judge(np.array([10.0, 10.0]), np.array([10.0, 10.0])) is None
+
+
+def test_area():
+    area = Area.square((1.0, 2.0), 4.0)
+    assert (area.x0, area.y0, area.x1, area.y1) == (-1.0, 0.0, 3.0, 4.0)
+    assert area.clearance(np.array([1.0, 2.0, 0.0]), (0.4, 0.2)) == pytest.approx(1.8)
+    assert area.clearance(np.array([2.9, 2.0, 0.0]), (0.4, 0.2)) < 0
+    around = Area.around((0.0, 0.0), 1.0)
+    assert np.hypot(around.x1, around.y1) == pytest.approx(1.0)
+    np.testing.assert_allclose(area.to_local(np.array([1.0, 2.0, 0.3])), [0.0, 0.0, 0.3])
+    with pytest.raises(ValueError, match="X0 < X1"):
+        Area(1.0, 0.0, 0.0, 1.0)
+
+
+@pytest.mark.parametrize("changes, words", [
+    ({"max_wheel_speed": 0.0}, "max_wheel_speed"),
+    ({"speed_fraction": 1.5}, "speed_fraction"),
+    ({"target": 2.0}, "target"),
+    ({"area": Area(0, 0, 1, 1), "radius": 1.0}, "not both"),
+    ({"sigma": (1e-3, 0.0, 1e-3)}, "sigma"),
+    ({"silence_timeout": 5.0, "abort_timeout": 1.0}, "abort_timeout"),
+])
+def test_bad_settings_are_refused(changes, words):
+    with pytest.raises(ValueError, match=words):
+        _settings(**changes)
+
+
+def test_a_rectangle_area_is_kept_by_the_guard():
+    """An area narrower than the default square: the footprint stays inside."""
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=6)
+    session = LiveSession(_settings(area=Area(-0.8, -3.0, 0.8, 3.0), max_time=40.0),
+                          make_protocol("slip_aware"), seed=6)
+    poses = []
+    while not session.ended:
+        robot.step(0.02)
+        session.add_wheels(*robot.wheel_angles())
+        session.add_pose(*robot.measured_pose())
+        c = session.command(robot.t)
+        robot.speeds = np.array([c.left, c.right])
+        poses.append(robot.pose.copy())
+    area = session.area
+    assert min(area.clearance(p) for p in poses) > 0
+
+
+def test_during_keeps_the_samples_between_two_times():
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=7)
+    session = LiveSession(_settings(max_time=6.0), make_protocol("arcs"), seed=7)
+    _drive(session, robot)
+    series = session.finish().series
+    part = during(series, 2.0, 4.0)
+    assert part.t_enc.min() >= 2.0 and part.t_enc.max() <= 4.0
+    assert part.t_pose.min() >= 2.0 and part.t_pose.max() <= 4.0
+    from excite.errors import DataError
+    with pytest.raises(DataError, match="fewer than 2"):
+        during(series, 100.0, None)
+
+
+@pytest.mark.slow
+@pytest.mark.statistical
+def test_sessions_stop_with_the_truth_in_the_95_percent_ellipse():
+    """Monte Carlo over 40 made-up robots and pose noises: the truth lies in the final
+    calibration's 95% ellipse (r_L, r_R, b) about 95% of the time, although every session
+    stopped when the rule first said done (optional stopping), and every stop is within the
+    target."""
+    from scipy.stats import binom, chi2
+
+    rng = np.random.default_rng(2026)
+    inside, within, runs = 0, 0, 40
+    for k in range(runs):
+        truth = Params(*(NOMINAL.as_array() * rng.uniform(0.97, 1.03, 3)))
+        robot = EXAMPLE.ToyRobot(truth, seed=100 + k)
+        session = LiveSession(_settings(), make_protocol("slip_aware"), seed=k)
+        _drive(session, robot)
+        result = session.finish()
+        assert result.outcome == "done", result.reason
+        c = result.calibration
+        error = c.params.as_array() - truth.as_array()
+        inside += error @ np.linalg.solve(c.covariance, error) <= chi2.ppf(0.95, 3)
+        within += np.all(np.abs(error / truth.as_array()) <= 0.005)
+    print(f"truth in the 95% ellipse: {inside}/{runs}; within the target: {within}/{runs}")
+    # at least the 1% lower quantile of Binomial(40, 0.95)
+    assert inside >= binom.ppf(0.01, runs, 0.95), inside
+    assert within >= binom.ppf(0.01, runs, 0.95), within
