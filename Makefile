@@ -4,7 +4,7 @@ PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 
-.PHONY: install demo test test-fast test-core test-live bench lint clean docs
+.PHONY: install demo test test-fast test-core test-live bench bench-live lint clean docs
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -18,12 +18,18 @@ demo: $(STAMP)
 	$(VENV)/bin/excite compare --episodes 100 --out demo_out
 	@echo "plots and tables: demo_out/ (summary.json, segments.csv, *.png)"
 
-test: $(STAMP) test-core docs
+test: $(STAMP) $(ROS_STAMP) test-core docs
 	$(VENV)/bin/ruff check excite envs agents tests benchmarks examples docs/hooks
 	# one BLAS thread per test worker: two workers with two threads each on two cores made the
 	# many small dense factorisations (excite/calibration/wander.py) 2-3x slower
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 --dist loadgroup --ignore=tests/live tests
-	$(MAKE) test-live
+	# the live tests (their own venv) run beside the main suite: they wait on simulated time
+	# far more than they compute; their output follows the suite's
+	mkdir -p build; EXCITE_LIVE_TESTS=1 OPENBLAS_NUM_THREADS=1 $(ROS_VENV)/bin/python -m pytest \
+	    tests/live \
+	    > build/live-tests.log 2>&1 & live=$$!; \
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -n 2 --dist loadgroup --ignore=tests/live tests; \
+	main=$$?; wait $$live; status=$$?; cat build/live-tests.log; \
+	test $$main -eq 0 && test $$status -eq 0
 
 # excite live over real DDS, in a venv of its own with the ROS 2 wheels (the ros2 extra): their
 # start-up hook re-runs every Python process of the venv with the ROS libraries on
@@ -61,6 +67,10 @@ test-fast: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
+
+# Live sessions against the simulated robot beside compare --target (BENCHMARKS.md).
+bench-live: $(ROS_STAMP)
+	OPENBLAS_NUM_THREADS=1 $(ROS_VENV)/bin/python benchmarks/bench_live.py
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check excite envs agents tests benchmarks examples docs/hooks

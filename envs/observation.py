@@ -139,3 +139,15 @@ def observations(model: SegmentModel, theta: np.ndarray, nominal_theta: np.ndarr
     obs[:, 3 * p + 6] = used
     out = obs.astype(np.float32)
     return np.minimum(np.maximum(out, space.low, out=out), space.high, out=out)
+
+
+def observation_of(knowledge, last_action) -> np.ndarray:
+    """The observation (the table in DiffDriveCalibEnv's doc) of what a robot knows, as
+    :class:`excite.contracts.RobotKnowledge` (a live session's), after ``last_action``
+    ([-1, 1]^2): what a learned policy reads off the simulator."""
+    eigenvalues, weakest = eigen(knowledge.information)
+    return observation(knowledge.model, knowledge.theta.tolist(),
+                       knowledge.nominal_theta.tolist(), eigenvalues, weakest,
+                       knowledge.pose.tolist(), [float(a) for a in last_action],
+                       min(knowledge.n_segments / knowledge.budget, 1.0), knowledge.arena_size,
+                       observation_space(knowledge.model))

@@ -31,6 +31,17 @@ segments to estimate the noise levels (fewer than MIN_RESIDUAL_DOF residual degr
 freedom per channel), or a channel of independent segments fitted exactly (its noise level at
 its floor). It predicts how many more segments the current way of
 driving needs from the growth of the information so far (std ~ 1 / sqrt(segments)).
+
+Asked after every segment of a growing log (:meth:`StoppingRule.session`, or
+:meth:`StoppingRule.decide` with the previous decision), most looks skip the batch
+calibration: for segments that share pose samples, a screen (:mod:`excite.calibration.screen`)
+computes the std of the data so far at the last calibration's noise model, its levels
+followed by a factor per group (a few ms instead of hundreds), and says *not yet* when the
+statistic from them exceeds SCREEN_MARGIN. Every *done*, and every look the screen does not
+rule out, is the batch calibration's, so a session stops where the rule alone first says done
+unless the screen's statistic is above SCREEN_MARGIN where the calibration's is at most 1
+(its levels then off by that much from the calibration's; ``benchmarks/bench_stopping.py
+--sessions`` compares the first *done* of both on simulated logs).
 """
 
 from __future__ import annotations
@@ -45,11 +56,13 @@ from scipy.stats import chi2, norm
 from excite.calibration.options import SensorPoseOption
 from excite.calibration.pipeline import calibrate
 from excite.calibration.result import CalibrationResult
+from excite.calibration.screen import screened_std
 from excite.core.kinematics import Params
 from excite.errors import ExciteError
 from excite.logs.segments import Segments
 
-__all__ = ["DEFAULT_CONFIDENCE", "DEFAULT_TARGET", "StopDecision", "StoppingRule"]
+__all__ = ["DEFAULT_CONFIDENCE", "DEFAULT_TARGET", "REFERENCE_GROWTH", "SCREEN_MARGIN",
+           "StopDecision", "StoppingRule", "StoppingSession"]
 
 #: The default target: the largest relative error of r_L, r_R, b (0.2%).
 DEFAULT_TARGET = 0.002
@@ -62,6 +75,14 @@ NOISE_BOUND_CONFIDENCE = 0.95
 #: parameters) before the rule may say done: noise levels estimated from fewer residuals can
 #: be near zero by chance (a channel fitted almost exactly), and the std with them.
 MIN_RESIDUAL_DOF = 10
+#: The screen (:meth:`StoppingRule.decide` with ``previous``) says *not yet* without the batch
+#: calibration only when its statistic exceeds this: its noise levels are an earlier look's
+#: followed by a factor per group, not the calibration's own REML and tests, and the
+#: calibration's statistic may be this much smaller.
+SCREEN_MARGIN = 1.05
+#: The screen uses an earlier look's calibration only while the segments have grown at most
+#: this many times since it; the batch calibration runs again then and is the next reference.
+REFERENCE_GROWTH = 1.25
 
 
 @dataclass(frozen=True)
@@ -93,7 +114,13 @@ class StopDecision:
         The same in seconds, from the mean duration of the segments so far (inf when unknown;
         None without segment times).
     result : CalibrationResult or None
-        The batch calibration the decision is based on (None when it failed).
+        The batch calibration the decision is based on (None when it failed); for a
+        ``screened`` decision, the earlier look's calibration whose noise model the screen
+        used (of ``result.n_segments`` < ``n_segments`` segments).
+    screened : bool
+        Whether the decision is the screen's *not yet* (:meth:`StoppingRule.decide` with
+        ``previous``): ``statistic``, ``quantile``, ``half_widths`` and ``segments_to_go``
+        are then the screen's (:mod:`excite.calibration.screen`), not a calibration's.
     """
 
     done: bool
@@ -106,6 +133,7 @@ class StopDecision:
     segments_to_go: float
     seconds_to_go: float | None
     result: CalibrationResult | None
+    screened: bool = False
 
     def to_dict(self) -> dict:
         """JSON-ready dict (without the calibration result)."""
@@ -115,7 +143,7 @@ class StopDecision:
                 "half_widths": self.half_widths, "tolerances": self.tolerances,
                 "segments_to_go": _finite_or_none(self.segments_to_go),
                 "seconds_to_go": None if self.seconds_to_go is None
-                else _finite_or_none(self.seconds_to_go)}
+                else _finite_or_none(self.seconds_to_go), "screened": self.screened}
 
 
 def _finite_or_none(x: float) -> float | None:
@@ -151,10 +179,33 @@ class StoppingRule:
         if not (isinstance(self.confidence, (int, float)) and 0.0 < self.confidence < 1.0):
             raise ValueError(f"confidence must be in (0, 1), got {self.confidence!r}")
 
-    def decide(self, segments: Segments, nominal: Params | ArrayLike | None = None
-               ) -> StopDecision:
+    def decide(self, segments: Segments, nominal: Params | ArrayLike | None = None,
+               previous: StopDecision | None = None) -> StopDecision:
         """The decision for ``segments`` (all the data so far), the batch calibration
-        started at ``nominal`` (Params or (r_L, r_R, b) in m; None: its own start)."""
+        started at ``nominal`` (Params or (r_L, r_R, b) in m; None: its own start).
+
+        ``previous``: this rule's decision at an earlier look of the same growing session
+        (on a prefix of ``segments``; None: none, the batch calibration decides). For
+        segments that share pose samples, the screen (:mod:`excite.calibration.screen`) then
+        says *not yet* without calibrating when its statistic, at the noise model of the
+        session's last batch calibration (``previous.result``, of at least
+        1 / REFERENCE_GROWTH of the segments), exceeds SCREEN_MARGIN; the decision is
+        ``screened``. Otherwise, and for every *done*, the batch calibration decides, exactly
+        as without ``previous``. :meth:`session` passes it along."""
+        if previous is not None:
+            screened = self._screened(segments, previous)
+            if screened is not None:
+                return screened
+        return self._calibrated(segments, nominal)
+
+    def session(self, nominal: Params | ArrayLike | None = None) -> StoppingSession:
+        """A :class:`StoppingSession`: this rule asked after every segment of one growing
+        session, each look passing the previous decision (the screen)."""
+        return StoppingSession(self, nominal)
+
+    def _calibrated(self, segments: Segments, nominal: Params | ArrayLike | None
+                    ) -> StopDecision:
+        """The decision from the batch calibration of ``segments``."""
         n = len(segments)
         try:
             result = calibrate(segments, initial=nominal, sensor_pose=self.sensor_pose,
@@ -203,13 +254,48 @@ class StoppingRule:
                     "theta": self.target}
         return tol
 
+    def _screened(self, segments: Segments, previous: StopDecision) -> StopDecision | None:
+        """The screen's *not yet* (see :meth:`decide`), or None when the batch calibration
+        must decide: no usable reference, the screen does not apply, or its statistic (the
+        smallest over the models the calibration could report and the outcomes of its tests
+        of segment noise) is at most SCREEN_MARGIN."""
+        reference, n = previous.result, len(segments)
+        if (reference is None or previous.n_segments > n
+                or n > REFERENCE_GROWTH * reference.n_segments):
+            return None
+        found = screened_std(segments, reference, self.sensor_pose, self.ticks_per_rev)
+        if not found:
+            return None
+        every = self._tolerances(reference)
+        best = None
+        for screened in found:
+            quantile = self._quantile_of(n, screened.n_parameters)
+            half = {name: float(quantile * s) for name, s in screened.std.items()}
+            ratios = {name: half[name] / every[name] for name in half}
+            statistic = max(ratios.values())
+            if best is None or statistic < best[0]:
+                best = (statistic, quantile, half, {k: every[k] for k in half}, ratios)
+        statistic, quantile, half, tolerances, ratios = best
+        if not statistic > SCREEN_MARGIN:
+            return None
+        worst = max(ratios, key=ratios.get)
+        to_go = _segments_to_go(n, statistic)
+        reason = (f"{worst} at about {statistic:.2f} of its tolerance at {self.confidence:.0%} "
+                  f"(screened at the noise model of the calibration of "
+                  f"{reference.n_segments} segments)")
+        return StopDecision(False, statistic, reason, n, quantile, half, tolerances, to_go,
+                            _seconds(segments, to_go), reference, screened=True)
+
     def _quantile(self, result: CalibrationResult) -> float:
-        """The simultaneous two-sided normal quantile over the P estimated parameters,
-        times an upper confidence bound (NOISE_BOUND_CONFIDENCE) on the noise scale from the
-        residual degrees of freedom of one noise channel (segments less the parameters):
-        sqrt(dof / chi2_dof^{-1}(1 - NOISE_BOUND_CONFIDENCE))."""
-        count = len(result.parameter_names)
-        dof = max(result.n_segments - count, 1)
+        """:meth:`_quantile_of` the calibration's segments and estimated parameters."""
+        return self._quantile_of(result.n_segments, len(result.parameter_names))
+
+    def _quantile_of(self, n_segments: int, count: int) -> float:
+        """The simultaneous two-sided normal quantile over the ``count`` estimated
+        parameters, times an upper confidence bound (NOISE_BOUND_CONFIDENCE) on the noise
+        scale from the residual degrees of freedom of one noise channel (segments less the
+        parameters): sqrt(dof / chi2_dof^{-1}(1 - NOISE_BOUND_CONFIDENCE))."""
+        dof = max(n_segments - count, 1)
         scale = math.sqrt(dof / chi2.ppf(1.0 - NOISE_BOUND_CONFIDENCE, dof))
         return float(norm.ppf(1.0 - (1.0 - self.confidence) / (2 * count)) * scale)
 
@@ -217,6 +303,36 @@ class StoppingRule:
                  result: CalibrationResult | None = None) -> StopDecision:
         return StopDecision(False, math.inf, reason, n, math.nan, {}, tolerances or {},
                             math.inf, None, result)
+
+
+class StoppingSession:
+    """A :class:`StoppingRule` asked after every segment of one growing session (e.g. a log
+    recorded on the robot): :meth:`decide` passes the previous decision to
+    :meth:`StoppingRule.decide`, so that looks the screen answers skip the batch
+    calibration. Every *done* is the batch calibration's, and the first comes at the look
+    where the rule alone first says done unless the screen's statistic there exceeds
+    SCREEN_MARGIN (see the module docstring).
+
+    Attributes
+    ----------
+    rule : StoppingRule
+        The rule asked.
+    nominal : Params, (r_L, r_R, b) or None
+        Where every batch calibration starts (m; None: its own start).
+    last : StopDecision or None
+        The latest decision (None before the first look).
+    """
+
+    def __init__(self, rule: StoppingRule, nominal: Params | ArrayLike | None = None):
+        self.rule = rule
+        self.nominal = nominal
+        self.last: StopDecision | None = None
+
+    def decide(self, segments: Segments) -> StopDecision:
+        """The decision for ``segments``: all the data of the session so far (the segments
+        of the previous look, and more)."""
+        self.last = self.rule.decide(segments, self.nominal, previous=self.last)
+        return self.last
 
 
 def _standard_deviations(result: CalibrationResult) -> dict[str, float]:

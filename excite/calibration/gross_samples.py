@@ -36,7 +36,6 @@ from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
-from numpy.typing import NDArray
 
 from excite.calibration.gross_errors import (
     Fits,
@@ -48,13 +47,12 @@ from excite.calibration.gross_errors import (
 )
 from excite.calibration.noise import chain_band
 from excite.core import se2
+from excite.core.arrays import BoolArray, FloatArray, IntArray
 from excite.logs.segments import Segments
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
 __all__ = ["PASSES", "marginal_sizes", "merged", "screen_chain"]
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 #: Most rounds of (test, find the candidates, repair, estimate the levels and fit again).
 PASSES = 3
 
@@ -113,7 +111,7 @@ def _attributed(data: Segments, chosen: IntArray, z2: FloatArray, threshold: flo
     return np.flatnonzero(out).astype(np.int64)
 
 
-def _runs(data: Segments, flagged: NDArray[np.bool_]) -> list[IntArray]:
+def _runs(data: Segments, flagged: BoolArray) -> list[IntArray]:
     """The flagged segments split into runs of consecutive chained segments."""
     chosen = np.flatnonzero(flagged)
     if chosen.size == 0:
@@ -123,8 +121,8 @@ def _runs(data: Segments, flagged: NDArray[np.bool_]) -> list[IntArray]:
     return np.split(chosen, breaks)
 
 
-def merged(data: Segments, flagged: NDArray[np.bool_],
-           left_out: NDArray[np.bool_] | None = None) -> tuple[Segments, list[IntArray]]:
+def merged(data: Segments, flagged: BoolArray,
+           left_out: BoolArray | None = None) -> tuple[Segments, list[IntArray]]:
     """``data`` repaired around the ``flagged`` segments: each run of two or more consecutive
     chained flagged segments made one segment, each single flagged segment and every
     ``left_out`` one left out; and the segments of ``data`` each repaired segment is made of.

@@ -49,6 +49,22 @@ def _default(cls_name: str, name: str):
     return next(f.default for f in fields(getattr(settings, cls_name)) if f.name == name)
 
 
+#: The numeric options of the robot: (flag, LiveSettings field of the default or None,
+#: metavar, help).
+_ROBOT_NUMBERS = (
+    ("--max-wheel-speed", None, "RAD/S",
+     "the wheels' speed limit (rad/s); required with --nominal, the preset's with --robot"),
+    ("--speed-fraction", "speed_fraction", "F",
+     "the share of --max-wheel-speed the protocol may command, in (0, 1] (default "
+     "%(default)g)"),
+    ("--max-wheel-accel", "max_wheel_acceleration", "RAD/S2",
+     "the largest change of a wheel's commanded speed (rad/s^2; default: none, the "
+     "controller's limits apply)"),
+    ("--motor-tau", None, "S", "the motors' time constant (s), for planners that plan around "
+     "slip (the preset's with --robot)"),
+    ("--grip", None, "M/S2", "the largest acceleration the floor gives a wheel before it "
+     "slides, mu g (m/s^2) (the preset's with --robot)"),
+)
 #: The numeric options of a session: (flag, LiveSettings field, metavar, help).
 _SESSION_NUMBERS = (
     ("--segment-duration", "segment_duration", "S",
@@ -100,23 +116,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     robot.add_argument("--robot", type=robot_preset, metavar="PRESET",
                        help="a preset's nominal robot, speed limit, traction and footprint: "
                        "%(robot_presets)s")
-    robot.add_argument("--max-wheel-speed", type=positive_number,
-                       metavar="RAD/S", help="the wheels' speed limit (rad/s); required with "
-                       "--nominal, the preset's with --robot")
-    robot.add_argument("--speed-fraction", type=positive_number,
-                       default=_default("LiveSettings", "speed_fraction"), metavar="F",
-                       help="the share of --max-wheel-speed the protocol may command, in "
-                       "(0, 1] (default %(default)g)")
-    robot.add_argument("--max-wheel-accel", type=positive_number,
-                       default=_default("LiveSettings", "max_wheel_acceleration"),
-                       metavar="RAD/S2", help="the largest change of a wheel's commanded "
-                       "speed (rad/s^2; default: none, the controller's limits apply)")
-    robot.add_argument("--motor-tau", type=positive_number, metavar="S",
-                       help="the motors' time constant (s), for planners that plan around "
-                       "slip (the preset's with --robot)")
-    robot.add_argument("--grip", type=positive_number, metavar="M/S2",
-                       help="the largest acceleration the floor gives a wheel before it "
-                       "slides, mu g (m/s^2) (the preset's with --robot)")
+    for flag, field, metavar, text in _ROBOT_NUMBERS:
+        default = None if field is None else _default("LiveSettings", field)
+        robot.add_argument(flag, type=positive_number, metavar=metavar, default=default,
+                           help=text)
     robot.add_argument("--sensor-pose", default=_default("LiveSettings", "sensor_pose"),
                        metavar=f"auto|axle|estimate|{POSE_VALUES}",
                        help="the pose sensor's mounting (as excite calibrate; default "
@@ -206,14 +209,18 @@ def settings_from(args: argparse.Namespace):
 
 
 def _protocol(text: str, settings):
-    """The protocol, checked against what the session knows (traction for slip_aware)."""
+    """The protocol, checked against what the session knows (traction for slip_aware), and
+    the observation a learned policy reads (None for the others)."""
     from agents.catalog import make_protocol, parse_protocol
 
     spec = parse_protocol(text)
     if spec.name == "slip_aware" and settings.traction is None:
         raise UsageError("slip_aware needs the motors' lag and the grip: --motor-tau S and "
                          "--grip M/S2, or --robot PRESET (or another --protocol)")
-    return make_protocol(spec)
+    observe = None
+    if spec.name == "learned":
+        from envs.observation import observation_of as observe
+    return make_protocol(spec), observe
 
 
 def run(args: argparse.Namespace) -> int:
@@ -222,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
     from excite.live.report import closing_lines, result_dict, status_line
 
     settings = settings_from(args)
-    protocol = _protocol(args.protocol, settings)
+    protocol, observe = _protocol(args.protocol, settings)
     for path in (args.out, Path(args.ros2_yaml) if args.ros2_yaml else None):
         if path is not None:
             check_output_file(path)
@@ -237,7 +244,7 @@ def run(args: argparse.Namespace) -> int:
                         right_wheel=args.right_wheel, pose_topic=args.pose_topic,
                         cmd_vel=args.cmd_vel, cmd_type=args.cmd_type, rate=args.rate,
                         use_sim_time=args.use_sim_time, wait=args.wait)
-    session = LiveSession(settings, protocol, seed=args.seed)
+    session = LiveSession(settings, protocol, seed=args.seed, observe=observe)
 
     def on_status(status) -> None:
         if not args.json:

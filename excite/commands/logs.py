@@ -57,6 +57,11 @@ def _wheel_joint(side: str) -> dict[str, Any]:
             "messages (bags: required, no default)"}
 
 
+def _time_bound(text: str) -> dict[str, Any]:
+    """The keywords of --start or --end: read only the samples stamped ``text``."""
+    return {"type": _finite, "metavar": "S", "help": f"read only the samples stamped {text}"}
+
+
 #: The options that cut logs into segments: a field of LogOptions and add_argument's keywords
 #: but the flag (--FIELD-NAME) and the default (the field's).
 _SEGMENTATION: dict[str, dict[str, Any]] = {
@@ -97,11 +102,8 @@ _READING: dict[str, dict[str, Any]] = {
                    "help": "bag topic of the sensor's pose in the world frame, x, y in m "
                    "(PoseStamped, PoseWithCovarianceStamped or Odometry); a bag needs this or "
                    "--tf (no default)"},
-    "start": {"type": _finite, "metavar": "S",
-              "help": "read only the samples stamped from S on (s, the log's own stamps; "
-              "default: from the first)"},
-    "end": {"type": _finite, "metavar": "S",
-            "help": "read only the samples stamped up to S (s; default: to the last)"},
+    "start": _time_bound("from S on (s, the log's own stamps; default: from the first)"),
+    "end": _time_bound("up to S (s; default: to the last)"),
     "tf": {"type": _frame_pair, "metavar": "PARENT:CHILD",
            "help": "the sensor's pose from /tf instead: CHILD's pose in PARENT (m, rad), direct "
            "transforms only (bags; no default)"},

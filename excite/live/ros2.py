@@ -65,7 +65,9 @@ SENSOR_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
 
 
 def _seconds(stamp: Any) -> float:
-    return stamp.sec + 1e-9 * stamp.nanosec
+    """A header stamp in s, computed as the bag reader computes it (whole ns times 1e-9), so
+    that a recorded session reads back to the same numbers."""
+    return (stamp.sec * 1_000_000_000 + stamp.nanosec) * 1e-9
 
 
 @contextmanager
@@ -177,7 +179,7 @@ class LiveNode:
         self.session.add_pose(t, x, y, theta)
         if self.recorder is not None:  # as PoseStamped, whatever the topic's type
             self.recorder.write(self.topics.pose_topic, t, self.recorder.pose_stamped(
-                t, x, y, theta, msg.header.frame_id or "map"))
+                t, x, y, theta, msg.header.frame_id or "map", (q.x, q.y, q.z, q.w)))
 
     # -- output -------------------------------------------------------------------------------
     def publish(self, command: Command) -> None:

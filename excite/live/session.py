@@ -179,21 +179,35 @@ class LiveResult:
     slowdowns: tuple[tuple[float, float], ...] = ()
 
 
+def increment_noise(result: CalibrationResult) -> np.ndarray:
+    """The std (m, m, rad) of one segment's measured increment under a calibration's noise
+    model: its white segment noise and, for segments cut from a log, the two pose samples
+    the increment is the difference of (sqrt(2) times their std). What a planner weighs the
+    segments with; the per-segment levels alone are near zero where the noise is all in the
+    pose samples."""
+    sigma = np.asarray(result.sigma, dtype=float)[:3]
+    if result.pose_sigma is None:
+        return sigma
+    xy, theta = np.asarray(result.pose_sigma, dtype=float)
+    return np.sqrt(sigma**2 + 2.0 * np.array([xy, xy, theta]) ** 2)
+
+
 def cut(series: TimeSeries, window: float) -> Segments:
     """A session's log cut into segments as ``excite calibrate --window WINDOW
     --split-at-gaps`` cuts it (ExciteError when it cannot be, e.g. too few segments)."""
     return segment_timeseries(series, window=window, on_gap="split").segments
 
 
-def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal
-               ) -> StopDecision | None:
-    """The stopping rule's decision on a session's log so far; None while it cannot be cut
-    into segments yet."""
+def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal,
+               previous: StopDecision | None = None) -> StopDecision | None:
+    """The stopping rule's decision on a session's log so far, ``previous`` the decision at
+    an earlier look of it (the rule's screen then spares most looks the batch calibration);
+    None while the log cannot be cut into segments yet."""
     try:
         segments = cut(series, window)
     except ExciteError:
         return None
-    return rule.decide(segments, nominal)
+    return rule.decide(segments, nominal, previous=previous)
 
 
 class _Stream:
@@ -243,7 +257,8 @@ class LiveSession:
     learned policy reads from the knowledge and the last action (None: an empty one).
     executor: where the stopping rule's batch calibration runs (e.g. a one-thread
     ThreadPoolExecutor, so a transport's command loop never waits for it; the decision is
-    then taken up at a later segment end); None: in the caller's thread.
+    then taken up as soon as it is ready, and a "done" ends the session at once); None: in
+    the caller's thread.
     """
 
     def __init__(self, settings: LiveSettings, protocol, seed: int | None = None,
@@ -304,6 +319,11 @@ class LiveSession:
             self._watch_streams(now)
         if self._state == "running" and now >= self._segment_end:
             self._end_segment(now)
+        elif self._state == "running" and self._pending is not None and self._pending.done():
+            self._take_decision(wait=False)  # a decision that says done ends the session now
+            if self._decision is not None and self._decision.done:
+                self._statuses.append(self.status)
+                self._end("done", self._decision.reason)
         if self._state != "running":
             self._target[:] = 0.0
         return self._ramp(now)
@@ -332,6 +352,17 @@ class LiveSession:
         fault = self._watch.check(min(now, self._wheels.last), self._wheels.at)
         if fault is not None:
             self._end("aborted", str(fault))
+            return
+        self._check_area()
+
+    def _check_area(self) -> None:
+        """Abort when the footprint (at the measured pose) reaches outside the area: the
+        guard kept the plan inside, so the robot does not move as planned (or started
+        outside)."""
+        clearance = self._area.clearance(self._body_pose(), self.settings.chassis)
+        if clearance < 0:
+            self._end("aborted", f"the robot's footprint is {-clearance:.2f} m outside the "
+                      f"safe area {self._area.to_text()} (m, pose frame): stopped")
 
     def _silence_text(self, now: float) -> str:
         silent = [name for name, last in (("the wheel angles", self._wheels.last),
@@ -345,7 +376,9 @@ class LiveSession:
             self._start = now
             self._area = self.settings.area_at(self._body_pose())
         self._state, self._reason = "running", "driving"
-        self._next_action(now)
+        self._check_area()
+        if self._state == "running":
+            self._next_action(now)
 
     def _end_segment(self, now: float) -> None:
         """Stage 2: the segment's row for the planner, the decision on the log so far, the
@@ -436,7 +469,8 @@ class LiveSession:
         series = self._series(self._epoch)
         if self._pending is not None or series is None:
             return
-        args = (self.rule, series, self.settings.segment_duration, self.settings.nominal)
+        args = (self.rule, series, self.settings.segment_duration, self.settings.nominal,
+                self._decision)
         self._pending_epoch = self._epoch
         if self.executor is None:
             self._accept(decide_log(*args))
@@ -492,8 +526,7 @@ class LiveSession:
         s = self.settings
         result = self._calibration()
         estimate = result.params if result is not None else s.nominal
-        sigma = (np.asarray(result.sigma, dtype=float)[:3] if result is not None
-                 else np.array(s.sigma))
+        sigma = np.array(s.sigma) if result is None else increment_noise(result)
         sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, s.sigma)
         rows = self._rows
         information = (information_matrix(rows[:, 0], rows[:, 1], estimate, sigma,

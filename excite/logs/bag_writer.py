@@ -114,13 +114,15 @@ class BagWriter:
                                        position=np.array(positions, dtype=float),
                                        velocity=empty, effort=empty)
 
-    def pose(self, x: float, y: float, theta: float) -> Any:
-        """A geometry_msgs Pose at (x, y, 0) m, turned by the yaw ``theta`` (rad)."""
+    def pose(self, x: float, y: float, theta: float,
+             quaternion: tuple[float, float, float, float] | None = None) -> Any:
+        """A geometry_msgs Pose at (x, y, 0) m, turned by the yaw ``theta`` (rad), or by
+        ``quaternion`` (x, y, z, w) as given (a received pose recorded unchanged)."""
         types = self.types
+        qx, qy, qz, qw = quaternion or (0.0, 0.0, math.sin(0.5 * theta), math.cos(0.5 * theta))
         return types["geometry_msgs/msg/Pose"](
             position=types["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-            orientation=types["geometry_msgs/msg/Quaternion"](
-                x=0.0, y=0.0, z=math.sin(0.5 * theta), w=math.cos(0.5 * theta)))
+            orientation=types["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw))
 
     def twist_stamped(self, t: float, v: float, omega: float, frame_id: str = "") -> Any:
         """A geometry_msgs TwistStamped stamped ``t`` s: forward speed ``v`` (m/s) and turn
@@ -132,10 +134,12 @@ class BagWriter:
                                                             twist=twist)
 
     def pose_stamped(self, t: float, x: float, y: float, theta: float,
-                     frame_id: str = WORLD_FRAME) -> Any:
-        """A PoseStamped stamped ``t`` s: `pose` (x, y, theta) in ``frame_id``."""
+                     frame_id: str = WORLD_FRAME,
+                     quaternion: tuple[float, float, float, float] | None = None) -> Any:
+        """A PoseStamped stamped ``t`` s: `pose` (x, y, theta, or ``quaternion``) in
+        ``frame_id``."""
         return self.types[POSE_STAMPED](header=self.header(t, frame_id),
-                                        pose=self.pose(x, y, theta))
+                                        pose=self.pose(x, y, theta, quaternion))
 
 
 def write_bag(

@@ -48,15 +48,19 @@ def test_live_refuses_an_output_in_a_missing_folder(capsys, tmp_path):
     assert_one_line_error(code, err, "no such directory")
 
 
-@pytest.mark.parametrize("args, words", [
-    (["--cut", "pose:1"], "--cut"),
-    (["--cut", "wheels:1:2"], "--cut"),
-    (["--cut", "pose:-1:2"], "START >= 0"),
-    (["--mount", "1,2"], "--mount"),
-    (["--pose-noise", "-1,0"], "--pose-noise"),
-    (["--speed", "0"], "--speed"),
-    (["--robot", "nosuch"], "unknown robot preset"),
-])
-def test_bad_sim_robot_input(capsys, args, words):
-    code, _, err = run_cli(capsys, "sim-robot", *args)
-    assert_one_line_error(code, err, words)
+#: Bad sim-robot options and the words of their error.
+BAD_SIM_ROBOT = {
+    "--cut pose:1": "--cut",
+    "--cut wheels:1:2": "--cut",
+    "--cut pose:-1:2": "START >= 0",
+    "--mount 1,2": "--mount",
+    "--pose-noise -1,0": "--pose-noise",
+    "--speed 0": "--speed",
+    "--robot nosuch": "unknown robot preset",
+}
+
+
+@pytest.mark.parametrize("args", BAD_SIM_ROBOT)
+def test_bad_sim_robot_input(capsys, args):
+    code, _, err = run_cli(capsys, "sim-robot", *args.split())
+    assert_one_line_error(code, err, BAD_SIM_ROBOT[args])

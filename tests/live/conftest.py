@@ -9,17 +9,9 @@ error instead of a skip, so the live tests never silently vanish from CI.
 
 from __future__ import annotations
 
-import itertools
-import json
 import os
-import signal
-import subprocess
-import sys
-import time
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 if os.environ.get("EXCITE_LIVE_TESTS") == "1":
@@ -27,102 +19,6 @@ if os.environ.get("EXCITE_LIVE_TESTS") == "1":
 else:
     pytest.importorskip("rclpy", reason="the live tests need the ros2 extra (make test runs "
                         "them in .venv-ros)")
-
-#: The excite command of this venv.
-EXCITE = [str(Path(sys.executable).with_name("excite"))]
-#: Simulated seconds per wall second of the simulated robot in the tests.
-SPEED = 2.0
-#: Domain ids of the tests: 40.. (pytest-xdist workers get disjoint ranges).
-_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").lstrip("gw") or 0)
-_IDS = itertools.count(40 + 40 * _WORKER)
-
-
-def ros_env() -> dict[str, str]:
-    """The environment of one test's nodes: a domain of their own, localhost discovery."""
-    env = dict(os.environ)
-    env["ROS_DOMAIN_ID"] = str(next(_IDS))
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    env.pop("ROS_LOCALHOST_ONLY", None)
-    env["PYTHONUNBUFFERED"] = "1"
-    return env
-
-
-@dataclass
-class Session:
-    """What one live session left: the live process' exit status and output, its JSON
-    result, the robot's truth and own log (t, x, y, theta, v, omega, received,
-    received_wall), the wall time a signal was sent (None without one), the folder."""
-
-    code: int
-    out: str
-    err: str
-    result: dict | None
-    truth: dict
-    log: np.ndarray
-    signalled: float | None
-    folder: Path
-
-    @property
-    def zero_after(self):
-        """The first (simulated, wall) time a zero command reached the robot after a time
-        (s, simulated or wall with ``wall=True``)."""
-        def first(t: float, wall: bool = False) -> float:
-            column = 7 if wall else 6
-            zero = (self.log[:, 4] == 0) & (self.log[:, 5] == 0) & (self.log[:, column] >= t)
-            return float(self.log[np.argmax(zero), column]) if zero.any() else np.inf
-        return first
-
-
-def run_session(folder: Path, live_args: list[str], sim_args: list[str] = (),
-                signal_after: tuple[int, int] | None = None, timeout: float = 240.0
-                ) -> Session:
-    """``excite sim-robot`` and ``excite live`` against it; ``signal_after`` (signal,
-    segments): send the signal to live once it printed that many status lines."""
-    env = ros_env()
-    truth, log = folder / "truth.json", folder / "robot.csv"
-    live = None
-    sim = subprocess.Popen(
-        [*EXCITE, "sim-robot", "--speed", str(SPEED), "--truth", str(truth), "--log",
-         str(log), *sim_args], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True)
-    try:
-        line = sim.stdout.readline()
-        assert "ready" in line, (line, sim.stderr.read() if sim.poll() is not None else "")
-        live = subprocess.Popen(
-            [*EXCITE, "live", "--use-sim-time", "--out", str(folder / "result.json"),
-             "--record", str(folder / "session.mcap"), *live_args],
-            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        signalled = None
-        lines: list[str] = []
-        if signal_after is not None:
-            sig, count = signal_after
-            while len([x for x in lines if x.startswith("segment")]) < count:
-                text = live.stdout.readline()
-                assert text, "live ended before the signal"
-                lines.append(text)
-            signalled = time.time()
-            live.send_signal(sig)
-        out, err = live.communicate(timeout=timeout)
-        out = "".join(lines) + out
-    finally:
-        for process in (live, sim):  # never leave a node behind, whatever happened
-            if process is not None and process.poll() is None:
-                process.send_signal(signal.SIGINT)
-        if live is not None:
-            try:
-                live.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                live.kill()
-        try:
-            sim.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            sim.kill()
-    result_path = folder / "result.json"
-    return Session(live.returncode, out, err,
-                   json.loads(result_path.read_text()) if result_path.exists() else None,
-                   json.loads(truth.read_text()),
-                   np.loadtxt(log, delimiter=",", skiprows=1, ndmin=2), signalled, folder)
-
 
 @pytest.fixture
 def session_dir(tmp_path: Path) -> Path:

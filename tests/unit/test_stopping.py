@@ -1,16 +1,20 @@
 """The stopping rule (excite.stopping): its decisions on determined and undetermined data, its
-half-widths and tolerances, the prediction of the segments still needed, and, by Monte Carlo,
-its false-stop rate when asked after every segment."""
+half-widths and tolerances, the prediction of the segments still needed, by Monte Carlo its
+false-stop rate when asked after every segment, and its screen of a growing log
+(excite.calibration.screen): the same first done as the rule alone."""
 
 import math
 
 import numpy as np
 import pytest
 
+from excite.calibration.screen import screened_std
 from excite.core.kinematics import Params, predict_increment
+from excite.core.models import SensorPose
+from excite.logs.segmentation import segment_timeseries
 from excite.logs.segments import Segments
-from excite.logs.synthetic import LESSON_TRUTH, lesson_dataset
-from excite.stopping import StoppingRule
+from excite.logs.synthetic import LESSON_TRUTH, lesson_dataset, synthetic_log
+from excite.stopping import REFERENCE_GROWTH, SCREEN_MARGIN, StopDecision, StoppingRule
 
 TRUTH = LESSON_TRUTH.as_array()
 
@@ -120,3 +124,79 @@ def test_a_channel_fitted_exactly_or_too_few_residuals_is_not_done():
     few = StoppingRule(target=0.5, sensor_pose="axle").decide(
         lesson_dataset(rng, 12, dphi_std=2.0))
     assert not few.done and "degrees of freedom" in few.reason
+
+
+def _log_segments(seed: int, duration: float) -> Segments:
+    """Segments cut from a time-series log: a sensor off the axle, pose samples with 2 mm and
+    2 mrad of noise (segments that share pose samples, the GLS with REML noise levels)."""
+    log = synthetic_log(np.random.default_rng([seed, 27]), duration, LESSON_TRUTH,
+                        SensorPose(0.1, -0.03, 0.4), pose_noise=(2e-3, 2e-3))
+    return segment_timeseries(log.series).segments
+
+
+@pytest.mark.slow
+def test_a_session_stops_at_the_same_look_as_the_rule_alone():
+    """A growing log asked after every segment: where the session calibrates, its decision is
+    the rule's own; where it screens, the rule alone is not done either (and the screen's
+    statistic is above its margin); the first done is at the same look; most looks before it
+    are screened."""
+    seg = _log_segments(0, 60.0)
+    rule = StoppingRule(target=0.01)
+    session = rule.session()
+    screened = 0
+    for n in range(15, len(seg) + 1):
+        alone, looked = rule.decide(seg[:n]), session.decide(seg[:n])
+        assert session.last is looked
+        if looked.screened:
+            screened += 1
+            assert not alone.done and not looked.done
+            assert looked.statistic > SCREEN_MARGIN
+            assert looked.result.n_segments < n and looked.to_dict()["screened"]
+        else:
+            assert looked.done == alone.done
+            assert looked.statistic == pytest.approx(alone.statistic, rel=1e-12)
+        if alone.done or looked.done:
+            break
+    assert alone.done and looked.done, n
+    assert 25 <= n < len(seg) and screened >= (n - 15) // 2, (n, screened)
+
+
+@pytest.mark.slow
+def test_the_screen_at_its_own_reference_gives_the_calibration_s_std():
+    """At the look the reference calibrated (no widening of its std there), the screen under
+    the reference's outcome of the tests of segment noise has the calibration's std (its
+    robustness factor 1); a reference from too few segments back, or from more segments, is
+    not used."""
+    seg = _log_segments(1, 40.0)
+    rule = StoppingRule(target=0.01, sensor_pose="estimate")
+    decision = rule.decide(seg)
+    result = decision.result
+    assert result.fit.heading_wander is None and result.fit.long_run_bandwidth is None
+    expected = dict(zip(("r_L", "r_R", "b", "x", "y", "theta"),
+                        np.append(result.std, result.sensor_pose_std), strict=True))
+    found = screened_std(seg, result, "estimate", None)  # segment noise held, free, slip alone
+
+    def off(screened) -> float:
+        return max(abs(screened.std[k] / v - 1.0) for k, v in expected.items())
+
+    assert len(found) == 3 and min(map(off, found)) < 0.01, [s.std for s in found]
+    assert min(found, key=off).scale == pytest.approx(1.0, abs=0.01)
+    short = rule.decide(seg[:20])
+    assert not rule.decide(seg[:int(REFERENCE_GROWTH * 20) + 1], previous=short).screened
+    assert not rule.decide(seg[:30], previous=decision).screened
+
+
+def test_the_screen_leaves_independent_segments_to_the_calibration():
+    seg = lesson_dataset(np.random.default_rng(6), 100, dphi_std=2.0)
+    rule = StoppingRule(target=0.002, sensor_pose="axle")
+    looked = rule.decide(seg, previous=rule.decide(seg[:95]))
+    alone = rule.decide(seg)
+    assert not looked.screened and not looked.done
+    assert looked.statistic == alone.statistic and looked.result.n_segments == 100
+    assert screened_std(seg, alone.result, "axle", None) is None
+
+
+def test_a_decision_built_as_before_is_not_screened():
+    decision = StopDecision(False, math.inf, "no calibration yet", 3, math.nan, {}, {},
+                            math.inf, None, None)
+    assert not decision.screened and decision.to_dict()["screened"] is False

@@ -242,3 +242,43 @@ def test_sessions_stop_with_the_truth_in_the_95_percent_ellipse():
     # at least the 1% lower quantile of Binomial(40, 0.95)
     assert inside >= binom.ppf(0.01, runs, 0.95), inside
     assert within >= binom.ppf(0.01, runs, 0.95), within
+
+
+def test_a_robot_outside_the_area_is_stopped():
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=8)
+    session = LiveSession(_settings(area=Area(1.0, 1.0, 3.0, 3.0)), make_protocol("arcs"))
+    sent = _drive(session, robot, until=2.0)
+    assert session.state == "aborted" and "outside the safe area" in session.reason
+    assert np.all(sent[:, 1:] == 0.0)
+
+
+def test_the_learned_policy_drives_a_session_through_the_observation():
+    """The shipped policy reads the observation built from live data (envs.observation)
+    and its commands stay in the area."""
+    pytest.importorskip("stable_baselines3")
+    from envs.observation import observation_of
+
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=9)
+    session = LiveSession(_settings(max_time=20.0), make_protocol("learned"), seed=9,
+                          observe=observation_of)
+    sent = _drive(session, robot)
+    assert session.state in ("done", "out_of_time"), session.reason
+    assert np.any(sent[:, 1:] != 0)
+    assert min(s.clearance for s in session.statuses) > 0
+
+
+def test_the_planner_weighs_segments_with_their_increment_noise():
+    """Cut from a pose stream, a segment's increment is the difference of two samples: the
+    planner's sigma is sqrt(2) times the samples' noise (1 mm, 2 mrad in the toy), not the
+    near-zero white segment noise."""
+    from excite.live.session import increment_noise
+
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=10)
+    session = LiveSession(_settings(), make_protocol("slip_aware"), seed=10)
+    _drive(session, robot)
+    result = session.finish().calibration
+    assert result.pose_sigma is not None
+    np.testing.assert_allclose(increment_noise(result),
+                               np.sqrt(2.0) * np.array([1e-3, 1e-3, 2e-3]), rtol=0.35)
+    np.testing.assert_allclose(session.knowledge().sigma, increment_noise(
+        session.decision.result), rtol=1e-12)
