@@ -3,6 +3,9 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
+# excite live's tests run in a venv of their own (see test-live)
+ROS_VENV  := .venv-ros
+ROS_STAMP := $(ROS_VENV)/.installed
 
 .PHONY: install demo test test-fast test-core test-live bench bench-live lint clean docs
 
@@ -35,8 +38,6 @@ test: $(STAMP) $(ROS_STAMP) test-core docs
 # start-up hook re-runs every Python process of the venv with the ROS libraries on
 # LD_LIBRARY_PATH, which the main suite's workers, Ray and torch need not live with. One test
 # at a time: each runs a simulated robot and a live node faster than real time.
-ROS_VENV  := .venv-ros
-ROS_STAMP := $(ROS_VENV)/.installed
 $(ROS_STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(ROS_VENV)
 	$(ROS_VENV)/bin/python -m pip install -q --upgrade pip
