@@ -40,3 +40,11 @@ def test_a_custom_input_format_calibrates(examples, tmp_path, capsys):
     assert module.main(str(tmp_path / "log.jsonl")) == 0
     out = capsys.readouterr().out
     assert "model=sensor_pose" in out and "identifiable    = yes" in out
+
+
+@pytest.mark.slow
+def test_a_live_session_without_ros_calibrates_its_made_up_robot(examples, capsys):
+    module = examples("live_session")
+    module.main()
+    out = capsys.readouterr().out
+    assert out.startswith("done after") and "verdict: calibrated" in out
