@@ -3,7 +3,8 @@ done (:class:`~excite.live.session.LiveSession`, transport-agnostic), and its RO
 (``excite live``, the ``ros2`` extra)."""
 
 from excite.live.area import Area
-from excite.live.session import Command, LiveResult, LiveSession, LiveStatus
+from excite.live.result import Command, LiveResult, LiveStatus
+from excite.live.session import LiveSession
 from excite.live.settings import LiveSettings
 
 __all__ = ["Area", "Command", "LiveResult", "LiveSession", "LiveSettings", "LiveStatus"]

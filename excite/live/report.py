@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from excite.live.session import LiveResult, LiveStatus
+from excite.live.result import LiveResult, LiveStatus
 
 __all__ = ["status_line", "result_dict", "closing_lines"]
 

@@ -39,7 +39,8 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 
 from excite.errors import DataError
-from excite.live.session import Command, LiveResult, LiveSession
+from excite.live.result import Command, LiveResult
+from excite.live.session import LiveSession
 from excite.live.settings import LiveTopics
 from excite.logs.bag_reader import headings
 

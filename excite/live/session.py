@@ -50,7 +50,7 @@ import bisect
 import math
 from collections.abc import Callable
 from concurrent.futures import Executor, Future
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -62,190 +62,18 @@ from excite.core.information import information_matrix
 from excite.core.models import SensorPose
 from excite.errors import ExciteError
 from excite.live.area import Area
+from excite.live.log import Stream, cut, decide_log, increment_noise
+from excite.live.result import OUTCOMES, Command, LiveResult, LiveStatus
 from excite.live.settings import LiveSettings
 from excite.live.watch import MotionWatch
-from excite.logs.segmentation import segment_timeseries
 from excite.logs.segments import Segments
 from excite.logs.timeseries import TimeSeries
 from excite.stopping import StopDecision, StoppingRule
 
-__all__ = ["Command", "LiveResult", "LiveSession", "LiveStatus", "OUTCOMES"]
+__all__ = ["MIN_SPEED_SCALE", "LiveSession"]
 
-#: How a session ends.
-OUTCOMES = ("done", "out_of_time", "aborted")
 #: The lowest share of the speed limit a session slows down to when the model does not fit.
 MIN_SPEED_SCALE = 0.25
-
-
-@dataclass(frozen=True)
-class Command:
-    """The command to send now: wheel speeds ``left``, ``right`` (rad/s), and the same as
-    ``v`` (m/s) and ``omega`` (rad/s) with the nominal geometry."""
-
-    left: float
-    right: float
-    v: float
-    omega: float
-
-    @property
-    def is_zero(self) -> bool:
-        return self.left == 0.0 and self.right == 0.0
-
-
-@dataclass(frozen=True)
-class LiveStatus:
-    """Where a session stands.
-
-    Attributes
-    ----------
-    state : str
-        "waiting" (no data yet), "running", "paused" (a stream is silent), or the outcome
-        ("done", "out_of_time", "aborted").
-    elapsed : float
-        Seconds since the session started driving.
-    segments : int
-        Commands the protocol has given so far.
-    calibrated_segments : int
-        Segments of the log the last decision saw.
-    estimate : (float, float, float)
-        r_L, r_R, b (m): the last batch calibration's, or the nominal values before one.
-    std : (float, float, float) or None
-        Their standard deviations (m); None before a calibration.
-    statistic : float
-        The stopping statistic (done at <= 1; inf before a calibration).
-    seconds_to_go : float or None
-        The predicted further driving (s) at the current way of driving.
-    clearance : float or None
-        The smallest distance (m) from the footprint to the area's edges.
-    reason : str
-        The stopping rule's reason, or why the session paused or ended.
-    """
-
-    state: str
-    elapsed: float
-    segments: int
-    calibrated_segments: int
-    estimate: tuple[float, float, float]
-    std: tuple[float, float, float] | None
-    statistic: float
-    seconds_to_go: float | None
-    clearance: float | None
-    reason: str
-
-
-@dataclass(frozen=True)
-class LiveResult:
-    """What a finished session leaves.
-
-    Attributes
-    ----------
-    outcome : str
-        "done", "out_of_time" or "aborted".
-    reason : str
-        Why it ended, in one line.
-    calibration : CalibrationResult or None
-        The full offline calibration of the whole session; None when the data did not allow
-        one (``calibration_error`` says why).
-    calibration_error : str or None
-        Why there is no calibration.
-    decision : StopDecision or None
-        The stopping rule's last decision during the session.
-    series : TimeSeries or None
-        The session's wheel angles and poses (None without data).
-    area : Area or None
-        The safe area (pose frame).
-    statuses : tuple of LiveStatus
-        The status after every segment.
-    duration : float
-        Seconds of driving.
-    calibrated_from : float or None
-        The stamp (s) from which the session's data are calibrated: the last slowdown (the
-        model did not fit the faster driving before it), or None for all of them
-        (``excite calibrate --start`` on the recorded bag gives the same calibration).
-    slowdowns : tuple of (float, float)
-        Each slowdown's stamp (s) and the share of the speed limit driven from then on.
-    """
-
-    outcome: str
-    reason: str
-    calibration: CalibrationResult | None
-    calibration_error: str | None
-    decision: StopDecision | None
-    series: TimeSeries | None
-    area: Area | None
-    statuses: tuple[LiveStatus, ...]
-    duration: float
-    calibrated_from: float | None = None
-    slowdowns: tuple[tuple[float, float], ...] = ()
-
-
-def increment_noise(result: CalibrationResult) -> np.ndarray:
-    """The std (m, m, rad) of one segment's measured increment under a calibration's noise
-    model: its white segment noise and, for segments cut from a log, the two pose samples
-    the increment is the difference of (sqrt(2) times their std). What a planner weighs the
-    segments with; the per-segment levels alone are near zero where the noise is all in the
-    pose samples."""
-    sigma = np.asarray(result.sigma, dtype=float)[:3]
-    if result.pose_sigma is None:
-        return sigma
-    xy, theta = np.asarray(result.pose_sigma, dtype=float)
-    return np.sqrt(sigma**2 + 2.0 * np.array([xy, xy, theta]) ** 2)
-
-
-def cut(series: TimeSeries, window: float) -> Segments:
-    """A session's log cut into segments as ``excite calibrate --window WINDOW
-    --split-at-gaps`` cuts it (ExciteError when it cannot be, e.g. too few segments)."""
-    return segment_timeseries(series, window=window, on_gap="split").segments
-
-
-def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal,
-               previous: StopDecision | None = None) -> StopDecision | None:
-    """The stopping rule's decision on a session's log so far, ``previous`` the decision at
-    an earlier look of it (the rule's screen then spares most looks the batch calibration);
-    None while the log cannot be cut into segments yet."""
-    try:
-        segments = cut(series, window)
-    except ExciteError:
-        return None
-    return rule.decide(segments, nominal, previous=previous)
-
-
-class _Stream:
-    """Samples of one stream with strictly increasing stamps (late or repeated ones are
-    counted and left out)."""
-
-    def __init__(self, width: int) -> None:
-        self.t: list[float] = []
-        self.values: list[tuple[float, ...]] = []
-        self.width = width
-        self.out_of_order = 0
-
-    def add(self, t: float, values: tuple[float, ...]) -> bool:
-        if not (math.isfinite(t) and all(map(math.isfinite, values))):
-            raise ValueError(f"a sample must be finite, got t={t!r}, {values!r}")
-        if self.t and t <= self.t[-1]:
-            self.out_of_order += 1
-            return False
-        self.t.append(float(t))
-        self.values.append(tuple(map(float, values)))
-        return True
-
-    @property
-    def last(self) -> float | None:
-        return self.t[-1] if self.t else None
-
-    def at(self, t: float) -> np.ndarray | None:
-        """The values linearly interpolated at ``t``; None outside the samples."""
-        if len(self.t) < 2 or not (self.t[0] <= t <= self.t[-1]):
-            return None
-        k = bisect.bisect_left(self.t, t)
-        if self.t[k] == t:
-            return np.array(self.values[k])
-        w = (t - self.t[k - 1]) / (self.t[k] - self.t[k - 1])
-        return (1 - w) * np.array(self.values[k - 1]) + w * np.array(self.values[k])
-
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        return np.array(self.t), np.array(self.values).reshape(-1, self.width)
 
 
 class LiveSession:
@@ -272,8 +100,8 @@ class LiveSession:
         self._observe = observe
         self.executor = executor
         self._pending: Future | None = None
-        self._wheels = _Stream(2)
-        self._poses = _Stream(3)
+        self._wheels = Stream(2)
+        self._poses = Stream(3)
         self._watch = MotionWatch(settings.motion_window, settings.response_time,
                                   settings.command_speed)
         self._state = "waiting"

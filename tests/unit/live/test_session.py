@@ -271,7 +271,7 @@ def test_the_planner_weighs_segments_with_their_increment_noise():
     """Cut from a pose stream, a segment's increment is the difference of two samples: the
     planner's sigma is sqrt(2) times the samples' noise (1 mm, 2 mrad in the toy), not the
     near-zero white segment noise."""
-    from excite.live.session import increment_noise
+    from excite.live.log import increment_noise
 
     robot = EXAMPLE.ToyRobot(TRUTH, seed=10)
     session = LiveSession(_settings(), make_protocol("slip_aware"), seed=10)

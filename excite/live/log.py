@@ -1,0 +1,91 @@
+"""The log of a live session: its streams as they arrive, cut into segments as ``excite
+calibrate`` cuts a log, the stopping rule's decision on them (run wherever the session says,
+e.g. in a process of its own), and the noise a planner weighs a segment with.
+
+Units: s, rad, m.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+
+import numpy as np
+
+from excite.calibration.result import CalibrationResult
+from excite.errors import ExciteError
+from excite.logs.segmentation import segment_timeseries
+from excite.logs.segments import Segments
+from excite.logs.timeseries import TimeSeries
+from excite.stopping import StopDecision, StoppingRule
+
+__all__ = ["Stream", "cut", "decide_log", "increment_noise"]
+
+
+def increment_noise(result: CalibrationResult) -> np.ndarray:
+    """The std (m, m, rad) of one segment's measured increment under a calibration's noise
+    model: its white segment noise and, for segments cut from a log, the two pose samples
+    the increment is the difference of (sqrt(2) times their std). What a planner weighs the
+    segments with; the per-segment levels alone are near zero where the noise is all in the
+    pose samples."""
+    sigma = np.asarray(result.sigma, dtype=float)[:3]
+    if result.pose_sigma is None:
+        return sigma
+    xy, theta = np.asarray(result.pose_sigma, dtype=float)
+    return np.sqrt(sigma**2 + 2.0 * np.array([xy, xy, theta]) ** 2)
+
+
+def cut(series: TimeSeries, window: float) -> Segments:
+    """A session's log cut into segments as ``excite calibrate --window WINDOW
+    --split-at-gaps`` cuts it (ExciteError when it cannot be, e.g. too few segments)."""
+    return segment_timeseries(series, window=window, on_gap="split").segments
+
+
+def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal,
+               previous: StopDecision | None = None) -> StopDecision | None:
+    """The stopping rule's decision on a session's log so far, ``previous`` the decision at
+    an earlier look of it (the rule's screen then spares most looks the batch calibration);
+    None while the log cannot be cut into segments yet."""
+    try:
+        segments = cut(series, window)
+    except ExciteError:
+        return None
+    return rule.decide(segments, nominal, previous=previous)
+
+
+class Stream:
+    """Samples of one stream with strictly increasing stamps (late or repeated ones are
+    counted and left out)."""
+
+    def __init__(self, width: int) -> None:
+        self.t: list[float] = []
+        self.values: list[tuple[float, ...]] = []
+        self.width = width
+        self.out_of_order = 0
+
+    def add(self, t: float, values: tuple[float, ...]) -> bool:
+        if not (math.isfinite(t) and all(map(math.isfinite, values))):
+            raise ValueError(f"a sample must be finite, got t={t!r}, {values!r}")
+        if self.t and t <= self.t[-1]:
+            self.out_of_order += 1
+            return False
+        self.t.append(float(t))
+        self.values.append(tuple(map(float, values)))
+        return True
+
+    @property
+    def last(self) -> float | None:
+        return self.t[-1] if self.t else None
+
+    def at(self, t: float) -> np.ndarray | None:
+        """The values linearly interpolated at ``t``; None outside the samples."""
+        if len(self.t) < 2 or not (self.t[0] <= t <= self.t[-1]):
+            return None
+        k = bisect.bisect_left(self.t, t)
+        if self.t[k] == t:
+            return np.array(self.values[k])
+        w = (t - self.t[k - 1]) / (self.t[k] - self.t[k - 1])
+        return (1 - w) * np.array(self.values[k - 1]) + w * np.array(self.values[k])
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.array(self.t), np.array(self.values).reshape(-1, self.width)
