@@ -282,3 +282,14 @@ def test_the_planner_weighs_segments_with_their_increment_noise():
                                np.sqrt(2.0) * np.array([1e-3, 1e-3, 2e-3]), rtol=0.35)
     np.testing.assert_allclose(session.knowledge().sigma, increment_noise(
         session.decision.result), rtol=1e-12)
+
+
+def test_commands_change_at_most_at_the_acceleration_limit_and_stop_at_once():
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=11)
+    session = LiveSession(_settings(max_wheel_acceleration=10.0, max_time=6.0),
+                          make_protocol("arcs"), seed=11)
+    sent = _drive(session, robot, dt=0.02)
+    steps = np.abs(np.diff(sent[:, 1:], axis=0))
+    assert np.abs(sent[:, 1:]).max() > 2.0  # it drove, ramping up and down
+    assert steps[:-1].max() <= 10.0 * 0.02 + 1e-9  # at most 10 rad/s^2 while running
+    assert session.state == "out_of_time" and np.all(sent[-1, 1:] == 0.0)  # zero at once
