@@ -48,18 +48,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.stats import chi2, norm
 
 from excite.calibration.options import SensorPoseOption
-from excite.calibration.pipeline import calibrate
-from excite.calibration.result import CalibrationResult
-from excite.calibration.screen import screened_std
 from excite.core.kinematics import Params
 from excite.errors import ExciteError
 from excite.logs.segments import Segments
+
+if TYPE_CHECKING:  # the calibration and scipy.stats are imported when a decision is asked:
+    # the command line reads this module's defaults at every start
+    from excite.calibration.result import CalibrationResult
 
 __all__ = ["DEFAULT_CONFIDENCE", "DEFAULT_TARGET", "REFERENCE_GROWTH", "SCREEN_MARGIN",
            "StopDecision", "StoppingRule", "StoppingSession"]
@@ -208,6 +209,8 @@ class StoppingRule:
         """The decision from the batch calibration of ``segments``."""
         n = len(segments)
         try:
+            from excite.calibration.pipeline import calibrate
+
             result = calibrate(segments, initial=nominal, sensor_pose=self.sensor_pose,
                                ticks_per_rev=self.ticks_per_rev)
         except ExciteError as exc:  # too few segments for the noise levels, no motion, ...
@@ -263,6 +266,8 @@ class StoppingRule:
         if (reference is None or previous.n_segments > n
                 or n > REFERENCE_GROWTH * reference.n_segments):
             return None
+        from excite.calibration.screen import screened_std
+
         found = screened_std(segments, reference, self.sensor_pose, self.ticks_per_rev)
         if not found:
             return None
@@ -296,6 +301,8 @@ class StoppingRule:
         scale from the residual degrees of freedom of one noise channel (segments less the
         parameters): sqrt(dof / chi2_dof^{-1}(1 - NOISE_BOUND_CONFIDENCE))."""
         dof = max(n_segments - count, 1)
+        from scipy.stats import chi2, norm
+
         scale = math.sqrt(dof / chi2.ppf(1.0 - NOISE_BOUND_CONFIDENCE, dof))
         return float(norm.ppf(1.0 - (1.0 - self.confidence) / (2 * count)) * scale)
 
