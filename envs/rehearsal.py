@@ -60,15 +60,12 @@ class Rehearsal:
     signalled: float | None
     folder: Path
 
-    @property
-    def zero_after(self):
-        """The first (simulated, wall) time a zero command reached the robot after a time
-        (s, simulated or wall with ``wall=True``)."""
-        def first(t: float, wall: bool = False) -> float:
-            column = 7 if wall else 6
-            zero = (self.log[:, 4] == 0) & (self.log[:, 5] == 0) & (self.log[:, column] >= t)
-            return float(self.log[np.argmax(zero), column]) if zero.any() else np.inf
-        return first
+    def zero_after(self, t: float, wall: bool = False) -> float:
+        """The first time (s, simulated; wall-clock with ``wall``) a zero command reached the
+        robot at or after ``t`` (inf if none did)."""
+        column = 7 if wall else 6
+        zero = (self.log[:, 4] == 0) & (self.log[:, 5] == 0) & (self.log[:, column] >= t)
+        return float(self.log[np.argmax(zero), column]) if zero.any() else np.inf
 
 
 def rehearse(folder: Path, live_args: list[str], sim_args: list[str] = (),

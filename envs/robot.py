@@ -150,20 +150,11 @@ class RobotDistribution:
         return self.radius * self.max_wheel_speed
 
     def arena_size(self, segment_duration: float = 1.0) -> float:
-        """Recommended side (m) of the square arena for this robot.
-
-        The larger of ARENA_SEGMENTS (4) segments driven straight at full speed (4 *
-        max_speed * segment_duration) and ARENA_CHASSIS (10) lengths of the chassis' longer
-        side, rounded to the millimetre. The default robot (1 m/s, 0.36 m chassis) gets
-        exactly 4.0 m at 1-s segments.
-        """
-        _require(
-            math.isfinite(segment_duration) and segment_duration > 0,
-            f"segment_duration must be finite and > 0, got {segment_duration}",
-        )
-        travel = ARENA_SEGMENTS * self.max_speed * segment_duration
-        body = ARENA_CHASSIS * max(self.chassis_length, self.chassis_width)
-        return round(max(travel, body), 3)
+        """Recommended side (m) of the square arena for this robot (:func:`arena_side` of its
+        top speed and chassis). The default robot (1 m/s, 0.36 m chassis) gets exactly 4.0 m
+        at 1-s segments."""
+        return arena_side(self.max_speed, (self.chassis_length, self.chassis_width),
+                          segment_duration)
 
     def nominal(self) -> RobotSpec:
         """The nominal robot (what the engineer believes before calibration)."""
@@ -203,6 +194,21 @@ class RobotDistribution:
             chassis_length=self.chassis_length,
             chassis_width=self.chassis_width,
         )
+
+
+def arena_side(max_speed: float, chassis: tuple[float, float],
+               segment_duration: float = 1.0) -> float:
+    """Recommended side (m) of the square arena (or a live session's area) for a robot of
+    top speed ``max_speed`` (m/s) and footprint ``chassis`` (length, width in m): the larger
+    of ARENA_SEGMENTS (4) segments driven straight at full speed (4 * max_speed *
+    segment_duration) and ARENA_CHASSIS (10) lengths of the chassis' longer side, rounded to
+    the millimetre."""
+    _require(
+        math.isfinite(segment_duration) and segment_duration > 0,
+        f"segment_duration must be finite and > 0, got {segment_duration}",
+    )
+    travel = ARENA_SEGMENTS * max_speed * segment_duration
+    return round(max(travel, ARENA_CHASSIS * max(chassis)), 3)
 
 
 #: Full-speed segments that fit across the recommended arena (RobotDistribution.arena_size).

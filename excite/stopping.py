@@ -63,7 +63,7 @@ if TYPE_CHECKING:  # the calibration and scipy.stats are imported when a decisio
     from excite.calibration.result import CalibrationResult
 
 __all__ = ["DEFAULT_CONFIDENCE", "DEFAULT_TARGET", "REFERENCE_GROWTH", "SCREEN_MARGIN",
-           "StopDecision", "StoppingRule", "StoppingSession"]
+           "StopDecision", "StoppingRule", "StoppingSession", "finite_or_none"]
 
 #: The default target: the largest relative error of r_L, r_R, b (0.2%).
 DEFAULT_TARGET = 0.002
@@ -138,16 +138,17 @@ class StopDecision:
 
     def to_dict(self) -> dict:
         """JSON-ready dict (without the calibration result)."""
-        return {"done": self.done, "statistic": _finite_or_none(self.statistic),
+        return {"done": self.done, "statistic": finite_or_none(self.statistic),
                 "reason": self.reason, "n_segments": self.n_segments,
-                "quantile": _finite_or_none(self.quantile),
+                "quantile": finite_or_none(self.quantile),
                 "half_widths": self.half_widths, "tolerances": self.tolerances,
-                "segments_to_go": _finite_or_none(self.segments_to_go),
+                "segments_to_go": finite_or_none(self.segments_to_go),
                 "seconds_to_go": None if self.seconds_to_go is None
-                else _finite_or_none(self.seconds_to_go), "screened": self.screened}
+                else finite_or_none(self.seconds_to_go), "screened": self.screened}
 
 
-def _finite_or_none(x: float) -> float | None:
+def finite_or_none(x: float) -> float | None:
+    """x as a JSON number, None where it is not finite (inf: unknown)."""
     return float(x) if math.isfinite(x) else None
 
 

@@ -178,8 +178,10 @@ def _robot(args: argparse.Namespace):
     traction = (Traction(args.motor_tau, args.grip) if args.motor_tau and args.grip else None)
     if bool(args.motor_tau) != bool(args.grip):
         raise UsageError("--motor-tau and --grip go together")
-    side = round(max(4 * nominal.as_array()[:2].mean() * args.max_wheel_speed
-                     * args.segment_duration, 10 * max(DEFAULT_CHASSIS)), 3)
+    from envs.robot import arena_side
+
+    side = arena_side(float(nominal.as_array()[:2].mean()) * args.max_wheel_speed,
+                      DEFAULT_CHASSIS, args.segment_duration)
     return nominal, args.max_wheel_speed, traction, DEFAULT_CHASSIS, side
 
 

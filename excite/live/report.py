@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 from excite.live.result import LiveResult, LiveStatus
+from excite.stopping import finite_or_none
 
 __all__ = ["status_line", "result_dict", "closing_lines"]
 
@@ -63,13 +64,11 @@ def result_dict(result: LiveResult, nominal=None) -> dict:
     return out
 
 
-def _finite(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
-
-
 def _status_dict(s: LiveStatus) -> dict:
+    to_go = None if s.seconds_to_go is None else finite_or_none(s.seconds_to_go)
     return {"state": s.state, "elapsed": s.elapsed, "segments": s.segments,
             "calibrated_segments": s.calibrated_segments, "estimate": list(s.estimate),
-            "std": None if s.std is None else list(s.std), "statistic": _finite(s.statistic),
-            "seconds_to_go": _finite(s.seconds_to_go), "clearance": s.clearance,
+            "std": None if s.std is None else list(s.std),
+            "statistic": finite_or_none(s.statistic), "seconds_to_go": to_go,
+            "clearance": s.clearance,
             "reason": s.reason}
