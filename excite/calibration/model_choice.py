@@ -18,6 +18,8 @@ from excite.calibration.noise_rounds import EstimatedNoise
 from excite.calibration.options import TEST_LEVEL, SensorPoseOption
 from excite.calibration.solver import Loss, normal_system
 from excite.calibration.starts import Starts
+from excite.core.arrays import FloatArray
+from excite.core.information import inverse_information
 from excite.core.models import AXLE, SENSOR_POSE
 from excite.stats.chi2 import chi2_quantile
 
@@ -70,13 +72,34 @@ class ModelChoice:
 def fit_candidates(fitter: Fitter, starts: Starts, noise: EstimatedNoise | None,
                    sensor_pose: SensorPoseOption) -> Candidates:
     """The primary model fitted from its start (the noise rounds' last parameters when the
-    noise levels were estimated with them) and, under "auto", the axle model from its own
-    start."""
+    noise levels were estimated with them) and, under "auto", the axle model
+    (from :func:`_axle_start`)."""
     start = starts.start if noise is None else noise.theta
     primary = fitter.fit(starts.primary, start)
-    axle = (fitter.fit(AXLE, starts.axle)
-            if starts.primary is SENSOR_POSE and sensor_pose == "auto" else None)
-    return Candidates(primary, axle)
+    if starts.primary is not SENSOR_POSE or sensor_pose != "auto":
+        return Candidates(primary, None)
+    return Candidates(primary, fitter.fit(AXLE, _axle_start(primary, starts)))
+
+
+#: The axle model starts from the sensor-pose fit's wheels when the sensor's offset from the
+#: axle is within this many times the model choice's chi-square(3) threshold (Wald statistic):
+#: then the two models' wheels are close. A sensor far off the axle bends the axle model's
+#: optimum away from them, and its own closed form is the better start.
+NEAR_AXLE = 100.0
+
+
+def _axle_start(primary: ModelFit, starts: Starts) -> FloatArray:
+    """The axle fit's start (r_L, r_R, b in m): the sensor-pose fit's wheels when the data
+    determine that fit and its sensor pose is near the axle (:data:`NEAR_AXLE`), else the
+    axle model's own start (the closed form or the initial guess). Only where the fit starts
+    depends on it, not where it ends."""
+    if not primary.identifiable:
+        return starts.axle
+    pose = primary.theta[3:] / primary.fit.ev.scale[3:]  # relative units
+    covariance = inverse_information(primary.fit.system.information)[3:, 3:]
+    wald = float(pose @ np.linalg.lstsq(covariance, pose, rcond=None)[0])
+    near = wald <= NEAR_AXLE * chi2_quantile(TEST_LEVEL, 3)
+    return primary.theta[:3] if near else starts.axle
 
 
 def choose_model(candidates: Candidates, fitter: Fitter) -> ModelChoice:

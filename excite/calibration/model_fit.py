@@ -66,6 +66,8 @@ class ModelFit:
         """The evaluation at the fit, not whitened: raw residuals and relative Jacobian rows
         (the driving test and the wandering heading error whiten or weight them their own
         way)."""
+        if self.problem.whitener is None:  # the fit's own evaluation is not whitened
+            return self.fit.ev
         return self.problem.evaluate(self.theta, whiten=False)
 
     @property

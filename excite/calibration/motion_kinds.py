@@ -104,12 +104,15 @@ def _kind_system(chosen: ModelFit, fitter: Fitter, kinds: IntArray
         p = ev.jac.shape[1]
         size = 3 * len(KINDS) + p - 3
         information, gradient = np.zeros((size, size)), np.zeros(size)
+        order = np.argsort(kinds, kind="stable")  # the segments of each kind side by side
+        raw, jac = ev.raw[:, order], ev.jac[:, :, order]
+        ends = np.searchsorted(kinds[order], np.arange(len(KINDS) + 1))
         for k in range(len(KINDS)):
-            mask = kinds == k
-            if not mask.any():
+            part = slice(ends[k], ends[k + 1])
+            if part.start == part.stop:
                 continue
-            system = normal_system(Evaluation(ev.theta, ev.scale, ev.raw[:, mask],
-                                              ev.jac[:, :, mask]), sigma, loss)
+            system = normal_system(Evaluation(ev.theta, ev.scale, raw[:, part],
+                                              jac[:, :, part]), sigma, loss)
             rows = np.r_[3 * k:3 * k + 3, 3 * len(KINDS):size]
             information[np.ix_(rows, rows)] += system.information
             gradient[rows] += system.gradient

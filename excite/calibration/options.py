@@ -54,7 +54,8 @@ class FitOptions:
         Most iterations of one fit.
     tol : float
         A fit has converged when its largest relative step is below this (relative units of
-        the model's ``column_scale``).
+        the model's ``column_scale``), or when the Gauss-Newton step would move the estimate
+        by less than :data:`excite.calibration.solver.STEP_IN_STD` of its std.
     max_relative_std : float
         Identifiability threshold on 1/sigma_min (relative std, dimensionless): relative
         directions of the parameters whose std would exceed it are not determined by the data

@@ -193,14 +193,15 @@ def driving_tests(data: Segments, mf: ModelFit, whitener: ChainWhitener | None,
     if len(data) < _MIN_SEGMENTS:
         return ()
     ev = mf.unwhitened
+    raw, jac = ev.raw, ev.jac
     whiten = _whitening(mf, whitener)
-    white, own = whiten(ev.raw, ev.jac)
     lags = serial.lags if serial is not None and serial.p_value < 1.0 - TEST_LEVEL else 0
     runs = runs_of(data.chained, len(data))
     rows = slice(None)
     if whitener is None and len(data) > MAX_TESTED:  # independent: evenly spaced ones
         rows = np.unique(np.linspace(0, len(data) - 1, MAX_TESTED).round().astype(np.int64))
-        white, own, runs = white[:, rows], own[:, :, rows], runs[rows]
+        raw, jac, runs = raw[:, rows], jac[:, :, rows], runs[rows]
+    white, own = whiten(raw, jac)
     tests = []
     for name, measure in driving_measures(data, mf.theta).items():
         measure = measure[rows]
@@ -209,10 +210,9 @@ def driving_tests(data: Segments, mf: ModelFit, whitener: ChainWhitener | None,
             continue
         z = (measure - measure.mean()) / spread
         extra = [0, 1, 2] if name == "acceleration" else list(range(mf.theta.size))
-        if whitener is None:  # per-channel whitening commutes with the scaling by z
-            columns = own[:, extra, :] * z
-        else:
-            columns = whiten(ev.raw, ev.jac[:, extra, :] * z)[1]
+        # per-channel whitening (no whitener) commutes with the scaling by z
+        columns = (own[:, extra, :] * z if whitener is None
+                   else whiten(raw, jac[:, extra, :] * z)[1])
         test = _driving_test(name, mf.model.names, own, columns, white, z, extra, runs, lags)
         if test is not None:
             tests.append(test)

@@ -21,8 +21,9 @@ from excite.core.models import SegmentModel
 from excite.logs.segments import Segments
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
-__all__ = ["Loss", "HUBER_K", "Problem", "Evaluation", "System", "Fit", "solve_psd",
-           "complement", "damped_step", "levenberg_marquardt", "normal_system", "estimate_sigma"]
+__all__ = ["Loss", "HUBER_K", "STEP_IN_STD", "Problem", "Evaluation", "System", "Fit",
+           "solve_psd", "step_in_std", "complement", "damped_step", "damped_step_svd",
+           "levenberg_marquardt", "normal_system", "estimate_sigma"]
 
 FloatArray = NDArray[np.float64]
 Loss = Literal["linear", "huber"]
@@ -33,6 +34,13 @@ HUBER_K = 1.345
 #: zero in a step (directions the data do not determine do not take steps driven by noise),
 #: unless they are above the caller's ``determined`` level (see :func:`damped_step`).
 RCOND = 1e-6
+#: :func:`damped_step` solves the damped normal equations when their condition number is below
+#: this (the Jacobian's below 1e4), and falls back to the SVD of the Jacobian otherwise.
+GRAM_CONDITION = 1e8
+#: A fit has also converged when the Gauss-Newton step would move the estimate by less than
+#: this fraction of its std (in the information's metric, the Newton decrement's root): what is
+#: left changes nothing the std can see, and large data sets end an evaluation sooner.
+STEP_IN_STD = 1e-3
 #: The smallest Levenberg-Marquardt damping (relative to the information's diagonal).
 MIN_DAMPING = 1e-30
 #: Noise levels are floored at this fraction of the measured magnitudes (noise-free data).
@@ -122,17 +130,43 @@ def _weights(ev: Evaluation, sigma: FloatArray, loss: Loss) -> FloatArray:
     return (HUBER_K / np.maximum(np.abs(z), HUBER_K)) * inv_var[:, None]
 
 
-def damped_step(ev: Evaluation, sigma: FloatArray, loss: Loss, lam: float,
-                diagonal: FloatArray, basis: FloatArray | None = None,
-                determined: float = np.inf) -> FloatArray:
+def damped_step(ev: Evaluation, system: System, sigma: FloatArray, loss: Loss, lam: float,
+                basis: FloatArray | None = None, determined: float = np.inf) -> FloatArray:
     """The Levenberg–Marquardt step in relative units: the least-squares solution of the
-    weighted linearised residuals with damping rows sqrt(lam * diagonal), solved on the
-    Jacobian itself (SVD) rather than the normal equations. A direction is left out when its
-    singular value is below RCOND of the largest (numerically undetermined, next to the
-    others) and below ``determined`` (relative, whitened: the data determine it to a relative
-    std of 1 / ``determined``; inf: the relative rule alone): a direction known far less well
-    than the others but well enough still steps (exact data: headings to 1e-11, lengths to
-    1e-5). basis: (P, m) orthonormal directions the step is confined to (None: all)."""
+    weighted linearised residuals with damping rows sqrt(lam * diag(information)).
+
+    system: the normal equations of ``ev`` at ``sigma`` (:func:`normal_system`). When their
+    damped form is well conditioned (condition number below :data:`GRAM_CONDITION`: every
+    direction is determined, and the step keeps at least 8 of its 16 digits, which the
+    iteration refines), the step solves them; otherwise it is :func:`damped_step_svd`'s,
+    solved on the Jacobian itself. basis: (P, m) orthonormal directions the step is confined
+    to (None: all); determined: see :func:`damped_step_svd`.
+    """
+    p = ev.jac.shape[1]
+    diagonal = np.maximum(np.diag(system.information), 0.0)
+    gram = system.information + np.diag(lam * diagonal)
+    gradient = system.gradient
+    if basis is not None:
+        gram, gradient = basis.T @ gram @ basis, basis.T @ gradient
+    if gram.shape[0] == 0:  # every direction frozen: nothing may move
+        return np.zeros(p)
+    eigenvalues, vectors = np.linalg.eigh(gram)
+    if not eigenvalues[0] > eigenvalues[-1] / GRAM_CONDITION:
+        return damped_step_svd(ev, sigma, loss, lam, diagonal, basis, determined)
+    step = -(vectors @ ((vectors.T @ gradient) / eigenvalues))
+    return step if basis is None else basis @ step
+
+
+def damped_step_svd(ev: Evaluation, sigma: FloatArray, loss: Loss, lam: float,
+                    diagonal: FloatArray, basis: FloatArray | None = None,
+                    determined: float = np.inf) -> FloatArray:
+    """:func:`damped_step`'s reference form, solved on the Jacobian itself (SVD) rather than
+    the normal equations. A direction is left out when its singular value is below RCOND of
+    the largest (numerically undetermined, next to the others) and below ``determined``
+    (relative, whitened: the data determine it to a relative std of 1 / ``determined``; inf:
+    the relative rule alone): a direction known far less well than the others but well enough
+    still steps (exact data: headings to 1e-11, lengths to 1e-5). diagonal: the damping's
+    (P,) information diagonal."""
     root = np.sqrt(_weights(ev, sigma, loss))
     p = ev.jac.shape[1]
     rows = (ev.jac * root[:, None, :]).transpose(0, 2, 1).reshape(-1, p)
@@ -169,6 +203,17 @@ def complement(directions: FloatArray) -> FloatArray:
     if k == 0:
         return np.eye(p)
     return np.linalg.svd(np.eye(p) - directions @ directions.T)[0][:, :p - k]
+
+
+def step_in_std(system: System, basis: FloatArray | None = None) -> float:
+    """The length of the Gauss-Newton step in units of the estimate's std (the root of the
+    Newton decrement g' F^+ g), within ``basis`` (P, m) when given."""
+    gradient, information = system.gradient, system.information
+    if basis is not None:
+        gradient, information = basis.T @ gradient, basis.T @ information @ basis
+    if gradient.size == 0:
+        return 0.0
+    return float(np.sqrt(max(gradient @ solve_psd(information, gradient), 0.0)))
 
 
 def solve_psd(a: FloatArray, rhs: FloatArray) -> FloatArray:
@@ -245,8 +290,7 @@ def levenberg_marquardt(
     free = None if frozen is None else complement(frozen)
 
     def step_now(damping: float) -> FloatArray:
-        return damped_step(ev, sigma, loss, damping, np.diag(system.information), free,
-                           determined)
+        return damped_step(ev, system, sigma, loss, damping, free, determined)
 
 
     for iteration in range(1, max_iterations + 1):
@@ -258,8 +302,10 @@ def levenberg_marquardt(
                 sigma = new_sigma
                 system = normal_system(ev, sigma, loss)
         step = step_now(lam)
-        if np.max(np.abs(step)) < tol and settled:
+        if settled and np.max(np.abs(step)) < tol:
             return Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
+        if settled and step_in_std(system, free) < STEP_IN_STD:
+            return Fit(ev, system, sigma, iteration, True, "step below 0.001 std")
         while True:
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
                 trial = model.step(ev.theta, step, ev.scale)  # a wild trial is rejected below

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -123,10 +124,11 @@ def sensor_pose_estimate(segments: Segments,
     w = 0.5 * (ratios[0] * phi_L + ratios[1] * phi_R)  # ds / b
     sin_th, cos_m1 = np.sin(th), -2.0 * np.sin(0.5 * th) ** 2
     s_x, s_y = segments.dx, segments.dy
-    a1 = np.concatenate([np.column_stack([f * w, cos_m1, -sin_th]),
-                         np.column_stack([g * w, sin_th, cos_m1])])
-    a2 = np.concatenate([np.column_stack([-s_x, s_y]), np.column_stack([-s_y, -s_x])])
-    g11, g12, g22 = a1.T @ a1, a1.T @ a2, a2.T @ a2
+    # the x rows and the y rows of [A1 A2] (5 columns each), and their Gram matrix
+    rows_x = np.stack([f * w, cos_m1, -sin_th, -s_x, s_y])
+    rows_y = np.stack([g * w, sin_th, cos_m1, -s_y, -s_x])
+    gram = rows_x @ rows_x.T + rows_y @ rows_y.T
+    g11, g12, g22 = gram[:3, :3], gram[:3, 3:], gram[3:, 3:]
     eliminate = np.linalg.pinv(g11, hermitian=True) @ g12  # x1 = -eliminate @ x2
     schur = g22 - g12.T @ eliminate
     x2 = np.linalg.eigh(0.5 * (schur + schur.T))[1][:, 0]
@@ -152,17 +154,29 @@ class Starts:
     start : ndarray, shape (P,)
         The primary model's start: r_L, r_R, b (m) and, for the sensor-pose model, the
         sensor's x, y (m) and theta (rad) in the body frame.
-    axle : ndarray, shape (3,)
-        The axle model's start r_L, r_R, b (m).
     fallback : Params
         Fills in what the data do not determine: the initial guess when given, else
         DEFAULT_NOMINAL.
+    segments : Segments
+        The data the starts are computed from.
+    guessed : bool
+        Whether ``fallback`` is the user's initial guess (then the axle model starts there).
     """
 
     primary: SegmentModel
     start: FloatArray
-    axle: FloatArray
     fallback: Params
+    segments: Segments
+    guessed: bool
+
+    @cached_property
+    def axle(self) -> FloatArray:
+        """The axle model's start r_L, r_R, b (m): the guess, else :func:`initial_estimate`
+        (computed when asked: under "auto" the axle model usually starts from the sensor-pose
+        model's fit)."""
+        if self.guessed or self.primary is AXLE:
+            return self.fallback.as_array() if self.guessed else self.start
+        return initial_estimate(self.segments).as_array()
 
 
 def first_estimates(segments: Segments, initial: Params | ArrayLike | None,
@@ -174,16 +188,16 @@ def first_estimates(segments: Segments, initial: Params | ArrayLike | None,
     fallback = DEFAULT_NOMINAL
     if initial is not None:
         fallback = initial if isinstance(initial, Params) else Params.from_array(initial)
-    axle = (initial_estimate(segments) if initial is None else fallback).as_array()
     primary: SegmentModel
     if isinstance(sensor_pose, SensorPose):
         primary = FixedSensorPoseModel(sensor_pose)
         start = (body_frame_estimate(segments, sensor_pose, fallback) if initial is None
                  else fallback).as_array()
     elif sensor_pose == "axle":
-        primary, start = AXLE, axle
+        primary = AXLE
+        start = (initial_estimate(segments) if initial is None else fallback).as_array()
     else:
         primary = SENSOR_POSE
         wheels, pose = sensor_pose_estimate(segments, fallback)
         start = np.append(wheels.as_array(), pose.as_array())
-    return Starts(primary, start, axle, fallback)
+    return Starts(primary, start, fallback, segments, initial is not None)

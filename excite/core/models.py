@@ -365,7 +365,7 @@ def _to_sensor(body: FloatArray, body_jac: FloatArray | None, pose: FloatArray,
     if body_jac is None:
         return prediction, None
     jac = np.empty((3, 6) + prediction.shape[1:])
-    jac[:, :3] = _body_to_sensor_derivatives(body_jac, sin_th, cos_m1, l_x, l_y, c, s)
+    _body_to_sensor_derivatives(body_jac, sin_th, cos_m1, l_x, l_y, c, s, out=jac[:, :3])
     jac[0, 3], jac[1, 3] = c * cos_m1 + s * sin_th, c * sin_th - s * cos_m1  # by l_x
     jac[0, 4], jac[1, 4] = s * cos_m1 - c * sin_th, c * cos_m1 + s * sin_th  # by l_y
     jac[0, 5], jac[1, 5] = prediction[1], -prediction[0]  # by l_theta
@@ -373,18 +373,25 @@ def _to_sensor(body: FloatArray, body_jac: FloatArray | None, pose: FloatArray,
     return prediction, jac
 
 
-def _body_to_sensor_derivatives(body_jac: FloatArray, sin_th, cos_m1, l_x, l_y, c, s
-                                ) -> FloatArray:
+def _body_to_sensor_derivatives(body_jac: FloatArray, sin_th, cos_m1, l_x, l_y, c, s,
+                                out: FloatArray | None = None) -> FloatArray:
     """Derivatives (3, Q, ...) of the sensor's increment from those of the body's (3, Q, ...)
     by Q quantities that move the body's arc (sin_th = sin(dtheta), cos_m1 = cos(dtheta) - 1,
     c, s = cos, sin of l_theta; all broadcast over the trailing axes): d u / d(dtheta) =
     dR/d(dtheta) l_xy, turned with each quantity's heading derivative; then R(-l_theta) of
-    everything that moves u."""
+    everything that moves u. out: where to write them (3, Q, ...), or None."""
     rot_x = -sin_th * l_x - (1.0 + cos_m1) * l_y
     rot_y = (1.0 + cos_m1) * l_x - sin_th * l_y
     du_x = body_jac[0] + rot_x * body_jac[2]
     du_y = body_jac[1] + rot_y * body_jac[2]
-    return np.stack([c * du_x + s * du_y, c * du_y - s * du_x, body_jac[2]])
+    if out is None:
+        out = np.empty((3,) + np.broadcast_shapes(du_x.shape, np.shape(c)))
+    np.multiply(c, du_x, out=out[0])
+    out[0] += s * du_y
+    np.multiply(c, du_y, out=out[1])
+    out[1] -= s * du_x
+    out[2] = body_jac[2]
+    return out
 
 
 def _wheels_to_sensor(dphi_L: ArrayLike, dphi_R: ArrayLike, wheels: FloatArray,

@@ -11,6 +11,13 @@ import math
 import numpy as np
 import pytest
 
+from excite.calibration.solver import (
+    Problem,
+    complement,
+    damped_step,
+    damped_step_svd,
+    normal_system,
+)
 from excite.core import information as I
 from excite.core import se2
 from excite.core.kinematics import TINY_THRESHOLD, sinc_family, sinc_family_scalar
@@ -21,6 +28,7 @@ from excite.estimators.online import (
     update_batch,
     update_scalar,
 )
+from excite.logs.segments import Segments
 
 EPS = np.finfo(float).eps
 SUBNORMAL = np.finfo(float).smallest_subnormal
@@ -200,7 +208,41 @@ def _between_scalar(rng):
     return fast, se2.between(starts, ends), None, None
 
 
+def _damped_step(rng):
+    """solver.damped_step (the damped normal equations, when well conditioned) against
+    damped_step_svd (the SVD of the weighted Jacobian), at random sensor-pose problems, noise
+    levels, losses, dampings and frozen directions. Beyond rounding, the normal equations'
+    error: eps cond of the step (cond the damped information's condition number)."""
+    fast, reference, tolerance = [], [], []
+    for k in range(DRAWS // 10):
+        truth = SENSOR_NOMINAL * rng.uniform(0.8, 1.2, SENSOR_NOMINAL.size)
+        phi = rng.normal(0.0, 3.0, (int(rng.integers(8, 200)), 2))
+        sigma = np.array([2e-3, 2e-3, 1e-3]) * 10.0 ** rng.uniform(-2, 1, 3)
+        measured = SENSOR_POSE.predict(phi[:, 0], phi[:, 1], truth) + rng.normal(
+            size=(len(phi), 3)) * sigma * rng.choice([1.0, 30.0], size=(len(phi), 1),
+                                                     p=[0.9, 0.1])
+        problem = Problem(SENSOR_POSE, Segments(phi[:, 0], phi[:, 1], *measured.T))
+        ev = problem.evaluate(truth * rng.uniform(0.98, 1.02, truth.size))
+        loss = ("linear", "huber")[k % 2]
+        lam = 10.0 ** rng.uniform(-8, 2)
+        basis = None if k % 3 else complement(np.linalg.qr(rng.normal(size=(6, k % 4)))[0])
+        system = normal_system(ev, sigma, loss)
+        got = damped_step(ev, system, sigma, loss, lam, basis)
+        diagonal = np.diag(system.information)
+        want = damped_step_svd(ev, sigma, loss, lam, diagonal, basis)
+        gram = system.information + lam * np.diag(diagonal)
+        if basis is not None:
+            gram = basis.T @ gram @ basis
+        fast.append(got)
+        reference.append(want)
+        tolerance.append(np.full(6, 1e-13 + 50 * EPS * np.linalg.cond(gram)
+                                 * np.abs(want).max()))
+    return (np.concatenate(fast), np.concatenate(reference), 1e-12,
+            np.concatenate(tolerance))
+
+
 CASES = {
+    "solver.damped_step": _damped_step,
     "kinematics.sinc_family_scalar": _sinc_family_scalar,
     "traction_kernel.sinc_cosc": _traction_kernel_sinc_cosc,
     "models.evaluate_scalar": _evaluate_scalar,
