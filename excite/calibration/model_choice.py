@@ -16,10 +16,9 @@ from excite.calibration.identifiability import describe_weak
 from excite.calibration.model_fit import Fitter, ModelFit
 from excite.calibration.noise_rounds import EstimatedNoise
 from excite.calibration.options import TEST_LEVEL, SensorPoseOption
-from excite.calibration.solver import Loss, normal_system
+from excite.calibration.solver import Loss, normal_system, solve_psd
 from excite.calibration.starts import Starts
 from excite.core.arrays import FloatArray
-from excite.core.information import inverse_information
 from excite.core.models import AXLE, SENSOR_POSE
 from excite.stats.chi2 import chi2_quantile
 
@@ -96,9 +95,12 @@ def _axle_start(primary: ModelFit, starts: Starts) -> FloatArray:
     if not primary.identifiable:
         return starts.axle
     pose = primary.theta[3:] / primary.fit.ev.scale[3:]  # relative units
-    covariance = inverse_information(primary.fit.system.information)[3:, 3:]
-    wald = float(pose @ np.linalg.lstsq(covariance, pose, rcond=None)[0])
-    near = wald <= NEAR_AXLE * chi2_quantile(TEST_LEVEL, 3)
+    info = primary.fit.system.information
+    if not np.all(np.isfinite(info)):
+        return starts.axle
+    # the sensor pose's information with the wheels profiled out (the Schur complement)
+    schur = info[3:, 3:] - info[3:, :3] @ solve_psd(info[:3, :3], info[:3, 3:])
+    near = float(pose @ schur @ pose) <= NEAR_AXLE * chi2_quantile(TEST_LEVEL, 3)
     return primary.theta[:3] if near else starts.axle
 
 

@@ -35,7 +35,8 @@ HUBER_K = 1.345
 #: unless they are above the caller's ``determined`` level (see :func:`damped_step`).
 RCOND = 1e-6
 #: :func:`damped_step` solves the damped normal equations when their condition number is below
-#: this (the Jacobian's below 1e4), and falls back to the SVD of the Jacobian otherwise.
+#: this (the Jacobian's below 1e4), and falls back to the SVD of the Jacobian otherwise; above
+#: it, :func:`step_in_std` does not end a fit.
 GRAM_CONDITION = 1e8
 #: A fit has also converged when the Gauss-Newton step would move the estimate by less than
 #: this fraction of its std (in the information's metric, the Newton decrement's root): what is
@@ -207,20 +208,27 @@ def complement(directions: FloatArray) -> FloatArray:
 
 def step_in_std(system: System, basis: FloatArray | None = None) -> float:
     """The length of the Gauss-Newton step in units of the estimate's std (the root of the
-    Newton decrement g' F^+ g), within ``basis`` (P, m) when given."""
+    Newton decrement g' F^-1 g), within ``basis`` (P, m) when given; inf when the information
+    is not well conditioned (condition number above :data:`GRAM_CONDITION`: a direction known
+    far less well than the others, as in noise-free data, is not measured reliably from it,
+    and the relative step tolerance decides alone)."""
     gradient, information = system.gradient, system.information
     if basis is not None:
         gradient, information = basis.T @ gradient, basis.T @ information @ basis
     if gradient.size == 0:
         return 0.0
-    return float(np.sqrt(max(gradient @ solve_psd(information, gradient), 0.0)))
+    lam, vectors = np.linalg.eigh(information)
+    if not lam[0] > lam[-1] / GRAM_CONDITION:
+        return np.inf
+    return float(np.sqrt(np.sum((vectors.T @ gradient) ** 2 / lam)))
 
 
 def solve_psd(a: FloatArray, rhs: FloatArray) -> FloatArray:
-    """Solve a x = rhs for symmetric PSD a, ignoring numerically null directions."""
+    """Solve a x = rhs (a vector or columns) for symmetric PSD a, ignoring numerically null
+    directions."""
     lam, vec = np.linalg.eigh(a)
     keep = lam > max(lam[-1], 0.0) * 1e-12
-    coef = (vec.T @ rhs)[keep] / lam[keep]
+    coef = (vec.T @ rhs)[keep] / lam[keep].reshape((-1,) + (1,) * (np.ndim(rhs) - 1))
     return vec[:, keep] @ coef
 
 
