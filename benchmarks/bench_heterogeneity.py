@@ -27,7 +27,8 @@ What is measured:
   each detection cell is set so that the difference is about 4 combined std over all
   directions (``seg-detect-2b``: in b alone).
 * false alarms (``*-null-*``): the fraction flagged on a robot with constant parameters.
-* pairs (``*-pairs``): two independent sets of logs of one robot, maneuvers drawn per log;
+* pairs (``*-pairs``; ``*-pairs-null`` of a robot with constant parameters): two independent
+  sets of logs of one robot, maneuvers drawn per log;
   the fraction of cases whose two pooled estimates agree within their std: (difference)'
   (C_1 + C_2)^-1 (difference) below the 95% chi-square(3) quantile.
 
@@ -130,7 +131,7 @@ def _case(cell: str, seed: int, scrub: float, work: Path) -> dict:
                 for m, s in zip(("tight", "wide"), seeds[:2], strict=True)]
 
     out: dict = {"seed": seed}
-    if what == "pairs":
+    if what.startswith("pairs"):
         results = []
         for half in range(2):
             directory = work / f"set{half}"
@@ -167,6 +168,7 @@ CELLS = {  # cell: scrub
     "ts-motion-detect": 0.032, "ts-motion-null": 0.0, "ts-pairs": 0.008,
     "seg-detect-2": 0.045, "seg-detect-2b": 0.2, "seg-null-2": 0.0,
     "seg-motion-detect": 0.022, "seg-motion-null": 0.0, "seg-pairs": 0.02,
+    "seg-pairs-null": 0.0,
 }
 
 
@@ -189,7 +191,7 @@ def _difference(tested: list[dict]) -> dict:
 
 def _summary(cell: str, cases: list[dict]) -> dict:
     n = len(cases)
-    if cell.endswith("pairs"):
+    if "pairs" in cell:
         agree = sum(c["agree"] for c in cases)
         return {"cases": n, "agree": agree, "rate": agree / n,
                 "agree_each": sum(c["agree_each"] for c in cases) / n,

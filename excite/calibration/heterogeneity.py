@@ -12,8 +12,9 @@ chi-square with 3 (G - 1) degrees of freedom under agreement (F with estimated n
 levels), at LEVEL (:mod:`excite.stats.meta_analysis`). When they disagree (:func:`applied`):
 r_L, r_R, b and their covariance from the random-effects pool (Knapp-Hartung's covariance
 for few groups), its std covering the spread (``heterogeneity="random"``), or the common fit
-failing its fit test (``"common"``); the words say which parameters differ and how, and name
-the groups that disagree most.
+failing its fit test (``"common"``); between logs the pool is also used when p is below
+POOLING_LEVEL without a disagreement said (the fit test unchanged); the words say which
+parameters differ and how, and name the groups that disagree most.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from excite.stats.meta_analysis import leave_one_out, pairwise_z, pool
 if TYPE_CHECKING:
     from excite.calibration.result import CalibrationResult, FitTest
 
-__all__ = ["LEVEL", "HeterogeneityOption", "Group", "Heterogeneity", "Comparison",
+__all__ = ["LEVEL", "POOLING_LEVEL", "HeterogeneityOption", "Group", "Heterogeneity", "Comparison",
            "check_option", "assessed", "across_logs", "applied"]
 
 FloatArray = NDArray[np.float64]
@@ -46,6 +47,12 @@ IntArray = NDArray[np.int64]
 HeterogeneityOption = Literal["random", "common", "off"]
 #: The level of the heterogeneity test.
 LEVEL = 0.05
+#: Between logs, r_L, r_R, b are the random-effects pool whenever the test's p-value is below
+#: this, even when the logs are not called different (p >= LEVEL): a pretest at the test's
+#: own level leaves differences below its power out of the std, so that pooled estimates of
+#: independent sets of logs disagree more often than their std say. 0.25 is Bancroft's pretest
+#: level for "sometimes pool" estimators (Ann. Math. Stat. 1944).
+POOLING_LEVEL = 0.25
 _NAMES = AXLE.names
 #: Two groups' estimates of a parameter this many combined std apart are named as differing.
 _NAMED_Z = 2.0
@@ -79,7 +86,8 @@ class Heterogeneity:
     estimate. between_std (3,): the std of r_L, r_R, b between groups (m, the square root of
     the diagonal of the method-of-moments between-group covariance). pooling: what the
     result's r_L, r_R, b are: "common" (the common fit: the groups agree, or common
-    parameters were forced) or "random effects". most_different: the groups that disagree
+    parameters were forced) or "random effects" (they disagree; or, between logs, p below
+    POOLING_LEVEL). most_different: the groups that disagree
     most (the largest distance from the others' common estimate; both with two groups);
     empty when they agree. differences: which parameters differ and how, in words; empty when
     they agree. random_params (3,), random_covariance (3, 3): the random-effects estimate
@@ -113,7 +121,7 @@ class Heterogeneity:
         """The ``heterogeneity`` object of ``excite calibrate --json``."""
         return {"detected": self.detected, "by": self.by, "statistic": self.statistic,
                 "dof": self.dof, "p_value": self.p_value, "level": LEVEL,
-                "pooling": self.pooling,
+                "pooling": self.pooling, "pooling_level": POOLING_LEVEL,
                 "between_std": dict(zip(_NAMES, map(float, self.between_std), strict=True)),
                 "most_different": list(self.most_different),
                 "differences": self.differences,
@@ -135,6 +143,10 @@ class Heterogeneity:
         if not self.detected:
             lines = [f"  agreement       = yes: {self.what} agree within their std "
                      f"({numbers})"]
+            if self.pooling == "random effects":
+                lines.append(f"                    p below {POOLING_LEVEL:g}: r_L, r_R, b above "
+                             "pool them with random effects, their std covering a spread "
+                             "the test cannot rule out")
         else:
             lines = [f"  agreement       = NO: r_L, r_R, b differ between {self.what} beyond "
                      f"their std ({numbers}); most different: {', '.join(self.most_different)}",
@@ -329,11 +341,12 @@ def assessed(c: Comparison) -> Heterogeneity:
         most = (c.names if len(c.names) == 2
                 else (c.names[int(np.argmax(distance))],))
         words = _differences(c, params, std)
+    pooled_randomly = detected or (c.by == "logs" and pooled.p_value < POOLING_LEVEL)
     return Heterogeneity(
         by=c.by, detected=bool(detected), statistic=pooled.statistic, dof=pooled.dof,
         p_value=pooled.p_value, groups=groups,
         between_std=np.sqrt(np.diag(pooled.between)) * c.scale,
-        pooling="random effects" if detected else "common", most_different=most,
+        pooling="random effects" if pooled_randomly else "common", most_different=most,
         differences=words, random_params=c.center + pooled.random_mean * c.scale,
         random_covariance=pooled.adjusted_covariance * scale2,
         group_covariance=c.covariance * np.tile(scale2, (len(c.names), len(c.names))))
@@ -372,13 +385,16 @@ def _own_fits(fit: FitTest, heterogeneity: Heterogeneity) -> FitTest:
 
 def applied(result: CalibrationResult, heterogeneity: Heterogeneity | None,
             option: HeterogeneityOption) -> CalibrationResult:
-    """The result with the test attached: unchanged without one; with ``detected`` and
-    ``option`` "random", r_L, r_R, b and their covariance from the random-effects pool (the
-    sensor pose and the rest kept); with "common", the common fit failing its fit test."""
+    """The result with the test attached: unchanged without one; with ``option`` "random"
+    and the pooling "random effects" (detected, or between logs p below POOLING_LEVEL), r_L,
+    r_R, b and their covariance from the random-effects pool (the sensor pose and the rest
+    kept; the fit test the logs' own when detected); with "common" and ``detected``, the
+    common fit failing its fit test."""
     if heterogeneity is None:
         return result
-    if not heterogeneity.detected:
-        return replace(result, heterogeneity=heterogeneity)
+    if not heterogeneity.detected and (option == "common"
+                                       or heterogeneity.pooling != "random effects"):
+        return replace(result, heterogeneity=replace(heterogeneity, pooling="common"))
     if option == "common":
         heterogeneity = replace(heterogeneity, pooling="common")
         fit = replace(result.fit, ok=False, message=(
@@ -389,7 +405,8 @@ def applied(result: CalibrationResult, heterogeneity: Heterogeneity | None,
         return replace(result, fit=fit, heterogeneity=heterogeneity)
     covariance = heterogeneity.random_covariance
     full = _carried_over(result.full_covariance, covariance)
+    fit = _own_fits(result.fit, heterogeneity) if heterogeneity.detected else result.fit
     return replace(result, params=Params(*heterogeneity.random_params), covariance=covariance,
-                   fit=_own_fits(result.fit, heterogeneity),
+                   fit=fit,
                    std=np.sqrt(np.diag(covariance)), full_covariance=full,
                    heterogeneity=heterogeneity)

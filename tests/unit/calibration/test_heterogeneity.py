@@ -202,6 +202,41 @@ def test_logs_of_different_turning_are_detected_and_pooled_with_their_spread(tmp
     assert "b from " in common.fit.message
 
 
+def _two_groups(by: str, q: float):
+    """Two groups' estimates (identity covariance in relative units of 1e-4 of TRUTH) whose
+    Cochran's Q is ``q`` (chi-square with 3 dof)."""
+    from excite.calibration.heterogeneity import Comparison, assessed
+
+    estimates = np.array([[np.sqrt(0.5 * q), 0.0, 0.0], [-np.sqrt(0.5 * q), 0.0, 0.0]])
+    return assessed(Comparison(by, ("a", "b"), (100, 100), TRUTH.as_array(),
+                               1e-4 * TRUTH.as_array(), estimates, np.eye(6), np.inf))
+
+
+def test_logs_below_the_pooling_level_are_pooled_with_random_effects(rng):
+    """Between logs, p in [LEVEL, POOLING_LEVEL): not called different, but pooled with random
+    effects (the fit test unchanged); above it, or between kinds of motion, the common fit."""
+    from excite.calibration.heterogeneity import POOLING_LEVEL, applied
+
+    q = chi2_quantile(1 - 0.5 * (LEVEL + POOLING_LEVEL), 3)  # p halfway between the levels
+    h = _two_groups("logs", q)
+    assert not h.detected and LEVEL < h.p_value < POOLING_LEVEL
+    assert h.pooling == "random effects" and h.to_dict()["pooling_level"] == POOLING_LEVEL
+    assert "pool them with random effects" in "\n".join(h.summary_lines())
+    assert h.plain_lines() == []
+    result = calibrate(lesson_dataset(rng, 200, TRUTH), sensor_pose="axle")
+    pooled = applied(result, h, "random")
+    np.testing.assert_array_equal(pooled.params.as_array(), h.random_params)
+    np.testing.assert_array_equal(pooled.covariance, h.random_covariance)
+    assert pooled.fit == result.fit
+    forced = applied(result, h, "common")
+    assert forced.params == result.params and forced.heterogeneity.pooling == "common"
+    assert forced.fit == result.fit
+    assert _two_groups("motion", q).pooling == "common"
+    high = _two_groups("logs", chi2_quantile(1 - 0.5 * (1 + POOLING_LEVEL), 3))
+    assert high.p_value > POOLING_LEVEL and high.pooling == "common"
+    assert applied(result, high, "random").params == result.params
+
+
 def test_two_robots_logs_name_the_file_that_disagrees(tmp_path):
     other = Params(TRUTH.r_L, TRUTH.r_R, 0.311)
     named = [(f"robot_a{i}.csv", lesson_dataset(np.random.default_rng(i), 120, TRUTH))
