@@ -104,9 +104,10 @@ def _kind_system(chosen: ModelFit, fitter: Fitter, kinds: IntArray
         p = ev.jac.shape[1]
         size = 3 * len(KINDS) + p - 3
         information, gradient = np.zeros((size, size)), np.zeros(size)
-        order = np.argsort(kinds, kind="stable")  # the segments of each kind side by side
+        members = [np.flatnonzero(kinds == k) for k in range(len(KINDS))]
+        order = np.concatenate(members)  # the segments of each kind side by side
         raw, jac = ev.raw[:, order], ev.jac[:, :, order]
-        ends = np.searchsorted(kinds[order], np.arange(len(KINDS) + 1))
+        ends = np.concatenate([[0], np.cumsum([m.size for m in members])])
         for k in range(len(KINDS)):
             part = slice(ends[k], ends[k + 1])
             if part.start == part.stop:

@@ -199,7 +199,8 @@ def driving_tests(data: Segments, mf: ModelFit, whitener: ChainWhitener | None,
     runs = runs_of(data.chained, len(data))
     rows = slice(None)
     if whitener is None and len(data) > MAX_TESTED:  # independent: evenly spaced ones
-        rows = np.unique(np.linspace(0, len(data) - 1, MAX_TESTED).round().astype(np.int64))
+        # spaced by at least one: increasing, no repeats
+        rows = np.linspace(0, len(data) - 1, MAX_TESTED).round().astype(np.int64)
         raw, jac, runs = raw[:, rows], jac[:, :, rows], runs[rows]
     white, own = whiten(raw, jac)
     tests = []
