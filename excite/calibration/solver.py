@@ -294,6 +294,7 @@ def levenberg_marquardt(
     system = normal_system(ev, sigma, loss)
     lam = 1e-3
 
+    positive = np.array([transform == "log" for transform in model.transforms])
     # the directions the steps may take: the complement of ``frozen``
     free = None if frozen is None else complement(frozen)
 
@@ -315,12 +316,15 @@ def levenberg_marquardt(
         if settled and step_in_std(system, free) < STEP_IN_STD:
             return Fit(ev, system, sigma, iteration, True, "step below 0.001 std")
         while True:
-            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
                 trial = model.step(ev.theta, step, ev.scale)  # a wild trial is rejected below
-            if np.all(np.isfinite(trial)):
-                ev_trial = problem.evaluate(trial)
-                system_trial = normal_system(ev_trial, sigma, loss)
-                if system_trial.cost <= system.cost:
+            # a wild step overflows, or underflows a length to 0: damp it more
+            if np.all(np.isfinite(trial)) and np.all(trial[positive] > 0):
+                with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                    ev_trial = problem.evaluate(trial)
+                    system_trial = normal_system(ev_trial, sigma, loss)
+                if (system_trial.cost <= system.cost
+                        and np.all(np.isfinite(system_trial.information))):
                     break
             lam *= 10.0
             if lam > 1e12:

@@ -270,3 +270,38 @@ def test_data_that_determine_nothing_are_reported_not_a_crash():
     measured += rng.normal(0.0, 0.02, measured.shape)
     result = calibrate(Segments(phi_L, phi_R, *measured.T))
     assert not result.identifiable and result.unidentifiable_direction
+
+
+def test_a_wild_step_that_underflows_a_length_is_damped_not_a_crash():
+    """Levenberg-Marquardt from a wheel separation thousands of metres off, on straight runs
+    that do not determine it (a stopping rule's early look at a back-and-forth drive, the two
+    turning segments weighted 0 as gross errors): the SVD step of log b is about -1150, exp()
+    underflows b to 0, and the trial must be rejected (more damping), not evaluated (it was a
+    ZeroDivisionError in the arc)."""
+    from excite.calibration.gross_errors import _Weights
+    from excite.calibration.solver import Problem, levenberg_marquardt
+    from excite.core.models import AXLE
+
+    back, forth = -18.372487896506325, 18.372487896506325
+    rows = np.array([
+        [13.430001797938788, -19.185497714085713, 0.02902169923943009, 0.012755563221616036,
+         -5.159671661949551],
+        [19.75613856717917, forth, 0.5135580805794787, -0.6751338699831184, -1.021672171512282],
+        [back, back, -0.5704819681122023, 0.0051778469052577505, 0.05591714786991142],
+        [forth, forth, 0.573226526617462, 0.04398094616510296, 0.012201663523796799],
+        [back, back, -0.570329541195666, 0.004489267618013162, 0.05686254056095785],
+        [forth, forth, 0.5716099141157344, 0.04636400595886629, 0.013189053304776762],
+        [back, back, -0.5707367392412538, 0.003087791989817349, 0.053483808575052125],
+        [forth, forth, 0.5719986706781601, 0.045395726872194495, 0.009733891242796716],
+        [back, back, -0.5723245479409277, 0.0001446589043173146, 0.05728388708744291],
+        [forth, forth, 0.5665786964857306, 0.04784665572344586, 0.01114700519782991],
+        [back, back, -0.5715936247979089, 0.002701413075902213, 0.05390340904953445]])
+    weights = np.r_[0.0, 0.0, np.ones(9)]
+    problem = Problem(AXLE, Segments(*rows.T), _Weights(weights))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fit = levenberg_marquardt(
+            problem, np.array([0.03186269350755853, 0.030303724654336804, 4346.585306891844]),
+            np.array([0.0017959880508495879, 0.03073200543034573, 0.04440131963604238]),
+            "linear", determined=10.0)
+    assert np.all(np.isfinite(fit.theta)) and np.all(fit.theta > 0)
