@@ -236,7 +236,10 @@ def tuned_specs(specs: list[ProtocolSpec], tuned: str, settings: CompareSettings
     from agents.tuning import apply_tuned, check_disjoint, load_tuned, mismatch, shipped_path
 
     def defaults(why: str) -> tuple[list[ProtocolSpec], dict[str, Any]]:
-        return specs, {"file": None, "note": f"declared defaults ({why})", "untuned": []}
+        written = [spec.label for spec in specs if spec.settings]
+        note = (f"declared defaults ({why})" if not written else
+                f"as written ({', '.join(written)}), else declared defaults ({why})")
+        return specs, {"file": None, "note": note, "untuned": []}
 
     if tuned == TUNED_NONE:
         return defaults("--tuned none")

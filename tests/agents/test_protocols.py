@@ -269,6 +269,11 @@ def test_default_compare_runs_the_shipped_settings(tmp_path, capsys):
     code, text, _ = run_cli(capsys, "compare", "--protocols", "umbmark", "--episodes", "1",
                             "--workers", "1", "--tuned", "none", "--out", tmp_path / "d")
     assert code == 0 and "declared defaults (--tuned none)" in text
+    code, text, _ = run_cli(capsys, "compare", "--protocols", "umbmark:speed=0.2,spin",
+                            "--episodes", "1", "--workers", "1", "--tuned", "none", "--out",
+                            tmp_path / "w")
+    assert code == 0
+    assert "as written (umbmark:speed=0.2), else declared defaults (--tuned none)" in text
 
 
 def test_simulate_takes_protocol_settings(tmp_path, capsys):
