@@ -336,6 +336,8 @@ def _growth(white: FloatArray, leverage: FloatArray, z: FloatArray
     upper = z > np.median(z)
     if not upper.any() or upper.all():
         upper = z > z.mean()
+    if not upper.any() or upper.all():  # no two sides to compare
+        return min(1.0, 3.0 * min(p_values)), np.ones(u.shape[0])
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.sqrt(u[:, upper].mean(axis=1) / u[:, ~upper].mean(axis=1))
     return min(1.0, 3.0 * min(p_values)), np.where(np.isfinite(ratio), ratio, 1.0)
