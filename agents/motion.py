@@ -42,15 +42,14 @@ def predicted_poses(pose: np.ndarray, dphi: np.ndarray, params: Params,
     return np.stack([x + c * dx - s * dy, y + s * dx + c * dy, th + dth], axis=-1)
 
 
-def is_safe(poses: np.ndarray, arena: float | tuple[float, float],
+def is_safe(poses: np.ndarray, arena: tuple[float, float],
             margin: float | np.ndarray = MARGIN,
             chassis: tuple[float, float] = DEFAULT_CHASSIS) -> np.ndarray:
     """Whether the footprint at every pose (n, m, 3) stays inside the arena centred at the
-    origin, ``margin`` (m, a scalar or one per candidate) from the walls. arena: the side of a
-    square (m), or (width along x, height along y) (``RobotKnowledge.arena``)."""
+    origin, ``margin`` (m, a scalar or one per candidate) from the walls. arena: (width
+    along x, height along y) (m; ``RobotKnowledge.arena``)."""
     margin = np.reshape(margin, (-1,) + (1,) * (poses.ndim - 2))
-    width, height = (arena, arena) if np.isscalar(arena) else arena
-    inside = Arena(width, height).contains_footprint(
+    inside = Arena(*arena).contains_footprint(
         poses[..., 0], poses[..., 1], poses[..., 2], margin, chassis)
     return inside.all(axis=-1)
 

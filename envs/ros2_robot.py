@@ -103,7 +103,7 @@ def run_sim_robot(robot: SimRobot, topics: SimTopics, speed: float = 1.0,
             ticks += 1
             stamp = _stamp(readings.t)
             clock.publish(Clock(clock=stamp))
-            silent = {c.stream for c in cuts if c.covers(c.stream, readings.t,
+            silent = {c.stream for c in cuts if c.covers(readings.t,
                                                            robot.first_command)}
             if readings.wheels is not None and "joints" not in silent:
                 msg = JointState(name=names,

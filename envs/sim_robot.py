@@ -63,10 +63,10 @@ class Cut:
             raise ValueError(f"a cut needs START >= 0 and SECONDS > 0, got {self.start:g} and "
                              f"{self.duration:g}")
 
-    def covers(self, stream: str, t: float, first_command: float | None) -> bool:
-        """Whether ``stream`` is silent at time ``t`` (s) when the first command arrived at
-        ``first_command`` (None: not yet)."""
-        if first_command is None or stream != self.stream:
+    def covers(self, t: float, first_command: float | None) -> bool:
+        """Whether the cut silences its stream at time ``t`` (s) when the first command
+        arrived at ``first_command`` (None: not yet)."""
+        if first_command is None:
             return False
         return self.start <= t - first_command < self.start + self.duration
 

@@ -233,10 +233,8 @@ class StoppingRule:
             return self._not_yet(n, f"the {', '.join(exact)} residuals vanish (a channel fitted "
                                  "exactly): its noise level is not known yet", tolerances,
                                  result)
-        std = _standard_deviations(result)
         quantile = self._quantile(result)
-        half = {name: float(quantile * s) for name, s in std.items()}
-        ratios = {name: half[name] / tolerances[name] for name in half}
+        half, ratios = _half_widths(_standard_deviations(result), quantile, tolerances)
         statistic = max(ratios.values())
         worst = max(ratios, key=ratios.get)
         done = bool(statistic <= 1.0)
@@ -276,8 +274,7 @@ class StoppingRule:
         best = None
         for screened in found:
             quantile = self._quantile_of(n, screened.n_parameters)
-            half = {name: float(quantile * s) for name, s in screened.std.items()}
-            ratios = {name: half[name] / every[name] for name in half}
+            half, ratios = _half_widths(screened.std, quantile, every)
             statistic = max(ratios.values())
             if best is None or statistic < best[0]:
                 best = (statistic, quantile, half, {k: every[k] for k in half}, ratios)
@@ -350,6 +347,13 @@ def _standard_deviations(result: CalibrationResult) -> dict[str, float]:
         std |= dict(zip(("x", "y", "theta"), map(float, result.sensor_pose_std), strict=True))
     return std
 
+
+def _half_widths(std: dict[str, float], quantile: float, tolerances: dict[str, float]
+                 ) -> tuple[dict[str, float], dict[str, float]]:
+    """Each parameter's half-width (quantile x std, in its unit) and its ratio to its
+    tolerance, for the parameters of ``std``."""
+    half = {name: float(quantile * s) for name, s in std.items()}
+    return half, {name: half[name] / tolerances[name] for name in half}
 
 def _segments_to_go(n: int, statistic: float) -> float:
     """Further segments for the statistic to fall to 1 when every std shrinks as

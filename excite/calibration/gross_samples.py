@@ -45,7 +45,7 @@ from excite.calibration.gross_errors import (
     size_range,
     test_threshold,
 )
-from excite.calibration.noise import chain_band
+from excite.calibration.noise import chain_band, chained_mask
 from excite.core import se2
 from excite.core.arrays import BoolArray, FloatArray, IntArray
 from excite.logs.segments import Segments
@@ -94,7 +94,7 @@ def _attributed(data: Segments, chosen: IntArray, z2: FloatArray, threshold: flo
     one), or alone at the end of a chain (its end sample is)."""
     mask = np.zeros(len(data), dtype=bool)
     mask[chosen] = True
-    chained = np.zeros(len(data), dtype=bool) if data.chained is None else data.chained
+    chained = chained_mask(data)
     out = np.zeros(len(data), dtype=bool)
     for run in _runs(data, mask):
         if run.size > 1:
@@ -116,7 +116,7 @@ def _runs(data: Segments, flagged: BoolArray) -> list[IntArray]:
     chosen = np.flatnonzero(flagged)
     if chosen.size == 0:
         return []
-    chained = np.zeros(len(data), dtype=bool) if data.chained is None else data.chained
+    chained = chained_mask(data)
     breaks = np.flatnonzero((np.diff(chosen) != 1) | ~chained[chosen[1:]]) + 1
     return np.split(chosen, breaks)
 

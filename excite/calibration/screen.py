@@ -58,6 +58,7 @@ from excite.calibration.noise import (
     cut_from_log,
 )
 from excite.calibration.options import TEST_LEVEL, SensorPoseOption
+from excite.calibration.reml import START_FRACTIONS
 from excite.calibration.result import CalibrationResult
 from excite.calibration.solver import Evaluation, Problem
 from excite.core.arrays import FloatArray
@@ -81,8 +82,8 @@ GROUP_TOLERANCE = 0.05
 #: A level within this fraction above its floor counts as held there.
 HELD_TOLERANCE = 1e-6
 #: A segment group the reference holds at its floor starts the *free* hypothesis at this
-#: fraction of the residuals' RMS (the largest of the REML search's START_FRACTIONS).
-START_FRACTION = 0.3
+#: fraction of the residuals' RMS: the largest of the REML search's starts.
+START_FRACTION = max(START_FRACTIONS)
 #: Under ``sensor_pose="auto"``, a reference that chose the sensor-pose model with a
 #: likelihood ratio below this multiple of the test's threshold has the axle model screened
 #: too (the next look may choose it, with fewer parameters and smaller std).

@@ -333,11 +333,12 @@ def _growth(white: FloatArray, leverage: FloatArray, z: FloatArray
     with np.errstate(divide="ignore", invalid="ignore"):
         r2 = (centred @ z) ** 2 / (n * np.sum(centred**2, axis=1))  # z: mean 0, std 1
     p_values = [chi2_survival(float(n * r), 1) if np.isfinite(r) else 1.0 for r in r2]
-    upper = z > np.median(z)
-    if not upper.any() or upper.all():
-        upper = z > z.mean()
-    if not upper.any() or upper.all():  # no two sides to compare
-        return min(1.0, 3.0 * min(p_values)), np.ones(u.shape[0])
+    p_value = min(1.0, 3.0 * min(p_values))
+    # above the median, or where ties make that one side, above the mean
+    upper = next((side for side in (z > np.median(z), z > z.mean())
+                  if side.any() and not side.all()), None)
+    if upper is None:  # no two sides to compare
+        return p_value, np.ones(u.shape[0])
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.sqrt(u[:, upper].mean(axis=1) / u[:, ~upper].mean(axis=1))
-    return min(1.0, 3.0 * min(p_values)), np.where(np.isfinite(ratio), ratio, 1.0)
+    return p_value, np.where(np.isfinite(ratio), ratio, 1.0)

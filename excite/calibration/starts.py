@@ -171,12 +171,10 @@ class Starts:
 
     @cached_property
     def axle(self) -> FloatArray:
-        """The axle model's start r_L, r_R, b (m): the guess, else :func:`initial_estimate`
-        (computed when asked: under "auto" the axle model usually starts from the sensor-pose
-        model's fit)."""
-        if self.guessed or self.primary is AXLE:
-            return self.fallback.as_array() if self.guessed else self.start
-        return initial_estimate(self.segments).as_array()
+        """The axle model's start r_L, r_R, b (m) beside the sensor-pose model: the guess,
+        else :func:`initial_estimate` (computed when asked: under "auto" the axle model
+        usually starts from the sensor-pose model's fit)."""
+        return (self.fallback if self.guessed else initial_estimate(self.segments)).as_array()
 
 
 def first_estimates(segments: Segments, initial: Params | ArrayLike | None,

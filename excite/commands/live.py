@@ -160,10 +160,11 @@ def _robot(args: argparse.Namespace):
                          "or --robot PRESET")
     if args.robot is not None:
         from envs.robot import PRESETS, traction_of
+        from excite.core.kinematics import Params
 
         dist = PRESETS[args.robot]
         spec = dist.nominal()
-        nominal = params_arg(",".join(map(str, spec.kinematic_params())), "--robot")
+        nominal = Params(*spec.kinematic_params())
         traction = traction_of(spec)
         speed = args.max_wheel_speed or spec.max_wheel_speed
         chassis = spec.chassis

@@ -7,10 +7,12 @@ import argparse
 from pathlib import Path
 
 from excite.commands.args import (
+    POSE_NOISE_VALUES,
     POSE_VALUES,
     UsageError,
     check_output_file,
     floats,
+    pose_noise_arg,
     positive_number,
     robot_preset,
 )
@@ -36,7 +38,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mount", default="0.05,0.02,0.1", metavar=POSE_VALUES,
                    help="the motion-capture body's pose on the robot, body frame (m, m, "
                    "rad; default %(default)s)")
-    p.add_argument("--pose-noise", default="0.001,0.002", metavar="SXY,STH",
+    p.add_argument("--pose-noise", type=pose_noise_arg, default="0.001,0.002",
+                   metavar=POSE_NOISE_VALUES,
                    help="noise of each pose (m, rad; default %(default)s)")
     p.add_argument("--speed", type=positive_number, default=1.0, metavar="X",
                    help="times faster than real time (default %(default)g)")
@@ -91,9 +94,7 @@ def run(args: argparse.Namespace) -> int:
     from envs.sim_robot import SimRobot
 
     mount = floats(args.mount, POSE_VALUES, "--mount", positive=False)
-    noise = floats(args.pose_noise, "SXY,STH", "--pose-noise", positive=False)
-    if any(v < 0 for v in noise):
-        raise UsageError(f"--pose-noise must be >= 0, got {args.pose_noise!r}")
+    noise = args.pose_noise
     for path in (args.truth, args.log):
         if path is not None:
             check_output_file(path)

@@ -265,6 +265,7 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
     session.executor = pool
     executor = SingleThreadedExecutor(context=context)
     node: LiveNode | None = None
+    stopped = False  # the zero command went out and was acknowledged
     try:
         with _signals() as interrupted:
             node = LiveNode(session, topics, context, recorder, on_status)
@@ -276,11 +277,13 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
                 executor.spin_once(timeout_sec=min(period, 0.05))
             if interrupted.is_set():
                 session.abort(INTERRUPTED)
-            node.stop()
+            node.stop()  # before the final calibration, which takes a while
+            stopped = True
             return session.finish()
     finally:
         if node is not None:
-            node.stop()
+            if not stopped:
+                node.stop()
             executor.remove_node(node.node)
             node.node.destroy_node()
         pool.shutdown(wait=False, cancel_futures=True)

@@ -148,7 +148,7 @@ class LiveSession:
         if self._state == "running" and now >= self._segment_end:
             self._end_segment(now)
         elif self._state == "running" and self._pending is not None and self._pending.done():
-            self._take_decision(wait=False)  # a decision that says done ends the session now
+            self._take_decision()  # a decision that says done ends the session now
             if self._decision is not None and self._decision.done:
                 self._statuses.append(self.status)
                 self._end("done", self._decision.reason)
@@ -214,9 +214,8 @@ class LiveSession:
         row = self._row(self._segment_start, now)
         if row is not None:
             self._rows = np.vstack([self._rows, row])
-        self._take_decision(wait=self.executor is None)
+        self._take_decision()
         self._start_decision()
-        self._take_decision(wait=self.executor is None)
         if self._decision is not None:
             self._reason = self._decision.reason
         self._slow_down(now)
@@ -294,8 +293,10 @@ class LiveSession:
     def _start_decision(self) -> None:
         """The stopping rule on the log so far (:func:`decide_log`), in the caller's thread
         or on the executor (one at a time: this segment's data wait for the next end)."""
+        if self._pending is not None:
+            return
         series = self._series(self._epoch)
-        if self._pending is not None or series is None:
+        if series is None:
             return
         args = (self.rule, series, self.settings.segment_duration, self.settings.nominal,
                 self._decision)
@@ -305,7 +306,8 @@ class LiveSession:
         else:
             self._pending = self.executor.submit(decide_log, *args)
 
-    def _take_decision(self, wait: bool) -> None:
+    def _take_decision(self, wait: bool = False) -> None:
+        """The executor's decision when it has come back, or ``wait`` for it."""
         if self._pending is not None and (wait or self._pending.done()):
             decision, self._pending = self._pending.result(), None
             self._accept(decision)
