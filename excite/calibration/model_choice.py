@@ -88,8 +88,9 @@ NEAR_AXLE = 100.0
 
 
 def _axle_start(primary: ModelFit, starts: Starts) -> FloatArray:
-    """The axle fit's start (r_L, r_R, b in m): the sensor-pose fit's wheels when the data
-    determine that fit and its sensor pose is near the axle (:data:`NEAR_AXLE`), else the
+    """The axle fit's start (r_L, r_R, b in m): the sensor-pose fit's wheels, moved as its
+    linearisation moves them when the sensor is put on the axle, when the data determine
+    that fit and its sensor pose is near the axle (:data:`NEAR_AXLE`), else the
     axle model's own start (the closed form or the initial guess). Only where the fit starts
     depends on it, not where it ends."""
     if not primary.identifiable:
@@ -101,7 +102,12 @@ def _axle_start(primary: ModelFit, starts: Starts) -> FloatArray:
     # the sensor pose's information with the wheels profiled out (the Schur complement)
     schur = info[3:, 3:] - info[3:, :3] @ solve_psd(info[:3, :3], info[:3, 3:])
     near = float(pose @ schur @ pose) <= NEAR_AXLE * chi2_quantile(TEST_LEVEL, 3)
-    return primary.theta[:3] if near else starts.axle
+    if not near:
+        return starts.axle
+    # the sensor moved onto the axle, the wheels with it along the fit's linearisation
+    wheels = -solve_psd(info[:3, :3], primary.fit.system.gradient[:3] - info[:3, 3:] @ pose)
+    return primary.model.step(primary.theta, np.append(wheels, -pose),
+                              primary.fit.ev.scale)[:3]
 
 
 def choose_model(candidates: Candidates, fitter: Fitter) -> ModelChoice:

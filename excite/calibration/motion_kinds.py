@@ -96,27 +96,34 @@ def _kind_system(chosen: ModelFit, fitter: Fitter, kinds: IntArray
     """The information and gradient (relative units) of the model with r_L, r_R, b per kind
     of motion (3 columns per kind of KINDS, then the sensor pose's), at the common fit, with
     its noise model and loss. Independent segments: assembled from each kind's own normal
-    system (kinds share no noise); segments that share pose samples: the augmented Jacobian
-    whitened as the fit's."""
+    system (kinds share no noise), the most frequent kind's as the fit's system less the
+    others' (a segment whose wheels do not move has no Jacobian); segments that share pose
+    samples: the augmented Jacobian whitened as the fit's."""
     sigma, loss = chosen.fit.sigma, fitter.options.loss
     if fitter.whitener is None:
         ev = chosen.fit.ev  # not whitened: raw residuals and relative Jacobian rows
-        p = ev.jac.shape[1]
-        size = 3 * len(KINDS) + p - 3
+        size = 3 * len(KINDS) + ev.jac.shape[1] - 3
         information, gradient = np.zeros((size, size)), np.zeros(size)
-        members = [np.flatnonzero(kinds == k) for k in range(len(KINDS))]
-        order = np.concatenate(members)  # the segments of each kind side by side
-        raw, jac = ev.raw[:, order], ev.jac[:, :, order]
-        ends = np.concatenate([[0], np.cumsum([m.size for m in members])])
-        for k in range(len(KINDS)):
-            part = slice(ends[k], ends[k + 1])
-            if part.start == part.stop:
-                continue
-            system = normal_system(Evaluation(ev.theta, ev.scale, raw[:, part],
-                                              jac[:, :, part]), sigma, loss)
+
+        def add(k: int, info: FloatArray, grad: FloatArray) -> None:
             rows = np.r_[3 * k:3 * k + 3, 3 * len(KINDS):size]
-            information[np.ix_(rows, rows)] += system.information
-            gradient[rows] += system.gradient
+            information[np.ix_(rows, rows)] += info
+            gradient[rows] += grad
+
+        counts = np.bincount(kinds[kinds >= 0], minlength=len(KINDS))
+        largest = int(np.argmax(counts))
+        rest_information = chosen.fit.system.information.copy()
+        rest_gradient = chosen.fit.system.gradient.copy()
+        for k in np.flatnonzero(counts):
+            if k == largest:
+                continue
+            members = np.flatnonzero(kinds == k)
+            system = normal_system(Evaluation(ev.theta, ev.scale, ev.raw[:, members],
+                                              ev.jac[:, :, members]), sigma, loss)
+            add(int(k), system.information, system.gradient)
+            rest_information -= system.information
+            rest_gradient -= system.gradient
+        add(largest, rest_information, rest_gradient)
         return information, gradient
     ev = chosen.unwhitened
     columns = [ev.jac[:, :3, :] * (kinds == k)[None, None, :] for k in range(len(KINDS))]

@@ -155,27 +155,35 @@ class DrivingTest:
                 "failed": self.failed, "slipping": self.slipping}
 
 
-def driving_measures(data: Segments, theta: FloatArray) -> dict[str, FloatArray]:
+def driving_measures(data: Segments, theta: FloatArray,
+                     rows: NDArray[np.int64] | None = None) -> dict[str, FloatArray]:
     """The measures of the driving per segment (module docstring), by name of DRIVING, at
-    the parameters ``theta`` (r_L, r_R, b first, m)."""
+    the parameters ``theta`` (r_L, r_R, b first, m), of the segments ``rows`` (None: all)."""
     r_l, r_r, b = (float(v) for v in theta[:3])
-    n = len(data)
+    at = np.arange(len(data)) if rows is None else rows
     timed = data.t_start is not None and data.t_end is not None
-    duration = (np.maximum(data.t_end - data.t_start, 1e-12) if timed  # type: ignore[operator]
-                else np.ones(n))
-    rate_l, rate_r = data.dphi_L / duration, data.dphi_R / duration
+
+    def durations(i: NDArray[np.int64]) -> FloatArray:
+        return (np.maximum(data.t_end[i] - data.t_start[i], 1e-12)  # type: ignore[index]
+                if timed else np.ones(i.size))
+
+    duration = durations(at)
+    rate_l, rate_r = data.dphi_L[at] / duration, data.dphi_R[at] / duration
     counts = data.substep_counts
     if counts is not None and data.sub_dphi_L is not None and data.sub_dphi_R is not None \
             and timed:
-        rows, last = np.arange(n), counts - 1
-        change = (np.abs(data.sub_dphi_L[rows, last] - data.sub_dphi_L[:, 0])
-                  + np.abs(data.sub_dphi_R[rows, last] - data.sub_dphi_R[:, 0])
-                  ) * counts / duration
+        last = counts[at] - 1
+        change = (np.abs(data.sub_dphi_L[at, last] - data.sub_dphi_L[at, 0])
+                  + np.abs(data.sub_dphi_R[at, last] - data.sub_dphi_R[at, 0])
+                  ) * counts[at] / duration
     else:  # from the previous segment; a run's first segment gets the median of the others
-        change = np.zeros(n)
-        change[1:] = np.abs(np.diff(rate_l)) + np.abs(np.diff(rate_r))
-        first = np.ones(n, dtype=bool)
-        first[1:] = False if data.chained is None else ~data.chained[1:]
+        before = np.maximum(at - 1, 0)
+        previous = durations(before)
+        change = (np.abs(rate_l - data.dphi_L[before] / previous)
+                  + np.abs(rate_r - data.dphi_R[before] / previous))
+        first = at == 0
+        if data.chained is not None:
+            first |= ~data.chained[at]
         if (~first).any():
             change[first] = np.median(change[~first])
     turn = np.abs(r_r * rate_r - r_l * rate_l) / b
@@ -197,15 +205,14 @@ def driving_tests(data: Segments, mf: ModelFit, whitener: ChainWhitener | None,
     whiten = _whitening(mf, whitener)
     lags = serial.lags if serial is not None and serial.p_value < 1.0 - TEST_LEVEL else 0
     runs = runs_of(data.chained, len(data))
-    rows = slice(None)
+    rows = None
     if whitener is None and len(data) > MAX_TESTED:  # independent: evenly spaced ones
         # spaced by at least one: increasing, no repeats
         rows = np.linspace(0, len(data) - 1, MAX_TESTED).round().astype(np.int64)
         raw, jac, runs = raw[:, rows], jac[:, :, rows], runs[rows]
     white, own = whiten(raw, jac)
     tests = []
-    for name, measure in driving_measures(data, mf.theta).items():
-        measure = measure[rows]
+    for name, measure in driving_measures(data, mf.theta, rows).items():
         spread = measure.std()
         if not np.isfinite(spread) or spread <= 0:
             continue

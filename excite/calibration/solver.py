@@ -46,6 +46,9 @@ STEP_IN_STD = 1e-3
 MIN_DAMPING = 1e-30
 #: Noise levels are floored at this fraction of the measured magnitudes (noise-free data).
 SIGMA_FLOOR = 1e-10
+#: Most rounds of :func:`settled_sigma` (it settles in a few: the degrees of freedom depend
+#: weakly on the levels' ratios).
+SETTLE_ROUNDS = 50
 
 
 class Evaluation:
@@ -252,6 +255,22 @@ def estimate_sigma(problem: Problem, ev: Evaluation, system: System | None,
     return np.maximum(sigma, problem.sigma_floor)
 
 
+def settled_sigma(problem: Problem, ev: Evaluation, loss: Loss,
+                  sigma: FloatArray | None = None) -> tuple[FloatArray, System]:
+    """The noise levels (3,) at an evaluation, iterated with their normal system until they
+    settle (relative change below 1e-6; :func:`estimate_sigma`'s degrees of freedom depend on
+    the levels' ratios), and that system; from ``sigma`` when given."""
+    if sigma is None:
+        sigma = estimate_sigma(problem, ev, None, loss)
+    system = normal_system(ev, sigma, loss)
+    for _ in range(SETTLE_ROUNDS):
+        new_sigma = estimate_sigma(problem, ev, system, loss)
+        if np.all(np.abs(new_sigma / sigma - 1.0) < 1e-6):
+            break
+        sigma, system = new_sigma, normal_system(ev, new_sigma, loss)
+    return sigma, system
+
+
 @dataclass
 class Fit:
     """Outcome of :func:`levenberg_marquardt` (the last accepted evaluation and its system)."""
@@ -280,8 +299,9 @@ def levenberg_marquardt(
 ) -> Fit:
     """Minimise the whitened (Huber-)cost from theta0.
 
-    sigma None: re-estimate the noise levels at every iterate (joint iteration), until both
-    the relative step and the noise levels settle. frozen: (P, k) orthonormal relative
+    sigma None: the noise levels estimated with the parameters (joint iteration): settled
+    at the start (:func:`settled_sigma`), re-estimated at every iterate, until both the
+    relative step and the noise levels settle. frozen: (P, k) orthonormal relative
     directions the steps must not move along. determined: the singular value (relative,
     whitened) above which a direction always steps (:func:`damped_step`; the caller's
     identifiability level, 1 / max_relative_std).
@@ -290,8 +310,9 @@ def levenberg_marquardt(
     estimate = sigma is None
     ev = problem.evaluate(np.asarray(theta0, dtype=float))
     if estimate:
-        sigma = estimate_sigma(problem, ev, None, loss)
-    system = normal_system(ev, sigma, loss)
+        sigma, system = settled_sigma(problem, ev, loss)
+    else:
+        system = normal_system(ev, sigma, loss)
     lam = 1e-3
 
     positive = np.array([transform == "log" for transform in model.transforms])

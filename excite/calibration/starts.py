@@ -103,6 +103,13 @@ def body_frame_estimate(segments: Segments, pose: SensorPose,
     return initial_estimate(Segments(segments.dphi_L, segments.dphi_R, *body.T), fallback)
 
 
+# the rows of [A1 A2] from (f w, g w, cos - 1, sin, s_x, s_y): columns (b, l_x, l_y, cos, sin)
+_PICK_X = np.array([[1, 0, 0, 0, 0], [0, 0, 0, 0, 0], [0, 1, 0, 0, 0], [0, 0, -1, 0, 0],
+                    [0, 0, 0, -1, 0], [0, 0, 0, 0, 1]], dtype=float)
+_PICK_Y = np.array([[0, 0, 0, 0, 0], [1, 0, 0, 0, 0], [0, 0, 1, 0, 0], [0, 1, 0, 0, 0],
+                    [0, 0, 0, 0, -1], [0, 0, 0, -1, 0]], dtype=float)
+
+
 def sensor_pose_estimate(segments: Segments,
                          fallback: Params = DEFAULT_NOMINAL) -> tuple[Params, SensorPose]:
     """Closed-form first estimate of (r_L, r_R, b) and the sensor pose (Censi's two steps).
@@ -122,12 +129,11 @@ def sensor_pose_estimate(segments: Segments,
     th = ratios[1] * phi_R - ratios[0] * phi_L  # heading change predicted from the ratios
     f, g = sinc_family(th, derivatives=False)
     w = 0.5 * (ratios[0] * phi_L + ratios[1] * phi_R)  # ds / b
-    sin_th, cos_m1 = np.sin(th), -2.0 * np.sin(0.5 * th) ** 2
-    s_x, s_y = segments.dx, segments.dy
-    # the x rows and the y rows of [A1 A2] (5 columns each), and their Gram matrix
-    rows_x = np.stack([f * w, cos_m1, -sin_th, -s_x, s_y])
-    rows_y = np.stack([g * w, sin_th, cos_m1, -s_y, -s_x])
-    gram = rows_x @ rows_x.T + rows_y @ rows_y.T
+    # the x rows (f w, cos - 1, -sin, -s_x, s_y) and the y rows (g w, sin, cos - 1, -s_y, -s_x)
+    # of [A1 A2] are signed picks of six arrays: their Gram matrix from the six's
+    six = np.stack([f * w, g * w, -th * g, th * f, segments.dx, segments.dy])
+    products = six @ six.T
+    gram = _PICK_X.T @ products @ _PICK_X + _PICK_Y.T @ products @ _PICK_Y
     g11, g12, g22 = gram[:3, :3], gram[:3, 3:], gram[3:, 3:]
     eliminate = np.linalg.pinv(g11, hermitian=True) @ g12  # x1 = -eliminate @ x2
     schur = g22 - g12.T @ eliminate

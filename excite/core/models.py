@@ -239,6 +239,11 @@ class AxleModel(SegmentModel):
         return "AXLE"  # one instance: code compares models by identity
 
     def evaluate(self, dphi_L, dphi_R, theta, jacobian=True, substeps=False):
+        return self.evaluate_turning(dphi_L, dphi_R, theta, jacobian, substeps)[:2]
+
+    def evaluate_turning(self, dphi_L, dphi_R, theta, jacobian=True, substeps=False):
+        """:meth:`evaluate`, and the turn (sin(dtheta), cos(dtheta) - 1) of each increment
+        from the arc's sinc and cosc (dtheta f, -dtheta g), or None for composed sub-steps."""
         phi_L, phi_R = _broadcast_increments(dphi_L, dphi_R)
         theta = np.asarray(theta, dtype=float)
         trailing = 1 + substeps
@@ -249,7 +254,9 @@ class AxleModel(SegmentModel):
         prediction = np.empty((3,) + shape)
         prediction[0], prediction[1], prediction[2] = arc.dx, arc.dy, arc.dtheta
         jac = arc.fill_jacobian(np.empty((3, 3) + shape)) if jacobian else None
-        return compose_substeps(prediction, jac) if substeps else (prediction, jac)
+        if substeps:
+            return compose_substeps(prediction, jac) + (None,)
+        return prediction, jac, (arc.dtheta * arc.f, -arc.dtheta * arc.g)
 
     def evaluate_wheels(self, dphi_L, dphi_R, theta, substeps=False):
         phi_L, phi_R = _broadcast_increments(dphi_L, dphi_R)
@@ -298,8 +305,9 @@ class SensorPoseModel(SegmentModel):
 
     def evaluate(self, dphi_L, dphi_R, theta, jacobian=True, substeps=False):
         theta = np.asarray(theta, dtype=float)
-        body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta[..., :3], jacobian, substeps)
-        return _to_sensor(body, body_jac, theta[..., 3:], theta.ndim == 1)
+        body, body_jac, turn = AXLE.evaluate_turning(dphi_L, dphi_R, theta[..., :3], jacobian,
+                                                     substeps)
+        return _to_sensor(body, body_jac, theta[..., 3:], theta.ndim == 1, turn)
 
     def evaluate_wheels(self, dphi_L, dphi_R, theta, substeps=False):
         theta = np.asarray(theta, dtype=float)
@@ -327,8 +335,8 @@ class FixedSensorPoseModel(SegmentModel):
 
     def evaluate(self, dphi_L, dphi_R, theta, jacobian=True, substeps=False):
         theta = np.asarray(theta, dtype=float)
-        body, body_jac = AXLE.evaluate(dphi_L, dphi_R, theta, jacobian, substeps)
-        prediction, jac = _to_sensor(body, body_jac, self.pose.as_array(), True)
+        body, body_jac, turn = AXLE.evaluate_turning(dphi_L, dphi_R, theta, jacobian, substeps)
+        prediction, jac = _to_sensor(body, body_jac, self.pose.as_array(), True, turn)
         return prediction, (None if jac is None else jac[:, :3])
 
     def evaluate_wheels(self, dphi_L, dphi_R, theta, substeps=False):
@@ -346,15 +354,19 @@ class FixedSensorPoseModel(SegmentModel):
 
 
 def _to_sensor(body: FloatArray, body_jac: FloatArray | None, pose: FloatArray,
-               single: bool) -> tuple[FloatArray, FloatArray | None]:
+               single: bool, turn: tuple[FloatArray, FloatArray] | None = None
+               ) -> tuple[FloatArray, FloatArray | None]:
     """The sensor's increment from the body's (3, ..., N) and its derivatives (3, 3, ..., N),
-    for a sensor pose (..., 3); derivatives by (r_L, r_R, b, l_x, l_y, l_theta)."""
+    for a sensor pose (..., 3); derivatives by (r_L, r_R, b, l_x, l_y, l_theta). turn:
+    (sin, cos - 1) of the body's heading change when known, else computed here."""
     if single:
         l_x, l_y, l_t = (float(v) for v in pose)
     else:
         l_x, l_y, l_t = (pose[..., i, None] for i in range(3))
     o_x, o_y, th = body
-    sin_th, cos_m1 = np.sin(th), -2.0 * np.sin(0.5 * th) ** 2  # cos - 1 without cancellation
+    if turn is None:  # cos - 1 without cancellation
+        turn = np.sin(th), -2.0 * np.sin(0.5 * th) ** 2
+    sin_th, cos_m1 = turn
     u_x = o_x + cos_m1 * l_x - sin_th * l_y
     u_y = o_y + sin_th * l_x + cos_m1 * l_y
     c, s = np.cos(l_t), np.sin(l_t)

@@ -155,6 +155,37 @@ def test_a_kind_that_cannot_determine_the_parameters_alone_is_merged(rng):
     assert h.dof == 3
 
 
+@pytest.mark.parametrize("loss", ["linear", "huber"])
+def test_each_kinds_blocks_are_its_own_segments_normal_system(rng, loss):
+    """The kinds' information and gradient, the most frequent kind's taken as the fit's less
+    the others', equal each kind's normal system on its own segments (still ones included)."""
+    from excite.calibration.model_fit import Fitter
+    from excite.calibration.motion_kinds import KINDS, _kind_system
+    from excite.calibration.options import FitOptions
+    from excite.calibration.solver import Evaluation, normal_system
+    from excite.core.models import SENSOR_POSE
+
+    seg = Segments.concatenate([spin_segments(rng, 30), _turns(rng, 40, 0.6, 1.9),
+                                _turns(rng, 200, 0.06, 0.45), _turns(rng, 50, 0.0, 0.04),
+                                exact_segments(np.zeros(5), np.zeros(5), TRUTH, SIGMA, rng)])
+    fitter = Fitter(seg, None, None, FitOptions(loss, 100, 1e-10, 0.05))
+    chosen = fitter.fit(SENSOR_POSE, np.r_[TRUTH.as_array(), 0.01, -0.02, 0.1])
+    kinds = motion_kinds(seg, Params(*chosen.theta[:3]))
+    assert np.bincount(kinds + 1).tolist() == [5, 30, 40, 200, 50]
+    information, gradient = _kind_system(chosen, fitter, kinds)
+    ev, sigma, k3 = chosen.fit.ev, chosen.fit.sigma, 3 * len(KINDS)
+    for k in range(len(KINDS)):
+        own = np.flatnonzero(kinds == k)
+        system = normal_system(Evaluation(ev.theta, ev.scale, ev.raw[:, own], ev.jac[:, :, own]),
+                               sigma, loss)
+        rows = np.r_[3 * k:3 * k + 3, k3:k3 + 3]
+        scale = np.abs(system.information).max()
+        np.testing.assert_allclose(information[np.ix_(rows[:3], rows[:3])],
+                                   system.information[:3, :3], rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(gradient[rows[:3]], system.gradient[:3], rtol=0,
+                                   atol=1e-10 * np.abs(system.gradient).max())
+
+
 def test_spins_and_straight_runs_alone_are_not_tested(rng):
     from tests.conftest import straight_segments
 

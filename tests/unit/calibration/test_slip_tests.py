@@ -41,6 +41,10 @@ def test_the_measures_come_from_the_wheels_at_the_fitted_parameters():
                      t_start=seg.t_start, t_end=seg.t_end)
     for name, values in driving_measures(moved, np.array([0.05, 0.1, 0.5])).items():
         np.testing.assert_array_equal(values, measures[name])
+    # of some segments only: the same values, each change still from the segment before
+    for name, values in driving_measures(seg, np.array([0.05, 0.1, 0.5]),
+                                         np.array([1, 2])).items():
+        np.testing.assert_allclose(values, measures[name][1:])
 
 
 @pytest.mark.slow
