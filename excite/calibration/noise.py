@@ -62,8 +62,9 @@ from numpy.typing import NDArray
 from excite.core.models import SegmentModel
 from excite.logs.segments import Segments
 
-__all__ = ["NoiseLevels", "WheelNoise", "ChainWhitener", "chain_band", "chained_mask",
-           "cut_from_log", "perpendicular", "quantization_variance", "TIMING_PERIOD_FRACTION"]
+__all__ = ["NoiseLevels", "WheelNoise", "ChainWhitener", "LevelBands", "chain_band",
+           "chained_mask", "cut_from_log", "perpendicular", "quantization_variance", "stacked",
+           "TIMING_PERIOD_FRACTION"]
 
 FloatArray = NDArray[np.float64]
 _BAND = 5  # lower bandwidth of C in segment-major order (x, y, theta per segment)
@@ -369,19 +370,70 @@ def chain_band(segments: Segments, levels: NoiseLevels,
     return band
 
 
+class LevelBands:
+    """The covariance band of the stacked increments (:func:`chain_band`) as a linear function
+    of the squared levels: C = C_0 + sum_i level_i^2 U_i, C_0 the part of no level (the
+    encoder quantization), U_i each level's band at 1. Built once for a data set, evaluated
+    at many levels (the searches of the noise levels).
+
+    Attributes
+    ----------
+    zero : ndarray, shape (_BAND + 1, 3N)
+        C_0 in lower band storage.
+    units : list of ndarray, each (_BAND + 1, 3N)
+        U_i, for the levels in the order of :meth:`NoiseLevels.vector` (5, or 7 with wheels).
+    """
+
+    def __init__(self, segments: Segments, wheels: WheelNoise | None, size: int):
+        zero = np.zeros(size)
+        self.zero = chain_band(segments, NoiseLevels.from_vector(zero), wheels)
+        self.units = []
+        for i in range(size):
+            one = zero.copy()
+            one[i] = 1.0
+            self.units.append(chain_band(segments, NoiseLevels.from_vector(one), wheels)
+                              - self.zero)
+
+    def at(self, levels: FloatArray) -> FloatArray:
+        """The band at ``levels`` (5 or 7, the order of :meth:`NoiseLevels.vector`)."""
+        band = self.zero.copy()
+        for value, unit in zip(levels, self.units, strict=True):
+            if value:
+                band += value * value * unit
+        return band
+
+
+def stacked(raw: FloatArray, jac: FloatArray | None = None) -> FloatArray:
+    """Residuals (3, N) and Jacobian rows (3, P, N) in the stacked order (3k + channel), as
+    the columns of one (3N, 1 [+ P]) array."""
+    n = raw.shape[1]
+    columns = [raw.T.reshape(3 * n, 1)]
+    if jac is not None:
+        columns.append(jac.transpose(2, 0, 1).reshape(3 * n, jac.shape[1]))
+    return np.concatenate(columns, axis=1)
+
+
 class ChainWhitener:
     """Whitening by the Cholesky factor of the covariance C of the stacked increments
     (:func:`chain_band`), for given noise levels; ``wheels`` adds the noise that enters
     through the wheels (slip at ``levels.slip``, encoder quantization, encoder timing at
-    ``levels.timing``), :class:`WheelNoise`."""
+    ``levels.timing``), :class:`WheelNoise`. LinAlgError when C is not positive definite."""
 
     def __init__(self, segments: Segments, levels: NoiseLevels,
                  wheels: WheelNoise | None = None):
-        from scipy.linalg import cholesky_banded
-
-        self._factor = cholesky_banded(chain_band(segments, levels, wheels), lower=True)
+        self._factor = _banded_cholesky(chain_band(segments, levels, wheels))
         self.n = len(segments)
         self.wheels = wheels
+
+    @classmethod
+    def from_band(cls, band: FloatArray, wheels: WheelNoise | None = None) -> ChainWhitener:
+        """The whitener of a covariance band already built (:func:`chain_band`,
+        :meth:`LevelBands.at`); ``wheels``: the wheel noise it includes, if any."""
+        whitener = cls.__new__(cls)
+        whitener._factor = _banded_cholesky(band)
+        whitener.n = band.shape[1] // 3
+        whitener.wheels = wheels
+        return whitener
 
     @property
     def log_det(self) -> float:
@@ -392,22 +444,35 @@ class ChainWhitener:
                ) -> tuple[FloatArray, FloatArray | None]:
         """L^-1 of residuals (3, N) and Jacobian rows (3, P, N), in the same layouts: the
         innovations of segment k are column k."""
-        from scipy.linalg import solve_banded
-
         n = self.n
-        columns = [raw.T.reshape(3 * n, 1)]
-        if jac is not None:
-            p = jac.shape[1]
-            columns.append(jac.transpose(2, 0, 1).reshape(3 * n, p))
-        rhs = np.concatenate(columns, axis=1)
-        out = solve_banded((_BAND, 0), self._factor, rhs, check_finite=False)
+        out = self.whiten_stacked(stacked(raw, jac))
         white = out[:, 0].reshape(n, 3).T
         if jac is None:
             return white, None
         return white, out[:, 1:].reshape(n, 3, -1).transpose(1, 2, 0)
+
+    def whiten_stacked(self, rows: FloatArray) -> FloatArray:
+        """L^-1 ``rows`` for (3N, m) rows in the stacked order (:func:`stacked`)."""
+        from scipy.linalg.lapack import dtbtrs
+
+        out, info = dtbtrs(self._factor, rows, uplo="L")
+        if info != 0:
+            raise np.linalg.LinAlgError("the covariance's factor is singular")
+        return out
 
     def solve(self, rows: FloatArray) -> FloatArray:
         """C^-1 ``rows`` for (3N, m) rows in the stacked order (3k + channel)."""
         from scipy.linalg import cho_solve_banded
 
         return cho_solve_banded((self._factor, True), rows, check_finite=False)
+
+
+def _banded_cholesky(band: FloatArray) -> FloatArray:
+    """The lower Cholesky factor of a symmetric band (lower storage), by LAPACK's dpbtrf;
+    LinAlgError when not positive definite."""
+    from scipy.linalg.lapack import dpbtrf
+
+    lower, info = dpbtrf(band, lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError("the covariance is not positive definite")
+    return lower

@@ -36,16 +36,18 @@ from numpy.typing import NDArray
 
 from excite.calibration.noise import (
     ChainWhitener,
+    LevelBands,
     NoiseLevels,
     WheelNoise,
     chained_mask,
     perpendicular,
+    stacked,
 )
 from excite.logs.segments import Segments
 from excite.stats.chi2 import chi_bar_square_quantile
 
-__all__ = ["level_bounds", "moment_noise", "reml_noise", "SEGMENT_NOISE_TEST_LEVEL",
-           "START_FRACTIONS"]
+__all__ = ["level_bounds", "moment_noise", "reml_noise", "restricted_deviance",
+           "SEGMENT_NOISE_TEST_LEVEL", "START_FRACTIONS"]
 
 FloatArray = NDArray[np.float64]
 #: Level of the test of "no segment noise" (:func:`reml_noise`): the segment levels are held
@@ -83,15 +85,16 @@ def moment_noise(segments: Segments, residual: FloatArray, n_parameters: int,
     return NoiseLevels(sigma, np.sqrt(np.array([pxy2, pth2])))
 
 
-def _restricted_deviance(segments: Segments, levels: NoiseLevels, residual: FloatArray,
-                         jac: FloatArray, wheels: WheelNoise | None = None) -> float:
-    """-2 log restricted likelihood (up to a constant) of residuals (3, N) with Jacobian rows
-    (3, P, N) of the linearised model: log det C + log det(J^T C^-1 J) + e^T C^-1 e, with e
-    the generalised least-squares residual (the parameters profiled out)."""
-    whitener = ChainWhitener(segments, levels, wheels)
-    white, white_jac = whitener.whiten(residual, jac)
-    w = white.T.reshape(-1)
-    a = white_jac.transpose(2, 0, 1).reshape(w.size, -1)
+def restricted_deviance(band: FloatArray, rows: FloatArray) -> float:
+    """-2 log restricted likelihood (up to a constant) of residuals with Jacobian rows of the
+    linearised model, given as ``rows`` (3N, 1 + P) in the stacked order
+    (:func:`excite.calibration.noise.stacked`), under the covariance ``band``
+    (:func:`excite.calibration.noise.chain_band`): log det C + log det(J^T C^-1 J)
+    + e^T C^-1 e, with e the generalised least-squares residual (the parameters profiled
+    out). LinAlgError when C or J^T C^-1 J is not positive definite."""
+    whitener = ChainWhitener.from_band(band)
+    out = whitener.whiten_stacked(rows)
+    w, a = out[:, 0], out[:, 1:]
     factor = np.linalg.cholesky(a.T @ a)  # J^T C^-1 J = G G^T
     projected = np.linalg.solve(factor, a.T @ w)  # |G^-1 J^T C^-1 r|^2: the fitted part
     return (whitener.log_det + 2.0 * float(np.sum(np.log(np.diag(factor))))
@@ -163,9 +166,12 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
     def levels_of(u: FloatArray) -> NoiseLevels:
         return NoiseLevels.from_vector(np.exp(u))
 
+    bands = LevelBands(segments, wheels, u0.size)
+    rows = stacked(residual, jac)
+
     def deviance(u: FloatArray) -> float:
         try:
-            return _restricted_deviance(segments, levels_of(u), residual, jac, wheels)
+            return restricted_deviance(bands.at(np.exp(u)), rows)
         except np.linalg.LinAlgError:  # C numerically not positive definite at the bounds
             return 1e300  # finite: the optimiser's difference quotients stay numbers
 

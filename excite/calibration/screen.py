@@ -52,13 +52,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from excite.calibration.noise import (
+    ChainWhitener,
+    LevelBands,
     NoiseLevels,
     WheelNoise,
-    chain_band,
     cut_from_log,
+    stacked,
 )
 from excite.calibration.options import TEST_LEVEL, SensorPoseOption
-from excite.calibration.reml import START_FRACTIONS
+from excite.calibration.reml import START_FRACTIONS, restricted_deviance
 from excite.calibration.result import CalibrationResult
 from excite.calibration.solver import Evaluation, Problem
 from excite.core.arrays import FloatArray
@@ -143,15 +145,15 @@ def screened_std(segments: Segments, reference: CalibrationResult,
         primary = problem.evaluate(theta)
         evaluations = [primary if m is model and np.array_equal(t, theta)
                        else Problem(m, segments).evaluate(t) for m, t in models]
-        bands = _Bands(segments, wheels, 7 if wheels is not None else 5)
+        bands = LevelBands(segments, wheels, 7 if wheels is not None else 5)
         for base, groups in _hypotheses(levels, primary, wheels, problem.sigma_floor,
                                         reference.levels_at_floor):
-            band = _fitted_band(bands, primary, base, groups)
-            lower = _banded_cholesky(band)
-            out = _whitened(lower, _stacked(primary))
+            whitener = ChainWhitener.from_band(_fitted_band(bands, primary, base, groups))
+            out = whitener.whiten_stacked(stacked(primary.raw, primary.jac))
             robust = _robust_factor(out[:, 0], out[:, 1:])
             for ev in evaluations:
-                a = out[:, 1:] if ev is primary else _whitened(lower, _stacked(ev))[:, 1:]
+                a = (out[:, 1:] if ev is primary
+                     else whitener.whiten_stacked(stacked(ev.raw, ev.jac))[:, 1:])
                 screened.append(_screened(a, ev.scale, robust))
     except np.linalg.LinAlgError:
         return None
@@ -203,7 +205,7 @@ def _hypotheses(levels: NoiseLevels, ev: Evaluation, wheels: WheelNoise | None,
     return [(start, [g for g in groups if np.any(start[g] > above[g])]) for start in hypotheses]
 
 
-def _fitted_band(bands: _Bands, ev: Evaluation, base: FloatArray,
+def _fitted_band(bands: LevelBands, ev: Evaluation, base: FloatArray,
                  groups: list[list[int]]) -> FloatArray:
     """The covariance band at ``base`` (5 or 7 levels) with each of ``groups`` scaled by the
     factor that maximises the restricted likelihood of the residuals and Jacobian ``ev``
@@ -300,36 +302,13 @@ def _newton_step(deviance: _GroupDeviance, u: FloatArray, value: float) -> Float
     return -np.linalg.solve(hessian, gradient)
 
 
-class _Bands:
-    """The covariance band of the stacked increments (:func:`chain_band`) as a linear
-    function of the squared levels: C = C_0 + sum_i level_i^2 U_i, C_0 the part of no level
-    (the encoder quantization), U_i each level's at 1; built once per screen."""
-
-    def __init__(self, segments: Segments, wheels: WheelNoise | None, size: int):
-        zero = np.zeros(size)
-        self.zero = chain_band(segments, NoiseLevels.from_vector(zero), wheels)
-        self.units = []
-        for i in range(size):
-            one = zero.copy()
-            one[i] = 1.0
-            self.units.append(chain_band(segments, NoiseLevels.from_vector(one), wheels)
-                              - self.zero)
-
-    def at(self, levels: FloatArray) -> FloatArray:
-        """The band at ``levels`` (5 or 7)."""
-        band = self.zero.copy()
-        for value, unit in zip(levels, self.units, strict=True):
-            if value:
-                band += value * value * unit
-        return band
-
-
 class _GroupDeviance:
-    """The restricted deviance (:func:`excite.calibration.reml._restricted_deviance`) as a
+    """The restricted deviance (:func:`excite.calibration.reml.restricted_deviance`) as a
     function of the log factors u of the groups of levels: C = sum_g exp(2 u_g) C_g + C_0,
-    C_g the band of group g's levels at ``base``, C_0 that of the rest (:class:`_Bands`)."""
+    C_g the band of group g's levels at ``base``, C_0 that of the rest
+    (:class:`excite.calibration.noise.LevelBands`)."""
 
-    def __init__(self, bands: _Bands, ev: Evaluation, base: FloatArray,
+    def __init__(self, bands: LevelBands, ev: Evaluation, base: FloatArray,
                  groups: list[list[int]]):
         self.base, self.groups = base, groups
         rest = base.copy()
@@ -341,7 +320,7 @@ class _GroupDeviance:
             alone = np.zeros_like(base)
             alone[group] = base[group]
             self.bands.append(bands.at(alone) - bands.zero)
-        self.rhs = _stacked(ev)
+        self.rhs = stacked(ev.raw, ev.jac)
 
     def band(self, u: FloatArray) -> FloatArray:
         """The band of C at log factors ``u``."""
@@ -352,44 +331,9 @@ class _GroupDeviance:
 
     def __call__(self, u: FloatArray) -> float:
         try:
-            lower = _banded_cholesky(self.band(u))
-            out = _whitened(lower, self.rhs)
-            w, a = out[:, 0], out[:, 1:]
-            factor = np.linalg.cholesky(a.T @ a)
+            return restricted_deviance(self.band(u), self.rhs)
         except np.linalg.LinAlgError:  # not positive definite at the bounds
             return 1e300
-        projected = np.linalg.solve(factor, a.T @ w)
-        return (2.0 * float(np.sum(np.log(lower[0]))) + 2.0 * float(np.sum(np.log(
-            np.diag(factor)))) + float(w @ w - projected @ projected))
-
-
-def _stacked(ev: Evaluation) -> FloatArray:
-    """The residuals and Jacobian of an evaluation in the stacked order (3k + channel), as
-    the columns of one (3N, 1 + P) array."""
-    n, p = ev.raw.shape[1], ev.jac.shape[1]
-    return np.concatenate([ev.raw.T.reshape(3 * n, 1),
-                           ev.jac.transpose(2, 0, 1).reshape(3 * n, p)], axis=1)
-
-
-def _banded_cholesky(band: FloatArray) -> FloatArray:
-    """The lower Cholesky factor of a symmetric band (lower storage), by LAPACK's dpbtrf;
-    LinAlgError when not positive definite."""
-    from scipy.linalg.lapack import dpbtrf
-
-    lower, info = dpbtrf(band, lower=1)
-    if info != 0:
-        raise np.linalg.LinAlgError("the covariance is not positive definite")
-    return lower
-
-
-def _whitened(lower: FloatArray, rhs: FloatArray) -> FloatArray:
-    """L^-1 ``rhs`` for the banded lower factor L (LAPACK's dtbtrs)."""
-    from scipy.linalg.lapack import dtbtrs
-
-    out, info = dtbtrs(lower, rhs, uplo="L")
-    if info != 0:
-        raise np.linalg.LinAlgError("the covariance's factor is singular")
-    return out
 
 
 def _robust_factor(w: FloatArray, a: FloatArray) -> float:

@@ -333,7 +333,12 @@ def levenberg_marquardt(
                 system = normal_system(ev, sigma, loss)
         step = step_now(lam)
         if settled and np.max(np.abs(step)) < tol:
-            return Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
+            # the damping can hide a direction the data determine far less well than the
+            # others (a small step is no optimum): the Gauss-Newton step decides
+            undamped = step_now(0.0)
+            if np.max(np.abs(undamped)) < tol:
+                return Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
+            step = undamped
         if settled and step_in_std(system, free) < STEP_IN_STD:
             return Fit(ev, system, sigma, iteration, True, "step below 0.001 std")
         while True:

@@ -44,7 +44,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from excite.calibration.noise import ChainWhitener, NoiseLevels, WheelNoise, chain_band
+from excite.calibration.noise import (
+    ChainWhitener,
+    LevelBands,
+    NoiseLevels,
+    WheelNoise,
+    chain_band,
+)
 from excite.calibration.reml import level_bounds
 from excite.core.arrays import FloatArray, IntArray
 from excite.logs.segments import Segments
@@ -194,11 +200,10 @@ def _band_product(band: FloatArray, x: FloatArray) -> FloatArray:
 
 @dataclass(frozen=True)
 class _Chunk:
-    """One chunk's fixed parts: the covariance's constant band and its band per unit
-    variance of each level, the heading-error design and the residuals and Jacobian."""
+    """One chunk's fixed parts: the covariance's band as a function of the levels, the
+    heading-error design and the residuals and Jacobian."""
 
-    fixed: FloatArray
-    units: list[FloatArray]
+    bands: LevelBands
     samples: _Samples
     lever: FloatArray
     residual: FloatArray
@@ -207,16 +212,8 @@ class _Chunk:
     @classmethod
     def of(cls, segments: Segments, wheels: WheelNoise | None, residual: FloatArray,
            jac: FloatArray, n_levels: int) -> _Chunk:
-        zero = NoiseLevels(np.zeros(3), np.zeros(2), 0.0)
-        fixed = chain_band(segments, zero, wheels)
-        units = []
-        for i in range(n_levels):
-            unit = np.zeros(n_levels)
-            unit[i] = 1.0
-            units.append(chain_band(segments, NoiseLevels.from_vector(unit), wheels)
-                         - fixed)
-        samples = _Samples.of(segments)
-        return cls(fixed, units, samples, _lever(segments), residual, jac)
+        return cls(LevelBands(segments, wheels, n_levels), _Samples.of(segments),
+                   _lever(segments), residual, jac)
 
 
 def _lever(segments: Segments) -> FloatArray:
@@ -256,7 +253,7 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
     p = chunks[0].jac.shape[1]
     info, gradient = np.zeros((p, p)), np.zeros(p)
     for c in chunks:
-        band = c.fixed + sum(v * unit for v, unit in zip(variances, c.units, strict=True))
+        band = c.bands.at(np.exp(u[:n_levels]))
         cov = _dense(band)
         k = dk = None
         if wander:
@@ -286,7 +283,7 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
     for c, (inverse, ci_j, ci_e, k, dk) in zip(chunks, parts, strict=True):
         y = ci_e - ci_j @ beta  # P e
         m = inverse - ci_j @ info_inverse @ ci_j.T - np.outer(y, y)  # P - P e e^T P
-        for i, (v, unit) in enumerate(zip(variances, c.units, strict=True)):
+        for i, (v, unit) in enumerate(zip(variances, c.bands.units, strict=True)):
             grad[i] += 2.0 * v * _band_inner(unit, m)
         if wander:
             grad[-2] += 2.0 * std2 * float(np.sum(m * k))

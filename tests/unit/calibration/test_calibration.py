@@ -272,6 +272,26 @@ def test_data_that_determine_nothing_are_reported_not_a_crash():
     assert not result.identifiable and result.unidentifiable_direction
 
 
+def test_a_direction_the_damping_hides_is_still_fitted(rng):
+    """Spins measured by a heading far more precise than the positions (1e-7 rad against
+    1 mm): the ratios r/b are known 1e6 times better than the common scale (which the data
+    still determine: relative std 0.6%), so the damping lam diag(F) shrinks a step along the
+    scale far below the relative tolerance while the scale is 1% off. The fit must not stop
+    there (it did, as converged: the 1-hour log's b ended 1.7 std from the optimum): the
+    Gauss-Newton step decides."""
+    from excite.calibration.solver import Problem, levenberg_marquardt
+    from excite.core.models import AXLE
+
+    n = 200
+    turn = rng.uniform(2.0, 6.0, n) * rng.choice([-1, 1], n)
+    seg = exact_segments(-turn + rng.normal(0, 0.5, n), turn)
+    sigma = np.array([1e-3, 1e-3, 1e-7])
+    fit = levenberg_marquardt(Problem(AXLE, seg), 1.01 * TRUTH.as_array(), sigma, "linear",
+                              determined=20.0)
+    assert fit.converged
+    np.testing.assert_allclose(fit.theta, TRUTH.as_array(), rtol=1e-6)
+
+
 def test_a_wild_step_that_underflows_a_length_is_damped_not_a_crash():
     """Levenberg-Marquardt from a wheel separation thousands of metres off, on straight runs
     that do not determine it (a stopping rule's early look at a back-and-forth drive, the two

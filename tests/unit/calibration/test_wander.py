@@ -144,7 +144,8 @@ def test_the_restricted_deviance_has_the_analytic_gradient(u_list, with_wheels):
 def test_the_deviance_without_the_wander_is_the_chain_models():
     """With the heading error off, the dense deviance is the banded chain model's (the same
     likelihood as excite.calibration.noise's REML)."""
-    from excite.calibration.reml import _restricted_deviance
+    from excite.calibration.noise import chain_band, stacked
+    from excite.calibration.reml import restricted_deviance
 
     seg = _log(6, 15.0)
     levels = NoiseLevels(np.array([1e-4, 2e-4, 3e-4]), np.array([2e-3, 1e-3]))
@@ -155,7 +156,8 @@ def test_the_deviance_without_the_wander_is_the_chain_models():
                       jac.transpose(2, 0, 1).reshape(3 * len(seg), -1), 5)
     u = np.log(np.concatenate([levels.sigma, levels.pose]))
     dense, _ = _deviance([chunk], u, 5, False)
-    assert dense == pytest.approx(_restricted_deviance(seg, levels, residual, jac), rel=1e-9)
+    assert dense == pytest.approx(restricted_deviance(chain_band(seg, levels),
+                                                      stacked(residual, jac)), rel=1e-9)
 
 
 def test_chunks_cover_short_logs_and_sample_long_ones():
