@@ -56,7 +56,8 @@ def _wandering(seg: Segments, mf: ModelFit, covariance: FloatArray, test: FitTes
     if not np.all(np.isfinite(covariance)):
         return covariance, replace(test, message=f"{found}; std not changed (a direction is "
                                    "undetermined)")
-    wider = wander_covariance(seg, whitener, mf.unwhitened.jac, covariance, wander)
+    geometry = seg if whitener.geometry is None else whitener.geometry
+    wider = wander_covariance(geometry, whitener, mf.unwhitened.jac, covariance, wander)
     why = (" (the sensor's mounting angle carries the log's mean heading error)"
            if mf.model is SENSOR_POSE else "")
     return wider, replace(test, message=f"{found}: the std are the fit's under a model with "

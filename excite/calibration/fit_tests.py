@@ -80,7 +80,7 @@ def fit_verdict(choice: ModelChoice, fitter: Fitter, starts: Starts,
         test = _with_driving_tests(test, driving_tests(
             data, chosen, None if noise is None else noise.whitener, test.serial_correlation))
         if noise is not None and test.ok:  # a misfit would be taken for a wander
-            test = replace(test, heading_wander=_heading_wander(data, chosen, noise.levels,
+            test = replace(test, heading_wander=_heading_wander(chosen, noise.levels,
                                                                 noise.whitener))
     return test
 
@@ -276,12 +276,13 @@ def pooled_over_kinds(result: CalibrationResult) -> CalibrationResult:
         "not grow with the driving and the mounting does not move with it")))
 
 
-def _heading_wander(data: Segments, mf: ModelFit, levels: NoiseLevels,
+def _heading_wander(mf: ModelFit, levels: NoiseLevels,
                     whitener: ChainWhitener) -> HeadingWander | None:
     """The pose samples' wandering heading error
     (:func:`excite.calibration.wander.estimate_wander`) from the fit's unwhitened residuals,
-    in the directions the data determine."""
+    in the directions the data determine, at the whitener's geometry."""
     ev = mf.unwhitened
     free = np.einsum("cpn,pm->cmn", ev.jac, complement(mf.weak))
-    return estimate_wander(data, ev.raw, free, levels, mf.problem.sigma_floor,
+    assert whitener.geometry is not None
+    return estimate_wander(whitener.geometry, ev.raw, free, levels, mf.problem.sigma_floor,
                            whitener.wheels)

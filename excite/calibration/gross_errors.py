@@ -224,6 +224,7 @@ class _Weights:
     whitener of :class:`excite.calibration.solver.Problem`: weighted least squares)."""
 
     wheels = None
+    position_mean = 1.0  # the measured positions as they are
 
     def __init__(self, weights: FloatArray):
         self.root = np.sqrt(weights)

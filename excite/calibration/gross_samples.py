@@ -62,8 +62,9 @@ def marginal_sizes(fits: Fits) -> FloatArray:
     covariance C_kk at the estimated levels (dimensionless; N(0, I) without gross errors)."""
     primary, noise = fits.candidates.primary, fits.noise
     assert noise is not None
-    data = fits.fitter.data
-    band = chain_band(data, noise.levels, noise.whitener.wheels)
+    data, geometry = fits.fitter.data, noise.whitener.geometry
+    assert geometry is not None
+    band = chain_band(geometry, noise.levels, noise.whitener.wheels)
     n = len(data)
     blocks = np.zeros((n, 3, 3))
     for a in range(3):

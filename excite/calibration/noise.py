@@ -10,8 +10,9 @@ z_k = (-P_k) (+) P_{k+1} of two pose samples P = (p, theta), plus noise of its o
 * segment noise, independent per segment (wheel slip, encoder quantisation, model error):
   std ``sigma`` = (x [m], y [m], theta [rad]).
 
-Linearised at the measured increments d_k = (dx_k, dy_k) (J = rotation by +90 degrees,
-R(a) = rotation by a, Delta_k = dtheta_k), the covariance of the stacked increments is
+Linearised at increments d_k = (dx_k, dy_k) (J = rotation by +90 degrees, R(a) = rotation
+by a, Delta_k = dtheta_k; the calibration gives the model's predicted ones, see
+:func:`excite.calibration.noise_rounds.predicted`), the covariance of the stacked increments is
 block tridiagonal over chains of segments that share their end and start samples:
 
     C_kk      = diag(sigma^2) + [[2 sxy^2 I + sth^2 (J d_k)(J d_k)^T,  sth^2 J d_k],
@@ -417,13 +418,28 @@ class ChainWhitener:
     """Whitening by the Cholesky factor of the covariance C of the stacked increments
     (:func:`chain_band`), for given noise levels; ``wheels`` adds the noise that enters
     through the wheels (slip at ``levels.slip``, encoder quantization, encoder timing at
-    ``levels.timing``), :class:`WheelNoise`. LinAlgError when C is not positive definite."""
+    ``levels.timing``), :class:`WheelNoise`. LinAlgError when C is not positive definite.
+
+    Attributes
+    ----------
+    geometry : Segments or None
+        The segments C was linearised at (:func:`chain_band`: their increments give the
+        heading's lever arms and the turns between chained segments); None when built from a
+        band.
+    position_mean : float
+        E[cos e] = exp(-sigma_theta^2 / 2) of the pose heading noise e: a segment's measured
+        position increment is the true one turned by its start sample's heading error, so its
+        mean is this fraction of the true one (1 without pose heading noise);
+        :class:`excite.calibration.solver.Problem` divides the measured positions by it.
+    """
 
     def __init__(self, segments: Segments, levels: NoiseLevels,
                  wheels: WheelNoise | None = None):
         self._factor = _banded_cholesky(chain_band(segments, levels, wheels))
         self.n = len(segments)
         self.wheels = wheels
+        self.geometry: Segments | None = segments
+        self.position_mean = math.exp(-0.5 * float(levels.pose[1]) ** 2)
 
     @classmethod
     def from_band(cls, band: FloatArray, wheels: WheelNoise | None = None) -> ChainWhitener:
@@ -433,6 +449,7 @@ class ChainWhitener:
         whitener._factor = _banded_cholesky(band)
         whitener.n = band.shape[1] // 3
         whitener.wheels = wheels
+        whitener.geometry, whitener.position_mean = None, 1.0
         return whitener
 
     @property

@@ -9,7 +9,7 @@ estimate is :func:`excite.calibration.reml.reml_noise`, started from the moment 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -17,7 +17,7 @@ from excite.calibration.model_fit import UNIT_SIGMA, fit_model
 from excite.calibration.noise import ChainWhitener, NoiseLevels, WheelNoise, cut_from_log
 from excite.calibration.options import FitOptions
 from excite.calibration.reml import moment_noise, reml_noise
-from excite.calibration.solver import Problem, complement
+from excite.calibration.solver import complement
 from excite.calibration.starts import Starts
 from excite.core.arrays import FloatArray
 from excite.core.models import SegmentModel
@@ -112,18 +112,32 @@ def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray,
     if wheels is not None:
         heading_unit = math.sqrt(max(float(np.mean(wheels.slip[:, 2, 2])), 1e-300))
         levels = NoiseLevels(levels.sigma, levels.pose, float(levels.sigma[2]) / heading_unit)
-    plain = Problem(model, data)
     for _ in range(NOISE_ROUNDS):
-        ev = plain.evaluate(mf.theta)
+        ev = mf.unwhitened  # at the last levels' mean of the measured positions
         free = complement(mf.weak)
-        new = reml_noise(data, ev.raw, np.einsum("cpn,pm->cmn", ev.jac, free), levels, floor,
-                         wheels=wheels)
+        geometry = predicted(model, data, mf.theta)
+        new = reml_noise(geometry, ev.raw, np.einsum("cpn,pm->cmn", ev.jac, free), levels,
+                         floor, wheels=wheels)
         settled = (new.close_to(levels, NOISE_RTOL) if wheels is None else
                    new.close_to(levels, NOISE_RTOL, wheels.scale, wheels.timing_scale))
         levels = new
         mf = fit_model(model, data, mf.theta, UNIT_SIGMA, options,
-                       ChainWhitener(data, levels, wheels))
+                       ChainWhitener(geometry, levels, wheels))
         wheels = wheels_at(mf.theta)
         if settled:
             break
-    return EstimatedNoise(levels, ChainWhitener(data, levels, wheels), mf.theta)
+    whitener = ChainWhitener(predicted(model, data, mf.theta), levels, wheels)
+    return EstimatedNoise(levels, whitener, mf.theta)
+
+
+def predicted(model: SegmentModel, data: Segments, theta: FloatArray) -> Segments:
+    """``data`` with their increments (dx, dy, dtheta) replaced by the model's at ``theta``:
+    where the chain covariance is linearised (:func:`excite.calibration.noise.chain_band`).
+    The measured increments would tilt each heading lever arm along the very pose noise it
+    weighs, a bias of the order sigma_theta^2 in the common scale of the wheels."""
+    if data.sub_dphi_L is not None and data.sub_dphi_R is not None:
+        increments, _ = model.evaluate(data.sub_dphi_L, data.sub_dphi_R, theta,
+                                       jacobian=False, substeps=True)
+    else:
+        increments, _ = model.evaluate(data.dphi_L, data.dphi_R, theta, jacobian=False)
+    return replace(data, dx=increments[0], dy=increments[1], dtheta=increments[2])

@@ -75,7 +75,8 @@ class Evaluation:
 class Problem:
     """A data set and a model: evaluates residuals and relative Jacobians at theta. whitener:
     an :class:`excite.calibration.noise.ChainWhitener` for segments whose noise is correlated
-    (then fit with sigma = 1), or None (independent segments, per-channel sigma)."""
+    (then fit with sigma = 1; the measured positions divided by its ``position_mean``), or
+    None (independent segments, per-channel sigma)."""
 
     def __init__(self, model: SegmentModel, segments: Segments,
                  whitener: ChainWhitener | None = None):
@@ -87,6 +88,8 @@ class Problem:
         else:
             self.phi_L, self.phi_R = segments.dphi_L, segments.dphi_R
         self.measured = np.stack([segments.dx, segments.dy, segments.dtheta])
+        if whitener is not None:  # the measured positions' mean under the pose heading noise
+            self.measured[:2] /= whitener.position_mean
         self.n = len(segments)
         position = float(np.sqrt(np.mean(self.measured[0] ** 2 + self.measured[1] ** 2)))
         heading = float(np.sqrt(np.mean(self.measured[2] ** 2)))
