@@ -51,8 +51,9 @@ print(time.perf_counter() - start, len(segments))
 
 def timed(tree: str, slip: float, mode: str) -> tuple[float, int]:
     env = dict(os.environ, PYTHONPATH=tree)
-    out = subprocess.run([sys.executable, "-c", CHILD, str(slip), mode], env=env, check=True,
-                         capture_output=True, text=True).stdout.split()
+    # -P: not the working directory first on sys.path (from a checkout it would shadow tree)
+    out = subprocess.run([sys.executable, "-P", "-c", CHILD, str(slip), mode], env=env,
+                         check=True, capture_output=True, text=True).stdout.split()
     return float(out[0]), int(out[1])
 
 
