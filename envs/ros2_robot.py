@@ -14,8 +14,6 @@ truth and its own log when asked.
 from __future__ import annotations
 
 import json
-import signal
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +29,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from envs.sim_robot import Cut, SimRobot
+from excite.live.ros2 import stop_on_signals
 
 __all__ = ["SimTopics", "run_sim_robot"]
 
@@ -72,10 +71,6 @@ def run_sim_robot(robot: SimRobot, topics: SimTopics, speed: float = 1.0,
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id,
                signal_handler_options=SignalHandlerOptions.NO)
-    stop = threading.Event()
-    if threading.current_thread() is threading.main_thread():
-        for s in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(s, lambda *_: stop.set())
     node = Node("excite_sim_robot", context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -98,30 +93,31 @@ def run_sim_robot(robot: SimRobot, topics: SimTopics, speed: float = 1.0,
         if on_ready is not None:
             on_ready()
         wall0 = time.monotonic()
-        while not stop.is_set() and robot.t < duration:
-            readings = robot.advance()
-            ticks += 1
-            stamp = _stamp(readings.t)
-            clock.publish(Clock(clock=stamp))
-            silent = {c.stream for c in cuts if c.covers(readings.t,
-                                                           robot.first_command)}
-            if readings.wheels is not None and "joints" not in silent:
-                msg = JointState(name=names,
-                                 position=[*readings.wheels, *[0.0] * len(topics.extra_joints)])
-                msg.header.stamp = stamp
-                joints.publish(msg)
-            if readings.pose is not None and "pose" not in silent:
-                msg = PoseStamped()
-                msg.header.stamp, msg.header.frame_id = stamp, topics.frame_id
-                x, y, theta = readings.pose
-                msg.pose.position.x, msg.pose.position.y = x, y
-                msg.pose.orientation.z, msg.pose.orientation.w = np.sin(0.5 * theta), np.cos(
-                    0.5 * theta)
-                poses.publish(msg)
-            executor.spin_once(timeout_sec=0.0)
-            ahead = wall0 + readings.t / speed - time.monotonic()
-            if ahead > 0:
-                time.sleep(ahead)
+        with stop_on_signals() as stop:
+            while not stop.is_set() and robot.t < duration:
+                readings = robot.advance()
+                ticks += 1
+                stamp = _stamp(readings.t)
+                clock.publish(Clock(clock=stamp))
+                silent = {c.stream for c in cuts if c.covers(readings.t,
+                                                               robot.first_command)}
+                if readings.wheels is not None and "joints" not in silent:
+                    msg = JointState(name=names,
+                                     position=[*readings.wheels, *[0.0] * len(topics.extra_joints)])
+                    msg.header.stamp = stamp
+                    joints.publish(msg)
+                if readings.pose is not None and "pose" not in silent:
+                    msg = PoseStamped()
+                    msg.header.stamp, msg.header.frame_id = stamp, topics.frame_id
+                    x, y, theta = readings.pose
+                    msg.pose.position.x, msg.pose.position.y = x, y
+                    msg.pose.orientation.z, msg.pose.orientation.w = np.sin(0.5 * theta), np.cos(
+                        0.5 * theta)
+                    poses.publish(msg)
+                executor.spin_once(timeout_sec=0.0)
+                ahead = wall0 + readings.t / speed - time.monotonic()
+                if ahead > 0:
+                    time.sleep(ahead)
     finally:
         if truth_out:
             Path(truth_out).write_text(json.dumps(robot.truth(), indent=2) + "\n")

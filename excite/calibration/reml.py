@@ -46,8 +46,9 @@ from excite.calibration.noise import (
 from excite.logs.segments import Segments
 from excite.stats.chi2 import chi_bar_square_quantile
 
-__all__ = ["level_bounds", "moment_noise", "reml_noise", "restricted_deviance",
-           "SEGMENT_NOISE_TEST_LEVEL", "START_FRACTIONS"]
+__all__ = ["at_floor", "level_bounds", "level_floors", "moment_noise", "reml_noise",
+           "restricted_deviance", "FLOOR_TOLERANCE", "SEGMENT_NOISE_TEST_LEVEL",
+           "START_FRACTIONS"]
 
 FloatArray = NDArray[np.float64]
 #: Level of the test of "no segment noise" (:func:`reml_noise`): the segment levels are held
@@ -101,6 +102,27 @@ def restricted_deviance(band: FloatArray, rows: FloatArray) -> float:
             + float(w @ w - projected @ projected))
 
 
+#: A level within this fraction above its floor counts as held there (not found in the data).
+FLOOR_TOLERANCE = 1e-6
+
+
+def level_floors(floor: FloatArray, wheels: WheelNoise | None = None) -> FloatArray:
+    """The floor of each noise level, in the order of :meth:`NoiseLevels.vector` (five, seven
+    with ``wheels``): ``floor`` (3,) = (position, position, heading) for the segment levels,
+    (position, heading) for the pose levels; the slip and timing floors are the heading
+    floor over their scales (:attr:`WheelNoise.scale`, :attr:`WheelNoise.timing_scale`)."""
+    floors = np.concatenate([floor, floor[[0, 2]]])
+    if wheels is None:
+        return floors
+    units = np.maximum([wheels.scale, wheels.timing_scale], 1e-300)
+    return np.append(floors, floor[2] / units)
+
+
+def at_floor(levels: FloatArray, floors: FloatArray) -> NDArray[np.bool_]:
+    """Which of ``levels`` are held at their ``floors`` (within FLOOR_TOLERANCE)."""
+    return levels <= floors * (1.0 + FLOOR_TOLERANCE)
+
+
 def level_bounds(residual: FloatArray, floor: FloatArray, wheels: WheelNoise | None = None
                  ) -> tuple[FloatArray, FloatArray]:
     """The bounds of the logs of the noise levels a REML search moves in: each level at
@@ -112,11 +134,10 @@ def level_bounds(residual: FloatArray, floor: FloatArray, wheels: WheelNoise | N
     :attr:`WheelNoise.timing_bound`).
     Five levels, seven with ``wheels``."""
     spread = float(np.max(np.abs(residual))) if residual.size else 1.0
-    lower = np.log(np.concatenate([floor, floor[[0, 2]]]))
+    lower = np.log(level_floors(floor, wheels))
     upper = np.full(5, np.log(max(10.0 * spread, 1e-300)))
     if wheels is not None:
         units = np.maximum([wheels.scale, wheels.timing_scale], 1e-300)
-        lower = np.append(lower, np.log(floor[2] / units))
         upper = np.append(upper, np.log(np.maximum(10.0 * spread / units, 1e-300)))
         upper[6] = min(upper[6], math.log(max(wheels.timing_bound, 1e-300)))
         lower[6] = min(lower[6], upper[6])

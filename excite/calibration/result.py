@@ -16,6 +16,7 @@ from excite.calibration.identifiability import describe_weak
 from excite.calibration.model_choice import ModelChoice
 from excite.calibration.noise_rounds import EstimatedNoise
 from excite.calibration.options import FitOptions
+from excite.calibration.reml import at_floor, level_floors
 from excite.calibration.slip_tests import DrivingTest
 from excite.calibration.wander import HeadingWander
 from excite.core.kinematics import Params
@@ -161,6 +162,11 @@ class CalibrationResult:
         The joint covariance of every estimated parameter (m^2, m rad, rad^2).
     model_choice : str
         Why this model, in words.
+    model_statistic : float or None
+        The likelihood ratio 2 log(L_sensor-pose / L_axle) (dimensionless) behind
+        ``sensor_pose="auto"``'s choice, against the chi-square(3) quantile at the test level;
+        None when the choice was not tested (the model asked for, or a sensor pose the data
+        do not determine).
     fit : FitTest
         Whether the chosen model fits the data.
     singular_values : ndarray, shape (P,)
@@ -253,6 +259,7 @@ class CalibrationResult:
     parameter_names: tuple[str, ...]
     full_covariance: FloatArray
     model_choice: str
+    model_statistic: float | None
     fit: FitTest
     singular_values: FloatArray
     condition_number: float
@@ -321,6 +328,7 @@ class CalibrationResult:
             "iterations": self.iterations,
             "model": self.model,
             "model_choice": self.model_choice,
+            "model_statistic": self.model_statistic,
             "sensor_pose": None if pose is None else named(pose.as_array(), _CHANNELS),
             "sensor_pose_std": (None if self.sensor_pose_std is None
                                 else named(self.sensor_pose_std, _CHANNELS)),
@@ -343,18 +351,17 @@ class CalibrationResult:
 
 def _levels_at_floor(sigma: FloatArray, pose: FloatArray | None, slip: float | None,
                      floor: FloatArray, wheels, estimated: bool) -> tuple[str, ...]:
-    """CalibrationResult.levels_at_floor: the estimated levels within 1e-6 (relative) of
-    their floor ``floor`` (3,) (m, m, rad; the pose levels' floors are its position and
-    heading entries, slip's the heading floor over the wheels' scale)."""
+    """CalibrationResult.levels_at_floor: the estimated levels at their floor
+    (:func:`excite.calibration.reml.at_floor`; ``floor`` (3,) (m, m, rad) as
+    :func:`excite.calibration.reml.level_floors` takes it)."""
     if not estimated:
         return ()
-    tolerance = 1.0 + 1e-6
-    names = [c for c, s, f in zip(_CHANNELS, sigma, floor, strict=True) if s <= f * tolerance]
+    floors = level_floors(floor, wheels)
+    names = [c for c, held in zip(_CHANNELS, at_floor(sigma, floors[:3]), strict=True) if held]
     if pose is not None:
-        names += [n for n, s, f in zip(("pose_xy", "pose_theta"), pose, floor[[0, 2]],
-                                       strict=True) if s <= f * tolerance]
-    if (slip is not None and wheels is not None
-            and slip <= floor[2] / max(wheels.scale, 1e-300) * tolerance):
+        names += [n for n, held in zip(("pose_xy", "pose_theta"), at_floor(pose, floors[3:5]),
+                                       strict=True) if held]
+    if slip is not None and wheels is not None and at_floor(np.array([slip]), floors[5:6])[0]:
         names.append("slip")
     return tuple(names)
 
@@ -429,6 +436,7 @@ def build_result(data: Segments, choice: ModelChoice, test: FitTest, relative: F
         parameter_names=mf.model.names,
         full_covariance=full,
         model_choice=choice.words,
+        model_statistic=choice.statistic,
         fit=test,
         singular_values=singular,
         condition_number=float(condition),

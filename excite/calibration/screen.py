@@ -46,7 +46,6 @@ each a banded Cholesky factorisation, ten-odd ms for 60 segments.
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,7 +59,12 @@ from excite.calibration.noise import (
     stacked,
 )
 from excite.calibration.options import TEST_LEVEL, SensorPoseOption
-from excite.calibration.reml import START_FRACTIONS, restricted_deviance
+from excite.calibration.reml import (
+    START_FRACTIONS,
+    at_floor,
+    level_floors,
+    restricted_deviance,
+)
 from excite.calibration.result import CalibrationResult
 from excite.calibration.solver import Evaluation, Problem
 from excite.core.arrays import FloatArray
@@ -81,8 +85,6 @@ GROUP_ITERATIONS = 4
 GROUP_STEP = 0.05
 GROUP_RANGE = 3.0
 GROUP_TOLERANCE = 0.05
-#: A level within this fraction above its floor counts as held there.
-HELD_TOLERANCE = 1e-6
 #: A segment group the reference holds at its floor starts the *free* hypothesis at this
 #: fraction of the residuals' RMS: the largest of the REML search's starts.
 START_FRACTION = max(START_FRACTIONS)
@@ -90,9 +92,6 @@ START_FRACTION = max(START_FRACTIONS)
 #: likelihood ratio below this multiple of the test's threshold has the axle model screened
 #: too (the next look may choose it, with fewer parameters and smaller std).
 CLEAR_CHOICE = 2.0
-#: The likelihood ratio in the words of "auto"'s choice of the sensor-pose model
-#: (excite.calibration.model_choice.choose_model).
-_AUTO_RATIO = re.compile(r"likelihood ratio ([0-9.eE+-]+) >")
 
 
 @dataclass(frozen=True)
@@ -161,7 +160,7 @@ def screened_std(segments: Segments, reference: CalibrationResult,
 
 
 def _hypotheses(levels: NoiseLevels, ev: Evaluation, wheels: WheelNoise | None,
-                floor: FloatArray, at_floor: tuple[str, ...] = ()
+                floor: FloatArray, held_names: tuple[str, ...] = ()
                 ) -> list[tuple[FloatArray, list[list[int]]]]:
     """The starting levels (5 or 7) and the groups followed, of the outcomes of
     :func:`excite.calibration.reml.reml_noise`'s tests of segment noise: *held* (white
@@ -171,19 +170,18 @@ def _hypotheses(levels: NoiseLevels, ev: Evaluation, wheels: WheelNoise | None,
     the residuals' RMS, like the REML search) and, with ``wheels``, *slip alone* (free, the
     white segment noise held). Groups: white segment noise (x, y, theta), pose-sample noise
     (xy, theta), noise through the wheels (slip, timing). A level is held at its floor when
-    the reference says so (``at_floor``: :attr:`CalibrationResult.levels_at_floor`) or it is
-    within HELD_TOLERANCE of ``floor``. The two pose-sample levels are followed apart (their
-    ratio moves with the segment noise)."""
+    the reference says so (``held_names``: :attr:`CalibrationResult.levels_at_floor`) or it
+    is at its floor (:func:`excite.calibration.reml.at_floor`). The two pose-sample levels
+    are followed apart (their ratio moves with the segment noise)."""
     with_wheels = wheels is not None
     base = levels.vector(with_wheels)
-    lowest = np.concatenate([floor, floor[[0, 2]]])
+    lowest = level_floors(floor, wheels)
     white, pose, through = [0, 1, 2], [3, 4], [5, 6]
     if with_wheels:
         unit = max(wheels.scale, 1e-300)
-        lowest = np.append(lowest, [floor[2] / unit, 0.0])
+        lowest[6] = 0.0  # the timing level is held at 0, as the REML search holds it
     names = ("x", "y", "theta", "pose_xy", "pose_theta", "slip", "timing")[:base.size]
-    floored = np.array([name in at_floor for name in names])
-    floored |= base <= lowest * (1.0 + HELD_TOLERANCE)
+    floored = np.array([name in held_names for name in names]) | at_floor(base, lowest)
     held = base.copy()
     held[white] = lowest[white]
     free = base.copy()
@@ -201,8 +199,8 @@ def _hypotheses(levels: NoiseLevels, ev: Evaluation, wheels: WheelNoise | None,
         slip_alone = free.copy()
         slip_alone[white] = lowest[white]
         hypotheses.append(slip_alone)
-    above = lowest * (1.0 + HELD_TOLERANCE)
-    return [(start, [g for g in groups if np.any(start[g] > above[g])]) for start in hypotheses]
+    return [(start, [g for g in groups if not np.all(at_floor(start[g], lowest[g]))])
+            for start in hypotheses]
 
 
 def _fitted_band(bands: LevelBands, ev: Evaluation, base: FloatArray,
@@ -246,7 +244,7 @@ def _models(reference: CalibrationResult, sensor_pose: SensorPoseOption
     if reference.sensor_pose_std is None:  # at a given pose
         return [(FixedSensorPoseModel(reference.sensor_pose), wheels)]
     models = [(SENSOR_POSE, np.append(wheels, reference.sensor_pose.as_array()))]
-    if sensor_pose == "auto" and not _clearly_chosen(reference.model_choice):
+    if sensor_pose == "auto" and not _clearly_chosen(reference):
         models.append((AXLE, wheels))
     return models
 
@@ -267,17 +265,12 @@ def _primary(reference: CalibrationResult, sensor_pose: SensorPoseOption
     return SENSOR_POSE, np.append(wheels, pose)
 
 
-def _clearly_chosen(words: str) -> bool:
+def _clearly_chosen(reference: CalibrationResult) -> bool:
     """Whether "auto" chose the sensor-pose model with a likelihood ratio of at least
-    CLEAR_CHOICE times its threshold (read from the result's words; False when absent)."""
-    found = _AUTO_RATIO.search(words)
-    if found is None:
-        return False
-    try:
-        ratio = float(found.group(1))
-    except ValueError:
-        return False
-    return ratio >= CLEAR_CHOICE * chi2_quantile(TEST_LEVEL, 3)
+    CLEAR_CHOICE times its threshold."""
+    ratio = reference.model_statistic
+    return (reference.model == "sensor_pose" and ratio is not None
+            and ratio >= CLEAR_CHOICE * chi2_quantile(TEST_LEVEL, 3))
 
 
 def _newton_step(deviance: _GroupDeviance, u: FloatArray, value: float) -> FloatArray:

@@ -17,7 +17,7 @@ from excite.commands.args import (
     sensor_pose_arg,
     sigma_arg,
 )
-from excite.commands.exit_status import EXIT_MISFIT, EXIT_OK, EXIT_UNIDENTIFIABLE
+from excite.commands.exit_status import calibration_status
 from excite.commands.logs import LOG_FILES, add_log_options
 from excite.commands.options import add_result_options
 
@@ -105,8 +105,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"\nheld-out logs ({len(validation.result.logs)}), nominal (--init) vs "
                   "calibrated:")
             print(validation.result.summary())
-    status = (EXIT_MISFIT if not result.fit.ok
-              else EXIT_OK if result.identifiable else EXIT_UNIDENTIFIABLE)
+    status = calibration_status(result)
     if args.ros2_yaml:
         export_yaml(args, result, initial, status)
     return status

@@ -10,7 +10,8 @@ line, naming the option (``argument --seed: ...``).
 from __future__ import annotations
 
 __all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_UNIDENTIFIABLE", "EXIT_MISFIT",
-           "EXIT_OUT_OF_TIME", "EXIT_ABORTED", "EXIT_WORSE", "EXIT_INTERRUPTED", "MEANINGS"]
+           "EXIT_OUT_OF_TIME", "EXIT_ABORTED", "EXIT_WORSE", "EXIT_INTERRUPTED", "MEANINGS",
+           "calibration_status"]
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -40,3 +41,11 @@ MEANINGS = {
     EXIT_INTERRUPTED: "interrupted (Ctrl-C or SIGTERM); compare, tune and sweep keep "
                       "finished work",
 }
+
+
+def calibration_status(result) -> int:
+    """A calibration's exit status (a :class:`~excite.calibration.result.CalibrationResult`):
+    EXIT_MISFIT when the model does not fit, else EXIT_OK when every parameter is determined,
+    else EXIT_UNIDENTIFIABLE."""
+    return (EXIT_MISFIT if not result.fit.ok
+            else EXIT_OK if result.identifiable else EXIT_UNIDENTIFIABLE)

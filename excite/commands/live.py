@@ -23,6 +23,7 @@ from excite.commands.exit_status import (
     EXIT_INTERRUPTED,
     EXIT_OK,
     EXIT_OUT_OF_TIME,
+    calibration_status,
 )
 from excite.commands.options import add_result_options, add_seed_option
 
@@ -280,17 +281,10 @@ def run(args: argparse.Namespace) -> int:
     if args.ros2_yaml and result.calibration is not None:
         from excite.commands.calibrate import export_yaml
 
-        export_yaml(args, result.calibration, settings.nominal, _status(result))
+        export_yaml(args, result.calibration, settings.nominal,
+                    calibration_status(result.calibration))
     return {"done": EXIT_OK, "out_of_time": EXIT_OUT_OF_TIME}.get(
         result.outcome, EXIT_INTERRUPTED if result.reason == INTERRUPTED else EXIT_ABORTED)
-
-
-def _status(result) -> int:
-    from excite.commands.exit_status import EXIT_MISFIT, EXIT_UNIDENTIFIABLE
-
-    calibration = result.calibration
-    return (EXIT_MISFIT if not calibration.fit.ok
-            else EXIT_OK if calibration.identifiable else EXIT_UNIDENTIFIABLE)
 
 
 def _recorder(path: Path | None):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Arena", "DEFAULT_CHASSIS", "DEFAULT_CHASSIS_SIZE"]
+__all__ = ["Arena", "DEFAULT_CHASSIS", "DEFAULT_CHASSIS_SIZE", "footprint_clearance"]
 
 #: m, side of the default robot's square chassis footprint.
 DEFAULT_CHASSIS_SIZE = 0.36
@@ -52,13 +52,22 @@ class Arena:
         centred on the axle midpoint; the default robot's 0.36 m square by default (use
         ``RobotSpec.chassis`` for another robot).
         """
-        length, width = chassis
-        c, s = np.abs(np.cos(theta)), np.abs(np.sin(theta))
-        # Corner extent of the rectangle rotated by theta, along each world axis.
-        if length == width:  # a square: one product, as before presets existed
-            reach_x = reach_y = 0.5 * length * (c + s) + margin
-        else:
-            reach_x = 0.5 * (length * c + width * s) + margin
-            reach_y = 0.5 * (length * s + width * c) + margin
-        return (np.abs(x) + reach_x <= 0.5 * self.width) & (
-            np.abs(y) + reach_y <= 0.5 * self.height)
+        return footprint_clearance(x, y, theta, (self.width, self.height), chassis) >= margin
+
+
+def footprint_clearance(x, y, theta, extent: tuple[float, float],
+                        chassis: tuple[float, float] = DEFAULT_CHASSIS) -> np.ndarray:
+    """The smallest distance (m) from the chassis footprint (length along body x, width along
+    body y, m, centred on the axle midpoint) at poses (x, y, theta) to the edges of an
+    ``extent`` (width along x, height along y, m) rectangle centred on the origin, in that
+    rectangle's frame; negative where the footprint reaches outside."""
+    length, width = chassis
+    c, s = np.abs(np.cos(theta)), np.abs(np.sin(theta))
+    # Corner extent of the rectangle rotated by theta, along each axis.
+    if length == width:  # a square: one product, as before presets existed
+        reach_x = reach_y = 0.5 * length * (c + s)
+    else:
+        reach_x = 0.5 * (length * c + width * s)
+        reach_y = 0.5 * (length * s + width * c)
+    return np.minimum(0.5 * extent[0] - np.abs(x) - reach_x,
+                      0.5 * extent[1] - np.abs(y) - reach_y)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from excite.core.arena import DEFAULT_CHASSIS
+from excite.core.arena import DEFAULT_CHASSIS, footprint_clearance
 
 __all__ = ["Area"]
 
@@ -79,12 +79,7 @@ class Area:
         """The smallest distance (m) from the footprint of a robot at body pose (x, y,
         theta) (pose frame) to the area's edges; negative when it reaches outside."""
         x, y, theta = self.to_local(pose)
-        length, width = chassis
-        c, s = abs(math.cos(theta)), abs(math.sin(theta))
-        reach_x = 0.5 * (length * c + width * s)
-        reach_y = 0.5 * (length * s + width * c)
-        w, h = self.extent
-        return float(min(0.5 * w - abs(x) - reach_x, 0.5 * h - abs(y) - reach_y))
+        return float(footprint_clearance(x, y, theta, self.extent, chassis))
 
     def to_text(self) -> str:
         """'X0,Y0,X1,Y1' in m, as ``--area`` takes it."""

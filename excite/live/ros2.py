@@ -44,7 +44,7 @@ from excite.live.session import LiveSession
 from excite.live.settings import LiveTopics
 from excite.logs.bag_reader import headings
 
-__all__ = ["INTERRUPTED", "POSE_TYPES", "run_live"]
+__all__ = ["INTERRUPTED", "POSE_TYPES", "run_live", "stop_on_signals"]
 
 #: How much lower the decisions' process runs than the node (os.nice): on a busy computer
 #: the node must keep up with the streams and the commands; a decision may wait.
@@ -72,8 +72,10 @@ def _seconds(stamp: Any) -> float:
 
 
 @contextmanager
-def _signals() -> Iterator[threading.Event]:
-    """SIGINT and SIGTERM set an event (the loop then stops the robot and ends)."""
+def stop_on_signals() -> Iterator[threading.Event]:
+    """While inside: SIGINT and SIGTERM set the event yielded (a node's loop then stops the
+    robot and ends); the previous handlers are restored on the way out. In a thread other
+    than the main one (where Python cannot install handlers) the event is only yielded."""
     event = threading.Event()
     if threading.current_thread() is not threading.main_thread():
         yield event
@@ -267,7 +269,7 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
     node: LiveNode | None = None
     stopped = False  # the zero command went out and was acknowledged
     try:
-        with _signals() as interrupted:
+        with stop_on_signals() as interrupted:
             node = LiveNode(session, topics, context, recorder, on_status)
             executor.add_node(node.node)
             node.connect(executor)

@@ -60,14 +60,14 @@ from excite.contracts import RobotKnowledge
 from excite.core import se2
 from excite.core.information import information_matrix
 from excite.core.models import SensorPose
-from excite.errors import ExciteError
+from excite.errors import DataError, ExciteError
 from excite.live.area import Area
 from excite.live.log import Stream, cut, decide_log, increment_noise
 from excite.live.result import OUTCOMES, Command, LiveResult, LiveStatus
 from excite.live.settings import LiveSettings
 from excite.live.watch import MotionWatch
 from excite.logs.segments import Segments
-from excite.logs.timeseries import TimeSeries
+from excite.logs.timeseries import TimeSeries, during
 from excite.stopping import StopDecision, StoppingRule
 
 __all__ = ["MIN_SPEED_SCALE", "LiveSession"]
@@ -274,13 +274,14 @@ class LiveSession:
         too few."""
         t_enc, wheels = self._wheels.arrays()
         t_pose, poses = self._poses.arrays()
-        if start is not None:
-            wheels, poses = wheels[t_enc >= start], poses[t_pose >= start]
-            t_enc, t_pose = t_enc[t_enc >= start], t_pose[t_pose >= start]
         if len(t_enc) < 2 or len(t_pose) < 2:
             return None
-        return TimeSeries(t_enc, wheels[:, 0], wheels[:, 1], t_pose, *poses.T,
-                          source=("wheel angles", "poses"))
+        series = TimeSeries(t_enc, wheels[:, 0], wheels[:, 1], t_pose, *poses.T,
+                            source=("wheel angles", "poses"))
+        try:
+            return during(series, start)
+        except DataError:  # fewer than 2 samples of a stream since ``start``
+            return None
 
     def _segmented(self) -> Segments:
         """The session's log since the last slowdown cut into segments as ``excite calibrate

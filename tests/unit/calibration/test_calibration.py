@@ -8,6 +8,7 @@ from excite import DataError, Params, calibrate
 from excite.calibration.starts import initial_estimate
 from excite.core.information import crlb_relative_std, fisher_information, scaled_jacobian
 from excite.logs.synthetic import lesson_dataset
+from excite.stats.chi2 import chi2_quantile
 from tests.conftest import TRUTH, exact_segments, spin_segments, straight_segments
 
 
@@ -175,12 +176,17 @@ def test_auto_estimates_an_off_axle_sensor_and_says_why(rng):
     d = result.to_dict()
     assert d["model"] == "sensor_pose" and set(d["sensor_pose"]) == {"x", "y", "theta"}
     assert d["fit"]["ok"] is True
+    assert f"likelihood ratio {result.model_statistic:.3g} >" in result.model_choice
+    assert d["model_statistic"] == result.model_statistic > chi2_quantile(0.999, 3)
 
 
 def test_auto_keeps_the_axle_model_on_axle_data(rng):
-    result = calibrate(lesson_dataset(rng, 200, TRUTH))
+    seg = lesson_dataset(rng, 200, TRUTH)
+    result = calibrate(seg)
     assert result.model == "axle" and result.sensor_pose is None
     assert "does not fit significantly better" in result.model_choice and result.fit.ok
+    assert f"likelihood ratio {result.model_statistic:.3g} <=" in result.model_choice
+    assert calibrate(seg, sensor_pose="axle").model_statistic is None
 
 
 def test_forcing_the_axle_model_on_an_off_axle_sensor_is_a_misfit_in_words(rng):
