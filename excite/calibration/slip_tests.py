@@ -211,6 +211,7 @@ def driving_tests(data: Segments, mf: ModelFit, whitener: ChainWhitener | None,
         rows = np.linspace(0, len(data) - 1, MAX_TESTED).round().astype(np.int64)
         raw, jac, runs = raw[:, rows], jac[:, :, rows], runs[rows]
     white, own = whiten(raw, jac)
+    own_system = _own_system(own)  # the same for every test
     tests = []
     for name, measure in driving_measures(data, mf.theta, rows).items():
         spread = measure.std()
@@ -221,7 +222,8 @@ def driving_tests(data: Segments, mf: ModelFit, whitener: ChainWhitener | None,
         # per-channel whitening (no whitener) commutes with the scaling by z
         columns = (own[:, extra, :] * z if whitener is None
                    else whiten(raw, jac[:, extra, :] * z)[1])
-        test = _driving_test(name, mf.model.names, own, columns, white, z, extra, runs, lags)
+        test = _driving_test(name, mf.model.names, own, own_system, columns, white, z, extra,
+                             runs, lags)
         if test is not None:
             tests.append(test)
     return tuple(tests)
@@ -236,15 +238,17 @@ def _whitening(mf: ModelFit, whitener: ChainWhitener | None) -> Whiten:
     return lambda raw, jac: (raw / sigma[:, None], jac / sigma[:, None, None])
 
 
-def _driving_test(name: str, names: tuple[str, ...], own: FloatArray, columns: FloatArray,
+def _driving_test(name: str, names: tuple[str, ...], own: FloatArray,
+                  own_system: tuple[FloatArray, FloatArray], columns: FloatArray,
                   white: FloatArray, z: FloatArray, extra: list[int],
                   runs: NDArray[np.int64], lags: int) -> DrivingTest | None:
     """One driving test: the score test of theta_k = theta + gamma z_k (gamma on the
     parameters ``extra``, whose whitened columns J_i z are ``columns`` (3, q, N) beside the
-    model's own (3, P, N), at the whitened residuals ``white``), its one-step gamma, the score
+    model's own (3, P, N) and their information and its inverse ``own_system``
+    (:func:`_own_system`), at the whitened residuals ``white``), its one-step gamma, the score
     test of the sensor pose's part alone and the growth of the residuals after that step;
     None when the data determine no extra direction."""
-    base = _Score(own, columns, white, runs, lags)
+    base = _Score(own, columns, white, runs, lags, own_system)
     if base.dof <= 0:
         return None
     std = np.sqrt(np.diag(inverse_information(base.own_information)))[extra]
@@ -292,10 +296,11 @@ class _Score:
     ``runs``; ``gamma`` the one Gauss-Newton step of the extra parameters."""
 
     def __init__(self, own: FloatArray, extra: FloatArray, white: FloatArray,
-                 runs: NDArray[np.int64], lags: int):
+                 runs: NDArray[np.int64], lags: int,
+                 own_system: tuple[FloatArray, FloatArray] | None = None):
         self.own_columns = own
-        self.own_information = _gram(own, own)
-        self.own_inverse = np.linalg.pinv(self.own_information, hermitian=True)
+        self.own_information, self.own_inverse = (_own_system(own) if own_system is None
+                                                  else own_system)
         projection = self.own_inverse @ _gram(own, extra)
         self.rest = extra - np.matmul(projection.T, own)
         shares = (self.rest * white[:, None, :]).sum(axis=0).T  # each segment's share (N, q)
@@ -323,6 +328,12 @@ class _Score:
                 + (self.rest * np.matmul(self.inverse, self.rest)).sum(axis=1))
 
 
+def _own_system(own: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The information (P, P) of whitened columns ``own`` (3, P, N) and its pseudo-inverse."""
+    information = _gram(own, own)
+    return information, np.linalg.pinv(information, hermitian=True)
+
+
 def _gram(a: FloatArray, b: FloatArray) -> FloatArray:
     """sum over channels c and segments n of a[c, p, n] b[c, q, n]: (P, Q)."""
     return sum((a[c] @ b[c].T for c in range(a.shape[0])), np.zeros((a.shape[1], b.shape[1])))
@@ -346,6 +357,8 @@ def _growth(white: FloatArray, leverage: FloatArray, z: FloatArray
                   if side.any() and not side.all()), None)
     if upper is None:  # no two sides to compare
         return p_value, np.ones(u.shape[0])
+    above = upper.astype(float)
+    count = float(above.sum())
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.sqrt(u[:, upper].mean(axis=1) / u[:, ~upper].mean(axis=1))
+        ratio = np.sqrt((u @ above) / count / ((u @ (1.0 - above)) / (z.size - count)))
     return p_value, np.where(np.isfinite(ratio), ratio, 1.0)
