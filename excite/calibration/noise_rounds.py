@@ -26,7 +26,7 @@ from excite.logs.segments import Segments
 from excite.logs.timeseries import tick_angle
 
 __all__ = ["MIN_NOISE_DOF_PER_LEVEL", "NOISE_ROUNDS", "NOISE_RTOL", "EstimatedNoise",
-           "estimated_noise"]
+           "estimated_noise", "predicted"]
 
 #: Most rounds of (estimate the noise levels, refit) for segments that share pose samples.
 NOISE_ROUNDS = 8

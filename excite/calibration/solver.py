@@ -258,13 +258,11 @@ def estimate_sigma(problem: Problem, ev: Evaluation, system: System | None,
     return np.maximum(sigma, problem.sigma_floor)
 
 
-def settled_sigma(problem: Problem, ev: Evaluation, loss: Loss,
-                  sigma: FloatArray | None = None) -> tuple[FloatArray, System]:
+def settled_sigma(problem: Problem, ev: Evaluation, loss: Loss) -> tuple[FloatArray, System]:
     """The noise levels (3,) at an evaluation, iterated with their normal system until they
     settle (relative change below 1e-6; :func:`estimate_sigma`'s degrees of freedom depend on
-    the levels' ratios), and that system; from ``sigma`` when given."""
-    if sigma is None:
-        sigma = estimate_sigma(problem, ev, None, loss)
+    the levels' ratios), and that system."""
+    sigma = estimate_sigma(problem, ev, None, loss)
     system = normal_system(ev, sigma, loss)
     for _ in range(SETTLE_ROUNDS):
         new_sigma = estimate_sigma(problem, ev, system, loss)
