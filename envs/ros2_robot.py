@@ -89,11 +89,11 @@ def run_sim_robot(robot: SimRobot, topics: SimTopics, speed: float = 1.0,
                              10)
     names = [topics.left_wheel, topics.right_wheel, *topics.extra_joints]
     ticks = 0
-    try:
-        if on_ready is not None:
-            on_ready()
-        wall0 = time.monotonic()
-        with stop_on_signals() as stop:
+    with stop_on_signals() as stop:  # from here on, SIGINT and SIGTERM end the loop
+        try:
+            if on_ready is not None:
+                on_ready()
+            wall0 = time.monotonic()
             while not stop.is_set() and robot.t < duration:
                 readings = robot.advance()
                 ticks += 1
@@ -118,14 +118,14 @@ def run_sim_robot(robot: SimRobot, topics: SimTopics, speed: float = 1.0,
                 ahead = wall0 + readings.t / speed - time.monotonic()
                 if ahead > 0:
                     time.sleep(ahead)
-    finally:
-        if truth_out:
-            Path(truth_out).write_text(json.dumps(robot.truth(), indent=2) + "\n")
-        if log_out:
-            np.savetxt(log_out, robot.log_array(), delimiter=",", fmt="%.15g",
-                       header="t,x,y,theta,v,omega,received,received_wall", comments="")
-        executor.remove_node(node)
-        node.destroy_node()
-        executor.shutdown(timeout_sec=1.0)
-        context.try_shutdown()
+        finally:
+            if truth_out:
+                Path(truth_out).write_text(json.dumps(robot.truth(), indent=2) + "\n")
+            if log_out:
+                np.savetxt(log_out, robot.log_array(), delimiter=",", fmt="%.15g",
+                           header="t,x,y,theta,v,omega,received,received_wall", comments="")
+            executor.remove_node(node)
+            node.destroy_node()
+            executor.shutdown(timeout_sec=1.0)
+            context.try_shutdown()
     return ticks

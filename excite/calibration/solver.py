@@ -333,13 +333,14 @@ def levenberg_marquardt(
                 sigma = new_sigma
                 system = normal_system(ev, sigma, loss)
         step = step_now(lam)
+        gauss_newton = False
         if settled and np.max(np.abs(step)) < tol:
             # the damping can hide a direction the data determine far less well than the
             # others (a small step is no optimum): the Gauss-Newton step decides
             undamped = step_now(0.0)
             if np.max(np.abs(undamped)) < tol:
                 return Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
-            step = undamped
+            step, gauss_newton = undamped, True
         if settled and step_in_std(system, free) < STEP_IN_STD:
             return Fit(ev, system, sigma, iteration, True, "step below 0.001 std")
         while True:
@@ -353,6 +354,8 @@ def levenberg_marquardt(
                 if (system_trial.cost <= system.cost
                         and np.all(np.isfinite(system_trial.information))):
                     break
+            if gauss_newton:  # it does not lower the cost either: at the optimum, to rounding
+                return Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
             lam *= 10.0
             if lam > 1e12:
                 return Fit(ev, system, sigma, iteration, True, "no further decrease of the cost")
