@@ -355,6 +355,7 @@ def _half_widths(std: dict[str, float], quantile: float, tolerances: dict[str, f
     half = {name: float(quantile * s) for name, s in std.items()}
     return half, {name: half[name] / tolerances[name] for name in half}
 
+
 def _segments_to_go(n: int, statistic: float) -> float:
     """Further segments for the statistic to fall to 1 when every std shrinks as
     1 / sqrt(segments) (the information grows linearly with the current driving)."""

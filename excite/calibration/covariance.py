@@ -20,7 +20,6 @@ from excite.calibration.result import FitTest
 from excite.calibration.wander import wander_covariance
 from excite.core.information import inverse_information
 from excite.core.models import SENSOR_POSE
-from excite.logs.segments import Segments
 from excite.stats.autocorrelation import at_least, long_run_covariance, runs_of
 
 __all__ = ["reported_covariance"]
@@ -36,11 +35,11 @@ def reported_covariance(chosen: ModelFit, test: FitTest, fitter: Fitter
     correlation (:func:`_long_run`)."""
     data = fitter.data
     inverse = inverse_information(chosen.fit.system.information)
-    relative, test = _wandering(data, chosen, inverse, test, fitter.whitener)
+    relative, test = _wandering(chosen, inverse, test, fitter.whitener)
     return _long_run(chosen, inverse, relative, test, runs_of(data.chained, len(data)))
 
 
-def _wandering(seg: Segments, mf: ModelFit, covariance: FloatArray, test: FitTest,
+def _wandering(mf: ModelFit, covariance: FloatArray, test: FitTest,
                whitener: ChainWhitener | None) -> tuple[FloatArray, FitTest]:
     """The relative covariance of the fit when the pose heading error wanders
     (``test.heading_wander``, :func:`excite.calibration.wander.wander_covariance`), and the
@@ -56,8 +55,9 @@ def _wandering(seg: Segments, mf: ModelFit, covariance: FloatArray, test: FitTes
     if not np.all(np.isfinite(covariance)):
         return covariance, replace(test, message=f"{found}; std not changed (a direction is "
                                    "undetermined)")
-    geometry = seg if whitener.geometry is None else whitener.geometry
-    wider = wander_covariance(geometry, whitener, mf.unwhitened.jac, covariance, wander)
+    assert whitener.geometry is not None
+    wider = wander_covariance(whitener.geometry, whitener, mf.unwhitened.jac, covariance,
+                              wander)
     why = (" (the sensor's mounting angle carries the log's mean heading error)"
            if mf.model is SENSOR_POSE else "")
     return wider, replace(test, message=f"{found}: the std are the fit's under a model with "

@@ -91,14 +91,15 @@ def _widening(relative: FloatArray, information: FloatArray) -> float:
     return max(1.0, float(np.linalg.eigvalsh(0.5 * (ratio + ratio.T))[-1]))
 
 
-def _kind_system(chosen: ModelFit, fitter: Fitter, kinds: IntArray
+def _kind_system(chosen: ModelFit, fitter: Fitter, kinds: IntArray, counts: IntArray
                  ) -> tuple[FloatArray, FloatArray]:
     """The information and gradient (relative units) of the model with r_L, r_R, b per kind
-    of motion (3 columns per kind of KINDS, then the sensor pose's), at the common fit, with
-    its noise model and loss. Independent segments: assembled from each kind's own normal
-    system (kinds share no noise), the most frequent kind's as the fit's system less the
-    others' (a segment whose wheels do not move has no Jacobian); segments that share pose
-    samples: the augmented Jacobian whitened as the fit's."""
+    of motion (3 columns per kind of KINDS, then the sensor pose's; ``counts``: each kind's
+    segments), at the common fit, with its noise model and loss. Independent segments:
+    assembled from each kind's own normal system (kinds share no noise), the most frequent
+    kind's as the fit's system less the others' (a segment whose wheels do not move has no
+    Jacobian); segments that share pose samples: the augmented Jacobian whitened as the
+    fit's."""
     sigma, loss = chosen.fit.sigma, fitter.options.loss
     if fitter.whitener is None:
         ev = chosen.fit.ev  # not whitened: raw residuals and relative Jacobian rows
@@ -110,7 +111,6 @@ def _kind_system(chosen: ModelFit, fitter: Fitter, kinds: IntArray
             information[np.ix_(rows, rows)] += info
             gradient[rows] += grad
 
-        counts = np.bincount(kinds[kinds >= 0], minlength=len(KINDS))
         largest = int(np.argmax(counts))
         rest_information = chosen.fit.system.information.copy()
         rest_gradient = chosen.fit.system.gradient.copy()
@@ -148,7 +148,7 @@ def motion_heterogeneity(chosen: ModelFit, fitter: Fitter, relative: FloatArray
     counts = np.bincount(kinds[kinds >= 0], minlength=len(KINDS))
     if np.count_nonzero(counts >= MIN_KIND_SEGMENTS) < 1:
         return None
-    information, gradient = _kind_system(chosen, fitter, kinds)
+    information, gradient = _kind_system(chosen, fitter, kinds, counts)
     k3 = 3 * len(KINDS)
 
     def block(group: list[int]) -> FloatArray:

@@ -269,8 +269,7 @@ def _clearly_chosen(reference: CalibrationResult) -> bool:
     """Whether "auto" chose the sensor-pose model with a likelihood ratio of at least
     CLEAR_CHOICE times its threshold."""
     ratio = reference.model_statistic
-    return (reference.model == "sensor_pose" and ratio is not None
-            and ratio >= CLEAR_CHOICE * chi2_quantile(TEST_LEVEL, 3))
+    return ratio is not None and ratio >= CLEAR_CHOICE * chi2_quantile(TEST_LEVEL, 3)
 
 
 def _newton_step(deviance: _GroupDeviance, u: FloatArray, value: float) -> FloatArray:

@@ -246,14 +246,15 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
     from scipy.linalg import cho_factor, cho_solve
     from scipy.linalg.lapack import dpotri
 
-    variances = np.exp(2.0 * u[:n_levels])
+    levels = np.exp(u[:n_levels])
+    variances = levels * levels
     std2, time = (math.exp(2.0 * u[-2]), math.exp(u[-1])) if wander else (0.0, 1.0)
     total = 0.0
     parts = []
     p = chunks[0].jac.shape[1]
     info, gradient = np.zeros((p, p)), np.zeros(p)
     for c in chunks:
-        band = c.bands.at(np.exp(u[:n_levels]))
+        band = c.bands.at(levels)
         cov = _dense(band)
         k = dk = None
         if wander:

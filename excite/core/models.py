@@ -239,11 +239,17 @@ class AxleModel(SegmentModel):
         return "AXLE"  # one instance: code compares models by identity
 
     def evaluate(self, dphi_L, dphi_R, theta, jacobian=True, substeps=False):
-        return self.evaluate_turning(dphi_L, dphi_R, theta, jacobian, substeps)[:2]
+        return self._evaluated(dphi_L, dphi_R, theta, jacobian, substeps)[:2]
 
     def evaluate_turning(self, dphi_L, dphi_R, theta, jacobian=True, substeps=False):
         """:meth:`evaluate`, and the turn (sin(dtheta), cos(dtheta) - 1) of each increment
         from the arc's sinc and cosc (dtheta f, -dtheta g), or None for composed sub-steps."""
+        prediction, jac, arc = self._evaluated(dphi_L, dphi_R, theta, jacobian, substeps)
+        return prediction, jac, (None if arc is None
+                                 else (arc.dtheta * arc.f, -arc.dtheta * arc.g))
+
+    def _evaluated(self, dphi_L, dphi_R, theta, jacobian, substeps):
+        """:meth:`evaluate`, and the arc of each increment (None for composed sub-steps)."""
         phi_L, phi_R = _broadcast_increments(dphi_L, dphi_R)
         theta = np.asarray(theta, dtype=float)
         trailing = 1 + substeps
@@ -256,7 +262,7 @@ class AxleModel(SegmentModel):
         jac = arc.fill_jacobian(np.empty((3, 3) + shape)) if jacobian else None
         if substeps:
             return compose_substeps(prediction, jac) + (None,)
-        return prediction, jac, (arc.dtheta * arc.f, -arc.dtheta * arc.g)
+        return prediction, jac, arc
 
     def evaluate_wheels(self, dphi_L, dphi_R, theta, substeps=False):
         phi_L, phi_R = _broadcast_increments(dphi_L, dphi_R)

@@ -172,7 +172,8 @@ def test_each_kinds_blocks_are_its_own_segments_normal_system(rng, loss):
     chosen = fitter.fit(SENSOR_POSE, np.r_[TRUTH.as_array(), 0.01, -0.02, 0.1])
     kinds = motion_kinds(seg, Params(*chosen.theta[:3]))
     assert np.bincount(kinds + 1).tolist() == [5, 30, 40, 200, 50]
-    information, gradient = _kind_system(chosen, fitter, kinds)
+    information, gradient = _kind_system(chosen, fitter, kinds,
+                                         np.bincount(kinds[kinds >= 0], minlength=4))
     ev, sigma, k3 = chosen.fit.ev, chosen.fit.sigma, 3 * len(KINDS)
     for k in range(len(KINDS)):
         own = np.flatnonzero(kinds == k)
