@@ -257,9 +257,9 @@ def _by(t: DrivingTest) -> str:
 
 def pooled_over_kinds(result: CalibrationResult) -> CalibrationResult:
     """The result with its fit test passing again when the heterogeneity stage found the
-    kinds of motion of one log disagreeing and pooled them (random effects, whose std covers
-    the spread) and the fit failed only by a driving test that is not slipping: the change of
-    the parameters with the driving is the kinds' difference the pool covers
+    kinds of motion of one log disagreeing and widened the std to cover their spread
+    (random effects) and the fit failed only by a driving test that is not slipping: the
+    change of the parameters with the driving is the kinds' difference the std cover
     (:mod:`excite.calibration.slip_tests`, "The verdict"). Unchanged otherwise."""
     h, fit = result.heterogeneity, result.fit
     if (fit.ok or h is None or not h.detected or h.by != "motion"
@@ -271,9 +271,8 @@ def pooled_over_kinds(result: CalibrationResult) -> CalibrationResult:
         return result
     return replace(result, fit=replace(fit, ok=True, message=(
         f"{_listed(worst.moved)} {_verb(worst.moved)} with the {worst.driving} "
-        f"({_by(worst)}) as the kinds of motion differ, which the random-effects pool "
-        "covers; the residuals do "
-        "not grow with the driving and the mounting does not move with it")))
+        f"({_by(worst)}) as the kinds of motion differ, which the std cover; the "
+        "residuals do not grow with the driving and the mounting does not move with it")))
 
 
 def _heading_wander(mf: ModelFit, levels: NoiseLevels,

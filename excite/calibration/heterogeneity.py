@@ -9,10 +9,14 @@ r_R, b are compared: the sensor mounting is shared by every group (between input
 input's estimate is combined under one mounting by generalised least squares, so its
 uncertainty is carried into the wheels'). The test: Cochran's Q of the groups' estimates,
 chi-square with 3 (G - 1) degrees of freedom under agreement (F with estimated noise
-levels), at LEVEL (:mod:`excite.stats.meta_analysis`). When they disagree (:func:`applied`):
-r_L, r_R, b and their covariance from the random-effects pool (Knapp-Hartung's covariance
-for few groups), its std covering the spread (``heterogeneity="random"``), or the common fit
-failing its fit test (``"common"``); between logs the pool is also used when p is below
+levels), at LEVEL (:mod:`excite.stats.meta_analysis`). When they disagree (:func:`applied`),
+with ``heterogeneity="random"``, r_L, r_R, b and their covariance cover the spread under the
+random-effects model (Knapp-Hartung's adjustment for few groups): between logs, the
+random-effects pool; within one log, the common fit of the log's mix of driving, with the
+kinds' spread carried through its weights into its covariance (the kinds' segments are
+scattered through the log and share pose samples, so the kinds alone hold a small part of
+the log's information, which the random-effects pool would give away). With ``"common"``
+the common fit fails its fit test. Between logs the pool is also used when p is below
 POOLING_LEVEL without a disagreement said (the fit test unchanged); the words say which
 parameters differ and how, and name the groups that disagree most.
 """
@@ -90,8 +94,10 @@ class Heterogeneity:
     POOLING_LEVEL). most_different: the groups that disagree
     most (the largest distance from the others' common estimate; both with two groups);
     empty when they agree. differences: which parameters differ and how, in words; empty when
-    they agree. random_params (3,), random_covariance (3, 3): the random-effects estimate
-    (m, m^2; Knapp-Hartung's covariance for few groups). group_covariance (3G, 3G): the
+    they agree. pooled_params (3,), pooled_covariance (3, 3): the estimate under the
+    random-effects model (m, m^2; module docstring: between logs the random-effects pool,
+    within a log the common fit with the spread in its covariance; Knapp-Hartung's
+    adjustment for few groups). group_covariance (3G, 3G): the
     joint covariance of the groups' estimates (m^2, group-major; the groups of one log are
     correlated). group_fits: between logs, each log's own fit test (ok, message), in the
     order of ``groups``; empty for kinds of motion.
@@ -107,8 +113,8 @@ class Heterogeneity:
     pooling: str
     most_different: tuple[str, ...]
     differences: str
-    random_params: FloatArray
-    random_covariance: FloatArray
+    pooled_params: FloatArray
+    pooled_covariance: FloatArray
     group_covariance: FloatArray
     group_fits: tuple[tuple[bool, str], ...] = ()
 
@@ -131,8 +137,9 @@ class Heterogeneity:
         """The report's line among what a user acts on: empty when the groups agree."""
         if not self.detected:
             return []
-        how = ("the values above pool them, their std cover the spread"
-               if self.pooling == "random effects" else "the values above do not fit them all")
+        how = ("the values above do not fit them all" if self.pooling != "random effects"
+               else "the values above pool them, their std cover the spread" if self.by == "logs"
+               else "the values above fit the log's mix of driving, their std cover the spread")
         return [f"  {'disagreement':<19} r_L, r_R, b differ between {self.what}: "
                 f"{self.differences}; {how}"]
 
@@ -154,9 +161,11 @@ class Heterogeneity:
             if self.pooling == "random effects":
                 spread = ", ".join(f"{n} {1e3 * s:.2g} mm"
                                    for n, s in zip(_NAMES, self.between_std, strict=True))
-                lines.append("                    r_L, r_R, b above pool them with their "
-                             f"spread (random effects; between-group std {spread}): their std "
-                             "cover it; --common-params forces one set")
+                what = ("pool them with their spread" if self.by == "logs" else
+                        "fit the log's mix of driving, with the kinds' spread")
+                lines.append(f"                    r_L, r_R, b above {what} (random effects; "
+                             f"between-group std {spread}): their std cover it; "
+                             "--common-params forces one set")
             else:
                 lines.append("                    common parameters forced (--common-params): "
                              "they do not fit every group")
@@ -347,8 +356,10 @@ def assessed(c: Comparison) -> Heterogeneity:
         p_value=pooled.p_value, groups=groups,
         between_std=np.sqrt(np.diag(pooled.between)) * c.scale,
         pooling="random effects" if pooled_randomly else "common", most_different=most,
-        differences=words, random_params=c.center + pooled.random_mean * c.scale,
-        random_covariance=pooled.adjusted_covariance * scale2,
+        differences=words, pooled_params=(c.center + pooled.random_mean * c.scale
+                                          if c.by == "logs" else c.center.copy()),
+        pooled_covariance=(pooled.adjusted_covariance if c.by == "logs"
+                           else pooled.fixed_spread_covariance) * scale2,
         group_covariance=c.covariance * np.tile(scale2, (len(c.names), len(c.names))))
 
 
@@ -403,10 +414,10 @@ def applied(result: CalibrationResult, heterogeneity: Heterogeneity | None,
             f"{_p_text(heterogeneity.p_value)}): common parameters (--common-params) do not fit "
             f"them; {heterogeneity.differences}"))
         return replace(result, fit=fit, heterogeneity=heterogeneity)
-    covariance = heterogeneity.random_covariance
+    covariance = heterogeneity.pooled_covariance
     full = _carried_over(result.full_covariance, covariance)
     fit = _own_fits(result.fit, heterogeneity) if heterogeneity.detected else result.fit
-    return replace(result, params=Params(*heterogeneity.random_params), covariance=covariance,
+    return replace(result, params=Params(*heterogeneity.pooled_params), covariance=covariance,
                    fit=fit,
                    std=np.sqrt(np.diag(covariance)), full_covariance=full,
                    heterogeneity=heterogeneity)

@@ -26,9 +26,10 @@ No initial guess and no noise levels are needed. The stages, in order, each in i
 9. :func:`~excite.calibration.result.build_result`: the
    :class:`~excite.calibration.result.CalibrationResult`.
 10. :func:`~excite.calibration.heterogeneity.applied`: when the kinds of motion disagree,
-    r_L, r_R, b from their random-effects pool (or the fit failed, ``heterogeneity="common"``).
-11. :func:`~excite.calibration.fit_tests.pooled_over_kinds`: when that pool was made, a
-    driving test that is not slipping no longer fails the fit (the pool covers it).
+    the common fit's r_L, r_R, b with the kinds' spread in their std (random effects; or the
+    fit failed, ``heterogeneity="common"``).
+11. :func:`~excite.calibration.fit_tests.pooled_over_kinds`: when the std were widened so, a
+    driving test that is not slipping no longer fails the fit (the std cover it).
 """
 
 from __future__ import annotations
@@ -105,7 +106,7 @@ def calibrate(
         (variance (2 pi / ticks_per_rev)^2 / 12) is then part of the noise model of segments
         that share samples (:class:`excite.calibration.noise.WheelNoise`).
     heterogeneity: "random" (default: test whether r_L, r_R, b differ between kinds of
-        motion; when they do, report their random-effects pool), "common" (test, keep common
+        motion; when they do, widen the std by their spread), "common" (test, keep common
         parameters, which then fail the fit when they differ) or "off"
         (:mod:`excite.calibration.heterogeneity`).
     """

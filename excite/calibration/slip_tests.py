@@ -48,8 +48,8 @@ residuals still grow with the driving after the step, or the mounting changes wi
 Wheel parameters that differ between gentle and hard driving while the residuals fit both
 and the mounting stays put may be the effective parameters of each driving (wheels that
 scrub in turns): when the heterogeneity stage finds the kinds of motion disagreeing and
-pools them (:mod:`excite.calibration.heterogeneity`, random effects whose std covers the
-spread), such a test no longer fails the fit (:func:`excite.calibration.fit_tests.
+widens the std by their spread (:mod:`excite.calibration.heterogeneity`, random
+effects), such a test no longer fails the fit (:func:`excite.calibration.fit_tests.
 pooled_over_kinds`); a slipping one still does. The three tests are one family at
 TEST_LEVEL: each at 1 - (1 - TEST_LEVEL) / 3 (Bonferroni), the growth and mounting tests at
 the same level. More than MAX_TESTED independent segments are tested on MAX_TESTED of them,
@@ -127,7 +127,7 @@ class DrivingTest:
     slipping : bool
         Whether the residuals grow with the driving after the step (``growth`` below the
         test's level) or the mounting changes with it (``pose_statistic`` above its
-        quantile): slip, which a random-effects pool over kinds of motion does not cover.
+        quantile): slip, which the kinds' spread in the std does not cover.
     """
 
     driving: str

@@ -130,8 +130,8 @@ def _driving(driving: str, slipping: bool) -> DrivingTest:
                                                   (False, "logs", False)])
 def test_a_pool_over_kinds_of_motion_covers_a_change_that_is_not_slip(slipping, by, lifted):
     """A driving test that failed the fit only by the parameters changing with the turn rate
-    (the residuals fitting gentle and hard turns alike) is what a random-effects pool over
-    the log's kinds of motion covers: the fit passes, saying so. A slipping one (residuals
+    (the residuals fitting gentle and hard turns alike) is what the std widened by the log's
+    kinds of motion's spread cover: the fit passes, saying so. A slipping one (residuals
     growing) still fails; a pool over logs (their own fit tests apply) changes nothing."""
     result = calibrate(lesson_dataset(np.random.default_rng(3), n=60))
     tests = (_driving("turn rate", slipping),)
@@ -143,7 +143,7 @@ def test_a_pool_over_kinds_of_motion_covers_a_change_that_is_not_slip(slipping, 
     out = pooled_over_kinds(replace(result, fit=failed, heterogeneity=pool))
     assert out.fit.ok == lifted
     if lifted:
-        assert "random-effects pool covers" in out.fit.message
+        assert "kinds of motion differ, which the std cover" in out.fit.message
     else:
         assert out.fit == failed
 
