@@ -1,5 +1,5 @@
 """The heterogeneity test: logs (or kinds of motion) whose r_L, r_R, b disagree beyond their
-std are said so, with a random-effects pool whose std covers the spread
+std are said so, with an estimate whose std covers the spread
 (excite.calibration.heterogeneity, excite.stats.meta_analysis)."""
 
 import dataclasses
@@ -237,6 +237,23 @@ def test_logs_of_different_turning_are_detected_and_pooled_with_their_spread(tmp
     assert common.heterogeneity.detected and common.heterogeneity.pooling == "common"
     assert not common.fit.ok and "--common-params" in common.fit.message
     assert "b from " in common.fit.message
+
+
+def test_kinds_of_motion_that_disagree_keep_the_common_fit_with_their_spread_in_its_std(rng):
+    """Within one input the kinds share the log's information: r_L, r_R, b stay the common
+    fit's (the log's mix of driving), the std widen to cover the kinds' spread."""
+    seg = Segments.concatenate([_maneuver(rng, "tight", 150, scrub=0.2),
+                                _maneuver(rng, "wide", 150, scrub=0.2)])
+    result = calibrate(seg)
+    common = calibrate(seg, heterogeneity="common")
+    h = result.heterogeneity
+    assert h.detected and h.by == "motion" and h.pooling == "random effects"
+    assert result.params == common.params
+    groups_b = np.array([g.params[2] for g in h.groups])
+    assert np.max(np.abs(groups_b - common.params.b)) > 4 * common.std[2]
+    assert np.all(np.abs(groups_b - result.params.b) <= 2 * result.std[2])
+    assert np.all(result.std > common.std)
+    assert "fit the log's mix of driving" in "\n".join(h.summary_lines())
 
 
 def _two_groups(by: str, q: float):
