@@ -2,7 +2,12 @@
 
 ``sensor_pose="auto"`` fits the sensor-pose model and the axle model and keeps the
 sensor-pose model when the data determine the sensor pose and it fits significantly better:
-a likelihood-ratio test (3 degrees of freedom) at TEST_LEVEL. ``"estimate"``, ``"axle"`` and a
+a likelihood-ratio test (3 degrees of freedom) at TEST_LEVEL. When the sensor-pose fit puts
+the sensor so far from the axle that the test's outcome is not in question (the sensor pose's
+Wald statistic above NEAR_AXLE times the test's threshold), the axle model is not fitted:
+the Wald statistic decides (the two statistics agree near the axle, and far from it both are
+far beyond the threshold; a misfitting axle model takes many iterations to reach an optimum
+that changes no decision). ``"estimate"``, ``"axle"`` and a
 given SensorPose fit the one model asked for.
 """
 
@@ -34,11 +39,15 @@ class Candidates:
     primary : ModelFit
         The model asked for (the sensor-pose model under "auto" and "estimate").
     axle : ModelFit or None
-        The axle model, fitted under "auto" only.
+        The axle model, fitted under "auto" only, unless the sensor is far from the axle.
+    wald : float or None
+        Under "auto", when the data determine the sensor pose: its Wald statistic
+        (dimensionless, chi-square with 3 degrees of freedom on the axle); else None.
     """
 
     primary: ModelFit
     axle: ModelFit | None
+    wald: float | None = None
 
 
 @dataclass(frozen=True)
@@ -56,9 +65,11 @@ class ModelChoice:
         sensor pose (the fit test measures the axle model's misfit against it); else None.
     statistic : float or None
         The likelihood ratio 2 log(L_sensor-pose / L_axle) (dimensionless) of "auto"'s test
-        when the data determine the sensor pose; else None.
+        when the data determine the sensor pose (the sensor pose's Wald statistic when the
+        sensor is far from the axle and the axle model was not fitted); else None.
     statistic_name : str or None
-        "likelihood ratio" under "auto" (also when ``statistic`` is None); else None.
+        "likelihood ratio" (or "Wald statistic") under "auto" (also when ``statistic`` is
+        None); else None.
     """
 
     chosen: ModelFit
@@ -77,34 +88,40 @@ def fit_candidates(fitter: Fitter, starts: Starts, noise: EstimatedNoise | None,
     primary = fitter.fit(starts.primary, start)
     if starts.primary is not SENSOR_POSE or sensor_pose != "auto":
         return Candidates(primary, None)
-    return Candidates(primary, fitter.fit(AXLE, _axle_start(primary, starts)))
+    wald = _pose_wald(primary)
+    if wald is None:
+        return Candidates(primary, fitter.fit(AXLE, starts.axle))
+    if wald > NEAR_AXLE * chi2_quantile(TEST_LEVEL, 3):
+        return Candidates(primary, None, wald)
+    return Candidates(primary, fitter.fit(AXLE, _axle_start(primary)), wald)
 
 
-#: The axle model starts from the sensor-pose fit's wheels when the sensor's offset from the
-#: axle is within this many times the model choice's chi-square(3) threshold (Wald statistic):
-#: then the two models' wheels are close. A sensor far off the axle bends the axle model's
-#: optimum away from them, and its own closed form is the better start.
+#: The sensor is near the axle when the sensor pose's Wald statistic is within this many times
+#: the model choice's chi-square(3) threshold: the axle model then starts from the
+#: sensor-pose fit's wheels (the two models' wheels are close). Beyond it the axle model is not
+#: fitted (module docstring): a likelihood ratio of thousands decides as surely as one of
+#: millions.
 NEAR_AXLE = 100.0
 
 
-def _axle_start(primary: ModelFit, starts: Starts) -> FloatArray:
-    """The axle fit's start (r_L, r_R, b in m): the sensor-pose fit's wheels, moved as its
-    linearisation moves them when the sensor is put on the axle, when the data determine
-    that fit and its sensor pose is near the axle (:data:`NEAR_AXLE`), else the
-    axle model's own start (the closed form or the initial guess). Only where the fit starts
-    depends on it, not where it ends."""
-    if not primary.identifiable:
-        return starts.axle
-    pose = primary.theta[3:] / primary.fit.ev.scale[3:]  # relative units
+def _pose_wald(primary: ModelFit) -> float | None:
+    """The sensor pose's Wald statistic (dimensionless) of the sensor-pose fit, the wheels
+    profiled out; None when the data do not determine that fit."""
     info = primary.fit.system.information
-    if not np.all(np.isfinite(info)):
-        return starts.axle
+    if not primary.identifiable or not np.all(np.isfinite(info)):
+        return None
+    pose = primary.theta[3:] / primary.fit.ev.scale[3:]  # relative units
     # the sensor pose's information with the wheels profiled out (the Schur complement)
     schur = info[3:, 3:] - info[3:, :3] @ solve_psd(info[:3, :3], info[:3, 3:])
-    near = float(pose @ schur @ pose) <= NEAR_AXLE * chi2_quantile(TEST_LEVEL, 3)
-    if not near:
-        return starts.axle
-    # the sensor moved onto the axle, the wheels with it along the fit's linearisation
+    return float(pose @ schur @ pose)
+
+
+def _axle_start(primary: ModelFit) -> FloatArray:
+    """The axle fit's start (r_L, r_R, b in m) for a sensor near the axle: the sensor-pose
+    fit's wheels, moved as its linearisation moves them when the sensor is put on the axle.
+    Only where the fit starts depends on it, not where it ends."""
+    info = primary.fit.system.information
+    pose = primary.theta[3:] / primary.fit.ev.scale[3:]  # relative units
     wheels = -solve_psd(info[:3, :3], primary.fit.system.gradient[:3] - info[:3, 3:] @ pose)
     return primary.model.step(primary.theta, np.append(wheels, -pose),
                               primary.fit.ev.scale)[:3]
@@ -112,12 +129,19 @@ def _axle_start(primary: ModelFit, starts: Starts) -> FloatArray:
 
 def choose_model(candidates: Candidates, fitter: Fitter) -> ModelChoice:
     """The model to report: the one asked for, or under "auto" the sensor-pose model when the
-    data determine its sensor pose and the likelihood ratio exceeds the chi-square(3)
-    quantile at TEST_LEVEL, else the axle model."""
+    data determine its sensor pose and the likelihood ratio (or, the sensor far from the
+    axle, the Wald statistic) exceeds the chi-square(3) quantile at TEST_LEVEL, else the axle
+    model."""
     primary, axle = candidates.primary, candidates.axle
     if primary.model is not SENSOR_POSE:
         return ModelChoice(primary, "axle: as asked" if primary.model is AXLE
                            else "sensor_pose: at the given pose, as asked")
+    threshold = chi2_quantile(TEST_LEVEL, 3)
+    if axle is None and candidates.wald is not None:
+        return ModelChoice(primary, f"sensor_pose: the sensor is far from the axle (Wald "
+                           f"statistic {candidates.wald:.3g} > {NEAR_AXLE:g} x {threshold:.3g}"
+                           "; the axle model was not fitted)", None, candidates.wald,
+                           "Wald statistic")
     if axle is None:
         return ModelChoice(primary, "sensor_pose: estimated, as asked")
     name = "likelihood ratio"
@@ -125,7 +149,6 @@ def choose_model(candidates: Candidates, fitter: Fitter) -> ModelChoice:
         return ModelChoice(axle, "axle: the data do not determine the sensor pose ("
                            + describe_weak(primary.weak, primary.theta, fitter.data,
                                            primary.channel_std) + ")", statistic_name=name)
-    threshold = chi2_quantile(TEST_LEVEL, 3)
     statistic = _likelihood_ratio(axle, primary, fitter.sigma is not None, fitter.options.loss)
     if statistic <= threshold:
         return ModelChoice(axle, f"axle: the sensor-pose model does not fit significantly "

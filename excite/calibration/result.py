@@ -53,7 +53,8 @@ class FitTest:
         chi-square with 3 degrees of freedom when the chosen model is right); None when not
         tested.
     statistic_name : str or None
-        "likelihood ratio" when both models were fitted, as ``sensor_pose="auto"`` does;
+        "likelihood ratio" when both models were fitted, as ``sensor_pose="auto"`` does
+        ("Wald statistic" when it did not fit the axle model, the sensor far from the axle);
         "score" (Rao's test at the chosen model's estimate, one evaluation) when a model was
         imposed, the alternative then fitted only to describe a misfit.
     threshold : float
@@ -164,9 +165,10 @@ class CalibrationResult:
         Why this model, in words.
     model_statistic : float or None
         The likelihood ratio 2 log(L_sensor-pose / L_axle) (dimensionless) behind
-        ``sensor_pose="auto"``'s choice, against the chi-square(3) quantile at the test level;
-        None when the choice was not tested (the model asked for, or a sensor pose the data
-        do not determine).
+        ``sensor_pose="auto"``'s choice, against the chi-square(3) quantile at the test level
+        (the sensor pose's Wald statistic when it is above 100 times that quantile: the axle
+        model is then not fitted); None when the choice was not tested (the model asked
+        for, or a sensor pose the data do not determine).
     fit : FitTest
         Whether the chosen model fits the data.
     singular_values : ndarray, shape (P,)

@@ -169,15 +169,35 @@ def test_exact_data_give_the_exact_sensor_pose_for_any_mounting_without_a_guess(
 def test_auto_estimates_an_off_axle_sensor_and_says_why(rng):
     result = calibrate(sensor_segments(rng))
     assert result.model == "sensor_pose" and result.sensor_pose_std is not None
-    assert "fits significantly better" in result.model_choice
+    # so far from the axle that the axle model is not fitted: the Wald statistic decides
+    assert "the sensor is far from the axle" in result.model_choice
     z = (result.sensor_pose.as_array() - OFF_AXLE) / result.sensor_pose_std
     assert np.all(np.abs(z) < 4), z
     assert result.full_covariance.shape == (6, 6) and result.singular_values.size == 6
     d = result.to_dict()
     assert d["model"] == "sensor_pose" and set(d["sensor_pose"]) == {"x", "y", "theta"}
     assert d["fit"]["ok"] is True
+    assert f"Wald statistic {result.model_statistic:.3g} >" in result.model_choice
+    assert d["model_statistic"] == result.model_statistic > 100 * chi2_quantile(0.999, 3)
+    assert result.fit.statistic_name == "Wald statistic"
+
+
+def test_a_sensor_near_the_axle_is_chosen_by_the_likelihood_ratio(rng, monkeypatch):
+    """Within 100 times the threshold both models are fitted and the likelihood ratio
+    decides; far beyond it, fitting the axle model too would decide the same."""
+    from excite.calibration import model_choice
+
+    threshold = chi2_quantile(0.999, 3)
+    result = calibrate(sensor_segments(rng, pose=(0.005, 0.0, 0.0)))
+    assert result.model == "sensor_pose" and result.fit.statistic_name == "likelihood ratio"
     assert f"likelihood ratio {result.model_statistic:.3g} >" in result.model_choice
-    assert d["model_statistic"] == result.model_statistic > chi2_quantile(0.999, 3)
+    assert threshold < result.model_statistic < model_choice.NEAR_AXLE * threshold
+    far = sensor_segments(rng)
+    assert "far from the axle" in calibrate(far).model_choice
+    monkeypatch.setattr(model_choice, "NEAR_AXLE", np.inf)
+    both = calibrate(far)
+    assert both.model == "sensor_pose" and both.fit.statistic_name == "likelihood ratio"
+    assert both.model_statistic > 100 * threshold
 
 
 def test_auto_keeps_the_axle_model_on_axle_data(rng):
