@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -56,6 +57,9 @@ from excite.core.arrays import FloatArray, IntArray
 from excite.logs.segments import Segments
 from excite.stats.autocorrelation import runs_of
 from excite.stats.chi2 import chi_bar_square_quantile
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
 
 __all__ = ["HeadingWander", "estimate_wander", "wander_covariance", "CHUNK_SEGMENTS",
            "MAX_CHUNKS", "MIN_WANDER_SEGMENTS", "WANDER_TEST_LEVEL"]
@@ -178,12 +182,13 @@ def _dense(band: FloatArray) -> FloatArray:
     return out
 
 
-def _band_inner(band: FloatArray, m: FloatArray) -> float:
-    """sum(X * M) for X the symmetric matrix of lower band storage ``band`` and symmetric M."""
+def _band_inner(band: FloatArray, m_band: FloatArray) -> float:
+    """sum(X * M) for X and M symmetric, given by their lower band storage ``band`` and
+    ``m_band`` (M's band at least as wide as X's)."""
     n = band.shape[1]
-    total = float(band[0] @ np.diagonal(m))
+    total = float(band[0] @ m_band[0])
     for d in range(1, band.shape[0]):
-        total += 2.0 * float(band[d, : n - d] @ np.diagonal(m, offset=-d))
+        total += 2.0 * float(band[d, : n - d] @ m_band[d, : n - d])
     return total
 
 
@@ -201,19 +206,31 @@ def _band_product(band: FloatArray, x: FloatArray) -> FloatArray:
 @dataclass(frozen=True)
 class _Chunk:
     """One chunk's fixed parts: the covariance's band as a function of the levels, the
-    heading-error design and the residuals and Jacobian."""
+    heading-error design (``design``: A^T, sparse (M, 3n), of the module doc) and the
+    residuals and Jacobian."""
 
     bands: LevelBands
     samples: _Samples
     lever: FloatArray
+    design: csr_matrix
     residual: FloatArray
     jac: FloatArray
 
     @classmethod
     def of(cls, segments: Segments, wheels: WheelNoise | None, residual: FloatArray,
            jac: FloatArray, n_levels: int) -> _Chunk:
-        return cls(LevelBands(segments, wheels, n_levels), _Samples.of(segments),
-                   _lever(segments), residual, jac)
+        from scipy.sparse import csr_matrix
+
+        samples, lever = _Samples.of(segments), _lever(segments)
+        n = len(segments)
+        rows = 3 * np.arange(n)
+        design = csr_matrix(
+            (np.concatenate([lever[:, 0], lever[:, 1], -np.ones(n), np.ones(n)]),
+             (np.concatenate([samples.start, samples.start, samples.start, samples.end]),
+              np.concatenate([rows, rows + 1, rows + 2, rows + 2]))),
+            shape=(len(samples.times), 3 * n))
+        return cls(LevelBands(segments, wheels, n_levels), samples, lever, design, residual,
+                   jac)
 
 
 def _lever(segments: Segments) -> FloatArray:
@@ -256,12 +273,10 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
     for c in chunks:
         band = c.bands.at(levels)
         cov = _dense(band)
-        k = dk = None
+        r = dr = None
         if wander:
             r, dr = c.samples.correlation(time)
-            k = _sandwiched(c.samples, c.lever, r)
-            dk = _sandwiched(c.samples, c.lever, dr) if with_gradient else None
-            cov += std2 * k
+            cov += std2 * _sandwiched(c.samples, c.lever, r)
         cov[np.diag_indices_from(cov)] *= 1.0 + JITTER
         factor, _ = cho_factor(cov, lower=True, check_finite=False)
         total += 2.0 * float(np.sum(np.log(np.diag(factor))))
@@ -273,7 +288,7 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
         info += c.jac.T @ ci_j
         gradient += c.jac.T @ ci_e
         total += float(c.residual @ ci_e)
-        parts.append((inverse, ci_j, ci_e, k, dk))
+        parts.append((inverse, ci_j, ci_e, dr))
     g_factor = cho_factor(info, lower=True, check_finite=False)
     beta = cho_solve(g_factor, gradient, check_finite=False)
     total += 2.0 * float(np.sum(np.log(np.diag(g_factor[0])))) - float(gradient @ beta)
@@ -281,14 +296,26 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
         return total, None
     grad = np.zeros(u.size)
     info_inverse = cho_solve(g_factor, np.eye(p), check_finite=False)
-    for c, (inverse, ci_j, ci_e, k, dk) in zip(chunks, parts, strict=True):
+    for c, (inverse, ci_j, ci_e, dr) in zip(chunks, parts, strict=True):
+        # d deviance / d theta_i = tr(M dC_i), M = P - P e e^T P, P = C^-1 - C^-1 J I^-1 J^T
+        # C^-1: only M's band (the levels' units) and A^T M A (the wander's) are needed
         y = ci_e - ci_j @ beta  # P e
-        m = inverse - ci_j @ info_inverse @ ci_j.T - np.outer(y, y)  # P - P e e^T P
+        low = ci_j @ info_inverse
+        width = c.bands.units[0].shape[0]
+        n = y.size
+        m_band = np.zeros((width, n))
+        for d in range(width):
+            m_band[d, : n - d] = (np.diagonal(inverse, offset=-d)
+                                  - np.einsum("ip,ip->i", low[d:], ci_j[: n - d])
+                                  - y[d:] * y[: n - d])
         for i, (v, unit) in enumerate(zip(variances, c.bands.units, strict=True)):
-            grad[i] += 2.0 * v * _band_inner(unit, m)
+            grad[i] += 2.0 * v * _band_inner(unit, m_band)
         if wander:
-            grad[-2] += 2.0 * std2 * float(np.sum(m * k))
-            grad[-1] += std2 * float(np.sum(m * dk))
+            a_low, a_j, a_y = c.design @ low, c.design @ ci_j, c.design @ y
+            projected = (c.design @ (c.design @ inverse).T
+                         - a_low @ a_j.T - np.outer(a_y, a_y))  # A^T M A
+            grad[-2] += 2.0 * std2 * float(np.sum(projected * r))
+            grad[-1] += std2 * float(np.sum(projected * dr))
     return total, grad
 
 
