@@ -361,13 +361,22 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
     start = np.clip(np.log(np.maximum(levels.vector(wheels is not None), 1e-300)), lower,
                     upper)
 
+    last: dict[tuple[bytes, bool], tuple[float, FloatArray]] = {}
+
     def deviance(u: FloatArray, wander: bool, with_gradient: bool = True
                  ) -> tuple[float, FloatArray]:
+        key = (u.tobytes(), wander)
+        if key in last:  # a restart begins where the search before it ended
+            return last[key]
         try:
             value, gradient = _deviance(chunks, u, n_levels, wander, with_gradient)
         except np.linalg.LinAlgError:  # not positive definite at the bounds
             return UNDEFINED, np.zeros(u.size)
-        return value, np.zeros(u.size) if gradient is None else gradient
+        if gradient is None:
+            return value, np.zeros(u.size)
+        last.clear()
+        last[key] = (value, gradient)
+        return value, gradient
 
     def fitted(u0: FloatArray, lo: FloatArray, hi: FloatArray, wander: bool
                ) -> tuple[FloatArray, float]:
