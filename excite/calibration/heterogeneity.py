@@ -46,8 +46,9 @@ __all__ = ["LEVEL", "POOLING_LEVEL", "HeterogeneityOption", "Group", "Heterogene
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-#: What to do about groups that disagree: "random" (test; a random-effects pool when they
-#: disagree), "common" (test; keep common parameters, which then fail the fit) or "off".
+#: What to do about groups that disagree: "random" (test; when they disagree, std that cover
+#: the spread under the random-effects model, module docstring), "common" (test; keep common
+#: parameters, which then fail the fit) or "off".
 HeterogeneityOption = Literal["random", "common", "off"]
 #: The level of the heterogeneity test.
 LEVEL = 0.05
@@ -398,9 +399,9 @@ def applied(result: CalibrationResult, heterogeneity: Heterogeneity | None,
             option: HeterogeneityOption) -> CalibrationResult:
     """The result with the test attached: unchanged without one; with ``option`` "random"
     and the pooling "random effects" (detected, or between logs p below POOLING_LEVEL), r_L,
-    r_R, b and their covariance from the random-effects pool (the sensor pose and the rest
-    kept; the fit test the logs' own when detected); with "common" and ``detected``, the
-    common fit failing its fit test."""
+    r_R, b and their covariance ``heterogeneity.pooled_params``, ``pooled_covariance`` (the
+    sensor pose and the rest kept; the fit test the logs' own when detected); with "common"
+    and ``detected``, the common fit failing its fit test."""
     if heterogeneity is None:
         return result
     if not heterogeneity.detected and (option == "common"

@@ -248,7 +248,8 @@ class CalibrationResult:
         The test of agreement of r_L, r_R, b between the logs, or between kinds of motion
         within one log (:class:`excite.calibration.heterogeneity.Heterogeneity`): each group's
         estimate, the statistic and the words. When they disagree, ``params``, ``covariance``,
-        ``std`` and the wheel block of ``full_covariance`` are the random-effects pool (unless
+        ``std`` and the wheel block of ``full_covariance`` cover their spread (between logs
+        the random-effects pool; within one log the common fit, its std widened; unless
         common parameters were forced: then ``fit`` fails). None when not tested.
     """
 

@@ -64,8 +64,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     cal.add_argument("--common-params", action="store_true",
                      help="one set of r_L, r_R, b for every input (and kind of motion) even when "
                      "they disagree beyond their std; the fit then fails (exit status 4). "
-                     "Default: when they disagree, report their random-effects pool, whose std "
-                     "cover the spread")
+                     "Default: when they disagree, report std that cover the spread (random "
+                     "effects)")
     add_log_options(cal)
     cal.set_defaults(handler=run)
 
