@@ -288,7 +288,7 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
         info += c.jac.T @ ci_j
         gradient += c.jac.T @ ci_e
         total += float(c.residual @ ci_e)
-        parts.append((inverse, ci_j, ci_e, dr))
+        parts.append((inverse, ci_j, ci_e, r, dr))
     g_factor = cho_factor(info, lower=True, check_finite=False)
     beta = cho_solve(g_factor, gradient, check_finite=False)
     total += 2.0 * float(np.sum(np.log(np.diag(g_factor[0])))) - float(gradient @ beta)
@@ -296,7 +296,7 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
         return total, None
     grad = np.zeros(u.size)
     info_inverse = cho_solve(g_factor, np.eye(p), check_finite=False)
-    for c, (inverse, ci_j, ci_e, dr) in zip(chunks, parts, strict=True):
+    for c, (inverse, ci_j, ci_e, r, dr) in zip(chunks, parts, strict=True):
         # d deviance / d theta_i = tr(M dC_i), M = P - P e e^T P, P = C^-1 - C^-1 J I^-1 J^T
         # C^-1: only M's band (the levels' units) and A^T M A (the wander's) are needed
         y = ci_e - ci_j @ beta  # P e
@@ -367,7 +367,8 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
                  ) -> tuple[float, FloatArray]:
         key = (u.tobytes(), wander)
         if key in last:  # a restart begins where the search before it ended
-            return last[key]
+            value, gradient = last[key]
+            return value, gradient.copy()
         try:
             value, gradient = _deviance(chunks, u, n_levels, wander, with_gradient)
         except np.linalg.LinAlgError:  # not positive definite at the bounds
@@ -376,7 +377,7 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
             return value, np.zeros(u.size)
         last.clear()
         last[key] = (value, gradient)
-        return value, gradient
+        return value, gradient.copy()
 
     def fitted(u0: FloatArray, lo: FloatArray, hi: FloatArray, wander: bool
                ) -> tuple[FloatArray, float]:

@@ -110,11 +110,17 @@ def test_samples_follow_the_clocks():
 
 
 def _chunks(seg: Segments, wheels: WheelNoise | None):
+    """Two chunks of different sizes and timing, as a long log's."""
     rng = np.random.default_rng(3)
     p = 4
     e = rng.normal(scale=1e-3, size=3 * len(seg))
     j = rng.normal(size=(3 * len(seg), p))
-    return [_Chunk.of(seg, wheels, e, j, 7 if wheels is not None else 5)]
+    cut = 2 * len(seg) // 5
+    parts = [range(0, cut), range(cut, len(seg))]
+    return [_Chunk.of(seg[part.start:part.stop],
+                      None if wheels is None else wheels.take(np.asarray(part)),
+                      e[3 * part.start:3 * part.stop], j[3 * part.start:3 * part.stop],
+                      7 if wheels is not None else 5) for part in parts]
 
 
 @settings(max_examples=15, deadline=None)
