@@ -13,7 +13,7 @@ levels), at LEVEL (:mod:`excite.stats.meta_analysis`). When they disagree (:func
 with ``heterogeneity="random"``, r_L, r_R, b and their covariance cover the spread under the
 random-effects model (Knapp-Hartung's adjustment for few groups): between logs, the
 random-effects pool; within one log, the common fit of the log's mix of driving, with the
-kinds' spread carried through its weights into its covariance (the kinds' segments are
+kinds' spread carried through its weights added to its covariance (the kinds' segments are
 scattered through the log and share pose samples, so the kinds alone hold a small part of
 the log's information, which the random-effects pool would give away). With ``"common"``
 the common fit fails its fit test. Between logs the pool is also used when p is below
@@ -95,10 +95,13 @@ class Heterogeneity:
     POOLING_LEVEL). most_different: the groups that disagree
     most (the largest distance from the others' common estimate; both with two groups);
     empty when they agree. differences: which parameters differ and how, in words; empty when
-    they agree. pooled_params (3,), pooled_covariance (3, 3): the estimate under the
-    random-effects model (m, m^2; module docstring: between logs the random-effects pool,
-    within a log the common fit with the spread in its covariance; Knapp-Hartung's
-    adjustment for few groups). group_covariance (3G, 3G): the
+    they agree. random_params (3,), random_covariance (3, 3): the random-effects pool (m,
+    m^2; Knapp-Hartung's covariance for few groups), what a disagreement between logs
+    reports. spread_covariance (3, 3): what the spread between kinds of motion adds to the
+    common fit's covariance as an estimate of the mean over kinds, what a disagreement
+    within one log reports (m^2; A (I (x) T) A', A the common fit's weights of the groups,
+    adjusted for few groups: :mod:`excite.stats.meta_analysis`; zero between logs).
+    group_covariance (3G, 3G): the
     joint covariance of the groups' estimates (m^2, group-major; the groups of one log are
     correlated). group_fits: between logs, each log's own fit test (ok, message), in the
     order of ``groups``; empty for kinds of motion.
@@ -114,8 +117,9 @@ class Heterogeneity:
     pooling: str
     most_different: tuple[str, ...]
     differences: str
-    pooled_params: FloatArray
-    pooled_covariance: FloatArray
+    random_params: FloatArray
+    random_covariance: FloatArray
+    spread_covariance: FloatArray
     group_covariance: FloatArray
     group_fits: tuple[tuple[bool, str], ...] = ()
 
@@ -357,10 +361,10 @@ def assessed(c: Comparison) -> Heterogeneity:
         p_value=pooled.p_value, groups=groups,
         between_std=np.sqrt(np.diag(pooled.between)) * c.scale,
         pooling="random effects" if pooled_randomly else "common", most_different=most,
-        differences=words, pooled_params=(c.center + pooled.random_mean * c.scale
-                                          if c.by == "logs" else c.center.copy()),
-        pooled_covariance=(pooled.adjusted_covariance if c.by == "logs"
-                           else pooled.fixed_spread_covariance) * scale2,
+        differences=words, random_params=c.center + pooled.random_mean * c.scale,
+        random_covariance=pooled.adjusted_covariance * scale2,
+        spread_covariance=(np.zeros((3, 3)) if c.by == "logs"
+                           else pooled.fixed_spread * scale2),
         group_covariance=c.covariance * np.tile(scale2, (len(c.names), len(c.names))))
 
 
@@ -398,10 +402,11 @@ def _own_fits(fit: FitTest, heterogeneity: Heterogeneity) -> FitTest:
 def applied(result: CalibrationResult, heterogeneity: Heterogeneity | None,
             option: HeterogeneityOption) -> CalibrationResult:
     """The result with the test attached: unchanged without one; with ``option`` "random"
-    and the pooling "random effects" (detected, or between logs p below POOLING_LEVEL), r_L,
-    r_R, b and their covariance ``heterogeneity.pooled_params``, ``pooled_covariance`` (the
-    sensor pose and the rest kept; the fit test the logs' own when detected); with "common"
-    and ``detected``, the common fit failing its fit test."""
+    and the pooling "random effects" (detected, or between logs p below POOLING_LEVEL):
+    between logs r_L, r_R, b and their covariance from the random-effects pool, within one
+    log the common fit's with ``spread_covariance`` added (module docstring); the sensor
+    pose and the rest kept, the fit test the logs' own when they disagree. With "common" and
+    ``detected``, the common fit failing its fit test."""
     if heterogeneity is None:
         return result
     if not heterogeneity.detected and (option == "common"
@@ -415,10 +420,12 @@ def applied(result: CalibrationResult, heterogeneity: Heterogeneity | None,
             f"{_p_text(heterogeneity.p_value)}): common parameters (--common-params) do not fit "
             f"them; {heterogeneity.differences}"))
         return replace(result, fit=fit, heterogeneity=heterogeneity)
-    covariance = heterogeneity.pooled_covariance
+    if heterogeneity.by == "logs":
+        params, covariance = Params(*heterogeneity.random_params), heterogeneity.random_covariance
+    else:
+        params, covariance = result.params, result.covariance + heterogeneity.spread_covariance
     full = _carried_over(result.full_covariance, covariance)
     fit = _own_fits(result.fit, heterogeneity) if heterogeneity.detected else result.fit
-    return replace(result, params=Params(*heterogeneity.pooled_params), covariance=covariance,
-                   fit=fit,
+    return replace(result, params=params, covariance=covariance, fit=fit,
                    std=np.sqrt(np.diag(covariance)), full_covariance=full,
                    heterogeneity=heterogeneity)

@@ -138,10 +138,10 @@ def choose_model(candidates: Candidates, fitter: Fitter) -> ModelChoice:
                            else "sensor_pose: at the given pose, as asked")
     threshold = chi2_quantile(TEST_LEVEL, 3)
     if axle is None and candidates.wald is not None:
-        return ModelChoice(primary, f"sensor_pose: the sensor is far from the axle (Wald "
-                           f"statistic {candidates.wald:.3g} > {NEAR_AXLE:g} x {threshold:.3g}"
-                           "; the axle model was not fitted)", None, candidates.wald,
-                           "Wald statistic")
+        return ModelChoice(primary, "sensor_pose: the axle model is far from fitting (the "
+                           f"sensor pose's Wald statistic {candidates.wald:.3g} > {NEAR_AXLE:g} "
+                           f"x {threshold:.3g}; the axle model was not fitted)", None,
+                           candidates.wald, "Wald statistic")
     if axle is None:
         return ModelChoice(primary, "sensor_pose: estimated, as asked")
     name = "likelihood ratio"

@@ -95,9 +95,10 @@ def calibrate(
         (robust to slip outliers; the threshold is 1.345 whitened standard deviations). The
         default was "linear" before "auto" existed.
     sensor_pose: "auto" (default: estimate the sensor pose when the data determine it and it
-        improves the fit significantly, a likelihood-ratio test at the 99.9% level; else the
-        axle model), "axle" (the sensor is on the axle midpoint, facing forward), "estimate"
-        (always estimate it), or a :class:`SensorPose` (known mounting).
+        improves the fit significantly, a likelihood-ratio test at the 99.9% level, or its
+        Wald statistic when that is 100 times the threshold and the axle model is not fitted;
+        else the axle model), "axle" (the sensor is on the axle midpoint, facing forward),
+        "estimate" (always estimate it), or a :class:`SensorPose` (known mounting).
     trim: fraction of segments to drop as outliers (largest whitened residuals), at most 1%
         per pass with a refit after each; 0 keeps all.
     max_relative_std: identifiability threshold on 1/sigma_min.

@@ -89,8 +89,9 @@ GROUP_TOLERANCE = 0.05
 #: fraction of the residuals' RMS: the largest of the REML search's starts.
 START_FRACTION = max(START_FRACTIONS)
 #: Under ``sensor_pose="auto"``, a reference that chose the sensor-pose model with a
-#: likelihood ratio below this multiple of the test's threshold has the axle model screened
-#: too (the next look may choose it, with fewer parameters and smaller std).
+#: statistic (its likelihood ratio, or Wald statistic far from the axle) below this multiple
+#: of the test's threshold has the axle model screened too (the next look may choose it,
+#: with fewer parameters and smaller std).
 CLEAR_CHOICE = 2.0
 
 
@@ -266,8 +267,8 @@ def _primary(reference: CalibrationResult, sensor_pose: SensorPoseOption
 
 
 def _clearly_chosen(reference: CalibrationResult) -> bool:
-    """Whether "auto" chose the sensor-pose model with a likelihood ratio of at least
-    CLEAR_CHOICE times its threshold."""
+    """Whether "auto" chose the sensor-pose model with a statistic (``model_statistic``) of
+    at least CLEAR_CHOICE times its threshold."""
     ratio = reference.model_statistic
     return ratio is not None and ratio >= CLEAR_CHOICE * chi2_quantile(TEST_LEVEL, 3)
 

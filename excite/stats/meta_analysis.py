@@ -22,10 +22,11 @@ y_g = mu + u_g + e_g, with e ~ N(0, V) and independent between-group effects u_g
   by max(1, Q* / ((G - 1) p)), Q* the residuals' quadratic form under V + I (x) T, and by
   p F_(p, (G-1)p)(0.95) / chi2_p(0.95), so that its 95% chi-square ellipse is the F-based one.
 * **The fixed-effects estimate under random effects**: mu_FE = A y, A = (X' W X)^-1 X' W,
-  as an estimate of mu has the covariance (X' W X)^-1 + A (I_G (x) T) A' (the groups' spread
-  carried through its weights); adjusted for few groups as above, with Q* at mu_FE. When
-  the groups are parts of one data set that share information (dense V), mu_FE keeps the
-  information the groups share, which mu_RE, weighting with V + I (x) T, gives away.
+  as an estimate of mu has the covariance (X' W X)^-1 + A (I_G (x) T) A': the groups' spread
+  carried through its weights adds the second term, which depends on the estimated T and is
+  adjusted for few groups as above (Q* at mu_FE). When the groups are parts of one data set
+  that share information (dense V), mu_FE keeps the information the groups share, which
+  mu_RE, weighting with V + I (x) T, gives away.
 * **Estimated noise levels.** When V comes from noise levels estimated with nu residual
   degrees of freedom, Q / ((G - 1) p) is compared with F((G - 1) p, nu) rather than
   Q with chi-square (the Wald test's small-sample form); nu = inf is the chi-square test.
@@ -59,9 +60,9 @@ class Pooled:
     zero when the groups agree). random_mean (p,), random_covariance (p, p): the
     random-effects estimate (the fixed-effects one when T = 0). adjusted_covariance (p, p):
     its covariance adjusted for few groups (Knapp-Hartung, module docstring).
-    fixed_spread_covariance (p, p): the covariance of fixed_mean as an estimate of the mean
-    over groups under the random-effects model, adjusted for few groups (module docstring;
-    fixed_covariance when T = 0).
+    fixed_spread (p, p): what the groups' spread adds to the covariance of fixed_mean as an
+    estimate of the mean over groups, A (I (x) T) A' adjusted for few groups (module
+    docstring; zero when T = 0).
     """
 
     fixed_mean: FloatArray
@@ -73,7 +74,7 @@ class Pooled:
     random_mean: FloatArray
     random_covariance: FloatArray
     adjusted_covariance: FloatArray
-    fixed_spread_covariance: FloatArray
+    fixed_spread: FloatArray
 
 
 def _design(groups: int, p: int) -> FloatArray:
@@ -167,7 +168,7 @@ def pool(estimates: ArrayLike, covariance: ArrayLike, residual_dof: float = math
         return few * max(1.0, float(spread @ random_weight @ spread) / dof)
 
     gain = fixed_covariance @ x.T @ weight  # fixed_mean = gain @ y
-    fixed_spread = fixed_covariance + gain @ spread_between @ gain.T
+    fixed_spread = gain @ spread_between @ gain.T
     fixed_spread = 0.5 * (fixed_spread + fixed_spread.T)
     return Pooled(fixed_mean, fixed_covariance, statistic, dof,
                   _f_survival(statistic / dof, dof, residual_dof), between, random_mean,

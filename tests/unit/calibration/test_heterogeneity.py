@@ -69,8 +69,8 @@ def test_one_parameter_is_cochran_q_and_dersimonian_laird():
         q_star * (t3 / z) ** 2 / np.sum(w_star), rel=1e-8)
     # the fixed-effects mean as an estimate of the mean over groups: its weights carry tau2
     q_fixed = max(1.0, np.sum(w_star * (y - mean) ** 2) / 3)
-    spread = 1 / np.sum(w) + tau2 * np.sum(w**2) / np.sum(w) ** 2
-    assert pooled.fixed_spread_covariance[0, 0] == pytest.approx(
+    spread = tau2 * np.sum(w**2) / np.sum(w) ** 2
+    assert pooled.fixed_spread[0, 0] == pytest.approx(
         q_fixed * (t3 / z) ** 2 * spread, rel=1e-8)
     # with noise levels estimated on 20 degrees of freedom: Q / 3 against F(3, 20)
     f_tail = stats.f.sf(q / 3, 3, 20)
@@ -279,8 +279,8 @@ def test_logs_below_the_pooling_level_are_pooled_with_random_effects(rng):
     assert h.plain_lines() == []
     result = calibrate(lesson_dataset(rng, 200, TRUTH), sensor_pose="axle")
     pooled = applied(result, h, "random")
-    np.testing.assert_array_equal(pooled.params.as_array(), h.pooled_params)
-    np.testing.assert_array_equal(pooled.covariance, h.pooled_covariance)
+    np.testing.assert_array_equal(pooled.params.as_array(), h.random_params)
+    np.testing.assert_array_equal(pooled.covariance, h.random_covariance)
     assert pooled.fit == result.fit
     forced = applied(result, h, "common")
     assert forced.params == result.params and forced.heterogeneity.pooling == "common"
@@ -353,9 +353,9 @@ def test_random_effects_pool_covers_the_mean_over_logs():
                     for b in tracks]
         h = _logs_test(segments)
         assert h is not None
-        params = h.pooled_params if h.detected else calibrate(
+        params = h.random_params if h.detected else calibrate(
             Segments.concatenate(segments), heterogeneity="off").params.as_array()
-        std = (np.sqrt(h.pooled_covariance[2, 2]) if h.detected else calibrate(
+        std = (np.sqrt(h.random_covariance[2, 2]) if h.detected else calibrate(
             Segments.concatenate(segments), heterogeneity="off").std[2])
         covered += abs(params[2] - TRUTH.b) <= 1.96 * std
     assert covered >= 34

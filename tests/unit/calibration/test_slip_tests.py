@@ -139,7 +139,8 @@ def test_a_pool_over_kinds_of_motion_covers_a_change_that_is_not_slip(slipping, 
     assert not failed.ok and "with the turn rate" in failed.message
     assert ("the residuals grow" in failed.message) == slipping
     pool = Heterogeneity(by, True, 30.0, 3, 1e-5, (), np.zeros(3), "random effects", (), "",
-                         result.params.as_array(), result.covariance, np.eye(6))
+                         result.params.as_array(), result.covariance, np.zeros((3, 3)),
+                         np.eye(6))
     out = pooled_over_kinds(replace(result, fit=failed, heterogeneity=pool))
     assert out.fit.ok == lifted
     if lifted:
