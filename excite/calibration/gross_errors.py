@@ -34,7 +34,7 @@ and 1 lose nothing against the soft posterior weights.
 
 **Not gross errors.** Gross errors are rare and strike at random: candidates are kept when
 they are more than MAX_SHARE of the segments, or when they turn or travel more than the other
-segments (:func:`_follows_driving`): residuals that grow with the turning or the speed are a
+segments (:func:`follows_driving`): residuals that grow with the turning or the speed are a
 misfit (slip in turns) for the fit tests to judge, not errors to drop.
 """
 
@@ -59,8 +59,9 @@ from excite.stats.chi2 import chi2_quantile
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
 __all__ = ["DRIVING_TEST_LEVEL", "EM_ROUNDS", "EM_TOL", "GROSS_TEST_LEVEL", "MAX_SHARE",
-           "MIN_SPREAD", "Fits", "GrossErrors", "declined_reason", "mixture", "screen",
-           "size_range", "test_threshold", "without_gross_errors"]
+           "MIN_SPREAD", "Fits", "GrossErrors", "declined_reason", "follows_driving",
+           "mixture", "screen", "size_range", "test_threshold", "too_many",
+           "without_gross_errors"]
 
 #: Level of the test of "no gross error" (eps = 0): the largest whitened squared residual
 #: against the chi-square(3) quantile at 1 - GROSS_TEST_LEVEL / N.
@@ -272,11 +273,17 @@ def size_range(size: FloatArray) -> tuple[float, float]:
 
 def declined_reason(data: Segments, candidates: IntArray) -> str | None:
     """Why the candidates (indices into ``data``) are not gross errors, in words: more than
-    MAX_SHARE of the segments, or following the driving (:func:`_follows_driving`); None when
-    they are."""
+    MAX_SHARE of the segments (:func:`too_many`), or following the driving
+    (:func:`follows_driving`); None when they are."""
+    return too_many(data, candidates) or follows_driving(data, candidates)
+
+
+def too_many(data: Segments, candidates: IntArray) -> str | None:
+    """"too many for gross errors" when the candidates are more than MAX_SHARE of ``data``;
+    else None."""
     if candidates.size > MAX_SHARE * len(data):
         return f"too many for gross errors (more than {100 * MAX_SHARE:g}%)"
-    return _follows_driving(data, candidates)
+    return None
 
 
 def screen(plain: ModelFit, data: Segments, sigma_given: FloatArray | None,
@@ -340,7 +347,7 @@ def _rank_sum_z(values: FloatArray, chosen: BoolArray) -> float:
     return float((ranks[chosen].sum() - m * (n + 1) / 2.0) / math.sqrt(variance))
 
 
-def _follows_driving(data: Segments, candidates: IntArray) -> str | None:
+def follows_driving(data: Segments, candidates: IntArray) -> str | None:
     """Why the candidates are not gross errors, in words, when they follow the driving: the
     rank-sum tests of their turn |dphi_R - dphi_L| and of their travel |dphi_L + dphi_R|
     (rad) against the other segments', one-sided (more than the others: slip grows with the

@@ -16,7 +16,7 @@ and z_k^2 = |u_k|^2 chi-square with 3 degrees of freedom.
   hide each other, so each channel of u is first scaled by its robust std (the median absolute
   value); the contaminated normal's EM on these sizes (the fit held) gives each segment's
   posterior probability of being gross; above 1/2 it is a candidate, unless the candidates are
-  too many or follow the driving (:mod:`excite.calibration.gross_errors`). A bad sample makes
+  too many (:mod:`excite.calibration.gross_errors`). A bad sample makes
   a pair: a candidate alone counts only when its own z^2 exceeds the test's quantile, and is
   then paired with its chained neighbour of the larger z^2 (the sample they share is the
   likely bad one), or left alone at the end of a chain.
@@ -28,6 +28,14 @@ and z_k^2 = |u_k|^2 chi-square with 3 degrees of freedom.
   are then estimated again on the repaired segments, and the test repeats on them (at most
   :data:`PASSES` times) until it no longer rejects; a repaired segment that is a candidate
   again (its run's first or last sample was bad too) is then left out whole.
+* **Explained, or following the driving.** A bad sample moves the two segments that share
+  it in opposite senses, and it cancels in their composition: a run made whole is explained
+  by its inner samples. Slip adds up instead, so a slipping segment and its neighbour make a
+  run that is a candidate again. The candidates left unexplained (left out, or alone at a
+  chain's end) are tested against the driving
+  (:func:`excite.calibration.gross_errors.follows_driving`): when they follow it, nothing is
+  repaired and the report says why. Not the explained ones: a swapped sample errs by the
+  speed times the lag, so bad samples are found mostly where the robot moves fastest.
 """
 
 from __future__ import annotations
@@ -40,10 +48,11 @@ import numpy as np
 from excite.calibration.gross_errors import (
     Fits,
     GrossErrors,
-    declined_reason,
+    follows_driving,
     mixture,
     size_range,
     test_threshold,
+    too_many,
 )
 from excite.calibration.noise import chain_band, chained_mask
 from excite.core import se2
@@ -208,7 +217,7 @@ def screen_chain(fits: Fits, refit: Callable[[Segments], Fits]
             (out if more[parts[c]].all() else more)[parts[c]] = True
         if not found.candidates.size:  # the first pass: are these gross errors at all?
             candidates = np.flatnonzero(more).astype(np.int64)
-            why = declined_reason(original, candidates)
+            why = too_many(original, candidates)
             found = replace(found, candidates=candidates, fraction=fraction, spread=spread,
                             ratio=size_range(size), declined=why)
             if why is not None:
@@ -222,8 +231,23 @@ def screen_chain(fits: Fits, refit: Callable[[Segments], Fits]
     assert found is not None
     if not flagged.any():
         return original, plain, found
-    segments = np.flatnonzero(flagged).astype(np.int64)
     runs = _runs(original, flagged & ~left_out)
+    # a bad sample's two segments err in opposite senses, and their composition, where it
+    # cancels, fits: the runs the repair made whole are explained; slip, which adds up, is
+    # not, and the candidates left unexplained are tested against the driving
+    unexplained = left_out.copy()
+    for run in runs:
+        if run.size == 1:
+            unexplained[run] = True
+    final = np.sum(marginal_sizes(fits) ** 2, axis=0)
+    for i, part in enumerate(parts):
+        if part.size > 1 and final[i] > test_threshold(len(data)):
+            unexplained[part] = True
+    why = (follows_driving(original, np.flatnonzero(unexplained).astype(np.int64))
+           if unexplained.any() else None)
+    if why is not None:
+        return original, plain, replace(found, declined=why)
+    segments = np.flatnonzero(flagged).astype(np.int64)
     samples = (None if original.t_start is None else
                np.array([t for run in runs for t in original.t_start[run[1:]]]))
     alone = int(np.sum(left_out)) + sum(run.size == 1 for run in runs)

@@ -298,6 +298,65 @@ def test_a_bad_pose_sample_is_flagged_not_its_two_segments(capsys, tmp_path):
                                                            seg.t_end[flagged], strict=True)]
 
 
+def _fastest_boundaries(seg: Segments, count: int) -> np.ndarray:
+    """The pose samples (s) that end the ``count`` segments travelling farthest and start a
+    chained next one."""
+    travel = np.abs(seg.dphi_L + seg.dphi_R)[:-1]
+    inner = np.flatnonzero(seg.chained[1:])
+    fastest = inner[np.argsort(-travel[inner])[:count]]
+    return np.sort(seg.t_end[fastest])
+
+
+@pytest.mark.slow
+def test_swapped_samples_on_the_fastest_segments_are_bad_samples():
+    """A swapped pose sample errs by the speed times the lag, so the candidates travel the
+    farthest; their pairs cancel when composed, which slip does not: repaired, not taken
+    for a misfit that follows the driving."""
+    from excite.core.models import SensorPose
+    from excite.logs.segmentation import segment_timeseries
+    from excite.logs.synthetic import synthetic_log
+    from excite.logs.timeseries import TimeSeries
+
+    log = synthetic_log(np.random.default_rng(11), 120.0,
+                        sensor_pose=SensorPose(0.1, -0.03, 0.4), pose_noise=(2e-3, 2e-3))
+    ts = log.series
+    times = _fastest_boundaries(segment_timeseries(ts).segments, 8)
+    index = np.searchsorted(ts.t_pose, times)
+    poses = np.column_stack([ts.x, ts.y, ts.theta])
+    poses[index] = poses[index + 5]  # the pose 0.1 s later
+    bad = TimeSeries(ts.t_enc, ts.phi_L, ts.phi_R, ts.t_pose, *poses.T, source=ts.source)
+    seg = segment_timeseries(bad).segments
+    gross = calibrate(seg).gross_errors
+    assert gross.declined is None and gross.detected
+    np.testing.assert_array_equal(gross.samples, times)
+
+
+@pytest.mark.slow
+def test_a_misfit_of_the_most_turning_segments_of_a_log_is_kept():
+    """Errors of the most turning segments' own wheel increments (slip in turns: each
+    segment alone, nothing cancels between neighbours) are not bad samples: kept, with the
+    reason."""
+    from excite.core.models import SensorPose
+    from excite.logs.segmentation import segment_timeseries
+    from excite.logs.synthetic import synthetic_log
+    from excite.logs.timeseries import TimeSeries
+
+    log = synthetic_log(np.random.default_rng(12), 120.0,
+                        sensor_pose=SensorPose(0.1, -0.03, 0.4), pose_noise=(2e-3, 2e-3))
+    ts = log.series
+    seg = segment_timeseries(ts).segments
+    turning = np.argsort(-np.abs(seg.dphi_R - seg.dphi_L))[:10]
+    phi_L = ts.phi_L.copy()
+    for k in turning:  # the left wheel slips 1 rad in the middle of the segment
+        middle = 0.5 * (seg.t_start[k] + seg.t_end[k])
+        phi_L[ts.t_enc >= middle] -= 1.0
+    slipping = TimeSeries(ts.t_enc, phi_L, ts.phi_R, ts.t_pose, ts.x, ts.y, ts.theta,
+                          source=ts.source)
+    gross = calibrate(segment_timeseries(slipping).segments).gross_errors
+    assert not gross.detected and gross.segments.size == 0
+    assert "mostly the segments that turn the most" in gross.declined
+
+
 @pytest.mark.slow
 def test_a_clean_log_is_fitted_bit_for_bit_as_with_the_linear_loss():
     from excite.core.models import SensorPose
