@@ -72,6 +72,11 @@ class Evaluation:
         return self._unit
 
 
+#: How many unwhitened evaluations a whitened problem keeps (the accepted iterate and a
+#: rejected trial after it).
+PLAIN_KEPT = 2
+
+
 class Problem:
     """A data set and a model: evaluates residuals and relative Jacobians at theta. whitener:
     an :class:`excite.calibration.noise.ChainWhitener` for segments whose noise is correlated
@@ -95,9 +100,16 @@ class Problem:
         heading = float(np.sqrt(np.mean(self.measured[2] ** 2)))
         floor = SIGMA_FLOOR * np.array([position, position, heading])
         self.sigma_floor = np.where(floor > 0, floor, 1e-300)
+        # the unwhitened evaluations behind the last whitened ones (theta's bytes: evaluation),
+        # for the stages that weigh the residuals their own way after a whitened fit
+        self._plain: dict[bytes, Evaluation] = {}
 
     def evaluate(self, theta: FloatArray, whiten: bool = True) -> Evaluation:
         """The evaluation at ``theta``; whitened by the whitener unless ``whiten`` is False."""
+        theta = np.asarray(theta, dtype=float)
+        key = theta.tobytes()
+        if not whiten and key in self._plain:
+            return self._plain[key]
         prediction, jac = self.model.evaluate(self.phi_L, self.phi_R, theta,
                                               substeps=self.substeps)
         raw = prediction - self.measured
@@ -107,6 +119,9 @@ class Problem:
         if self.whitener is None or not whiten:
             return Evaluation(theta, scale, raw, jac)
         white, white_jac = self.whitener.whiten(raw, jac)
+        if len(self._plain) >= PLAIN_KEPT:
+            del self._plain[next(iter(self._plain))]
+        self._plain[key] = Evaluation(theta, scale, raw, jac)
         return Evaluation(theta, scale, white, white_jac, residual=raw)
 
 
