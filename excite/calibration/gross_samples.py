@@ -239,9 +239,9 @@ def screen_chain(fits: Fits, refit: Callable[[Segments], Fits]
     for run in runs:
         if run.size == 1:
             unexplained[run] = True
-    final = np.sum(marginal_sizes(fits) ** 2, axis=0)
+    final, threshold = np.sum(marginal_sizes(fits) ** 2, axis=0), test_threshold(len(data))
     for i, part in enumerate(parts):
-        if part.size > 1 and final[i] > test_threshold(len(data)):
+        if part.size > 1 and final[i] > threshold:
             unexplained[part] = True
     why = (follows_driving(original, np.flatnonzero(unexplained).astype(np.int64))
            if unexplained.any() else None)

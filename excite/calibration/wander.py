@@ -150,14 +150,22 @@ class _Samples:
             backward[i] += a[i] * backward[i + 1]
         return forward + backward - h
 
+    def design(self, segments: Segments) -> csr_matrix:
+        """A^T (M, 3N), sparse: segment k's x, y rows are its lever arm -J d_k
+        (:func:`_lever`) at its first sample, its theta row -1 there and +1 at its last."""
+        from scipy.sparse import csr_matrix
+
+        lever, n = _lever(segments), len(segments)
+        rows = 3 * np.arange(n)
+        return csr_matrix(
+            (np.concatenate([lever[:, 0], lever[:, 1], -np.ones(n), np.ones(n)]),
+             (np.concatenate([self.start, self.start, self.start, self.end]),
+              np.concatenate([rows, rows + 1, rows + 2, rows + 2]))),
+            shape=(len(self.times), 3 * n))
+
     def transpose_design(self, segments: Segments, rows: FloatArray) -> FloatArray:
         """A^T ``rows`` (M, P) for rows (3N, P) in O(N P)."""
-        x, y, th = rows[0::3], rows[1::3], rows[2::3]
-        lever = _lever(segments)
-        out = np.zeros((len(self.times), rows.shape[1]))
-        np.add.at(out, self.start, lever[:, :1] * x + lever[:, 1:] * y - th)
-        np.add.at(out, self.end, th)
-        return out
+        return self.design(segments) @ rows
 
 
 def _longest_stretch(segments: Segments) -> float:
@@ -206,8 +214,8 @@ def _band_product(band: FloatArray, x: FloatArray) -> FloatArray:
 @dataclass(frozen=True)
 class _Chunk:
     """One chunk's fixed parts: the covariance's band as a function of the levels, the
-    heading-error design (``design``: A^T, sparse (M, 3n), of the module doc) and the
-    residuals and Jacobian."""
+    heading-error design (``design``: A^T, :meth:`_Samples.design`) and the residuals and
+    Jacobian."""
 
     bands: LevelBands
     samples: _Samples
@@ -219,18 +227,9 @@ class _Chunk:
     @classmethod
     def of(cls, segments: Segments, wheels: WheelNoise | None, residual: FloatArray,
            jac: FloatArray, n_levels: int) -> _Chunk:
-        from scipy.sparse import csr_matrix
-
-        samples, lever = _Samples.of(segments), _lever(segments)
-        n = len(segments)
-        rows = 3 * np.arange(n)
-        design = csr_matrix(
-            (np.concatenate([lever[:, 0], lever[:, 1], -np.ones(n), np.ones(n)]),
-             (np.concatenate([samples.start, samples.start, samples.start, samples.end]),
-              np.concatenate([rows, rows + 1, rows + 2, rows + 2]))),
-            shape=(len(samples.times), 3 * n))
-        return cls(LevelBands(segments, wheels, n_levels), samples, lever, design, residual,
-                   jac)
+        samples = _Samples.of(segments)
+        return cls(LevelBands(segments, wheels, n_levels), samples, _lever(segments),
+                   samples.design(segments), residual, jac)
 
 
 def _lever(segments: Segments) -> FloatArray:
