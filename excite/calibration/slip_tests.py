@@ -67,7 +67,7 @@ from numpy.typing import NDArray
 from excite.calibration.model_fit import ModelFit
 from excite.calibration.noise import ChainWhitener
 from excite.calibration.options import TEST_LEVEL
-from excite.core.information import inverse_information
+from excite.core.information import channel_gram, inverse_information
 from excite.logs.segments import Segments
 from excite.stats.autocorrelation import LjungBox, at_least, long_run_covariance, runs_of
 from excite.stats.chi2 import chi2_quantile, chi2_survival
@@ -336,7 +336,7 @@ def _own_system(own: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 def _gram(a: FloatArray, b: FloatArray) -> FloatArray:
     """sum over channels c and segments n of a[c, p, n] b[c, q, n]: (P, Q)."""
-    return sum((a[c] @ b[c].T for c in range(a.shape[0])), np.zeros((a.shape[1], b.shape[1])))
+    return channel_gram(a, b).sum(axis=0)
 
 
 def _growth(white: FloatArray, leverage: FloatArray, z: FloatArray

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from excite.calibration.noise import ChainWhitener
+from excite.core.information import channel_gram
 from excite.core.kinematics import wrap_angle
 from excite.core.models import SegmentModel
 from excite.logs.segments import Segments
@@ -66,9 +67,9 @@ class Evaluation:
     def unit_system(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Per channel: J_c J_c^T (3, P, P), J_c r_c (3, P) and r_c . r_c (3,), for sigma = 1."""
         if self._unit is None:
-            info = np.matmul(self.jac, self.jac.transpose(0, 2, 1))
-            gradient = np.matmul(self.jac, self.raw[:, :, None])[:, :, 0]
-            self._unit = (info, gradient, np.einsum("ck,ck->c", self.raw, self.raw))
+            info = channel_gram(self.jac)
+            gradient = channel_gram(self.jac, self.raw[:, None, :])[:, :, 0]
+            self._unit = (info, gradient, channel_gram(self.raw[:, None, :])[:, 0, 0])
         return self._unit
 
 

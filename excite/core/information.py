@@ -39,6 +39,7 @@ __all__ = [
     "information_matrices",
     "eigen_3x3",
     "fisher_information",
+    "channel_gram",
     "sigma_min",
     "log_det",
     "inverse_information",
@@ -124,6 +125,31 @@ def fisher_information(scaled_jac: ArrayLike) -> FloatArray:
     """F = sum_k J_k^T J_k of scaled Jacobians shaped (..., N, 3, P) -> (..., P, P)."""
     j = np.asarray(scaled_jac, dtype=float)
     return np.einsum("...nki,...nkj->...ij", j, j)
+
+
+#: Rows at least this long are multiplied by dot products, one pair of rows at a time:
+#: BLAS's matrix product of a few long rows is several times slower (memory-bound on a
+#: 100k-segment Jacobian, it reads them in the wrong order); for shorter rows numpy's
+#: per-call overhead makes the one product faster.
+LONG_ROWS = 4096
+
+
+def channel_gram(a: FloatArray, b: FloatArray | None = None) -> FloatArray:
+    """Per channel c, the products of the rows of a (C, P, N) with those of b (C, Q, N)
+    (default a): G[c, p, q] = sum_n a[c, p, n] b[c, q, n], shape (C, P, Q); with b omitted,
+    J_c J_c^T of Jacobian rows (the information per channel at unit noise)."""
+    same = b is None
+    b = a if b is None else b
+    if a.shape[-1] < LONG_ROWS:
+        return np.matmul(a, b.transpose(0, 2, 1))
+    out = np.empty((a.shape[0], a.shape[1], b.shape[1]))
+    for c in range(a.shape[0]):
+        for p in range(a.shape[1]):
+            for q in range(p if same else 0, b.shape[1]):
+                out[c, p, q] = a[c, p] @ b[c, q]
+                if same:
+                    out[c, q, p] = out[c, p, q]
+    return out
 
 
 def _information_rows(

@@ -241,7 +241,27 @@ def _damped_step(rng):
             np.concatenate(tolerance))
 
 
+def _channel_gram(rng):
+    """information.channel_gram's dot products of long rows against numpy's product, for
+    rows with and without a second factor. Summation orders differ: error below
+    N eps of the products of the rows' norms."""
+    fast, reference, tolerance = [], [], []
+    for _ in range(10):
+        n = I.LONG_ROWS + int(rng.integers(0, 5000))
+        a = rng.normal(size=(3, int(rng.integers(1, 7)), n)) * 10.0 ** rng.uniform(-3, 3)
+        b = rng.normal(size=(3, int(rng.integers(1, 4)), n))
+        for second in (None, b):
+            other = a if second is None else second
+            fast.append(I.channel_gram(a, second).ravel())
+            reference.append(np.matmul(a, other.transpose(0, 2, 1)).ravel())
+            norms = np.linalg.norm(a, axis=2)[:, :, None] * np.linalg.norm(other, axis=2)[
+                :, None, :]
+            tolerance.append((n * EPS * norms).ravel())
+    return np.concatenate(fast), np.concatenate(reference), 0.0, np.concatenate(tolerance)
+
+
 CASES = {
+    "information.channel_gram": _channel_gram,
     "solver.damped_step": _damped_step,
     "kinematics.sinc_family_scalar": _sinc_family_scalar,
     "traction_kernel.sinc_cosc": _traction_kernel_sinc_cosc,
