@@ -39,6 +39,7 @@ an error is not modelled: its differences nearly cancel along the log.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -53,7 +54,7 @@ from excite.calibration.noise import (
     chain_band,
 )
 from excite.calibration.reml import level_bounds
-from excite.core.arrays import FloatArray, IntArray
+from excite.core.arrays import BoolArray, FloatArray, IntArray
 from excite.logs.segments import Segments
 from excite.stats.autocorrelation import runs_of
 from excite.stats.chi2 import chi_bar_square_quantile
@@ -279,11 +280,17 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
         cov[np.diag_indices_from(cov)] *= 1.0 + JITTER
         factor, _ = cho_factor(cov, lower=True, check_finite=False)
         total += 2.0 * float(np.sum(np.log(np.diag(factor))))
-        inverse, status = dpotri(factor, lower=1)
-        if status:
-            raise np.linalg.LinAlgError("covariance not positive definite")
-        inverse = np.tril(inverse) + np.tril(inverse, -1).T
-        ci_j, ci_e = inverse @ c.jac, inverse @ c.residual
+        if with_gradient:  # the gradient needs C^-1 itself
+            inverse, status = dpotri(factor, lower=1)
+            if status:
+                raise np.linalg.LinAlgError("covariance not positive definite")
+            np.copyto(inverse, inverse.T, where=_upper(inverse.shape[0]))  # from its lower
+            ci_j, ci_e = inverse @ c.jac, inverse @ c.residual
+        else:
+            inverse = None
+            solved = cho_solve((factor, True), np.column_stack([c.jac, c.residual]),
+                               check_finite=False)
+            ci_j, ci_e = solved[:, :-1], solved[:, -1]
         info += c.jac.T @ ci_j
         gradient += c.jac.T @ ci_e
         total += float(c.residual @ ci_e)
@@ -316,6 +323,12 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
             grad[-2] += 2.0 * std2 * float(np.sum(projected * r))
             grad[-1] += std2 * float(np.sum(projected * dr))
     return total, grad
+
+
+@functools.lru_cache(maxsize=8)
+def _upper(n: int) -> BoolArray:
+    """The mask (n, n) of the strict upper triangle."""
+    return np.triu(np.ones((n, n), dtype=bool), 1)
 
 
 def _chunk_ranges(n: int) -> list[range]:

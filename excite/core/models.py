@@ -196,19 +196,21 @@ def compose_substeps(prediction: FloatArray, jac: FloatArray | None
     """The composition a_1 (+) ... (+) a_K of body increments (3, ..., K) along the last
     axis, and its derivatives (3, P, ..., K) -> (3, P, ...) by the chain rule: with
     Theta_k the heading before sub-step k, X = sum_k R(Theta_k) a_k,xy and
-    Theta = sum_k a_k,theta (m, rad)."""
-    dx, dy, dth = prediction
-    heading = np.cumsum(dth, axis=-1) - dth  # Theta_k, exclusive
-    c, s = np.cos(heading), np.sin(heading)
-    world_x, world_y = c * dx - s * dy, s * dx + c * dy
-    out = np.stack([world_x.sum(axis=-1), world_y.sum(axis=-1), dth.sum(axis=-1)])
+    Theta = sum_k a_k,theta (m, rad). The derivatives are those of
+    :func:`substep_derivatives` summed over the sub-steps, each sum taken in one pass."""
+    c, s, world = _world_substeps(prediction)
+    total = world[0].sum(axis=-1), world[1].sum(axis=-1)
+    out = np.stack([total[0], total[1], prediction[2].sum(axis=-1)])
     if jac is None:
         return out, None
-    d_heading = np.cumsum(jac[2], axis=-1) - jac[2]  # (P, ..., K)
-    out_jac = np.stack([
-        (c * jac[0] - s * jac[1] - world_y * d_heading).sum(axis=-1),
-        (s * jac[0] + c * jac[1] + world_x * d_heading).sum(axis=-1),
-        jac[2].sum(axis=-1)])
+    tail_x, tail_y = _tails(world, total)
+
+    def dot(weight: FloatArray, rows: FloatArray) -> FloatArray:  # sum_k weight_k rows_pk
+        return np.einsum("...k,p...k->p...", weight, rows)
+
+    out_jac = np.stack([dot(c, jac[0]) - dot(s, jac[1]) - dot(tail_y, jac[2]),
+                        dot(s, jac[0]) + dot(c, jac[1]) + dot(tail_x, jac[2]),
+                        jac[2].sum(axis=-1)])
     return out, out_jac
 
 
@@ -217,14 +219,29 @@ def substep_derivatives(prediction: FloatArray, jac: FloatArray) -> FloatArray:
     (3, ..., K), :func:`compose_substeps`) by Q quantities each of which moves only its own
     sub-step k, given d a_k / d q (3, Q, ..., K): R(Theta_k) d a_k,xy + J (X - W_<=k)
     d a_k,theta, with W_<=k the displacement up to and including sub-step k (m, rad)."""
+    c, s, world = _world_substeps(prediction)
+    tail_x, tail_y = _tails(world, (world[0].sum(axis=-1), world[1].sum(axis=-1)))
+    return np.stack([c * jac[0] - s * jac[1] - tail_y * jac[2],
+                     s * jac[0] + c * jac[1] + tail_x * jac[2], jac[2]])
+
+
+def _world_substeps(prediction: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, tuple[FloatArray, FloatArray]]:
+    """For body increments (3, ..., K): cos and sin of Theta_k, the heading before sub-step
+    k, and each sub-step's displacement R(Theta_k) a_k,xy (x, y) in the frame of the
+    composition's start (m); each (..., K)."""
     dx, dy, dth = prediction
     heading = np.cumsum(dth, axis=-1) - dth  # Theta_k, exclusive
     c, s = np.cos(heading), np.sin(heading)
-    world_x, world_y = c * dx - s * dy, s * dx + c * dy
-    tail_x = world_x.sum(axis=-1, keepdims=True) - np.cumsum(world_x, axis=-1)
-    tail_y = world_y.sum(axis=-1, keepdims=True) - np.cumsum(world_y, axis=-1)
-    return np.stack([c * jac[0] - s * jac[1] - tail_y * jac[2],
-                     s * jac[0] + c * jac[1] + tail_x * jac[2], jac[2]])
+    return c, s, (c * dx - s * dy, s * dx + c * dy)
+
+
+def _tails(world: tuple[FloatArray, FloatArray], total: tuple[FloatArray, FloatArray]
+           ) -> tuple[FloatArray, FloatArray]:
+    """X - W_<=k (x, y), each (..., K): the displacement after sub-step k (m), from the
+    sub-steps' displacements ``world`` and their sums ``total`` (:func:`_world_substeps`)."""
+    return (total[0][..., None] - np.cumsum(world[0], axis=-1),
+            total[1][..., None] - np.cumsum(world[1], axis=-1))
 
 
 class AxleModel(SegmentModel):
