@@ -35,7 +35,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from excite.calibration.noise import (
-    ChainWhitener,
     LevelBands,
     NoiseLevels,
     WheelNoise,
@@ -43,6 +42,7 @@ from excite.calibration.noise import (
     perpendicular,
     stacked,
 )
+from excite.calibration.reml_search import RestrictedDeviance, newton_search, restricted_deviance
 from excite.logs.segments import Segments
 from excite.stats.chi2 import chi_bar_square_quantile
 
@@ -84,22 +84,6 @@ def moment_noise(segments: Segments, residual: FloatArray, n_parameters: int,
                             2 * pxy2 + pth2 * np.mean(jy * jy), 2 * pth2])
     sigma = np.maximum(np.sqrt(np.maximum(seg2, 0.0)), floor)
     return NoiseLevels(sigma, np.sqrt(np.array([pxy2, pth2])))
-
-
-def restricted_deviance(band: FloatArray, rows: FloatArray) -> float:
-    """-2 log restricted likelihood (up to a constant) of residuals with Jacobian rows of the
-    linearised model, given as ``rows`` (3N, 1 + P) in the stacked order
-    (:func:`excite.calibration.noise.stacked`), under the covariance ``band``
-    (:func:`excite.calibration.noise.chain_band`): log det C + log det(J^T C^-1 J)
-    + e^T C^-1 e, with e the generalised least-squares residual (the parameters profiled
-    out). LinAlgError when C or J^T C^-1 J is not positive definite."""
-    whitener = ChainWhitener.from_band(band)
-    out = whitener.whiten_stacked(rows)
-    w, a = out[:, 0], out[:, 1:]
-    factor = np.linalg.cholesky(a.T @ a)  # J^T C^-1 J = G G^T
-    projected = np.linalg.solve(factor, a.T @ w)  # |G^-1 J^T C^-1 r|^2: the fitted part
-    return (whitener.log_det + 2.0 * float(np.sum(np.log(np.diag(factor))))
-            + float(w @ w - projected @ projected))
 
 
 #: A level within this fraction above its floor counts as held there (not found in the data).
@@ -153,7 +137,8 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
     (predicted - measured) of a fit whose Jacobian rows (3, P, N) span the fitted directions
     (only the directions the data determine): the five of :mod:`excite.calibration.noise` and, with
     ``wheels``, the slip and encoder timing levels (its quantization is known, not
-    estimated). Optimised over the logs of the levels from ``start`` (L-BFGS-B); each level
+    estimated). Optimised over the logs of the levels from ``start`` (the projected Newton
+    search of :mod:`excite.calibration.reml_search`); each level
     at least its floor: ``floor`` (3,) is (position, position, heading) and floors the
     segment levels and (position, heading) the pose levels; the slip and timing floors are
     the heading floor over their scales.
@@ -187,23 +172,23 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
     def levels_of(u: FloatArray) -> NoiseLevels:
         return NoiseLevels.from_vector(np.exp(u))
 
-    bands = LevelBands(segments, wheels, u0.size)
-    rows = stacked(residual, jac)
-
-    def deviance(u: FloatArray) -> float:
-        try:
-            return restricted_deviance(bands.at(np.exp(u)), rows)
-        except np.linalg.LinAlgError:  # C numerically not positive definite at the bounds
-            return 1e300  # finite: the optimiser's difference quotients stay numbers
+    deviance = RestrictedDeviance(LevelBands(segments, wheels, u0.size),
+                                  stacked(residual, jac))
 
     def optimum(start_u: FloatArray, fixed: NDArray[np.bool_],
                 start_value: float | None = None) -> tuple[FloatArray, float]:
         """The minimum of the deviance over the levels not ``fixed`` at their floor
-        (``start_value``: the deviance at the start, when known)."""
+        (``start_value``: the deviance at the start, when known): the Newton search of
+        :mod:`excite.calibration.reml_search`, L-BFGS-B from where it stopped when it did
+        not converge."""
         u = np.where(fixed, held_at, start_u)
-        free = np.flatnonzero(~fixed)
         if start_value is None:
             start_value = deviance(u)
+        u, value, converged = newton_search(deviance, deviance.information, u, start_value,
+                                            ~fixed, lower, upper)
+        if converged:
+            return u, value
+        free = np.flatnonzero(~fixed)
 
         def partial(v: FloatArray) -> float:
             full = u.copy()
@@ -212,8 +197,9 @@ def reml_noise(segments: Segments, residual: FloatArray, jac: FloatArray,
 
         result = minimize(partial, u[free], method="L-BFGS-B",
                           bounds=list(zip(lower[free], upper[free], strict=True)))
-        if result.fun > start_value:
-            return u, start_value
+        if result.fun > value:
+            return u, value
+        u = u.copy()
         u[free] = result.x
         return u, float(result.fun)
 

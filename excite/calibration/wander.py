@@ -55,6 +55,7 @@ from excite.calibration.noise import (
 )
 from excite.calibration.reml import level_bounds
 from excite.core.arrays import BoolArray, FloatArray, IntArray
+from excite.core.banded import band_inner, band_product, dense
 from excite.logs.segments import Segments
 from excite.stats.autocorrelation import runs_of
 from excite.stats.chi2 import chi_bar_square_quantile
@@ -180,38 +181,6 @@ def _longest_stretch(segments: Segments) -> float:
     return float(np.max(segments.t_end[last] - segments.t_start[first]))
 
 
-def _dense(band: FloatArray) -> FloatArray:
-    """The symmetric matrix of lower band storage ``band`` (b + 1, n)."""
-    n = band.shape[1]
-    out = np.zeros((n, n))
-    for d in range(band.shape[0]):
-        j = np.arange(n - d)
-        out[j + d, j] = band[d, : n - d]
-        out[j, j + d] = band[d, : n - d]
-    return out
-
-
-def _band_inner(band: FloatArray, m_band: FloatArray) -> float:
-    """sum(X * M) for X and M symmetric, given by their lower band storage ``band`` and
-    ``m_band`` (M's band at least as wide as X's)."""
-    n = band.shape[1]
-    total = float(band[0] @ m_band[0])
-    for d in range(1, band.shape[0]):
-        total += 2.0 * float(band[d, : n - d] @ m_band[d, : n - d])
-    return total
-
-
-def _band_product(band: FloatArray, x: FloatArray) -> FloatArray:
-    """X x for X the symmetric matrix of lower band storage ``band`` and x (n, P)."""
-    n = band.shape[1]
-    out = band[0][:, None] * x
-    for d in range(1, band.shape[0]):
-        b = band[d, : n - d][:, None]
-        out[d:] += b * x[: n - d]
-        out[: n - d] += b * x[d:]
-    return out
-
-
 @dataclass(frozen=True)
 class _Chunk:
     """One chunk's fixed parts: the covariance's band as a function of the levels, the
@@ -272,7 +241,7 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
     info, gradient = np.zeros((p, p)), np.zeros(p)
     for c in chunks:
         band = c.bands.at(levels)
-        cov = _dense(band)
+        cov = dense(band)
         r = dr = None
         if wander:
             r, dr = c.samples.correlation(time)
@@ -315,7 +284,7 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
                                   - np.einsum("ip,ip->i", low[d:], ci_j[: n - d])
                                   - y[d:] * y[: n - d])
         for i, (v, unit) in enumerate(zip(variances, c.bands.units, strict=True)):
-            grad[i] += 2.0 * v * _band_inner(unit, m_band)
+            grad[i] += 2.0 * v * band_inner(unit, m_band)
         if wander:
             a_low, a_j, a_y = c.design @ low, c.design @ ci_j, c.design @ y
             projected = (c.design @ (c.design @ inverse).T
@@ -439,7 +408,7 @@ def wander_covariance(segments: Segments, whitener: ChainWhitener, jac: FloatArr
     g = whitener.solve(j)  # B^-1 J
     band = chain_band(segments, wander.levels, whitener.wheels)
     h = samples.transpose_design(segments, g)  # A^T B^-1 J
-    middle = g.T @ _band_product(band, g) + wander.std**2 * (
+    middle = g.T @ band_product(band, g) + wander.std**2 * (
         h.T @ samples.apply_correlation(wander.correlation_time, h))
     out = covariance @ middle @ covariance
     return 0.5 * (out + out.T)

@@ -22,7 +22,6 @@ from excite.calibration.wander import (
     HeadingWander,
     _Chunk,
     _chunk_ranges,
-    _dense,
     _deviance,
     _lever,
     _longest_stretch,
@@ -31,6 +30,7 @@ from excite.calibration.wander import (
     estimate_wander,
     wander_covariance,
 )
+from excite.core.banded import dense
 from excite.core.models import SensorPose
 from excite.logs.segmentation import segment_timeseries
 from excite.logs.segments import Segments
@@ -161,8 +161,8 @@ def test_the_deviance_without_the_wander_is_the_chain_models():
     chunk = _Chunk.of(seg, None, residual.T.reshape(-1),
                       jac.transpose(2, 0, 1).reshape(3 * len(seg), -1), 5)
     u = np.log(np.concatenate([levels.sigma, levels.pose]))
-    dense, _ = _deviance([chunk], u, 5, False)
-    assert dense == pytest.approx(restricted_deviance(chain_band(seg, levels),
+    value, _ = _deviance([chunk], u, 5, False)
+    assert value == pytest.approx(restricted_deviance(chain_band(seg, levels),
                                                       stacked(residual, jac)), rel=1e-9)
 
 
@@ -185,14 +185,14 @@ def test_the_covariance_is_the_sandwich_of_the_dense_model():
     whitener = ChainWhitener(seg, levels, wheels)
     jac = Problem(SENSOR_POSE, seg).evaluate(theta).jac
     j = jac.transpose(2, 0, 1).reshape(3 * len(seg), -1)
-    b = _dense(chain_band(seg, levels, wheels))
+    b = dense(chain_band(seg, levels, wheels))
     information = j.T @ np.linalg.solve(b, j)
     covariance = np.linalg.inv(information)
     other = NoiseLevels(np.array([2e-4, 1e-4, 1e-5]), np.array([1e-3, 5e-4]), 5e-4)
     wander = HeadingWander(0.002, 6.0, 30.0, other)
     samples = _Samples.of(seg)
     a = _dense_design(seg, samples)
-    c = _dense(chain_band(seg, other, wheels)) + 0.002**2 * a @ _dense_correlation(
+    c = dense(chain_band(seg, other, wheels)) + 0.002**2 * a @ _dense_correlation(
         samples, 6.0) @ a.T
     g = np.linalg.solve(b, j)
     expected = covariance @ g.T @ c @ g @ covariance
