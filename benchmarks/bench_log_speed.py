@@ -1,10 +1,15 @@
-"""Speed of ``calibrate`` on a 1-hour 100 Hz log, side by side with another checkout of excite
-(ratios, since absolute times drift on a shared machine).
+"""Speed of the default ``calibrate`` (issue 26's rows), side by side with another checkout of
+excite (ratios, since absolute times drift on a shared machine).
 
-The log: ``excite.logs.synthetic.synthetic_log`` of 3600 s, encoders and poses at 100 Hz, pose
-noise 2 mm / 2 mrad, the sensor off the axle, with and without wheel slip (0.01 rad/sqrt(s)),
-cut into 1 s windows (3600 segments). Each configuration is timed in fresh subprocesses,
-alternating this tree and the baseline, ``--repeats`` times; the medians are printed.
+1. A 1-hour 100 Hz log: ``excite.logs.synthetic.synthetic_log`` of 3600 s, encoders and poses
+   at 100 Hz, pose noise 2 mm / 2 mrad, the sensor off the axle, with and without wheel slip
+   (0.01 rad/sqrt(s)), cut into 1 s windows (3600 segments).
+2. 100k segments of the lesson's kind: the default ``calibrate`` over the lesson's estimator
+   (``benchmarks/lesson_baseline.py``) on the same data, the two alternating in one process
+   (median of 9 each), so that the ratio is of one moment of the machine.
+
+Each is timed in fresh subprocesses, alternating this tree and the baseline, ``--repeats``
+times; the medians are printed.
 
     git archive OLD excite | tar -x -C /tmp/old
     python benchmarks/bench_log_speed.py --baseline /tmp/old
@@ -49,6 +54,36 @@ print(time.perf_counter() - start, len(segments))
 """
 
 
+#: Run in a subprocess with the tree to time on sys.path: the lesson's estimator and the
+#: default calibrate alternating on 100k lesson segments; prints both medians (s).
+LESSON_CHILD = """
+import sys, time
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from lesson_baseline import lesson_calibrate
+from excite.calibration import calibrate
+from excite.logs.synthetic import LESSON_TRUTH, lesson_dataset
+seg = lesson_dataset(np.random.default_rng(1), 100_000, LESSON_TRUTH)
+calibrate(seg)
+lesson_calibrate(seg)
+times = {"lesson": [], "excite": []}
+for _ in range(9):
+    for name, fn in (("lesson", lesson_calibrate), ("excite", calibrate)):
+        start = time.perf_counter()
+        fn(seg)
+        times[name].append(time.perf_counter() - start)
+print(np.median(times["lesson"]), np.median(times["excite"]))
+"""
+
+
+def lesson_ratio(tree: str) -> tuple[float, float]:
+    """The lesson's and the default calibrate's median seconds on 100k segments, ``tree``."""
+    env = dict(os.environ, PYTHONPATH=tree)
+    out = subprocess.run([sys.executable, "-P", "-c", LESSON_CHILD, str(HERE / "benchmarks")],
+                         env=env, check=True, capture_output=True, text=True).stdout.split()
+    return float(out[0]), float(out[1])
+
+
 def timed(tree: str, slip: float, mode: str) -> tuple[float, int]:
     env = dict(os.environ, PYTHONPATH=tree)
     # -P: not the working directory first on sys.path (from a checkout it would shadow tree)
@@ -72,6 +107,16 @@ def main() -> None:
             a, b = statistics.median(ours), statistics.median(theirs)
             print(f"slip {slip:g}, sensor_pose={mode}: {n} segments; this tree {a:.2f} s, "
                   f"baseline {b:.2f} s, ratio {a / b:.2f}", flush=True)
+    ours, theirs = [], []
+    for _ in range(args.repeats):
+        ours.append(lesson_ratio(str(HERE)))
+        theirs.append(lesson_ratio(args.baseline))
+    for name, runs in (("this tree", ours), ("baseline", theirs)):
+        ratios = [e / lesson for lesson, e in runs]
+        print(f"100k lesson segments, default calibrate over the lesson's estimator, {name}: "
+              f"{min(ratios):.2f}-{max(ratios):.2f} (calibrate "
+              f"{statistics.median(e for _, e in runs):.3f} s, lesson "
+              f"{statistics.median(lesson for lesson, _ in runs):.3f} s)", flush=True)
 
 
 if __name__ == "__main__":

@@ -42,12 +42,12 @@ from excite.calibration.noise import (
     perpendicular,
     stacked,
 )
-from excite.calibration.reml_search import RestrictedDeviance, newton_search, restricted_deviance
+from excite.calibration.reml_search import RestrictedDeviance, newton_search
 from excite.logs.segments import Segments
 from excite.stats.chi2 import chi_bar_square_quantile
 
 __all__ = ["at_floor", "level_bounds", "level_floors", "moment_noise", "reml_noise",
-           "restricted_deviance", "FLOOR_TOLERANCE", "SEGMENT_NOISE_TEST_LEVEL",
+           "FLOOR_TOLERANCE", "SEGMENT_NOISE_TEST_LEVEL",
            "START_FRACTIONS"]
 
 FloatArray = NDArray[np.float64]

@@ -59,12 +59,8 @@ from excite.calibration.noise import (
     stacked,
 )
 from excite.calibration.options import TEST_LEVEL, SensorPoseOption
-from excite.calibration.reml import (
-    START_FRACTIONS,
-    at_floor,
-    level_floors,
-    restricted_deviance,
-)
+from excite.calibration.reml import START_FRACTIONS, at_floor, level_floors
+from excite.calibration.reml_search import restricted_deviance
 from excite.calibration.result import CalibrationResult
 from excite.calibration.solver import Evaluation, Problem
 from excite.core.arrays import FloatArray
@@ -296,7 +292,7 @@ def _newton_step(deviance: _GroupDeviance, u: FloatArray, value: float) -> Float
 
 
 class _GroupDeviance:
-    """The restricted deviance (:func:`excite.calibration.reml.restricted_deviance`) as a
+    """The restricted deviance (:func:`excite.calibration.reml_search.restricted_deviance`) as a
     function of the log factors u of the groups of levels: C = sum_g exp(2 u_g) C_g + C_0,
     C_g the band of group g's levels at ``base``, C_0 that of the rest
     (:class:`excite.calibration.noise.LevelBands`)."""

@@ -151,7 +151,7 @@ def test_the_deviance_without_the_wander_is_the_chain_models():
     """With the heading error off, the dense deviance is the banded chain model's (the same
     likelihood as excite.calibration.noise's REML)."""
     from excite.calibration.noise import chain_band, stacked
-    from excite.calibration.reml import restricted_deviance
+    from excite.calibration.reml_search import restricted_deviance
 
     seg = _log(6, 15.0)
     levels = NoiseLevels(np.array([1e-4, 2e-4, 3e-4]), np.array([2e-3, 1e-3]))
