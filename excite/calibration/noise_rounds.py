@@ -105,8 +105,14 @@ def _correlated_noise(model: SegmentModel, data: Segments, start: FloatArray,
     levels = moment_noise(data, mf.fit.ev.residual, model.size, floor)
     in_wheels = cut_from_log(data)
 
+    built: dict[bytes, WheelNoise | None] = {}  # the last geometry, by its parameters
+
     def wheels_at(theta: FloatArray) -> WheelNoise | None:
-        return WheelNoise.of(model, data, theta, tick) if in_wheels else None
+        key = np.asarray(theta, dtype=float).tobytes()
+        if key not in built:  # a fit that did not move keeps its geometry
+            built.clear()
+            built[key] = WheelNoise.of(model, data, theta, tick) if in_wheels else None
+        return built[key]
 
     wheels = wheels_at(mf.theta)
     if wheels is not None:
