@@ -395,6 +395,16 @@ class LevelBands:
             self.units.append(chain_band(segments, NoiseLevels.from_vector(one), wheels)
                               - self.zero)
 
+    @classmethod
+    def side_by_side(cls, parts: list[LevelBands]) -> LevelBands:
+        """The bands of parts that share no noise (chunks of a log, apart) as one, block
+        diagonal: :func:`chain_band` leaves the band's last columns beyond each part zero."""
+        joined = cls.__new__(cls)
+        joined.zero = np.concatenate([part.zero for part in parts], axis=1)
+        joined.units = [np.concatenate(units, axis=1)
+                        for units in zip(*(part.units for part in parts), strict=True)]
+        return joined
+
     def at(self, levels: FloatArray) -> FloatArray:
         """The band at ``levels`` (5 or 7, the order of :meth:`NoiseLevels.vector`)."""
         band = self.zero.copy()

@@ -54,6 +54,7 @@ from excite.calibration.noise import (
     chain_band,
 )
 from excite.calibration.reml import level_bounds
+from excite.calibration.reml_search import RestrictedDeviance, newton_search
 from excite.core.arrays import BoolArray, FloatArray, IntArray
 from excite.core.banded import band_inner, band_product, dense
 from excite.logs.segments import Segments
@@ -376,7 +377,15 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
                 break
         return u, value
 
-    _, null = fitted(start, lower, upper, wander=False)
+    # without the wander the chunks' covariance is banded: the REML search of the chain's
+    # levels (the same deviance, the dense one's L-BFGS-B where it does not converge)
+    banded = RestrictedDeviance(LevelBands.side_by_side([c.bands for c in chunks]),
+                                np.column_stack([np.concatenate([c.residual for c in chunks]),
+                                                 np.concatenate([c.jac for c in chunks])]))
+    _, null, converged = newton_search(banded, banded.information, start, banded(start),
+                                       np.ones(start.size, dtype=bool), lower, upper)
+    if not converged:
+        _, null = fitted(start, lower, upper, wander=False)
     if null >= UNDEFINED:
         return None
     largest_heading = max(float(np.max(np.abs(residual[2]))), floor[2])  # rad
