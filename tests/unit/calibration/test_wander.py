@@ -166,6 +166,26 @@ def test_the_deviance_without_the_wander_is_the_chain_models():
                                                       stacked(residual, jac)), rel=1e-9)
 
 
+def test_the_chunks_bands_side_by_side_give_the_dense_deviance_without_the_wander():
+    """The test's null is searched on the chunks' bands side by side (block diagonal, one
+    set of parameters): the same deviance as the dense chunks'."""
+    from excite.calibration.noise import LevelBands
+    from excite.calibration.reml_search import RestrictedDeviance
+    from excite.core.models import SENSOR_POSE
+
+    seg = _log(8, 15.0)
+    theta = np.array([0.05, 0.051, 0.3, *SENSOR.as_array()])
+    chunks = _chunks(seg, WheelNoise.of(SENSOR_POSE, seg, theta, 2 * np.pi / 4096))
+    banded = RestrictedDeviance(
+        LevelBands.side_by_side([c.bands for c in chunks]),
+        np.column_stack([np.concatenate([c.residual for c in chunks]),
+                         np.concatenate([c.jac for c in chunks])]))
+    for u in (np.log([1e-4, 2e-4, 3e-4, 2e-3, 1e-3, 1e-2, 1e-3]),
+              np.log([1e-6, 1e-6, 1e-6, 5e-3, 2e-3, 3e-2, 1e-4])):
+        value, _ = _deviance(chunks, u, 7, False, with_gradient=False)
+        assert banded(u) == pytest.approx(value, rel=1e-8)
+
+
 def test_chunks_cover_short_logs_and_sample_long_ones():
     assert _chunk_ranges(120) == [range(0, 120)]
     assert _chunk_ranges(200) == [range(0, 100), range(100, 200)]
