@@ -159,9 +159,10 @@ def newton_search(deviance: Callable[[FloatArray], float],
         lam, vectors = np.linalg.eigh(h / np.outer(root, root))
         lam = np.maximum(lam, max(EIGEN_FLOOR * float(lam[-1]), 1e-300))
         step = -(vectors @ ((vectors.T @ (g / root)) / lam)) / root
-        if not np.all(np.isfinite(step)):
+        with np.errstate(over="ignore", invalid="ignore"):
+            predicted = 0.5 * float(-(g @ step))
+        if not math.isfinite(predicted):  # steps beyond what the numbers hold
             return u, value, False
-        predicted = 0.5 * float(-(g @ step))
         if predicted < DEVIANCE_TOLERANCE:
             return u, value, True
         t = 1.0
@@ -185,7 +186,8 @@ def _gradient(deviance: Callable[[FloatArray], float], at: Callable[[FloatArray]
     """Forward (at the upper bound backward) differences of D in the squared levels v, each
     by a step of DIFFERENCE_STEP of the level's standard error (1 / sqrt(curvature), the
     information's diagonal) and corrected by half a step of its curvature: the error of the
-    difference quotient to first order. ``at``: the log-levels of squared levels."""
+    difference quotient to first order; inf where D is not defined at the step's end.
+    ``at``: the log-levels of squared levels."""
     out = np.empty(v.size)
     for i in range(v.size):
         h = DIFFERENCE_STEP / math.sqrt(curvature[i]) if curvature[i] > 0 else DIFFERENCE_STEP
@@ -193,5 +195,7 @@ def _gradient(deviance: Callable[[FloatArray], float], at: Callable[[FloatArray]
             h = -h
         shifted = v.copy()
         shifted[i] += h
-        out[i] = (deviance(at(shifted)) - value) / h - 0.5 * h * curvature[i]
+        shifted_value = deviance(at(shifted))
+        out[i] = (math.inf if not shifted_value < UNDEFINED
+                  else (shifted_value - value) / h - 0.5 * h * curvature[i])
     return out
