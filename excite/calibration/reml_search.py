@@ -70,7 +70,11 @@ def restricted_deviance(band: FloatArray, rows: FloatArray) -> float:
     + e^T C^-1 e, with e the generalised least-squares residual (the parameters profiled
     out). LinAlgError when C or J^T C^-1 J is not positive definite."""
     whitener = ChainWhitener.from_band(band)
-    out = whitener.whiten_stacked(rows)
+    return _deviance_of(whitener, whitener.whiten_stacked(rows))
+
+
+def _deviance_of(whitener: ChainWhitener, out: FloatArray) -> float:
+    """:func:`restricted_deviance` from the whitener and the whitened rows."""
     w, a = out[:, 0], out[:, 1:]
     factor = np.linalg.cholesky(a.T @ a)  # J^T C^-1 J = G G^T
     projected = np.linalg.solve(factor, a.T @ w)  # |G^-1 J^T C^-1 r|^2: the fitted part
@@ -80,7 +84,8 @@ def restricted_deviance(band: FloatArray, rows: FloatArray) -> float:
 
 class RestrictedDeviance:
     """D as a function of the logs of the levels u (in the order of the bands' units), and
-    its average information (module docstring).
+    its average information (module docstring). The whitening of the last u evaluated is
+    kept: the search asks the information where its line search has just evaluated D.
 
     Attributes
     ----------
@@ -94,22 +99,29 @@ class RestrictedDeviance:
     def __init__(self, bands: LevelBands, rows: FloatArray):
         self.bands = bands
         self.rows = rows
+        self._last: tuple[bytes, ChainWhitener, FloatArray] | None = None
+
+    def _whitened(self, u: FloatArray) -> tuple[ChainWhitener, FloatArray]:
+        """The whitener of C at log-levels u and the whitened rows (LinAlgError when C is
+        not positive definite)."""
+        key = np.asarray(u, dtype=float).tobytes()
+        if self._last is None or self._last[0] != key:
+            whitener = ChainWhitener.from_band(self.bands.at(np.exp(u)))
+            self._last = (key, whitener, whitener.whiten_stacked(self.rows))
+        return self._last[1], self._last[2]
 
     def __call__(self, u: FloatArray) -> float:
         """D at log-levels u; UNDEFINED where C is numerically not positive definite (at the
         bounds)."""
         try:
-            return restricted_deviance(self.bands.at(np.exp(u)), self.rows)
+            return _deviance_of(*self._whitened(u))
         except np.linalg.LinAlgError:
             return UNDEFINED
 
     def information(self, u: FloatArray) -> FloatArray:
         """The average information of D in the squared levels v = exp(2 u) at log-levels u
         (len(u), len(u)). LinAlgError when C is not positive definite there."""
-        levels = np.exp(u)
-        band = self.bands.at(levels)
-        whitener = ChainWhitener.from_band(band)
-        out = whitener.whiten_stacked(self.rows)
+        whitener, out = self._whitened(u)
         w, a = out[:, 0], out[:, 1:]
         gram = a.T @ a
         beta = np.linalg.solve(gram, a.T @ w)
