@@ -233,7 +233,8 @@ def _driving_words(t: DrivingTest) -> str:
                f"{gentler})" if grown else f"the residuals' size changes with the {t.driving}")
     else:
         why = (f"the sensor's pose would have to change with the {t.driving} (score "
-               f"{t.pose_statistic:.3g}, {t.pose_dof} dof), as a mounting does not")
+               f"{t.pose_statistic:.3g} > {chi2_quantile(FAMILY_LEVEL, t.pose_dof):.3g}, "
+               f"{t.pose_dof} dof), as a mounting does not")
     return (f"{why}, and {_listed(t.moved)} {_verb(t.moved)} with it ({by}): the wheels "
             f"slip {where}, which biases the estimates beyond their std; calibrate on "
             f"gentler driving ({gentler})")
@@ -251,8 +252,9 @@ def _by(t: DrivingTest) -> str:
     """How much and how sure: the largest change over one std of the driving and the
     score."""
     whose = "its" if len(t.moved) == 1 else "their"
+    compared = ">" if t.statistic > t.threshold else "<="
     return (f"by up to {t.shift:.3g} of {whose} std per std of the {t.driving}; score "
-            f"{t.statistic:.3g} > {t.threshold:.3g}, {t.dof} dof")
+            f"{t.statistic:.3g} {compared} {t.threshold:.3g}, {t.dof} dof")
 
 
 def pooled_over_kinds(result: CalibrationResult) -> CalibrationResult:

@@ -40,11 +40,14 @@ residuals (over 1 - leverage) regressed on z: Koenker's studentised Breusch-Paga
 N R^2, chi-square with 1 degree of freedom when their size does not depend on the driving;
 ``growth`` is the smallest p-value of the three channels times 3.
 
-**The verdict.** A test fails the fit when its change is significant and material (some
-parameter moves by more than its own std over one std of the driving: on a long log a tiny
-effect is significant and moves nothing). It is ``slipping`` when the change is one that
-slip makes and a difference of effective parameters between kinds of driving does not: the
-residuals still grow with the driving after the step, or the mounting changes with it.
+**The verdict.** A test fails the fit when its change is material (some parameter moves
+by more than its own std over one std of the driving: on a long log a tiny effect is
+significant and moves nothing) and significant, or the mounting's part of it is: the
+sensor's pose would have to move with the driving, which no mounting does, so the change is
+slip even where the wheels' share of it alone would not be significant. It is
+``slipping`` when the change is one that slip makes and a difference of effective parameters
+between kinds of driving does not: the residuals still grow with the driving after the
+step, or the mounting changes with it.
 Wheel parameters that differ between gentle and hard driving while the residuals fit both
 and the mounting stays put may be the effective parameters of each driving (wheels that
 scrub in turns): when the heterogeneity stage finds the kinds of motion disagreeing and
@@ -123,7 +126,8 @@ class DrivingTest:
     pose_dof : int or None
         Its degrees of freedom.
     failed : bool
-        Whether this test fails the fit: the change is significant and material.
+        Whether this test fails the fit: the change is material, and significant or the
+        mounting's part of it is (module docstring, "The verdict").
     slipping : bool
         Whether the residuals grow with the driving after the step (``growth`` below the
         test's level) or the mounting changes with it (``pose_statistic`` above its
@@ -273,18 +277,23 @@ def _driving_test(name: str, names: tuple[str, ...], own: FloatArray,
 
 
 def _fails(test: DrivingTest) -> bool:
-    """Whether a driving test fails the fit: its change is significant and material."""
-    return test.statistic > test.threshold and bool(test.moved)
+    """Whether a driving test fails the fit: its change is material, and significant, or
+    the mounting's part of it is (a mounting does not move with the driving)."""
+    return bool(test.moved) and (test.statistic > test.threshold or _mounting_moves(test))
+
+
+def _mounting_moves(test: DrivingTest) -> bool:
+    """Whether the score test of the sensor pose's part alone (``pose_statistic``) is
+    significant at FAMILY_LEVEL: the mounting would have to change with the driving."""
+    return (test.pose_statistic is not None and test.pose_dof is not None
+            and chi2_survival(test.pose_statistic, test.pose_dof) < 1.0 - FAMILY_LEVEL)
 
 
 def _slipping(test: DrivingTest) -> bool:
     """Whether the change is one that slip makes and a difference of effective parameters
     between kinds of driving does not: the residuals still grow with the driving, or the
     mounting changes with it."""
-    alpha = 1.0 - FAMILY_LEVEL
-    return test.growth < alpha or (test.pose_statistic is not None
-                                   and test.pose_dof is not None
-                                   and chi2_survival(test.pose_statistic, test.pose_dof) < alpha)
+    return test.growth < 1.0 - FAMILY_LEVEL or _mounting_moves(test)
 
 
 class _Score:
