@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import signal
 import subprocess
+from statistics import NormalDist
 
 import numpy as np
 import pytest
@@ -19,6 +20,8 @@ pytestmark = pytest.mark.slow
 WHEELS = ["--left-wheel", "left_wheel_joint", "--right-wheel", "right_wheel_joint",
           "--pose-topic", "/pose"]
 LIVE = [*WHEELS, "--robot", "default", "--target", "0.005"]
+#: The chance that a session whose std are honest fails the check of its truth.
+FALSE_FAILURE = 1e-4
 
 
 def _first_command(session) -> float:
@@ -41,10 +44,14 @@ def test_a_session_reaches_the_target_and_stops(session_dir):
     assert s.code == 0, (s.out, s.err)
     live = s.result["live"]
     assert live["outcome"] == "done"
-    # the truth within 3 std of the result
+    # the truth near the result: one session can check only that it calibrated this robot
+    # (its std's honesty is a Monte Carlo's: tests/unit/live/test_session.py and the
+    # benchmarks); with honest std this bound fails one run in 10^4 (Bonferroni over the three
+    # parameters), where 3 std failed one in 120 by design
+    bound = NormalDist().inv_cdf(1.0 - FALSE_FAILURE / 6.0)
     for name in ("r_L", "r_R", "b"):
         z = (s.result["params"][name] - s.truth[name]) / s.result["std"][name]
-        assert abs(z) < 3, (name, z)
+        assert abs(z) < bound, (name, z)
     # the robot never left the area (its true footprint, on the robot's side)
     area = Area(*live["area"])
     chassis = PRESETS["default"].nominal().chassis
