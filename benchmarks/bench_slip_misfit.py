@@ -27,7 +27,8 @@ std or exit 4; on gentle logs a driving test's failure is a false alarm unless t
 estimate is itself more than 4 std off (then it is a detection).
 
 Run: ``OPENBLAS_NUM_THREADS=1 nice python benchmarks/bench_slip_misfit.py`` (``--quick``:
-fewer logs; ``--out FILE.json`` keeps every log).
+fewer logs; ``--out FILE.json`` keeps every log; ``--seed-offset K``: other logs of the same
+cells, every seed + K, for a held-out check of a setting chosen on the default seeds).
 """
 
 from __future__ import annotations
@@ -162,30 +163,36 @@ def main(argv: list[str] | None = None) -> list[dict]:
     parser.add_argument("--quick", action="store_true", help="3 seeds per protocol, fewer "
                         "synthetic data sets")
     parser.add_argument("--out", help="write every log's outcome to this JSON file")
+    parser.add_argument("--seed-offset", type=int, default=0, help="added to every seed: "
+                        "other logs of the same cells (a held-out check of a setting chosen "
+                        "on the default seeds)")
     args = parser.parse_args(argv)
+    k = args.seed_offset
     per = 3 if args.quick else 10
     synthetic = 20 if args.quick else 100
     started = time.perf_counter()
     cells: dict[str, list[dict]] = {}
-    quick = _env_cell(SLIP, ["umbmark:speed=0.5"], range(1, 6))
+    quick = _env_cell(SLIP, ["umbmark:speed=0.5"], range(k + 1, k + 6))
     for form in ("segments", "timeseries"):
         cells[f"quick start, declared speed 0.5 ({form})"] = [r for r in quick
                                                                if r["form"] == form]
-    quick_tuned = _env_cell(SLIP, _tuned(("umbmark",)), range(1, 6))
+    quick_tuned = _env_cell(SLIP, _tuned(("umbmark",)), range(k + 1, k + 6))
     for form in ("segments", "timeseries"):
         cells[f"quick start, tuned speed ({form})"] = [r for r in quick_tuned
                                                         if r["form"] == form]
     for name, env_id, protocols, seeds in (
-            ("slip env, declared settings", SLIP, list(PROTOCOLS), range(1000, 1000 + per)),
-            ("slip env, tuned settings", SLIP, _tuned(PROTOCOLS), range(2000, 2000 + per)),
-            ("ideal env, declared settings", IDEAL, list(PROTOCOLS), range(3000, 3000 + per))):
+            ("slip env, declared settings", SLIP, list(PROTOCOLS),
+             range(k + 1000, k + 1000 + per)),
+            ("slip env, tuned settings", SLIP, _tuned(PROTOCOLS), range(k + 2000, k + 2000 + per)),
+            ("ideal env, declared settings", IDEAL, list(PROTOCOLS),
+             range(k + 3000, k + 3000 + per))):
         rows = _env_cell(env_id, protocols, seeds)
         for form in ("segments", "timeseries"):
             cells[f"{name} ({form})"] = [r for r in rows if r["form"] == form]
         print(f"... {name}: {time.perf_counter() - started:.0f} s", file=sys.stderr)
     for kind, count in (("lesson30", synthetic), ("lesson200", synthetic),
                         ("log60", synthetic // 2), ("log60 slip", synthetic // 2)):
-        cells[f"synthetic {kind}"] = _synthetic_cell(kind, range(count))
+        cells[f"synthetic {kind}"] = _synthetic_cell(kind, range(k, k + count))
     summaries = [_summary(name, rows) for name, rows in cells.items()]
     keys = list(summaries[0])
     print("| " + " | ".join(keys) + " |")

@@ -12,8 +12,8 @@
   the search for a wandering heading error of the pose samples
   (:mod:`excite.calibration.wander`).
 
-Every test is at TEST_LEVEL (99.9%) except the wander's (5%, its own module); the three
-driving tests are one family at TEST_LEVEL.
+Every test is at TEST_LEVEL (99.9%) except the wander's (5%, its own module) and the three
+driving tests, one family at DRIVING_TEST_LEVEL (99%: :mod:`excite.calibration.slip_tests`).
 """
 
 from __future__ import annotations

@@ -54,8 +54,8 @@ def test_size_on_independent_segments_the_model_describes():
     test's score statistic is chi-square with its dof when nothing changes with the driving.
     Over 40 data sets x 3 tests (120 draws) the share above the 90% quantile is 0.1 (binomial
     std 0.027: within 0.03-0.2), the mean of statistic / dof near 1 (std of the mean about
-    0.1: within 0.7-1.3), and the fit is failed by a driving test in at most 2 of the 40
-    (each at 1 - FAMILY_LEVEL = 0.033%: P(3 or more) ~ 1e-5)."""
+    0.1: within 0.7-1.3), and the fit is failed by a driving test in at most 3 of the 40
+    (the family at 1 - DRIVING_TEST_LEVEL = 1%: P(4 or more) ~ 7e-4)."""
     above, ratios, failed = [], [], 0
     for seed in range(40):
         result = calibrate(lesson_dataset(np.random.default_rng([seed, 12]), n=30))
@@ -68,7 +68,7 @@ def test_size_on_independent_segments_the_model_describes():
         failed += any(t.failed for t in tests)
     assert 0.03 <= np.mean(above) <= 0.2
     assert 0.7 <= np.mean(ratios) <= 1.3
-    assert failed <= 2
+    assert failed <= 3
 
 
 @pytest.mark.slow
