@@ -190,7 +190,6 @@ class _Chunk:
 
     bands: LevelBands
     samples: _Samples
-    lever: FloatArray
     design: csr_matrix
     residual: FloatArray
     jac: FloatArray
@@ -199,8 +198,8 @@ class _Chunk:
     def of(cls, segments: Segments, wheels: WheelNoise | None, residual: FloatArray,
            jac: FloatArray, n_levels: int) -> _Chunk:
         samples = _Samples.of(segments)
-        return cls(LevelBands(segments, wheels, n_levels), samples, _lever(segments),
-                   samples.design(segments), residual, jac)
+        return cls(LevelBands(segments, wheels, n_levels), samples, samples.design(segments),
+                   residual, jac)
 
 
 def _lever(segments: Segments) -> FloatArray:
@@ -209,19 +208,11 @@ def _lever(segments: Segments) -> FloatArray:
     return np.stack([segments.dy, -segments.dx], axis=1)
 
 
-def _sandwiched(samples: _Samples, lever: FloatArray, r: FloatArray) -> FloatArray:
-    """A R A^T (3n, 3n) for the design A of ``samples`` and ``lever`` (:func:`_lever`) and
-    R (M, M)."""
-    first, last, a = samples.start, samples.end, lever
-    ss, se, ee = r[np.ix_(first, first)], r[np.ix_(first, last)], r[np.ix_(last, last)]
-    n = len(first)
-    out = np.empty((n, 3, n, 3))
-    out[:, :2, :, :2] = a[:, :, None, None] * a[None, None, :, :] * ss[:, None, :, None]
-    cross = a[:, :, None] * (se - ss)[:, None, :]  # xy of k with theta of j
-    out[:, :2, :, 2] = cross
-    out[:, 2, :, :2] = (se.T - ss)[:, :, None] * a[None, :, :]  # theta of k with xy of j
-    out[:, 2, :, 2] = ee - se - se.T + ss
-    return out.reshape(3 * n, 3 * n)
+def _sandwiched(design: csr_matrix, r: FloatArray) -> FloatArray:
+    """A R A^T (3n, 3n) for the heading-error design ``design`` = A^T (M, 3n)
+    (:meth:`_Samples.design`) and R (M, M) symmetric: two sparse products, A (A R)^T."""
+    a = design.T
+    return a @ (a @ r).T
 
 
 def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
@@ -246,7 +237,7 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
         r = dr = None
         if wander:
             r, dr = c.samples.correlation(time)
-            cov += std2 * _sandwiched(c.samples, c.lever, r)
+            cov += std2 * _sandwiched(c.design, r)
         cov[np.diag_indices_from(cov)] *= 1.0 + JITTER
         factor, _ = cho_factor(cov, lower=True, check_finite=False)
         total += 2.0 * float(np.sum(np.log(np.diag(factor))))

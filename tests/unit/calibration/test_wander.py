@@ -23,7 +23,6 @@ from excite.calibration.wander import (
     _Chunk,
     _chunk_ranges,
     _deviance,
-    _lever,
     _longest_stretch,
     _Samples,
     _sandwiched,
@@ -92,7 +91,7 @@ def test_the_pieces_of_the_heading_error_match_their_dense_matrices(seg, time):
     a = _dense_design(seg, samples)
     r = _dense_correlation(samples, time)
     assert np.allclose(samples.correlation(time)[0], r)
-    assert np.allclose(_sandwiched(samples, _lever(seg), r), a @ r @ a.T)
+    assert np.allclose(_sandwiched(samples.design(seg), r), a @ r @ a.T)
     rows = np.random.default_rng(0).normal(size=(3 * len(seg), 4))
     assert np.allclose(samples.transpose_design(seg, rows), a.T @ rows)
     h = a.T @ rows
