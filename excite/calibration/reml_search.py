@@ -12,11 +12,14 @@ Biometrics 1995)
     H_ij = y^T P U_i P U_j P y = r_i^T r_j,   r_i = (I - a (a^T a)^-1 a^T) L^-1 U_i P y,
 
 with L the Cholesky factor of C and a = L^-1 J: one more whitening of as many columns as
-levels, the cost of about one evaluation of D. The gradient is taken by forward differences
-of D, a hundredth of each level's standard error (1 / sqrt(H_ii)) long (D changes by about
-1e-4 over it near the minimum: well above its rounding, about 1e-5 on noise-free data, where
-C is ill-conditioned) and corrected by half a step of its curvature: the trace terms of the
-exact gradient would need the band of C^-1.
+levels, the cost of about one evaluation of D. The search also serves a deviance that is not
+linear in its parameters (the wandering heading's time constant,
+:mod:`excite.calibration.wander`), given its gradient and average information. The gradient
+of the banded deviance is taken by forward differences of D, a hundredth of each level's
+standard error (1 / sqrt(H_ii)) long (D changes by about 1e-4 over it near the minimum: well
+above its rounding, about 1e-5 on noise-free data, where C is ill-conditioned) and corrected
+by half a step of its curvature: the trace terms of the exact gradient would need the band
+of C^-1.
 
 The search runs in the squared levels, not in their logs (where the callers' bounds are
 given): a level whose best value is 0 has a deviance that flattens out as its log falls,
@@ -134,13 +137,15 @@ class RestrictedDeviance:
 
 def newton_search(deviance: Callable[[FloatArray], float],
                   information: Callable[[FloatArray], FloatArray], u0: FloatArray,
-                  value0: float, free: BoolArray, lower: FloatArray, upper: FloatArray
+                  value0: float, free: BoolArray, lower: FloatArray, upper: FloatArray,
+                  gradient: Callable[[FloatArray], FloatArray] | None = None
                   ) -> tuple[FloatArray, float, bool]:
     """The minimum of ``deviance`` (a function of the log-levels u) over the levels ``free``
     within [lower, upper] (log-levels), from u0 (inside the bounds; ``value0`` the deviance
     there), the others held: the log-levels, the deviance there and whether the search
     converged (module docstring). ``information``: the average information in the squared
-    levels v = exp(2 u) at u (LinAlgError where it is not defined)."""
+    levels v = exp(2 u) at u (LinAlgError where it is not defined); ``gradient``: dD / dv at
+    u, every level (None: by differences, module docstring)."""
     u, value = u0.copy(), float(value0)
     index = np.flatnonzero(free)
     if index.size == 0 or not value < UNDEFINED:
@@ -158,15 +163,16 @@ def newton_search(deviance: Callable[[FloatArray], float],
             hessian = information(u)[np.ix_(index, index)]
         except np.linalg.LinAlgError:
             return u, value, False
-        gradient = _gradient(deviance, at, v, value, high, np.diag(hessian))
-        if not np.all(np.isfinite(gradient)):
+        slope = (_gradient(deviance, at, v, value, high, np.diag(hessian)) if gradient is None
+                 else gradient(u)[index])
+        if not np.all(np.isfinite(slope)):
             return u, value, False
-        held = (((v <= low) & (gradient > 0.0)) | ((v >= high) & (gradient < 0.0))
+        held = (((v <= low) & (slope > 0.0)) | ((v >= high) & (slope < 0.0))
                 | (np.diag(hessian) <= 0.0))
         moving = ~held
         if not moving.any():
             return u, value, True
-        g, h = gradient[moving], hessian[np.ix_(moving, moving)]
+        g, h = slope[moving], hessian[np.ix_(moving, moving)]
         root = np.sqrt(np.diag(h))  # scaled to unit diagonal: the levels differ by decades
         lam, vectors = np.linalg.eigh(h / np.outer(root, root))
         lam = np.maximum(lam, max(EIGEN_FLOOR * float(lam[-1]), 1e-300))

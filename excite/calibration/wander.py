@@ -25,13 +25,16 @@ an error is not modelled: its differences nearly cancel along the log.
 
 * :func:`estimate_wander`: restricted maximum likelihood (as
   :func:`excite.calibration.reml.reml_noise`) of the chain's noise levels with and without the
-  wandering error, with analytic gradients, on the dense covariance of chunks of at most
-  CHUNK_SEGMENTS consecutive segments (their restricted likelihood as if the chunks were
-  independent; at most MAX_CHUNKS chunks, spread over the log); the wandering error is kept
-  when the likelihood ratio exceeds the chi-bar-square quantile of one variance component on
-  its boundary at ``test_level`` (as :func:`excite.calibration.reml.reml_noise`'s tests; the
-  time constant is not identified without the wander, so the level is approximate:
-  ``benchmarks/bench_logs.py`` counts how often white pose noise is taken for a wander).
+  wandering error (with it: the projected Newton search of
+  :func:`excite.calibration.reml_search.newton_search` with the analytic gradient and the
+  average information, L-BFGS-B on where it does not converge), on the dense covariance of
+  chunks of at most CHUNK_SEGMENTS consecutive segments (their restricted likelihood as if
+  the chunks were independent; at most MAX_CHUNKS chunks, spread over the log); the
+  wandering error is kept when the likelihood ratio exceeds the chi-bar-square quantile of
+  one variance component on its boundary at ``test_level`` (as
+  :func:`excite.calibration.reml.reml_noise`'s tests; the time constant is not identified
+  without the wander, so the level is approximate: ``benchmarks/bench_logs.py`` counts how
+  often white pose noise is taken for a wander).
 * :func:`wander_covariance`: the covariance of the estimate weighted by the chain's
   covariance B alone (the fit is unchanged) when the increments' covariance is
   C = B' + A Sigma A^T (the sandwich I^-1 J^T B^-1 C B^-1 J I^-1), in O(N).
@@ -79,8 +82,8 @@ MIN_WANDER_SEGMENTS = 50
 START_TIMES = (2.0, 6.0, 20.0, 60.0)
 #: Relative tolerance of each likelihood search (the deviance is ~ -1e3 per 100 segments).
 FTOL = 1e-10
-#: A search restarts from where it stopped (at most MAX_RESTARTS times) while a restart
-#: lowers the deviance by more than RESTART_GAIN.
+#: An L-BFGS-B search restarts from where it stopped (at most MAX_RESTARTS times) while a
+#: restart lowers the deviance by more than RESTART_GAIN.
 MAX_RESTARTS = 8
 RESTART_GAIN = 1e-2
 #: Level of the likelihood-ratio test of "no wandering heading error".
@@ -216,9 +219,13 @@ def _sandwiched(design: csr_matrix, r: FloatArray) -> FloatArray:
 
 
 def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
-              with_gradient: bool = True) -> tuple[float, FloatArray | None]:
-    """-2 log restricted likelihood (up to a constant) of the chunks taken as independent,
-    and (``with_gradient``) its gradient by u = log of (levels..., [std, time]). Each chunk's
+              with_gradient: bool = True, with_information: bool = False
+              ) -> tuple[float, FloatArray | None, FloatArray | None]:
+    """-2 log restricted likelihood (up to a constant) of the chunks taken as independent;
+    (``with_gradient``) its gradient by u = log of (levels..., [std, time]); and
+    (``with_information``, with the gradient) its average information in v = exp(2 u) (the
+    squared levels, std^2 and time^2), y^T P dC_i P dC_j P y (as
+    :class:`excite.calibration.reml_search.RestrictedDeviance`'s). Each chunk's
     covariance gets JITTER of its diagonal added: the wander's rank-one x, y blocks with the
     position levels at their floor are otherwise singular to rounding."""
     from scipy.linalg import cho_factor, cho_solve
@@ -260,9 +267,10 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
     beta = cho_solve(g_factor, gradient, check_finite=False)
     total += 2.0 * float(np.sum(np.log(np.diag(g_factor[0])))) - float(gradient @ beta)
     if not with_gradient:
-        return total, None
+        return total, None, None
     grad = np.zeros(u.size)
     info_inverse = cho_solve(g_factor, np.eye(p), check_finite=False)
+    average = _AverageInformation(u, variances, std2, time, p) if with_information else None
     for c, (inverse, ci_j, ci_e, r, dr) in zip(chunks, parts, strict=True):
         # d deviance / d theta_i = tr(M dC_i), M = P - P e e^T P, P = C^-1 - C^-1 J I^-1 J^T
         # C^-1: only M's band (the levels' units) and A^T M A (the wander's) are needed
@@ -283,7 +291,40 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
                          - a_low @ a_j.T - np.outer(a_y, a_y))  # A^T M A
             grad[-2] += 2.0 * std2 * float(np.sum(projected * r))
             grad[-1] += std2 * float(np.sum(projected * dr))
-    return total, grad
+        if average is not None:
+            average.add(c, inverse, ci_j, y, r, dr)
+    return total, grad, None if average is None else average.matrix(info_inverse)
+
+
+class _AverageInformation:
+    """The average information y^T P dC_i P dC_j P y of :func:`_deviance` in v = exp(2 u),
+    summed over the chunks: with w_i = dC_i P y per chunk, sum w_i^T C^-1 w_j less
+    t_i^T (J^T C^-1 J)^-1 t_j, t_i = sum J^T C^-1 w_i (P couples the chunks through the common
+    parameters). dC_i: the level's unit band; for std^2, A R A^T; for time^2, std^2 A (dR / d
+    time) A^T / (2 time)."""
+
+    def __init__(self, u: FloatArray, variances: FloatArray, std2: float, time: float, p: int):
+        self.size, self.levels = u.size, variances.size
+        self.std2, self.time = std2, time
+        self.inner = np.zeros((u.size, u.size))
+        self.shares = np.zeros((p, u.size))
+
+    def add(self, c: _Chunk, inverse: FloatArray, ci_j: FloatArray, y: FloatArray,
+            r: FloatArray | None, dr: FloatArray | None) -> None:
+        """One chunk's share (its C^-1, C^-1 J, P y and R, dR / d log time)."""
+        w = np.empty((y.size, self.size))
+        for i, unit in enumerate(c.bands.units):
+            w[:, i] = band_product(unit, y[:, None])[:, 0]
+        if r is not None and dr is not None:
+            a_y = c.design @ y
+            w[:, -2] = c.design.T @ (r @ a_y)
+            w[:, -1] = (self.std2 / (2.0 * self.time**2)) * (c.design.T @ (dr @ a_y))
+        self.inner += w.T @ (inverse @ w)
+        self.shares += ci_j.T @ w
+
+    def matrix(self, info_inverse: FloatArray) -> FloatArray:
+        out = self.inner - self.shares.T @ info_inverse @ self.shares
+        return 0.5 * (out + out.T)
 
 
 @functools.lru_cache(maxsize=8)
@@ -343,7 +384,7 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
             value, gradient = last[key]
             return value, gradient.copy()
         try:
-            value, gradient = _deviance(chunks, u, n_levels, wander, with_gradient)
+            value, gradient, _ = _deviance(chunks, u, n_levels, wander, with_gradient)
         except np.linalg.LinAlgError:  # not positive definite at the bounds
             return UNDEFINED, np.zeros(u.size)
         if gradient is None:
@@ -388,13 +429,56 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
     starts = [np.clip(np.append(start, [math.log(std), math.log(tau)]), w_lower, w_upper)
               for tau in step * np.array(START_TIMES) for std in (first_std, 3.0 * first_std)]
     values = [deviance(u0, True, with_gradient=False)[0] for u0 in starts]
-    best_u, best = fitted(starts[int(np.argmin(values))], w_lower, w_upper, wander=True)
+    first = int(np.argmin(values))
+    # the projected Newton search with the average information (reml_search), L-BFGS-B on
+    # from where it stopped when it does not converge
+    search = _Search(chunks, n_levels)
+    best_u, best, converged = newton_search(
+        search, search.information, starts[first], values[first],
+        np.ones(w_lower.size, dtype=bool), w_lower, w_upper, gradient=search.gradient)
+    if not converged:
+        best_u, best = fitted(best_u, w_lower, w_upper, wander=True)
     statistic = null - best
     if statistic <= chi_bar_square_quantile(1.0 - test_level, 1):
         return None
     return HeadingWander(float(np.exp(best_u[-2])), float(np.exp(best_u[-1])), statistic,
                          NoiseLevels.from_vector(np.exp(best_u[:n_levels])),
                          at_bound=bool(best_u[-1] >= w_upper[-1] - 1e-6))
+
+
+class _Search:
+    """The deviance with the wander as :func:`excite.calibration.reml_search.newton_search`
+    asks for it, by u = log of (levels..., std, time): its value (:meth:`__call__`), and its
+    gradient and average information in v = exp(2 u), the two from one evaluation per
+    point."""
+
+    def __init__(self, chunks: list[_Chunk], n_levels: int):
+        self.chunks, self.n_levels = chunks, n_levels
+        self.key: bytes | None = None
+        self.full: tuple[FloatArray, FloatArray] | None = None
+
+    def __call__(self, u: FloatArray) -> float:
+        try:
+            return _deviance(self.chunks, u, self.n_levels, True, with_gradient=False)[0]
+        except np.linalg.LinAlgError:  # not positive definite at the bounds
+            return UNDEFINED
+
+    def _evaluated(self, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The gradient in u and the average information in v at u (LinAlgError where the
+        covariance is not positive definite)."""
+        if self.key != u.tobytes() or self.full is None:
+            _, gradient, information = _deviance(self.chunks, u, self.n_levels, True,
+                                                 with_information=True)
+            assert gradient is not None and information is not None
+            self.key, self.full = u.tobytes(), (gradient, information)
+        return self.full
+
+    def information(self, u: FloatArray) -> FloatArray:
+        return self._evaluated(u)[1]
+
+    def gradient(self, u: FloatArray) -> FloatArray:
+        """dD / dv = (dD / du) / (2 v)."""
+        return self._evaluated(u)[0] / (2.0 * np.exp(2.0 * u))
 
 
 def wander_covariance(segments: Segments, whitener: ChainWhitener, jac: FloatArray,

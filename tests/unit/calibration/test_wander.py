@@ -135,7 +135,7 @@ def test_the_restricted_deviance_has_the_analytic_gradient(u_list, with_wheels):
     n_levels = 7 if with_wheels else 5  # with the wheels: slip and encoder timing
     u = np.array(u_list[:n_levels] + [u_list[7], np.log(np.exp(u_list[8] + 9.0) + 0.5)])
     chunks = _chunks(seg, wheels)
-    value, gradient = _deviance(chunks, u, n_levels, True)
+    value, gradient, _ = _deviance(chunks, u, n_levels, True)
     step = 1e-6
     for i in range(u.size):
         up, down = u.copy(), u.copy()
@@ -144,6 +144,54 @@ def test_the_restricted_deviance_has_the_analytic_gradient(u_list, with_wheels):
         numeric = (_deviance(chunks, up, n_levels, True)[0]
                    - _deviance(chunks, down, n_levels, True)[0]) / (2 * step)
         assert numeric == pytest.approx(gradient[i], rel=1e-4, abs=1e-4 * (1 + abs(value)))
+
+
+@pytest.mark.parametrize("with_wheels", [False, True])
+def test_the_average_information_is_its_dense_formula(with_wheels):
+    """y^T P dC_i P dC_j P y in v = exp(2 u) (the levels', std^2's and time^2's), the chunks'
+    C block diagonal and P coupling them through the common parameters, written out."""
+    from scipy.linalg import block_diag
+
+    seg = _log(6, 15.0)
+    wheels = None
+    if with_wheels:
+        from excite.core.models import SENSOR_POSE
+
+        theta = np.array([0.05, 0.051, 0.3, *SENSOR.as_array()])
+        wheels = WheelNoise.of(SENSOR_POSE, seg, theta, 2 * np.pi / 4096)
+    n_levels = 7 if with_wheels else 5
+    chunks = _chunks(seg, wheels)
+    u = np.append(np.log([2e-3, 2e-3, 1e-3, 1e-3, 2e-3, 5e-3, 1e-4][:n_levels]),
+                  [np.log(3e-3), np.log(2.5)])
+    _, _, information = _deviance(chunks, u, n_levels, True, with_information=True)
+    std2, time = np.exp(2 * u[-2]), np.exp(u[-1])
+    covariances, derivatives = [], [[] for _ in range(u.size)]
+    for c in chunks:
+        a = _dense_design(_chunk_segments(seg, c), c.samples)
+        r = _dense_correlation(c.samples, time)
+        lag = np.abs(c.samples.times[:, None] - c.samples.times[None, :])
+        cov = dense(c.bands.at(np.exp(u[:n_levels]))) + std2 * a @ r @ a.T
+        covariances.append(cov * (1.0 + 1e-10 * np.eye(len(cov))))
+        for i, unit in enumerate(c.bands.units):
+            derivatives[i].append(dense(unit))
+        derivatives[-2].append(a @ r @ a.T)
+        derivatives[-1].append(std2 * a @ (r * lag / time**2) @ a.T / (2.0 * time))
+    inverse = np.linalg.inv(block_diag(*covariances))
+    j = np.concatenate([c.jac for c in chunks])
+    y = np.concatenate([c.residual for c in chunks])
+    ci_j = inverse @ j
+    p_matrix = inverse - ci_j @ np.linalg.solve(j.T @ ci_j, ci_j.T)
+    py = p_matrix @ y
+    w = np.column_stack([block_diag(*d) @ py for d in derivatives])
+    expected = w.T @ p_matrix @ w
+    assert np.allclose(information, expected, rtol=1e-6, atol=1e-9 * np.abs(expected).max())
+
+
+def _chunk_segments(seg: Segments, chunk: _Chunk) -> Segments:
+    """The segments of ``chunk`` (one of :func:`_chunks`' two parts of ``seg``)."""
+    n = chunk.jac.shape[0] // 3
+    cut = 2 * len(seg) // 5
+    return seg[:cut] if n == cut else seg[cut:]
 
 
 def test_the_deviance_without_the_wander_is_the_chain_models():
@@ -160,7 +208,7 @@ def test_the_deviance_without_the_wander_is_the_chain_models():
     chunk = _Chunk.of(seg, None, residual.T.reshape(-1),
                       jac.transpose(2, 0, 1).reshape(3 * len(seg), -1), 5)
     u = np.log(np.concatenate([levels.sigma, levels.pose]))
-    value, _ = _deviance([chunk], u, 5, False)
+    value, _, _ = _deviance([chunk], u, 5, False)
     assert value == pytest.approx(restricted_deviance(chain_band(seg, levels),
                                                       stacked(residual, jac)), rel=1e-9)
 
@@ -181,7 +229,7 @@ def test_the_chunks_bands_side_by_side_give_the_dense_deviance_without_the_wande
                          np.concatenate([c.jac for c in chunks])]))
     for u in (np.log([1e-4, 2e-4, 3e-4, 2e-3, 1e-3, 1e-2, 1e-3]),
               np.log([1e-6, 1e-6, 1e-6, 5e-3, 2e-3, 3e-2, 1e-4])):
-        value, _ = _deviance(chunks, u, 7, False, with_gradient=False)
+        value, _, _ = _deviance(chunks, u, 7, False, with_gradient=False)
         assert banded(u) == pytest.approx(value, rel=1e-8)
 
 
@@ -268,6 +316,18 @@ def test_joined_logs_reach_the_optimum():
     wander = calibrate(both, sensor_pose="estimate").fit.heading_wander
     assert wander is not None
     assert wander.statistic > 49.0 and 5.0 < wander.correlation_time < 30.0
+
+
+def test_a_wander_that_the_quasi_newton_search_missed_is_found():
+    """A 120 s log with a 20 s wander (2 mrad): L-BFGS-B, the search before the Newton one,
+    stopped near its start and kept no wander (the likelihood ratio at its stop 0); the
+    Newton search with the average information reaches the optimum, LR about 35, a time
+    constant about 12 s."""
+    log = synthetic_log(np.random.default_rng([2, 77]), 120.0, sensor_pose=SENSOR,
+                        pose_noise=(0.002, 0.002), pose_noise_time=20.0)
+    wander = calibrate(segment_timeseries(log.series).segments).fit.heading_wander
+    assert wander is not None
+    assert wander.statistic > 30.0 and 5.0 < wander.correlation_time < 40.0
 
 
 def test_a_misfit_is_not_taken_for_a_wander():
