@@ -270,7 +270,7 @@ def _deviance(chunks: list[_Chunk], u: FloatArray, n_levels: int, wander: bool,
         return total, None, None
     grad = np.zeros(u.size)
     info_inverse = cho_solve(g_factor, np.eye(p), check_finite=False)
-    average = _AverageInformation(u, variances, std2, time, p) if with_information else None
+    average = _AverageInformation(u.size, std2, time, p) if with_information else None
     for c, (inverse, ci_j, ci_e, r, dr) in zip(chunks, parts, strict=True):
         # d deviance / d theta_i = tr(M dC_i), M = P - P e e^T P, P = C^-1 - C^-1 J I^-1 J^T
         # C^-1: only M's band (the levels' units) and A^T M A (the wander's) are needed
@@ -303,11 +303,10 @@ class _AverageInformation:
     parameters). dC_i: the level's unit band; for std^2, A R A^T; for time^2, std^2 A (dR / d
     time) A^T / (2 time)."""
 
-    def __init__(self, u: FloatArray, variances: FloatArray, std2: float, time: float, p: int):
-        self.size, self.levels = u.size, variances.size
-        self.std2, self.time = std2, time
-        self.inner = np.zeros((u.size, u.size))
-        self.shares = np.zeros((p, u.size))
+    def __init__(self, size: int, std2: float, time: float, p: int):
+        self.size, self.std2, self.time = size, std2, time
+        self.inner = np.zeros((size, size))
+        self.shares = np.zeros((p, size))
 
     def add(self, c: _Chunk, inverse: FloatArray, ci_j: FloatArray, y: FloatArray,
             r: FloatArray | None, dr: FloatArray | None) -> None:
@@ -323,6 +322,7 @@ class _AverageInformation:
         self.shares += ci_j.T @ w
 
     def matrix(self, info_inverse: FloatArray) -> FloatArray:
+        """The sum over the chunks, given (J^T C^-1 J)^-1 of all of them."""
         out = self.inner - self.shares.T @ info_inverse @ self.shares
         return 0.5 * (out + out.T)
 
