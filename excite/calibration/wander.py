@@ -377,18 +377,16 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
 
     last: dict[tuple[bytes, bool], tuple[float, FloatArray]] = {}
 
-    def deviance(u: FloatArray, wander: bool, with_gradient: bool = True
-                 ) -> tuple[float, FloatArray]:
+    def deviance(u: FloatArray, wander: bool) -> tuple[float, FloatArray]:
         key = (u.tobytes(), wander)
         if key in last:  # a restart begins where the search before it ended
             value, gradient = last[key]
             return value, gradient.copy()
         try:
-            value, gradient, _ = _deviance(chunks, u, n_levels, wander, with_gradient)
+            value, gradient, _ = _deviance(chunks, u, n_levels, wander)
         except np.linalg.LinAlgError:  # not positive definite at the bounds
             return UNDEFINED, np.zeros(u.size)
-        if gradient is None:
-            return value, np.zeros(u.size)
+        assert gradient is not None
         last.clear()
         last[key] = (value, gradient)
         return value, gradient.copy()
@@ -428,11 +426,11 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
     first_std = max(levels.pose[1], levels.sigma[2], floor[2])  # rad: the chain's heading level
     starts = [np.clip(np.append(start, [math.log(std), math.log(tau)]), w_lower, w_upper)
               for tau in step * np.array(START_TIMES) for std in (first_std, 3.0 * first_std)]
-    values = [deviance(u0, True, with_gradient=False)[0] for u0 in starts]
+    search = _Search(chunks, n_levels)
+    values = [search(u0) for u0 in starts]
     first = int(np.argmin(values))
     # the projected Newton search with the average information (reml_search), L-BFGS-B on
     # from where it stopped when it does not converge
-    search = _Search(chunks, n_levels)
     best_u, best, converged = newton_search(
         search, search.information, starts[first], values[first],
         np.ones(w_lower.size, dtype=bool), w_lower, w_upper, gradient=search.gradient)

@@ -114,8 +114,7 @@ def _chunks(seg: Segments, wheels: WheelNoise | None):
     p = 4
     e = rng.normal(scale=1e-3, size=3 * len(seg))
     j = rng.normal(size=(3 * len(seg), p))
-    cut = 2 * len(seg) // 5
-    parts = [range(0, cut), range(cut, len(seg))]
+    parts = _parts(seg)
     return [_Chunk.of(seg[part.start:part.stop],
                       None if wheels is None else wheels.take(np.asarray(part)),
                       e[3 * part.start:3 * part.stop], j[3 * part.start:3 * part.stop],
@@ -166,8 +165,8 @@ def test_the_average_information_is_its_dense_formula(with_wheels):
     _, _, information = _deviance(chunks, u, n_levels, True, with_information=True)
     std2, time = np.exp(2 * u[-2]), np.exp(u[-1])
     covariances, derivatives = [], [[] for _ in range(u.size)]
-    for c in chunks:
-        a = _dense_design(_chunk_segments(seg, c), c.samples)
+    for c, part in zip(chunks, _parts(seg), strict=True):
+        a = _dense_design(seg[part.start:part.stop], c.samples)
         r = _dense_correlation(c.samples, time)
         lag = np.abs(c.samples.times[:, None] - c.samples.times[None, :])
         cov = dense(c.bands.at(np.exp(u[:n_levels]))) + std2 * a @ r @ a.T
@@ -187,11 +186,10 @@ def test_the_average_information_is_its_dense_formula(with_wheels):
     assert np.allclose(information, expected, rtol=1e-6, atol=1e-9 * np.abs(expected).max())
 
 
-def _chunk_segments(seg: Segments, chunk: _Chunk) -> Segments:
-    """The segments of ``chunk`` (one of :func:`_chunks`' two parts of ``seg``)."""
-    n = chunk.jac.shape[0] // 3
+def _parts(seg: Segments) -> list[range]:
+    """The two parts of ``seg`` that :func:`_chunks` makes chunks of."""
     cut = 2 * len(seg) // 5
-    return seg[:cut] if n == cut else seg[cut:]
+    return [range(0, cut), range(cut, len(seg))]
 
 
 def test_the_deviance_without_the_wander_is_the_chain_models():
