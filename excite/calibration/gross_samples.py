@@ -30,9 +30,13 @@ and z_k^2 = |u_k|^2 chi-square with 3 degrees of freedom.
   again (its run's first or last sample was bad too) is then left out whole.
 * **Explained, or following the driving.** A bad sample moves the two segments that share
   it in opposite senses, and it cancels in their composition: a run made whole is explained
-  by its inner samples. Slip adds up instead, so a slipping segment and its neighbour make a
-  run that is a candidate again. The candidates left unexplained (left out, or alone at a
-  chain's end) are tested against the driving
+  by its inner samples when its merged segment agrees with the other segments
+  (:func:`shift_statistics`: its increment against its prediction from the others, within
+  the test's quantile; the others must determine the parameters, else its residual tests
+  nothing, as for a merged segment that alone carries the common scale). Slip adds up
+  instead, so a slipping segment and its neighbour make a run that does not agree. The
+  candidates left unexplained (left out, alone at a chain's end, or a run that does not
+  agree) are tested against the driving
   (:func:`excite.calibration.gross_errors.follows_driving`): when they follow it, nothing is
   repaired and the report says why. Not the explained ones: a swapped sample errs by the
   speed times the lag, so bad samples are found mostly where the robot moves fastest.
@@ -54,13 +58,14 @@ from excite.calibration.gross_errors import (
     test_threshold,
     too_many,
 )
-from excite.calibration.noise import chain_band, chained_mask
+from excite.calibration.noise import chain_band, chained_mask, stacked
+from excite.calibration.solver import complement
 from excite.core import se2
 from excite.core.arrays import BoolArray, FloatArray, IntArray
 from excite.logs.segments import Segments
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
-__all__ = ["PASSES", "marginal_sizes", "merged", "screen_chain"]
+__all__ = ["PASSES", "marginal_sizes", "merged", "screen_chain", "shift_statistics"]
 
 #: Most rounds of (test, find the candidates, repair, estimate the levels and fit again).
 PASSES = 3
@@ -82,6 +87,45 @@ def marginal_sizes(fits: Fits) -> FloatArray:
     factor = np.linalg.cholesky(blocks)
     residual = primary.fit.ev.residual.T[:, :, None]
     return np.linalg.solve(factor, residual)[:, :, 0].T
+
+
+def shift_statistics(fits: Fits, segments: list[int]) -> FloatArray:
+    """The mean-shift test of each of ``segments`` (indices into ``fits.fitter.data``) at the
+    primary fit: the chi-square(3) statistic of a free offset of its increment (m, m, rad)
+    fitted with the parameters, under the chain covariance at the estimated levels, which is
+    the test of its measured increment against its prediction from the other segments
+    (deleting a segment is fitting it a free offset; its neighbours' shared pose samples
+    stay correlated with it). inf where the other segments do not determine the parameters
+    (the calibration's rule, ``max_relative_std``): the segment's residual is then not tested
+    by the others, whatever its size."""
+    out = np.zeros(len(segments))
+    if not segments:
+        return out
+    primary, noise = fits.candidates.primary, fits.noise
+    assert noise is not None
+    ev = primary.fit.ev  # whitened at the estimated levels
+    rows = stacked(ev.raw, np.einsum("cpn,pm->cmn", ev.jac, complement(primary.weak)))
+    basis, _ = np.linalg.qr(rows[:, 1:])
+    outside = rows[:, :1] - basis @ (basis.T @ rows[:, :1])  # the residual off the fit
+    n = len(fits.fitter.data)
+    units = np.zeros((3 * n, 3 * len(segments)))
+    for j, k in enumerate(segments):
+        units[3 * k:3 * k + 3, 3 * j:3 * j + 3] = np.eye(3)
+    offsets = noise.whitener.whiten_stacked(units)
+    information = rows[:, 1:].T @ rows[:, 1:]
+    smallest = 1.0 / fits.fitter.options.max_relative_std**2
+    for j in range(len(segments)):
+        own = offsets[:, 3 * j:3 * j + 3]
+        gram = own.T @ own
+        cross = rows[:, 1:].T @ own
+        others = information - cross @ np.linalg.solve(gram, cross.T)
+        if np.linalg.eigvalsh(others)[0] < smallest:
+            out[j] = np.inf
+            continue
+        free = own - basis @ (basis.T @ own)  # the offset's directions off the parameters'
+        score = free.T @ outside[:, 0]
+        out[j] = float(score @ np.linalg.solve(free.T @ free, score))
+    return out
 
 
 def _candidates(u: FloatArray) -> tuple[IntArray, float, float, FloatArray]:
@@ -233,16 +277,18 @@ def screen_chain(fits: Fits, refit: Callable[[Segments], Fits]
         return original, plain, found
     runs = _runs(original, flagged & ~left_out)
     # a bad sample's two segments err in opposite senses, and their composition, where it
-    # cancels, fits: the runs the repair made whole are explained; slip, which adds up, is
-    # not, and the candidates left unexplained are tested against the driving
+    # cancels, agrees with the other segments: the runs the repair made whole are explained;
+    # slip, which adds up, is not, and the candidates left unexplained are tested against
+    # the driving
     unexplained = left_out.copy()
     for run in runs:
         if run.size == 1:
             unexplained[run] = True
-    final, threshold = np.sum(marginal_sizes(fits) ** 2, axis=0), test_threshold(len(data))
-    for i, part in enumerate(parts):
-        if part.size > 1 and final[i] > threshold:
-            unexplained[part] = True
+    whole = [i for i, part in enumerate(parts) if part.size > 1]
+    threshold = test_threshold(len(data))
+    for i, shift in zip(whole, shift_statistics(fits, whole), strict=True):
+        if not shift <= threshold:
+            unexplained[parts[i]] = True
     why = (follows_driving(original, np.flatnonzero(unexplained).astype(np.int64))
            if unexplained.any() else None)
     if why is not None:

@@ -372,3 +372,57 @@ def test_a_clean_log_is_fitted_bit_for_bit_as_with_the_linear_loss():
     for key in ("loss", "outliers", "outlier_times", "gross_errors"):
         a.pop(key), b.pop(key)
     assert json.dumps(a) == json.dumps(b)
+
+
+def _deleted_statistic(fits, k: int) -> float:
+    """The chi-square statistic of segment k's increment against its prediction from the
+    other segments, by the dense GLS without it: the parameters fitted on the others, the
+    prediction with the conditional mean of its noise given theirs (dense C)."""
+    from excite.calibration.noise import stacked
+    from excite.calibration.solver import complement
+
+    primary = fits.candidates.primary
+    raw = primary.unwhitened
+    free = complement(primary.weak)
+    rows = stacked(raw.raw, np.einsum("cpn,pm->cmn", raw.jac, free))
+    d, jac = -rows[:, 0], rows[:, 1:]
+    inverse_factor = fits.noise.whitener.whiten_stacked(np.eye(rows.shape[0]))  # L^-1
+    factor = np.linalg.inv(inverse_factor)
+    cov = factor @ factor.T
+    own = np.arange(3 * k, 3 * k + 3)
+    others = np.setdiff1d(np.arange(rows.shape[0]), own)
+    c_oo = cov[np.ix_(others, others)]
+    gain = np.linalg.solve(c_oo, cov[np.ix_(others, own)]).T  # C_ko C_oo^-1
+    weighted = np.linalg.solve(c_oo, jac[others])
+    information = jac[others].T @ weighted
+    delta = np.linalg.solve(information, weighted.T @ d[others])
+    error = d[own] - jac[own] @ delta - gain @ (d[others] - jac[others] @ delta)
+    lever = jac[own] - gain @ jac[others]
+    variance = (cov[np.ix_(own, own)] - gain @ cov[np.ix_(others, own)]
+                + lever @ np.linalg.solve(information, lever.T))
+    return float(error @ np.linalg.solve(variance, error))
+
+
+@pytest.mark.slow
+def test_the_shift_statistic_is_the_test_of_a_segment_against_the_others():
+    """A merged segment is explained when its increment agrees with its prediction from the
+    other segments (not merely with a fit it may dominate): the mean-shift statistic equals
+    the deletion test by dense GLS (the shared pose samples' correlation included)."""
+    from excite.calibration.gross_samples import shift_statistics
+    from excite.calibration.options import DEFAULT_MAX_RELATIVE_STD, FitOptions
+    from excite.calibration.pipeline import _fitted
+    from excite.calibration.starts import first_estimates
+    from excite.core.models import SensorPose
+    from excite.logs.segmentation import segment_timeseries
+    from excite.logs.synthetic import synthetic_log
+
+    log = synthetic_log(np.random.default_rng(21), 40.0, sensor_pose=SensorPose(0.1, -0.03, 0.4),
+                        pose_noise=(2e-3, 2e-3), slip=0.01)
+    seg = segment_timeseries(log.series).segments
+    options = FitOptions("linear", 100, 1e-8, DEFAULT_MAX_RELATIVE_STD)
+    fits = _fitted(seg, first_estimates(seg, None, "auto"), None, None, options, "auto")
+    chosen = [0, 7, len(seg) - 1]
+    found = shift_statistics(fits, chosen)
+    expected = [_deleted_statistic(fits, k) for k in chosen]
+    np.testing.assert_allclose(found, expected, rtol=1e-6)
+    assert np.all(found > 0)
