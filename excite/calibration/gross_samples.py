@@ -69,6 +69,9 @@ __all__ = ["PASSES", "marginal_sizes", "merged", "screen_chain", "shift_statisti
 
 #: Most rounds of (test, find the candidates, repair, estimate the levels and fit again).
 PASSES = 3
+#: :func:`shift_statistics` whitens the offsets of this many segments at a time (3 N rows
+#: each: memory, not results).
+SHIFT_BATCH = 64
 
 
 def marginal_sizes(fits: Fits) -> FloatArray:
@@ -107,15 +110,16 @@ def shift_statistics(fits: Fits, segments: list[int]) -> FloatArray:
     rows = stacked(ev.raw, np.einsum("cpn,pm->cmn", ev.jac, complement(primary.weak)))
     basis, _ = np.linalg.qr(rows[:, 1:])
     outside = rows[:, :1] - basis @ (basis.T @ rows[:, :1])  # the residual off the fit
-    n = len(fits.fitter.data)
-    units = np.zeros((3 * n, 3 * len(segments)))
-    for j, k in enumerate(segments):
-        units[3 * k:3 * k + 3, 3 * j:3 * j + 3] = np.eye(3)
-    offsets = noise.whitener.whiten_stacked(units)
     information = rows[:, 1:].T @ rows[:, 1:]
     smallest = 1.0 / fits.fitter.options.max_relative_std**2
     for j in range(len(segments)):
-        own = offsets[:, 3 * j:3 * j + 3]
+        if j % SHIFT_BATCH == 0:  # the offsets' columns whitened a batch at a time
+            batch = segments[j:j + SHIFT_BATCH]
+            units = np.zeros((rows.shape[0], 3 * len(batch)))
+            for i, m in enumerate(batch):
+                units[3 * m:3 * m + 3, 3 * i:3 * i + 3] = np.eye(3)
+            offsets = noise.whitener.whiten_stacked(units)
+        own = offsets[:, 3 * (j % SHIFT_BATCH):3 * (j % SHIFT_BATCH) + 3]
         gram = own.T @ own
         cross = rows[:, 1:].T @ own
         others = information - cross @ np.linalg.solve(gram, cross.T)

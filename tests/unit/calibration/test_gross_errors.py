@@ -404,10 +404,12 @@ def _deleted_statistic(fits, k: int) -> float:
 
 
 @pytest.mark.slow
-def test_the_shift_statistic_is_the_test_of_a_segment_against_the_others():
+@pytest.mark.parametrize("batch", [64, 2])
+def test_the_shift_statistic_is_the_test_of_a_segment_against_the_others(monkeypatch, batch):
     """A merged segment is explained when its increment agrees with its prediction from the
     other segments (not merely with a fit it may dominate): the mean-shift statistic equals
     the deletion test by dense GLS (the shared pose samples' correlation included)."""
+    from excite.calibration import gross_samples
     from excite.calibration.gross_samples import shift_statistics
     from excite.calibration.options import DEFAULT_MAX_RELATIVE_STD, FitOptions
     from excite.calibration.pipeline import _fitted
@@ -421,6 +423,7 @@ def test_the_shift_statistic_is_the_test_of_a_segment_against_the_others():
     seg = segment_timeseries(log.series).segments
     options = FitOptions("linear", 100, 1e-8, DEFAULT_MAX_RELATIVE_STD)
     fits = _fitted(seg, first_estimates(seg, None, "auto"), None, None, options, "auto")
+    monkeypatch.setattr(gross_samples, "SHIFT_BATCH", batch)  # the batches change nothing
     chosen = [0, 7, len(seg) - 1]
     found = shift_statistics(fits, chosen)
     expected = [_deleted_statistic(fits, k) for k in chosen]
