@@ -2,7 +2,9 @@
 
 * :func:`fit_model`: Levenberg-Marquardt from a start; relative directions the data do not
   determine (relative std above ``max_relative_std``) are then held at the start instead of
-  drifting to chase noise.
+  drifting to chase noise, judged where the fit ends (a first fit can end where the
+  information is weak while the data determine every direction at the estimate the held fit
+  reaches: fitted free from there).
 * :class:`Fitter`: the fits of one calibration, all on the same data under the same noise
   model (given or estimated per-channel sigma, or the whitener of correlated noise).
 """
@@ -82,22 +84,40 @@ class ModelFit:
 def fit_model(model: SegmentModel, seg: Segments, start: FloatArray, sigma: FloatArray | None,
               options: FitOptions, whitener: ChainWhitener | None = None) -> ModelFit:
     """LM from ``start``; directions the data cannot determine are then held at the start
-    instead of drifting to chase noise. ``sigma``: the per-channel noise std (m, m, rad), None
-    to estimate it with the parameters; with a whitener, sigma must be ones."""
+    instead of drifting to chase noise, unless the data determine every direction at the
+    estimate the held fit reaches and at the free fit from there (module docstring).
+    ``sigma``: the per-channel noise std (m, m, rad), None to estimate it with the
+    parameters; with a whitener, sigma must be ones."""
     max_relative_std = options.max_relative_std
     problem = Problem(model, seg, whitener)
     determined = 1.0 / max_relative_std
     fit = levenberg_marquardt(problem, start, sigma, options.loss, options.max_iterations,
                               options.tol, determined=determined)
-    lam, vec = np.linalg.eigh(fit.system.information)
-    weak = lam * max_relative_std**2 < 1.0
-    if np.any(weak):
+    weak = _weak(fit, max_relative_std)
+    if weak.shape[1]:
         refit = levenberg_marquardt(problem, start, fit.sigma, options.loss,
-                                    options.max_iterations, options.tol, frozen=vec[:, weak],
+                                    options.max_iterations, options.tol, frozen=weak,
                                     determined=determined)
         refit.iterations += fit.iterations
         fit = refit
-    return ModelFit(model, problem, fit, vec[:, weak])
+        if not _weak(fit, max_relative_std).shape[1]:
+            # the data determine every direction at the estimate the held fit reached (the
+            # first fit ended where they did not): fitted free from there, unless the free
+            # fit ends where they do not again
+            free = levenberg_marquardt(problem, fit.theta, fit.sigma, options.loss,
+                                       options.max_iterations, options.tol,
+                                       determined=determined)
+            if not _weak(free, max_relative_std).shape[1]:
+                free.iterations += fit.iterations
+                fit, weak = free, weak[:, :0]
+    return ModelFit(model, problem, fit, weak)
+
+
+def _weak(fit: Fit, max_relative_std: float) -> FloatArray:
+    """Orthonormal relative directions (P, k) the information at the fit does not determine
+    (relative std above ``max_relative_std``)."""
+    lam, vec = np.linalg.eigh(fit.system.information)
+    return vec[:, lam * max_relative_std**2 < 1.0]
 
 
 @dataclass(frozen=True)
