@@ -23,7 +23,7 @@ from excite.calibration.solver import Evaluation, Fit, Problem, levenberg_marqua
 from excite.core.models import SegmentModel
 from excite.logs.segments import Segments
 
-__all__ = ["UNIT_SIGMA", "ModelFit", "Fitter", "fit_model"]
+__all__ = ["UNIT_SIGMA", "ModelFit", "Fitter", "fit_model", "weak_directions"]
 
 FloatArray = NDArray[np.float64]
 #: The per-channel sigma of a whitened fit (the whitener carries the noise levels).
@@ -93,27 +93,27 @@ def fit_model(model: SegmentModel, seg: Segments, start: FloatArray, sigma: Floa
     determined = 1.0 / max_relative_std
     fit = levenberg_marquardt(problem, start, sigma, options.loss, options.max_iterations,
                               options.tol, determined=determined)
-    weak = _weak(fit, max_relative_std)
+    weak = weak_directions(fit, max_relative_std)
     if weak.shape[1]:
         refit = levenberg_marquardt(problem, start, fit.sigma, options.loss,
                                     options.max_iterations, options.tol, frozen=weak,
                                     determined=determined)
         refit.iterations += fit.iterations
         fit = refit
-        if not _weak(fit, max_relative_std).shape[1]:
+        if not weak_directions(fit, max_relative_std).shape[1]:
             # the data determine every direction at the estimate the held fit reached (the
             # first fit ended where they did not): fitted free from there, unless the free
             # fit ends where they do not again
             free = levenberg_marquardt(problem, fit.theta, fit.sigma, options.loss,
                                        options.max_iterations, options.tol,
                                        determined=determined)
-            if not _weak(free, max_relative_std).shape[1]:
+            if not weak_directions(free, max_relative_std).shape[1]:
                 free.iterations += fit.iterations
                 fit, weak = free, weak[:, :0]
     return ModelFit(model, problem, fit, weak)
 
 
-def _weak(fit: Fit, max_relative_std: float) -> FloatArray:
+def weak_directions(fit: Fit, max_relative_std: float) -> FloatArray:
     """Orthonormal relative directions (P, k) the information at the fit does not determine
     (relative std above ``max_relative_std``)."""
     lam, vec = np.linalg.eigh(fit.system.information)

@@ -14,6 +14,7 @@ from excite.calibration.gross_errors import GrossErrors
 from excite.calibration.heterogeneity import Heterogeneity
 from excite.calibration.identifiability import describe_weak
 from excite.calibration.model_choice import ModelChoice
+from excite.calibration.model_fit import weak_directions
 from excite.calibration.noise_rounds import EstimatedNoise
 from excite.calibration.options import FitOptions
 from excite.calibration.reml import at_floor, level_floors
@@ -412,11 +413,11 @@ def build_result(data: Segments, choice: ModelChoice, test: FitTest, relative: F
     scale = fit.ev.scale
     full = relative * np.outer(scale, scale)
     max_relative_std = options.max_relative_std
-    identifiable = bool(s_min > 0 and 1.0 / s_min <= max_relative_std)
+    weak = weak_directions(fit, max_relative_std)
+    identifiable = weak.shape[1] == 0
     direction = vector = None
     if not identifiable:
         vector = vec[:, 0]
-        weak = vec[:, lam * max_relative_std**2 < 1.0]
         direction = describe_weak(weak, theta, data, mf.channel_std)
     params, pose = mf.model.split(theta)
     pose_std = np.sqrt(np.diag(full)[3:6]) if mf.model is SENSOR_POSE else None
