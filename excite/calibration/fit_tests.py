@@ -24,7 +24,6 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from excite.calibration.gross_errors import GrossErrors
 from excite.calibration.model_choice import ModelChoice
 from excite.calibration.model_fit import Fitter, ModelFit
 from excite.calibration.noise import ChainWhitener, NoiseLevels
@@ -40,7 +39,7 @@ from excite.logs.segments import Segments
 from excite.stats.autocorrelation import ljung_box, runs_of
 from excite.stats.chi2 import chi2_quantile, chi2_survival
 
-__all__ = ["fit_verdict", "pooled_over_kinds", "with_misfit_outliers"]
+__all__ = ["fit_verdict", "pooled_over_kinds"]
 
 FloatArray = NDArray[np.float64]
 #: Whitened residuals correlate with |dtheta| "significantly" above this z value.
@@ -256,19 +255,6 @@ def _by(t: DrivingTest) -> str:
     compared = ">" if t.statistic > t.threshold else "<="
     return (f"by up to {t.shift:.3g} of {whose} std per std of the {t.driving}; score "
             f"{t.statistic:.3g} {compared} {t.threshold:.3g}, {t.dof} dof")
-
-
-def with_misfit_outliers(test: FitTest, gross: GrossErrors | None) -> FitTest:
-    """The fit test failed when the gross-error screen kept its candidates because they
-    follow the driving (``gross.follows_driving``): residuals far beyond the noise level
-    (the screen's test rejected at GROSS_TEST_LEVEL) on the segments that turn or travel the
-    most (at the screen's DRIVING_TEST_LEVEL) are slip, which biases the estimates whether or
-    not the parameters' change with the driving is significant. Unchanged otherwise."""
-    if not test.ok or gross is None or not gross.follows_driving:
-        return test
-    return replace(test, ok=False, message=(
-        f"{gross.kept_words}: the wheels slip, which biases the estimates beyond their std; "
-        "calibrate on gentler driving"))
 
 
 def pooled_over_kinds(result: CalibrationResult) -> CalibrationResult:

@@ -33,10 +33,9 @@ covariance is their information. The gross component is broad, so the posterior 
 and 1 lose nothing against the soft posterior weights.
 
 **Not gross errors.** Gross errors are rare and strike at random: candidates are kept when
-they are more than MAX_SHARE of the segments (for the fit tests to judge), or when they turn
-or travel more than the other segments (:func:`follows_driving`): residuals that grow with
-the turning or the speed are a misfit (slip in turns), not errors to drop, and the fit fails
-(:func:`excite.calibration.fit_tests.with_misfit_outliers`).
+they are more than MAX_SHARE of the segments, or when they turn or travel more than the other
+segments (:func:`follows_driving`): residuals that grow with the turning or the speed are a
+misfit (slip in turns) for the fit tests to judge, not errors to drop.
 """
 
 from __future__ import annotations
@@ -60,7 +59,7 @@ from excite.stats.chi2 import chi2_quantile
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
 __all__ = ["DRIVING_TEST_LEVEL", "EM_ROUNDS", "EM_TOL", "GROSS_TEST_LEVEL", "MAX_SHARE",
-           "MIN_SPREAD", "Fits", "GrossErrors", "follows_driving",
+           "MIN_SPREAD", "Fits", "GrossErrors", "declined_reason", "follows_driving",
            "mixture", "screen", "size_range", "test_threshold", "too_many",
            "without_gross_errors"]
 
@@ -136,10 +135,6 @@ class GrossErrors:
         For segments that share pose samples, how many flagged segments were left out (their
         neighbours not flagged, or still gross once merged); the others were merged around
         ``samples``.
-    follows_driving : bool
-        Whether the candidates were kept because they follow the driving
-        (:func:`follows_driving`): residuals far beyond the noise that slip makes, a misfit
-        (the fit fails, :func:`excite.calibration.fit_tests.with_misfit_outliers`).
     """
 
     segments: IntArray
@@ -155,7 +150,6 @@ class GrossErrors:
     t_end: FloatArray | None = None
     samples: FloatArray | None = None
     dropped: int = 0
-    follows_driving: bool = False
 
     @property
     def detected(self) -> bool:
@@ -173,32 +167,19 @@ class GrossErrors:
             return (f"none found (largest residual {self.statistic:.3g} > "
                     f"{self.threshold:.3g}, but no segment is more likely a gross error "
                     "than not)")
-        m = self.candidates.size
+        m, n = self.candidates.size, self.n_segments
         assert self.ratio is not None
-        size, count = _times(*self.ratio), self._count()
+        size = _times(*self.ratio)
+        count = f"{m} of {n} segment{'' if n == 1 else 's'} ({100 * m / n:.2g}%)"
         if self.declined is not None:
-            return f"{self.kept_words}: kept as they are"
+            return (f"{count} {'has' if m == 1 else 'have'} residuals {size} the noise level, "
+                    f"{self.declined}: kept as they are")
         if self.samples is None:
             return (f"{count} {'is a gross error' if m == 1 else 'are gross errors'} "
                     f"(residuals {size} the noise level): left out of the fit; --loss linear "
                     "to keep them")
         return (f"{count} spoilt by gross errors (residuals {size} the noise level): "
                 f"{_samples_words(self.samples, self.dropped)}; --loss linear to keep them")
-
-    @property
-    def kept_words(self) -> str:
-        """The candidates kept and why, in words ("6 of 30 segments (20%) have residuals
-        2.8-13x the noise level, mostly the segments that ..."); "" without candidates."""
-        m = self.candidates.size
-        if m == 0 or self.ratio is None:
-            return ""
-        return (f"{self._count()} {'has' if m == 1 else 'have'} residuals "
-                f"{_times(*self.ratio)} the noise level, {self.declined}")
-
-    def _count(self) -> str:
-        """The candidates among the segments, in words: "6 of 30 segments (20%)"."""
-        m, n = self.candidates.size, self.n_segments
-        return f"{m} of {n} segment{'' if n == 1 else 's'} ({100 * m / n:.2g}%)"
 
     def to_dict(self) -> dict:
         """JSON-ready dict (the ``gross_errors`` object of ``excite calibrate --json``)."""
@@ -208,7 +189,7 @@ class GrossErrors:
                 "fraction": self.fraction, "spread": self.spread,
                 "ratio": None if self.ratio is None else list(self.ratio),
                 "samples": None if self.samples is None else [float(t) for t in self.samples],
-                "dropped": self.dropped, "follows_driving": self.follows_driving}
+                "dropped": self.dropped}
 
     def kept(self) -> BoolArray:
         """Which of the screened segments are kept (n_segments,)."""
@@ -291,6 +272,13 @@ def size_range(size: FloatArray) -> tuple[float, float]:
     return float(size.min()), float(size.max())
 
 
+def declined_reason(data: Segments, candidates: IntArray) -> str | None:
+    """Why the candidates (indices into ``data``) are not gross errors, in words: more than
+    MAX_SHARE of the segments (:func:`too_many`), or following the driving
+    (:func:`follows_driving`); None when they are."""
+    return too_many(data, candidates) or follows_driving(data, candidates)
+
+
 def too_many(data: Segments, candidates: IntArray) -> str | None:
     """"too many for gross errors" when the candidates are more than MAX_SHARE of ``data``;
     else None."""
@@ -317,11 +305,9 @@ def screen(plain: ModelFit, data: Segments, sigma_given: FloatArray | None,
                    / 3.0)
     found = replace(nothing, segments=candidates, candidates=candidates, fraction=fraction,
                     spread=spread, ratio=size_range(size))
-    declined = too_many(data, candidates)
-    driving = None if declined is not None else follows_driving(data, candidates)
-    if declined is not None or driving is not None:
-        return replace(found, segments=np.zeros(0, dtype=np.int64), declined=declined or driving,
-                       follows_driving=driving is not None)
+    declined = declined_reason(data, candidates)
+    if declined is not None:
+        return replace(found, segments=np.zeros(0, dtype=np.int64), declined=declined)
     if data.t_start is None or data.t_end is None:
         return found
     return replace(found, t_start=data.t_start[candidates], t_end=data.t_end[candidates])

@@ -296,7 +296,7 @@ def screen_chain(fits: Fits, refit: Callable[[Segments], Fits]
     why = (follows_driving(original, np.flatnonzero(unexplained).astype(np.int64))
            if unexplained.any() else None)
     if why is not None:
-        return original, plain, replace(found, declined=why, follows_driving=True)
+        return original, plain, replace(found, declined=why)
     segments = np.flatnonzero(flagged).astype(np.int64)
     samples = (None if original.t_start is None else
                np.array([t for run in runs for t in original.t_start[run[1:]]]))

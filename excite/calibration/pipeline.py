@@ -18,9 +18,7 @@ No initial guess and no noise levels are needed. The stages, in order, each in i
    segments that share them, :mod:`excite.calibration.gross_samples`); when any, stages 2, 4
    and 5 again without them.
 6. :func:`~excite.calibration.model_choice.choose_model`: the axle or the sensor-pose model.
-7. :func:`~excite.calibration.fit_tests.fit_verdict`: whether the chosen model fits the data;
-   :func:`~excite.calibration.fit_tests.with_misfit_outliers`: not when the gross-error
-   candidates were kept because they follow the driving (slip).
+7. :func:`~excite.calibration.fit_tests.fit_verdict`: whether the chosen model fits the data.
 8. :func:`~excite.calibration.covariance.reported_covariance`: the covariance under a
    wandering heading error and widened for serially correlated residuals.
    8a. :func:`~excite.calibration.motion_kinds.motion_heterogeneity`: whether r_L, r_R, b
@@ -39,7 +37,7 @@ from __future__ import annotations
 from numpy.typing import ArrayLike
 
 from excite.calibration.covariance import reported_covariance
-from excite.calibration.fit_tests import fit_verdict, pooled_over_kinds, with_misfit_outliers
+from excite.calibration.fit_tests import fit_verdict, pooled_over_kinds
 from excite.calibration.gross_errors import Fits, GrossErrors, without_gross_errors
 from excite.calibration.heterogeneity import HeterogeneityOption, applied, check_option
 from excite.calibration.model_choice import choose_model, fit_candidates
@@ -130,8 +128,7 @@ def calibrate(
         data, fits, gross = without_gross_errors(fits, refit, given, options)
     starts, noise, fitter, candidates = fits
     choice = choose_model(candidates, fitter)
-    test = with_misfit_outliers(fit_verdict(choice, fitter, starts, sensor_pose, given, noise),
-                                gross)
+    test = fit_verdict(choice, fitter, starts, sensor_pose, given, noise)
     relative, test = reported_covariance(choice.chosen, test, fitter)
     kinds = (None if heterogeneity == "off"
              else motion_heterogeneity(choice.chosen, fitter, relative))

@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from agents.catalog import make_protocol, parse_protocol
+from agents.compare import make_env, run_protocol_episode
 from excite.calibration.pipeline import calibrate
 from excite.calibration.slip_tests import FAMILY_LEVEL
 from excite.stats.chi2 import chi2_survival
-from tests.sim.episodes import slip_episode
+
+SLIP = "excite/DiffDriveCalib-v0"
 
 
 def test_a_mounting_that_moves_with_the_wheel_speed_fails_the_fit():
@@ -18,9 +21,13 @@ def test_a_mounting_that_moves_with_the_wheel_speed_fails_the_fit():
     moves with the wheel speed (its score test significant at the family level) while the
     joint score of all six parameters is not; that test fails the fit, which passed before
     with the sensor pose more than 4 of its std from the truth."""
-    episode = slip_episode("umbmark:speed=0.16", 2001)
-    truth = episode.truth
-    result = calibrate(episode.segments)
+    spec = parse_protocol("umbmark:speed=0.16")
+    env = make_env(SLIP, 30)
+    run_protocol_episode(env, make_protocol(spec), 2001, None, label=spec.label)
+    base = env.unwrapped
+    truth, segments = base.true_params.as_array(), base.segments
+    env.close()
+    result = calibrate(segments)
     speed = next(t for t in result.fit.driving_tests if t.driving == "wheel speed")
     assert speed.statistic <= speed.threshold  # the joint score alone would pass
     assert chi2_survival(speed.pose_statistic, speed.pose_dof) < 1.0 - FAMILY_LEVEL

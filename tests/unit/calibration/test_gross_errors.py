@@ -110,17 +110,6 @@ def test_candidates_that_follow_the_driving_are_kept(rng):
     assert "mostly the segments that turn the most" in gross.declined
     assert "kept as they are" in gross.message
     assert result.n_segments == 200
-    # residuals far beyond the noise where the robot turns most are slip: the fit fails,
-    # by this finding alone where the other tests pass
-    assert gross.follows_driving and gross.to_dict()["follows_driving"] is True
-    assert not result.fit.ok
-    from excite.calibration.fit_tests import with_misfit_outliers
-
-    passing = calibrate(seg).fit
-    assert passing.ok and with_misfit_outliers(passing, calibrate(seg).gross_errors) == passing
-    failed = with_misfit_outliers(passing, gross)
-    assert not failed.ok and failed.message.startswith(gross.kept_words)
-    assert "the wheels slip" in failed.message and "gentler driving" in failed.message
 
 
 def test_too_many_candidates_are_kept(rng):
@@ -131,7 +120,6 @@ def test_too_many_candidates_are_kept(rng):
     gross = calibrate(_with_gross(seg, bad, rng), sigma=SIGMA).gross_errors
     assert not gross.detected and gross.candidates.size > MAX_SHARE * 100
     assert gross.declined.startswith("too many for gross errors")
-    assert not gross.follows_driving  # left to the fit tests
 
 
 def test_rank_sum_z_matches_scipy(rng):
