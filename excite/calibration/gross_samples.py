@@ -112,23 +112,22 @@ def shift_statistics(fits: Fits, segments: list[int]) -> FloatArray:
     outside = rows[:, :1] - basis @ (basis.T @ rows[:, :1])  # the residual off the fit
     information = rows[:, 1:].T @ rows[:, 1:]
     smallest = 1.0 / fits.fitter.options.max_relative_std**2
-    for j in range(len(segments)):
-        if j % SHIFT_BATCH == 0:  # the offsets' columns whitened a batch at a time
-            batch = segments[j:j + SHIFT_BATCH]
-            units = np.zeros((rows.shape[0], 3 * len(batch)))
-            for i, m in enumerate(batch):
-                units[3 * m:3 * m + 3, 3 * i:3 * i + 3] = np.eye(3)
-            offsets = noise.whitener.whiten_stacked(units)
-        own = offsets[:, 3 * (j % SHIFT_BATCH):3 * (j % SHIFT_BATCH) + 3]
-        gram = own.T @ own
-        cross = rows[:, 1:].T @ own
-        others = information - cross @ np.linalg.solve(gram, cross.T)
-        if np.linalg.eigvalsh(others)[0] < smallest:
-            out[j] = np.inf
-            continue
-        free = own - basis @ (basis.T @ own)  # the offset's directions off the parameters'
-        score = free.T @ outside[:, 0]
-        out[j] = float(score @ np.linalg.solve(free.T @ free, score))
+    for first in range(0, len(segments), SHIFT_BATCH):  # the offsets whitened a batch at once
+        batch = segments[first:first + SHIFT_BATCH]
+        units = np.zeros((rows.shape[0], 3 * len(batch)))
+        for i, k in enumerate(batch):
+            units[3 * k:3 * k + 3, 3 * i:3 * i + 3] = np.eye(3)
+        offsets = noise.whitener.whiten_stacked(units)
+        for i in range(len(batch)):
+            own = offsets[:, 3 * i:3 * i + 3]
+            cross = rows[:, 1:].T @ own
+            others = information - cross @ np.linalg.solve(own.T @ own, cross.T)
+            if np.linalg.eigvalsh(others)[0] < smallest:
+                out[first + i] = np.inf
+                continue
+            free = own - basis @ (basis.T @ own)  # the offset's directions off the parameters'
+            score = free.T @ outside[:, 0]
+            out[first + i] = float(score @ np.linalg.solve(free.T @ free, score))
     return out
 
 
