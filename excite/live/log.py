@@ -22,17 +22,25 @@ from excite.stopping import StopDecision, StoppingRule
 __all__ = ["Stream", "cut", "decide_log", "increment_noise"]
 
 
-def increment_noise(result: CalibrationResult) -> np.ndarray:
+def increment_noise(result: CalibrationResult, duration: float) -> np.ndarray:
     """The std (m, m, rad) of one segment's measured increment under a calibration's noise
-    model: its white segment noise and, for segments cut from a log, the two pose samples
-    the increment is the difference of (sqrt(2) times their std). What a planner weighs the
-    segments with; the per-segment levels alone are near zero where the noise is all in the
-    pose samples."""
-    sigma = np.asarray(result.sigma, dtype=float)[:3]
-    if result.pose_sigma is None:
-        return sigma
-    xy, theta = np.asarray(result.pose_sigma, dtype=float)
-    return np.sqrt(sigma**2 + 2.0 * np.array([xy, xy, theta]) ** 2)
+    model, for segments of ``duration`` s: its white segment noise; for segments cut from a
+    log, the two pose samples the increment is the difference of (sqrt(2) times their std);
+    and with wheel slip, each wheel's random walk over the segment (slip^2 * duration per
+    wheel, rad^2) carried to the increment by a short segment's first-order wheel Jacobian at
+    the estimate: x and y by (r_L^2 + r_R^2) / 4, theta by (r_L^2 + r_R^2) / b^2. What a
+    planner weighs the segments with. No term alone will do: the calibration may put the
+    heading's noise in the pose samples or in the slip, and the one it leaves out is near
+    zero (a near-zero std would make the planner's information matrix singular)."""
+    variance = np.asarray(result.sigma, dtype=float)[:3] ** 2
+    if result.pose_sigma is not None:
+        xy, theta = np.asarray(result.pose_sigma, dtype=float)
+        variance = variance + 2.0 * np.array([xy, xy, theta]) ** 2
+    if result.slip is not None:
+        r_L, r_R, b = result.params.as_array()
+        wheels = result.slip**2 * duration * (r_L**2 + r_R**2)
+        variance = variance + wheels * np.array([0.25, 0.25, b**-2.0])
+    return np.sqrt(variance)
 
 
 def cut(series: TimeSeries, window: float) -> Segments:

@@ -357,7 +357,8 @@ class LiveSession:
         s = self.settings
         result = self._calibration()
         estimate = result.params if result is not None else s.nominal
-        sigma = np.array(s.sigma) if result is None else increment_noise(result)
+        sigma = (np.array(s.sigma) if result is None
+                 else increment_noise(result, s.segment_duration))
         sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, s.sigma)
         rows = self._rows
         information = (information_matrix(rows[:, 0], rows[:, 1], estimate, sigma,
