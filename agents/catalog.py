@@ -20,12 +20,14 @@ from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-from agents.protocols import Protocol, ProtocolError, Value, resolve_settings
+import numpy as np
+
+from agents.protocols import Protocol, ProtocolError, Value, check_action, resolve_settings
 from excite.errors import one_line_repr
 
 __all__ = ["PROTOCOLS", "ProtocolError", "ProtocolSpec", "register", "protocol_class",
            "parse_protocol", "parse_protocols", "check_distinct", "make_protocol", "with_policy",
-           "default_protocols", "user_supplied", "calling"]
+           "default_protocols", "user_supplied", "calling", "Checked"]
 
 #: The packages of excite's own code: errors raised there are excite's bugs, not bad input.
 EXCITE_PACKAGES = ("agents", "excite", "envs")
@@ -86,6 +88,25 @@ def calling(label: str, what: str, user: bool) -> Iterator[None]:
             raise
         raise ProtocolError(f"protocol {label}: {what} raised {type(exc).__name__}: "
                             f"{exc}") from None
+
+
+class Checked:
+    """A protocol called as ``compare`` calls it, for a driver that calls ``reset`` and
+    ``act`` itself (``excite live``): its errors name it (:func:`calling`) and every action
+    is two finite numbers (:func:`agents.protocols.check_action`), never a NaN sent to a
+    robot."""
+
+    def __init__(self, protocol: Protocol, label: str) -> None:
+        self.protocol, self.label = protocol, label
+        self._user = user_supplied(type(protocol).__module__)
+
+    def reset(self, rng: np.random.Generator) -> None:
+        with calling(self.label, "reset", self._user):
+            self.protocol.reset(rng)
+
+    def act(self, knowledge) -> np.ndarray:
+        with calling(self.label, "act", self._user):
+            return check_action(self.protocol.act(knowledge))
 
 
 def protocol_class(name: str) -> type[Protocol]:

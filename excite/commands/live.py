@@ -215,7 +215,7 @@ def settings_from(args: argparse.Namespace):
 def _protocol(text: str, settings):
     """The protocol, checked against what the session knows (traction for slip_aware), and
     the observation a learned policy reads (None for the others)."""
-    from agents.catalog import make_protocol, parse_protocol
+    from agents.catalog import Checked, make_protocol, parse_protocol
 
     spec = parse_protocol(text)
     if spec.name == "slip_aware" and settings.traction is None:
@@ -224,13 +224,12 @@ def _protocol(text: str, settings):
     observe = None
     if spec.name == "learned":
         from envs.observation import observation_of as observe
-    return make_protocol(spec), observe
+    return Checked(make_protocol(spec), spec.label), observe
 
 
 def run(args: argparse.Namespace) -> int:
-    from excite.commands.logs import print_note
     from excite.live import LiveSession
-    from excite.live.report import closing_lines, result_dict, status_line
+    from excite.live.report import status_line
 
     settings = settings_from(args)
     protocol, observe = _protocol(args.protocol, settings)
@@ -241,7 +240,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"cannot record to {args.record}: it exists")
     if args.force_yaml and not args.ros2_yaml:
         raise UsageError("--force-yaml needs --ros2-yaml OUT.yaml")
-    from excite.live.ros2 import INTERRUPTED, run_live
+    from excite.live.ros2 import INTERRUPTED, SessionFailed, run_live
     from excite.live.settings import LiveTopics
 
     topics = LiveTopics(joint_states=args.joint_states, left_wheel=args.left_wheel,
@@ -255,11 +254,27 @@ def run(args: argparse.Namespace) -> int:
             print(status_line(status), flush=True)
 
     recorder = _recorder(args.record)
+    failure = None
     try:
         result = run_live(session, topics, recorder, on_status)
+    except SessionFailed as failed:  # the robot stopped: report what was recorded, then fail
+        result, failure = failed.result, failed.__cause__
     finally:
         if recorder is not None:
             recorder.__exit__(None, None, None)
+    _report(args, result, settings)
+    if failure is not None:
+        raise failure
+    return {"done": EXIT_OK, "out_of_time": EXIT_OUT_OF_TIME}.get(
+        result.outcome, EXIT_INTERRUPTED if result.reason == INTERRUPTED else EXIT_ABORTED)
+
+
+def _report(args: argparse.Namespace, result, settings) -> None:
+    """A finished session's result: the JSON file and output, the closing lines and the
+    calibration's report, the note on the recorded bag, the ROS 2 parameter file."""
+    from excite.commands.logs import print_note
+    from excite.live.report import closing_lines, result_dict
+
     report = result_dict(result, settings.nominal)
     if args.out is not None:
         args.out.write_text(json.dumps(report, indent=2) + "\n")
@@ -283,8 +298,6 @@ def run(args: argparse.Namespace) -> int:
 
         export_yaml(args, result.calibration, settings.nominal,
                     calibration_status(result.calibration))
-    return {"done": EXIT_OK, "out_of_time": EXIT_OUT_OF_TIME}.get(
-        result.outcome, EXIT_INTERRUPTED if result.reason == INTERRUPTED else EXIT_ABORTED)
 
 
 def _recorder(path: Path | None):

@@ -38,13 +38,13 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 
-from excite.errors import DataError
+from excite.errors import DataError, ExciteError
 from excite.live.result import Command, LiveResult
 from excite.live.session import LiveSession
 from excite.live.settings import LiveTopics
 from excite.logs.bag_reader import headings
 
-__all__ = ["INTERRUPTED", "POSE_TYPES", "run_live", "stop_on_signals"]
+__all__ = ["INTERRUPTED", "POSE_TYPES", "SessionFailed", "run_live", "stop_on_signals"]
 
 #: How much lower the decisions' process runs than the node (os.nice): on a busy computer
 #: the node must keep up with the streams and the commands; a decision may wait.
@@ -63,6 +63,24 @@ JOINT_STATE = "sensor_msgs/msg/JointState"
 #: Best effort matches best-effort and reliable publishers alike; deep enough for 1 kHz.
 SENSOR_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,
                         history=HistoryPolicy.KEEP_LAST)
+
+
+class SessionFailed(Exception):
+    """A session ended by an exception while it drove (a bug, or a user's protocol that
+    failed): the robot was stopped and the session aborted with the exception as its reason;
+    ``result`` is what it recorded (:meth:`LiveSession.finish`), the exception its
+    ``__cause__``."""
+
+    def __init__(self, result: LiveResult) -> None:
+        super().__init__(result.reason)
+        self.result = result
+
+
+def _failure_reason(exc: Exception) -> str:
+    """An exception as a session's reason to end."""
+    if isinstance(exc, ExciteError):
+        return str(exc)
+    return f"internal error: {type(exc).__name__}: {exc}"
 
 
 def _seconds(stamp: Any) -> float:
@@ -256,7 +274,8 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
     """Run ``session`` over ROS 2 until it ends, Ctrl-C or SIGTERM (the session then ends
     *aborted*, "interrupted"); the robot is commanded to zero on every way out. Returns the
     session's result (:meth:`LiveSession.finish`). Raises DataError when a topic is missing at
-    the start (the robot was never commanded)."""
+    the start (the robot was never commanded), and SessionFailed, with the session's result,
+    when an exception ends it while it drives (after the robot was stopped)."""
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id,
                signal_handler_options=SignalHandlerOptions.NO)
@@ -275,8 +294,16 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
             node.connect(executor)
             period = 1.0 / topics.rate
             node.node.create_timer(period, node.tick)
-            while not session.ended and not interrupted.is_set():
-                executor.spin_once(timeout_sec=min(period, 0.05))
+            try:
+                while not session.ended and not interrupted.is_set():
+                    executor.spin_once(timeout_sec=min(period, 0.05))
+            except Exception as exc:  # stop, keep what was recorded, then report it
+                if session.state == "waiting":  # never started: nothing to keep
+                    raise
+                session.abort(_failure_reason(exc))
+                node.stop()
+                stopped = True
+                raise SessionFailed(session.finish()) from exc
             if interrupted.is_set():
                 session.abort(INTERRUPTED)
             node.stop()  # before the final calibration, which takes a while

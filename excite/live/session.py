@@ -243,7 +243,11 @@ class LiveSession:
 
     def _next_action(self, now: float) -> None:
         knowledge = self.knowledge()
-        action = np.clip(np.asarray(self.protocol.act(knowledge), dtype=float), -1.0, 1.0)
+        action = np.asarray(self.protocol.act(knowledge), dtype=float)
+        if action.shape != (2,) or not np.isfinite(action).all():  # never sent to a robot
+            raise ValueError(f"the protocol's action must be two finite wheel-speed "
+                             f"fractions, got {action!r}")
+        action = np.clip(action, -1.0, 1.0)
         self._action = action
         self._target = action * self.settings.command_speed * self._speed_scale
         self._segment_start, self._segment_end = now, now + self.settings.segment_duration

@@ -96,6 +96,43 @@ def test_a_signal_stops_the_robot_and_keeps_what_was_recorded(session_dir, sig):
     assert (session_dir / "session.mcap" / "metadata.yaml").is_file()
 
 
+FAILING_PROTOCOL = """
+import numpy as np
+from agents.protocols import Protocol
+
+class FailsLater(Protocol):
+    def reset(self, rng):
+        super().reset(rng)
+        self.calls = 0
+
+    def plan(self, k):
+        self.calls += 1
+        if self.calls > 4:
+            raise RuntimeError("boom after four segments")
+        return np.array([0.3, 0.4])
+"""
+
+
+def test_a_protocol_that_fails_mid_session_stops_the_robot_and_keeps_the_result(
+        session_dir, monkeypatch):
+    """An exception while the robot drives (here a user's protocol; an internal error the
+    same way, exit 1): the robot stopped, the one-line error, and the session's result and
+    bag kept, the session aborted with the error as its reason."""
+    (session_dir / "user_protocols.py").write_text(FAILING_PROTOCOL)
+    monkeypatch.setenv("PYTHONPATH", str(session_dir))
+    s = rehearse(session_dir, [*WHEELS, "--robot", "default", "--protocol",
+                               "user_protocols:FailsLater"], ["--seed", "9"])
+    assert s.code == 2, (s.out, s.err)
+    lines = [line for line in _error_lines(s) if line.startswith("excite: error:")]
+    assert len(lines) == 1 and "FailsLater: act raised RuntimeError: boom" in lines[0], s.err
+    assert s.result["live"]["outcome"] == "aborted"
+    assert "boom after four segments" in s.result["live"]["reason"]
+    assert len(s.result["live"]["statuses"]) >= 4
+    assert np.any(s.log[:, 4] != 0)  # it drove, and was stopped
+    assert s.log[-1, 4] == 0 and s.log[-1, 5] == 0
+    assert (session_dir / "session.mcap" / "metadata.yaml").is_file()
+
+
 def test_a_pose_stream_cut_stops_the_robot_and_the_session_resumes(session_dir):
     s = rehearse(session_dir, [*LIVE, "--max-time", "40"], ["--seed", "5", "--cut", "pose:6:2"])
     assert s.code in (0, 5), (s.out, s.err)  # done, or out of time: not a fault

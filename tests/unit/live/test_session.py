@@ -325,3 +325,22 @@ def test_commands_change_at_most_at_the_acceleration_limit_and_stop_at_once():
     assert np.abs(sent[:, 1:]).max() > 2.0  # it drove, ramping up and down
     assert steps[:-1].max() <= 10.0 * 0.02 + 1e-9  # at most 10 rad/s^2 while running
     assert session.state == "out_of_time" and np.all(sent[-1, 1:] == 0.0)  # zero at once
+
+
+def test_an_action_that_is_not_two_finite_numbers_never_becomes_a_command():
+    """A protocol's NaN (a learned policy's, say) ends the session with an error at the
+    segment it planned (the transport stops the robot); no command carries it."""
+
+    class NaNLater:
+        def reset(self, rng):
+            self.calls = 0
+
+        def act(self, knowledge):
+            self.calls += 1
+            return np.array([0.3, 0.4]) if self.calls < 3 else np.array([np.nan, 0.2])
+
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=13)
+    session = LiveSession(_settings(), NaNLater(), seed=13)
+    with pytest.raises(ValueError, match="two finite wheel-speed fractions"):
+        _drive(session, robot)
+    assert np.isfinite(robot.speeds).all()
