@@ -80,7 +80,8 @@ class LiveSession:
     """Drives a robot with ``protocol`` until calibrated (see the module docstring).
 
     settings: :class:`excite.live.settings.LiveSettings`. protocol: an object with
-    ``reset(rng)`` and ``act(knowledge) -> [-1, 1]^2`` (every protocol of ``agents``).
+    ``reset(rng)`` and ``act(knowledge) -> [-1, 1]^2`` (every protocol of ``agents``; an
+    action that is not two finite numbers is a ValueError, never a command).
     seed: the protocol's random generator's seed. observe: builds the observation vector a
     learned policy reads from the knowledge and the last action (None: an empty one).
     executor: where the stopping rule's batch calibration runs (e.g. a one-thread
