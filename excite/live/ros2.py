@@ -224,11 +224,13 @@ class LiveNode:
         now = self._now()
         self._check_wheel_names()
         self._check_clock(now)
-        self.publish(self.session.command(now))
-        statuses = self.session.statuses
-        for status in statuses[self._statuses:]:
-            self.on_status(status)
-        self._statuses = len(statuses)
+        try:
+            self.publish(self.session.command(now))
+        finally:  # the segment's status even when its next maneuver failed
+            statuses = self.session.statuses
+            for status in statuses[self._statuses:]:
+                self.on_status(status)
+            self._statuses = len(statuses)
 
     def _check_wheel_names(self) -> None:
         """JointState messages for 2 s, none of them naming both wheels: a wrong name
