@@ -58,6 +58,7 @@ from excite.calibration.gross_errors import (
     test_threshold,
     too_many,
 )
+from excite.calibration.model_fit import weak_directions
 from excite.calibration.noise import chain_band, chained_mask, stacked
 from excite.calibration.solver import complement
 from excite.core import se2
@@ -111,7 +112,7 @@ def shift_statistics(fits: Fits, segments: list[int]) -> FloatArray:
     basis, _ = np.linalg.qr(rows[:, 1:])
     outside = rows[:, :1] - basis @ (basis.T @ rows[:, :1])  # the residual off the fit
     information = rows[:, 1:].T @ rows[:, 1:]
-    smallest = 1.0 / fits.fitter.options.max_relative_std**2
+    max_relative_std = fits.fitter.options.max_relative_std
     for first in range(0, len(segments), SHIFT_BATCH):  # the offsets whitened a batch at once
         batch = segments[first:first + SHIFT_BATCH]
         units = np.zeros((rows.shape[0], 3 * len(batch)))
@@ -122,7 +123,7 @@ def shift_statistics(fits: Fits, segments: list[int]) -> FloatArray:
             own = offsets[:, 3 * i:3 * i + 3]
             cross = rows[:, 1:].T @ own
             others = information - cross @ np.linalg.solve(own.T @ own, cross.T)
-            if np.linalg.eigvalsh(others)[0] < smallest:
+            if weak_directions(others, max_relative_std).shape[1]:
                 out[first + i] = np.inf
                 continue
             free = own - basis @ (basis.T @ own)  # the offset's directions off the parameters'

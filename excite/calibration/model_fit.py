@@ -93,30 +93,31 @@ def fit_model(model: SegmentModel, seg: Segments, start: FloatArray, sigma: Floa
     determined = 1.0 / max_relative_std
     fit = levenberg_marquardt(problem, start, sigma, options.loss, options.max_iterations,
                               options.tol, determined=determined)
-    weak = weak_directions(fit, max_relative_std)
+    weak = weak_directions(fit.system.information, max_relative_std)
     if weak.shape[1]:
         refit = levenberg_marquardt(problem, start, fit.sigma, options.loss,
                                     options.max_iterations, options.tol, frozen=weak,
                                     determined=determined)
         refit.iterations += fit.iterations
         fit = refit
-        if not weak_directions(fit, max_relative_std).shape[1]:
+        if not weak_directions(fit.system.information, max_relative_std).shape[1]:
             # the data determine every direction at the estimate the held fit reached (the
             # first fit ended where they did not): fitted free from there, unless the free
             # fit ends where they do not again
             free = levenberg_marquardt(problem, fit.theta, fit.sigma, options.loss,
                                        options.max_iterations, options.tol,
                                        determined=determined)
-            if not weak_directions(free, max_relative_std).shape[1]:
+            if not weak_directions(free.system.information, max_relative_std).shape[1]:
                 free.iterations += fit.iterations
                 fit, weak = free, weak[:, :0]
     return ModelFit(model, problem, fit, weak)
 
 
-def weak_directions(fit: Fit, max_relative_std: float) -> FloatArray:
-    """Orthonormal relative directions (P, k) the information at the fit does not determine
-    (relative std above ``max_relative_std``)."""
-    lam, vec = np.linalg.eigh(fit.system.information)
+def weak_directions(information: FloatArray, max_relative_std: float) -> FloatArray:
+    """Orthonormal relative directions (P, k) a relative information (P, P) does not
+    determine (relative std above ``max_relative_std``): the calibration's identifiability
+    rule."""
+    lam, vec = np.linalg.eigh(information)
     return vec[:, lam * max_relative_std**2 < 1.0]
 
 

@@ -413,7 +413,7 @@ def build_result(data: Segments, choice: ModelChoice, test: FitTest, relative: F
     scale = fit.ev.scale
     full = relative * np.outer(scale, scale)
     max_relative_std = options.max_relative_std
-    weak = weak_directions(fit, max_relative_std)
+    weak = weak_directions(fit.system.information, max_relative_std)
     identifiable = weak.shape[1] == 0
     direction = vector = None
     if not identifiable:

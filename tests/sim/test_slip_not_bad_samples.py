@@ -5,12 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.catalog import make_protocol, parse_protocol
-from agents.compare import make_env, run_protocol_episode
 from excite.calibration.pipeline import calibrate
 from excite.logs.segmentation import segment_timeseries
-
-SLIP = "excite/DiffDriveCalib-v0"
+from tests.sim.episodes import SLIP, recorded_episode
 
 
 def test_slipping_first_segments_of_a_spinning_log_are_not_merged_away():
@@ -21,12 +18,7 @@ def test_slipping_first_segments_of_a_spinning_log_are_not_merged_away():
     its residual tests nothing (the other segments do not determine the parameters). Not
     explained, the candidates follow the driving and are kept; the driving tests then fail
     the fit, where it passed before 130 of its std from the truth."""
-    spec = parse_protocol("greedy")
-    env = make_env(SLIP, 30, record=True)
-    run_protocol_episode(env, make_protocol(spec), 51006, None, label=spec.label)
-    base = env.unwrapped
-    recording = base.recording
-    env.close()
+    recording = recorded_episode(SLIP, "greedy", 51006, 30)
     segments = segment_timeseries(recording.series).segments
     result = calibrate(segments, ticks_per_rev=recording.ticks_per_rev)
     gross = result.gross_errors

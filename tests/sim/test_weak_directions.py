@@ -5,14 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents.catalog import make_protocol, parse_protocol
-from agents.compare import make_env, run_protocol_episode
 from excite.calibration import model_fit, noise_rounds
 from excite.calibration.options import DEFAULT_MAX_RELATIVE_STD
 from excite.calibration.pipeline import calibrate
 from excite.logs.segmentation import segment_timeseries
-
-SLIP = "excite/DiffDriveCalib-v0"
+from tests.sim.episodes import SLIP, recorded_episode
 
 
 def test_a_direction_the_data_determine_at_the_estimate_is_fitted(monkeypatch):
@@ -22,11 +19,7 @@ def test_a_direction_the_data_determine_at_the_estimate_is_fitted(monkeypatch):
     estimate where it is (its smallest eigenvalue 19 times the threshold). That direction
     was held at the start while the result called the parameters determined; now it is
     fitted from there, and every axle fit determines every direction."""
-    spec = parse_protocol("greedy")
-    env = make_env(SLIP, 30, record=True)
-    run_protocol_episode(env, make_protocol(spec), 1001, None, label=spec.label)
-    recording = env.unwrapped.recording
-    env.close()
+    recording = recorded_episode(SLIP, "greedy", 1001, 30)
     fits = []
     original = model_fit.fit_model
 
