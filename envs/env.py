@@ -31,7 +31,7 @@ from envs.recording import Recorder, Recording, RecordingConfig
 from envs.reward import reward_terms, uses_error
 from envs.robot import RobotSpec, robot_distribution, traction_of
 from envs.simulation import Simulation, SimulationConfig
-from envs.target import decide, stopping_rule
+from envs.target import ENCODER_READINGS, decide, rule_segments, stopping_rule
 from excite.contracts import Estimator, EstimatorFactory, RobotKnowledge
 from excite.core.information import information_matrix
 from excite.core.kinematics import Params
@@ -138,7 +138,9 @@ class DiffDriveCalibEnv(gym.Env):
     ``env.unwrapped.true_params`` (hidden truth), ``env.unwrapped.segments`` (the episode's
     calibration log), ``env.unwrapped.estimator``; in target mode ``env.unwrapped.last_stop``,
     the stopping rule's last :class:`excite.stopping.StopDecision` with its batch calibration
-    (None before the first segment and when target mode is off).
+    (None before the first segment and when target mode is off), and
+    ``env.unwrapped.rule_segments``, the segments it decided on (each with its encoder
+    readings: :mod:`envs.target`).
 
     ``reset(options={"robot": RobotSpec, "sensor_pose": SensorPose, "pose": (x, y, theta)})``
     fixes the hidden robot, the hidden sensor mounting (sensor-pose envs) and/or the start
@@ -225,6 +227,7 @@ class DiffDriveCalibEnv(gym.Env):
                 np.zeros(3) if self._mount is None else self._mount.as_array(),
                 sim_rng.spawn(1)[0], self.sim.pose, self.sim.wheel_angles)
         self._log = np.empty((self.budget, 5))  # calibration rows; grows if stepped past budget
+        self._sub: list[np.ndarray] = []  # target mode: each row's encoder sub-increments
         self._n = 0
         self.last_stop: StopDecision | None = None
         self._paths: list[np.ndarray] = [self.sim.pose[None, :]]
@@ -303,6 +306,9 @@ class DiffDriveCalibEnv(gym.Env):
         if self._n == len(self._log):
             self._log = np.concatenate([self._log, np.empty_like(self._log)])
         self._log[self._n] = row
+        if self._rule is not None:
+            self._sub.append(self.sim.encoders.sub_increments(outcome.wheel_path,
+                                                              ENCODER_READINGS))
         self._n += 1
         self._paths.append(outcome.path[1:])
         if self._recorder is not None:
@@ -317,8 +323,8 @@ class DiffDriveCalibEnv(gym.Env):
         n = self._n
         config = self.config
         target = config["target_sigma_min"]
-        decision = None if self._rule is None else decide(self._rule, self._log[:n],
-                                                          self.nominal_theta)
+        decision = None if self._rule is None else decide(
+            self._rule, self._log[:n], np.stack(self._sub), self.nominal_theta)
         self.last_stop = decision
         done = decision is not None and decision.done
         terminated = (target is not None and self._sigma_min >= target) or done
@@ -361,6 +367,14 @@ class DiffDriveCalibEnv(gym.Env):
     def segments(self) -> Segments:
         """The calibration log of this episode so far."""
         return Segments.from_array(self._log[: self._n])
+
+    @property
+    def rule_segments(self) -> Segments:
+        """Target mode: the segments the stopping rule decides on, the log so far with each
+        segment's encoder sub-increments (:func:`envs.target.rule_segments`)."""
+        if self._rule is None:
+            raise RuntimeError("rule_segments is only kept in target mode")
+        return rule_segments(self._log[: self._n], np.stack(self._sub))
 
     def information_at(self, theta: Params | np.ndarray) -> np.ndarray:
         """Relative Fisher information (P x P) of this episode's segments evaluated at

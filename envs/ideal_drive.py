@@ -132,10 +132,11 @@ class IdealBatchDrive:
     def wheel_angles(self) -> np.ndarray:
         return self._phi.copy()
 
-    def run(self, commands: np.ndarray, n_ticks: int) -> tuple[np.ndarray, np.ndarray]:
-        paths, wheels, collided = ideal_arcs(self.arena, self.dt, self._poses, self._phi,
+    def run(self, commands: np.ndarray, n_ticks: int, wheels: bool = False
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        paths, angles, collided = ideal_arcs(self.arena, self.dt, self._poses, self._phi,
                                              commands, self._limits, self._params,
                                              self._chassis, n_ticks)
         self._poses = paths[:, -1].copy()
-        self._phi = wheels[:, -1].copy()
-        return self._poses.copy(), collided
+        self._phi = angles[:, -1].copy()
+        return self._poses.copy(), collided, angles.transpose(1, 0, 2).copy() if wheels else None

@@ -391,13 +391,17 @@ class PymunkBatchDrive:
         """Absolute wheel angles (N, 2) (phi_L, phi_R) in rad, unquantized."""
         return self._state[:, _PHI].copy()
 
-    def run(self, commands: np.ndarray, n_ticks: int) -> tuple[np.ndarray, np.ndarray]:
+    def run(self, commands: np.ndarray, n_ticks: int, wheels: bool = False
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """Hold wheel-speed commands (N, 2) (rad/s) for ``n_ticks`` ticks on every robot.
-        Returns the end poses (N, 3) and whether each robot touched a wall (N,)."""
+        Returns the end poses (N, 3), whether each robot touched a wall (N,) and, with
+        ``wheels``, the wheel angles at every tick (n_ticks + 1, N, 2) (rad; else None)."""
         for i in np.flatnonzero(self._touched):  # as PymunkDrive's fresh space after a contact
             body = self._bodies[i]
             self._new_body(i, tuple(body.position), body.angle)
+        path = np.empty((n_ticks + 1, len(self._state), len(PATH_FIELDS))) if wheels else None
         self._touched = self._ticks().run(self.dt, self._constants, self._state,
                                              np.ascontiguousarray(commands, dtype=float),
-                                             self._contacts, self._began, n_ticks)
-        return self._state[:, _POSE].copy(), self._touched.copy()
+                                             self._contacts, self._began, n_ticks, path)
+        return (self._state[:, _POSE].copy(), self._touched.copy(),
+                None if path is None else path[:, :, 3:].copy())

@@ -34,6 +34,15 @@ class WheelEncoders:
         """Measured wheel angle increments (rad) between two absolute angle readings."""
         return (self.count(angles_end) - self.count(angles_start)) * self.resolution
 
+    def sub_increments(self, wheel_path: np.ndarray, count: int) -> np.ndarray:
+        """The increments (rad) between ``count + 1`` readings evenly spaced over a segment's
+        ticks, its first and last included: wheel_path (M, ..., 2) absolute wheel angles at
+        every tick (rad) -> (count, ..., 2), fewer when the segment has fewer than ``count``
+        ticks. Their whole ticks sum to those of :meth:`increments` of the first and last tick."""
+        ticks = len(wheel_path) - 1
+        at = np.linspace(0, ticks, min(count, ticks) + 1).round().astype(np.int64)
+        return np.diff(self.count(wheel_path[at]), axis=0) * self.resolution
+
 
 @dataclass(frozen=True)
 class RelativePoseSensor:

@@ -281,6 +281,7 @@ class BatchOutcome:
     collision: np.ndarray  # (N,) bool
     pose_start: np.ndarray  # (N, 3)
     pose_end: np.ndarray  # (N, 3)
+    wheel_path: np.ndarray | None = None  # (M, N, 2) wheel angles at every tick, when asked
 
 
 class BatchSimulation(_World):
@@ -311,9 +312,11 @@ class BatchSimulation(_World):
         self._rngs[i] = rng
 
     def run_segment(self, commands: np.ndarray, duration: float,
-                    settle: float = 0.0) -> BatchOutcome:
+                    settle: float = 0.0, wheels: bool = False) -> BatchOutcome:
         """Hold wheel-speed commands (N, 2) (rad/s, clipped to each motor's limit) for
-        ``duration`` s, then zero for ``settle`` s, on every robot (as Simulation.run_segment)."""
+        ``duration`` s, then zero for ``settle`` s, on every robot (as Simulation.run_segment);
+        with ``wheels``, the outcome holds the wheel angles at every tick (as
+        SegmentOutcome.wheel_path, on a second axis of N)."""
         if any(robot is None for robot in self._robots):
             raise RuntimeError("BatchSimulation.reset must be called for every robot first")
         commands = np.asarray(commands, dtype=float)
@@ -323,14 +326,17 @@ class BatchSimulation(_World):
         n_settle = self._ticks(settle, "settle", minimum=0)
         phi_start = self.drive.wheel_angles
         pose_start = self.drive.poses()
-        pose_end, collision = self.drive.run(commands, n_ticks)
+        pose_end, collision, path = self.drive.run(commands, n_ticks, wheels)
         if n_settle:
-            pose_end, stopped = self.drive.run(np.zeros_like(commands), n_settle)
+            pose_end, stopped, stop_path = self.drive.run(np.zeros_like(commands), n_settle,
+                                                          wheels)
             collision = collision | stopped
+            if path is not None and stop_path is not None:
+                path = np.concatenate([path, stop_path[1:]])
         phi_end = self.drive.wheel_angles
         true_increment = se2.between(pose_start, pose_end)
         measurement = self._measure(phi_start, phi_end, true_increment, self._rngs)
-        return BatchOutcome(measurement, true_increment, collision, pose_start, pose_end)
+        return BatchOutcome(measurement, true_increment, collision, pose_start, pose_end, path)
 
     def _measure(self, phi_start: np.ndarray, phi_end: np.ndarray, true_increment: np.ndarray,
                  rngs: list[np.random.Generator]) -> np.ndarray:

@@ -17,7 +17,7 @@ from envs.env import DiffDriveCalibEnv
 from envs.observation import measure_poses, observations, read_estimate, sense_increments
 from envs.reward import REWARD_TERMS, reward_terms, uses_error
 from envs.simulation import BatchOutcome, BatchSimulation
-from envs.target import decide, stopping_rule
+from envs.target import ENCODER_READINGS, decide, stopping_rule
 from excite.contracts import Estimator, EstimatorFactory
 from excite.core.information import information_matrices
 from excite.core.kinematics import Params
@@ -114,6 +114,8 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         self.estimators: BatchOnlineEstimator | list[Estimator | None] = (
             self.single.new_estimators(n) or [None] * n)
         self._log = np.zeros((n, self.budget, 5))
+        #: target mode: each row's encoder sub-increments (N, budget, K, 2), set at the first step
+        self._sub: np.ndarray | None = None
         self._n = np.zeros(n, dtype=int)
         self._last_action = np.zeros((n, 2))
         self._sigma_min = np.zeros(n)
@@ -205,7 +207,8 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         rows = np.zeros((n_robots, 5))
         if moving.any():
             outcome = self.sim.run_segment(actions * single.max_wheel_speed,
-                                           single.segment_duration, config["settle_time"])
+                                           single.segment_duration, config["settle_time"],
+                                           wheels=self._rule is not None)
             collision = outcome.collision & moving
             previous, previous_error = self._sigma_min.copy(), self._error.copy()
             rows[moving] = self._record(moving, outcome, actions)
@@ -256,8 +259,10 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         segments so far; None for the others and when target mode is off."""
         decisions: list[StopDecision | None] = [None] * self.num_envs
         if self._rule is not None:
+            assert self._sub is not None  # set by _record, before the first decision
             for i in np.flatnonzero(moving):
                 decisions[i] = decide(self._rule, self._log[i, :self._n[i]],
+                                      self._sub[i, :self._n[i]],
                                       self.single.nominal_theta)
         return decisions
 
@@ -284,6 +289,12 @@ class DiffDriveCalibVectorEnv(VectorEnv):
         rows = rows[robots]
         n = self._n[robots]  # < budget: an episode ends at the budget and autoresets
         self._log[robots, n] = rows
+        if outcome.wheel_path is not None:
+            sub = self.sim.encoders.sub_increments(outcome.wheel_path[:, robots],
+                                                   ENCODER_READINGS).transpose(1, 0, 2)
+            if self._sub is None:
+                self._sub = np.zeros((self.num_envs, self.budget, *sub.shape[1:]))
+            self._sub[robots, n] = sub
         self._n[robots] = n + 1
         self._last_action[robots] = actions[robots]
         self._measured_pose[robots] = measure_poses(self.sim.pose_sensor,

@@ -78,7 +78,8 @@ def fit_verdict(choice: ModelChoice, fitter: Fitter, starts: Starts,
             test = replace(test, serial_correlation=ljung_box(
                 chosen.fit.ev.raw.T, runs_of(data.chained, len(data))))
         test = _with_driving_tests(test, driving_tests(
-            data, chosen, None if noise is None else noise.whitener, test.serial_correlation))
+            data, chosen, None if noise is None else noise.whitener, test.serial_correlation),
+            one_arc=data.sub_dphi_L is None)
         if noise is not None and test.ok:  # a misfit would be taken for a wander
             test = replace(test, heading_wander=_heading_wander(chosen, noise.levels,
                                                                 noise.whitener))
@@ -176,9 +177,13 @@ def _model_test(chosen: ModelFit, alternative: ModelFit | None, statistic: float
                    *numbers)
 
 
-def _with_driving_tests(test: FitTest, tests: tuple[DrivingTest, ...]) -> FitTest:
+def _with_driving_tests(test: FitTest, tests: tuple[DrivingTest, ...], one_arc: bool
+                        ) -> FitTest:
     """The fit test with the driving tests (:mod:`excite.calibration.slip_tests`) added; a
-    failing one (:func:`_reported`) fails the fit with its reason in words."""
+    failing one (:func:`_reported`) fails the fit with its reason in words. ``one_arc``:
+    the segments have no encoder readings within them (each is taken for one arc), so the
+    words add ONE_ARC_WORDS: segments cut from a continuous drive bend where the wheel speeds
+    change within them, which the tests see as slip."""
     if not tests:
         return test
     acceleration = next((t for t in tests if t.driving == "acceleration"), None)
@@ -192,7 +197,14 @@ def _with_driving_tests(test: FitTest, tests: tuple[DrivingTest, ...]) -> FitTes
                            "parameters do not change with the acceleration, turn rate or "
                            "wheel speed)")
         return test
-    return replace(test, ok=False, message=_driving_words(worst))
+    return replace(test, ok=False, message=_driving_words(worst) + (ONE_ARC_WORDS if one_arc
+                                                                   else ""))
+
+
+#: Added to a driving test's words for segments without encoder readings within them.
+ONE_ARC_WORDS = ("; or, if the segments were cut from a continuous drive, they are no arcs "
+                 "where the wheel speeds change within them (the motors lag the commands): "
+                 "calibrate the time-series log itself, which keeps the encoder readings")
 
 
 def _reported(tests: tuple[DrivingTest, ...]) -> DrivingTest | None:

@@ -137,7 +137,7 @@ def test_the_record_holds_the_rules_batch_calibration_at_the_stop():
     records = run_protocol_episode(env, make_protocol("arcs"), seed=7)
     base = env.unwrapped
     assert records[-1]["stop"] == 1 and base.last_stop.done
-    decision = StoppingRule(TARGET, sensor_pose="axle").decide(base.segments,
+    decision = StoppingRule(TARGET, sensor_pose="axle").decide(base.rule_segments,
                                                               nominal=base.nominal_theta[:3])
     assert decision.done
     expected = decision.result.params.as_array() / base.true_params.as_array() - 1.0

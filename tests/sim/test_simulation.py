@@ -16,6 +16,8 @@ from envs.sensors import RelativePoseSensor, WheelEncoders
 from envs.simulation import SPAWN_MARGIN, Simulation, SimulationConfig
 from excite.core import se2
 from excite.core.arena import Arena
+from excite.core.kinematics import predict_increment
+from excite.core.models import compose_substeps
 
 DIST = RobotDistribution()
 BIG = {"arena_width": 200.0, "arena_height": 200.0}  # room for any segment without walls
@@ -348,3 +350,33 @@ def test_settle_must_be_whole_ticks():
     sim.reset(RobotDistribution().nominal(), rng)
     with pytest.raises(ValueError, match="settle must be a non-negative multiple"):
         sim.run_segment(1.0, 1.0, 1.0, settle=0.013)
+
+
+def test_encoder_readings_within_a_segment_sum_to_its_increments():
+    sim = make_sim(3, **BIG)
+    outcome = sim.run_segment(4.0, 6.0, 1.0, settle=0.2)
+    sub = sim.encoders.sub_increments(outcome.wheel_path, 10)
+    assert sub.shape == (10, 2)
+    np.testing.assert_allclose(sub.sum(axis=0), outcome.measurement[:2], rtol=1e-14)
+    resolution = sim.encoders.resolution
+    np.testing.assert_allclose(sub / resolution, np.round(sub / resolution), atol=1e-9)
+    assert sim.encoders.sub_increments(outcome.wheel_path[:4], 10).shape == (3, 2)
+
+
+def test_a_segment_that_turns_the_other_way_is_no_arc_but_its_readings_compose_it():
+    """The motors lag the commands: a segment that starts while the robot still turns the
+    other way bends its path, millimetres off the one arc of its increments; the arcs between
+    ten readings (the stopping rule's segments in target mode) follow it."""
+    for seed in range(3):
+        sim = make_sim(seed, **BIG)
+        robot = sim.robot
+        speed = 0.16 * robot.max_wheel_speed
+        sim.run_segment(0.3 * speed, 1.7 * speed, 1.0)
+        outcome = sim.run_segment(1.7 * speed, 0.3 * speed, 1.0)
+        one_arc = kinematic_increment(outcome.true_dphi, robot) - outcome.true_increment
+        at = np.linspace(0, len(outcome.wheel_path) - 1, 11).round().astype(int)
+        sub = np.diff(outcome.wheel_path[at], axis=0)
+        arcs = np.array(predict_increment(sub[:, 0], sub[:, 1], robot.kinematic_params()))
+        composed = compose_substeps(arcs, None)[0] - outcome.true_increment
+        assert np.hypot(*one_arc[:2]) > 2e-3
+        assert np.hypot(*composed[:2]) < 0.1 * np.hypot(*one_arc[:2])

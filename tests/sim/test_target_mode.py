@@ -7,9 +7,11 @@ import numpy as np
 import pytest
 
 import excite  # noqa: F401  (registers the ids)
+from envs.target import ENCODER_READINGS
 from envs.vector_env import DiffDriveCalibVectorEnv
 
 IDEAL = "excite/DiffDriveCalibIdeal-v0"
+SLIP = "excite/DiffDriveCalib-v0"
 #: Gentle arcs both ways and spins: a drive that determines r_L, r_R and b.
 DRIVE = [np.array(a) for a in ([0.3, 0.15], [0.15, 0.3], [-0.2, 0.2], [0.2, -0.2],
                                [-0.3, -0.15], [-0.15, -0.3])]
@@ -41,8 +43,11 @@ def test_the_episode_ends_when_the_rule_says_done():
     assert stop["done"] and stop["statistic"] <= 1.0
     assert info["reward_terms"]["stop"] == 2.0
     truth = env.unwrapped.true_params.as_array()
-    decided = env.unwrapped.segments  # the rule's own answer is the batch calibration
+    decided = env.unwrapped.rule_segments  # the log with each segment's encoder readings
     assert len(decided) == k + 1 and np.all(np.isfinite(truth))
+    assert decided.sub_dphi_L.shape == (k + 1, ENCODER_READINGS)
+    np.testing.assert_allclose(decided.sub_dphi_L.sum(axis=1), decided.dphi_L, rtol=1e-12)
+    np.testing.assert_allclose(decided.sub_dphi_R.sum(axis=1), decided.dphi_R, rtol=1e-12)
 
 
 def test_a_spin_only_drive_never_stops():
@@ -54,11 +59,15 @@ def test_a_spin_only_drive_never_stops():
     assert truncated and not info["stop"]["done"]
 
 
-def test_the_vector_env_decides_as_the_single_env():
-    kwargs = {"target": 0.01, "budget": 40, "ideal": True}
+@pytest.mark.parametrize("ideal", [True, False])
+def test_the_vector_env_decides_as_the_single_env(ideal):
+    """The same decisions on the same segments and encoder readings (the pymunk drive's
+    readings come from the kernel's per-tick path, the single and the batch drive's alike)."""
+    kwargs = {"target": 0.01, "budget": 40, "ideal": ideal}
     venv = DiffDriveCalibVectorEnv(num_envs=2, **kwargs)
     venv.reset(seed=[3, 4])
-    singles = [gym.make(IDEAL, target=0.01, budget=40).unwrapped for _ in range(2)]
+    singles = [gym.make(IDEAL if ideal else SLIP, target=0.01, budget=40).unwrapped
+               for _ in range(2)]
     for i, single in enumerate(singles):
         single.reset(seed=3 + i)
     ended = [False, False]
@@ -71,6 +80,7 @@ def test_the_vector_env_decides_as_the_single_env():
             _, r, t, tr, single_info = single.step(action)
             assert terminated[i] == t and truncated[i] == tr
             assert info["stop"][i]["done"] == single_info["stop"]["done"]
+            assert info["stop"][i]["statistic"] == single_info["stop"]["statistic"]
             assert reward[i] == pytest.approx(r, abs=1e-6)  # sigma_min of rank 2: rounding
             ended[i] = t or tr
         if all(ended):

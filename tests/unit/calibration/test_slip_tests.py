@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from excite import calibrate
-from excite.calibration.fit_tests import _with_driving_tests, pooled_over_kinds
+from excite.calibration.fit_tests import ONE_ARC_WORDS, _with_driving_tests, pooled_over_kinds
 from excite.calibration.heterogeneity import Heterogeneity
 from excite.calibration.result import FitTest
 from excite.calibration.slip_tests import DRIVING, FAMILY_LEVEL, DrivingTest, driving_measures
@@ -135,8 +135,13 @@ def test_a_pool_over_kinds_of_motion_covers_a_change_that_is_not_slip(slipping, 
     growing) still fails; a pool over logs (their own fit tests apply) changes nothing."""
     result = calibrate(lesson_dataset(np.random.default_rng(3), n=60))
     tests = (_driving("turn rate", slipping),)
-    failed = _with_driving_tests(FitTest(True, "no alternative to test against"), tests)
+    failed = _with_driving_tests(FitTest(True, "no alternative to test against"), tests,
+                                 one_arc=False)
     assert not failed.ok and "with the turn rate" in failed.message
+    assert "no arcs" not in failed.message
+    one_arc = _with_driving_tests(FitTest(True, "no alternative to test against"), tests,
+                                  one_arc=True)
+    assert one_arc.message == failed.message + ONE_ARC_WORDS
     assert ("the residuals grow" in failed.message) == slipping
     pool = Heterogeneity(by, True, 30.0, 3, 1e-5, (), np.zeros(3), "random effects", (), "",
                          result.params.as_array(), result.covariance, np.zeros((3, 3)),
