@@ -37,6 +37,7 @@ from tqdm import tqdm
 import excite  # noqa: F401  (registers the environment ids in worker processes)
 from agents.backends import LOCAL, chunk_size, open_backend
 from agents.catalog import (
+    Checked,
     ProtocolSpec,
     calling,
     check_distinct,
@@ -45,7 +46,7 @@ from agents.catalog import (
     user_supplied,
 )
 from agents.oracle import oracle_design
-from agents.protocols import Protocol, ProtocolError, check_action
+from agents.protocols import Protocol, ProtocolError
 from agents.target_record import TARGET_COLUMNS, target_fields
 from excite.core.information import crlb_relative_std
 from excite.errors import ExciteError
@@ -141,20 +142,16 @@ def run_protocol_episode(env: gym.Env, protocol: Protocol, seed: int,
     (:func:`excite.stats.consistency.estimate_error`), ``time`` the seconds driven since the
     start. In the env's target mode each record also holds the columns of
     :func:`agents.target_record.target_fields`."""
-    label = label or type(protocol).__name__
-    user = user_supplied(type(protocol).__module__)
+    checked = Checked(protocol, label or type(protocol).__name__)
     env.reset(seed=seed, options=options)
     base = env.unwrapped
-    with calling(label, "reset", user):
-        protocol.reset(np.random.default_rng([seed, 1]))
+    checked.reset(np.random.default_rng([seed, 1]))
     truth, true_theta = base.true_params.as_array(), base.true_theta
     seconds_per_segment = base.segment_duration + float(base.config["settle_time"])
     records, distance, done = [], 0.0, False
     knowledge = base.knowledge()
     while not done:
-        with calling(label, "act", user):
-            action = check_action(protocol.act(knowledge))
-        _, _, terminated, truncated, info = env.step(action)
+        _, _, terminated, truncated, info = env.step(checked.act(knowledge))
         done = terminated or truncated
         knowledge = base.knowledge()
         distance += base.last_segment_distance
