@@ -26,7 +26,9 @@ scale is the margin against that. The false-stop rate is measured by Monte Carlo
 benchmarks).
 
 The rule also says *not yet* whenever the batch result cannot be trusted: parameters not
-determined (exit 3 of ``excite calibrate``), a model that does not fit (exit 4), too few
+determined (exit 3 of ``excite calibrate``), a model that does not fit (exit 4), a driving
+test that passes the calibration's level but not the rule's STOP_DRIVING_LEVEL, more than
+MAX_GROSS_SHARE of the segments left out as gross errors, too few
 segments to estimate the noise levels (fewer than MIN_RESIDUAL_DOF residual degrees of
 freedom per channel), or a channel of independent segments fitted exactly (its noise level at
 its floor). It predicts how many more segments the current way of
@@ -62,8 +64,9 @@ if TYPE_CHECKING:  # the calibration and scipy.stats are imported when a decisio
     # the command line reads this module's defaults at every start
     from excite.calibration.result import CalibrationResult
 
-__all__ = ["DEFAULT_CONFIDENCE", "DEFAULT_TARGET", "REFERENCE_GROWTH", "SCREEN_MARGIN",
-           "StopDecision", "StoppingRule", "StoppingSession", "finite_or_none"]
+__all__ = ["DEFAULT_CONFIDENCE", "DEFAULT_TARGET", "MAX_GROSS_SHARE", "REFERENCE_GROWTH",
+           "SCREEN_MARGIN", "STOP_DRIVING_LEVEL", "StopDecision", "StoppingRule",
+           "StoppingSession", "finite_or_none"]
 
 #: The default target: the largest relative error of r_L, r_R, b (0.2%).
 DEFAULT_TARGET = 0.002
@@ -76,6 +79,17 @@ NOISE_BOUND_CONFIDENCE = 0.95
 #: parameters) before the rule may say done: noise levels estimated from fewer residuals can
 #: be near zero by chance (a channel fitted almost exactly), and the std with them.
 MIN_RESIDUAL_DOF = 10
+#: The level at which a *done* needs the driving tests passed (the three tests one family,
+#: :func:`excite.calibration.slip_tests.fails_at`), stricter than the calibration's 99%: asked
+#: after every segment, a test that fails at most looks still passes at some look (optional
+#: stopping over the fit tests); a miss there is a false stop, a false alarm a few more
+#: segments.
+STOP_DRIVING_LEVEL = 0.95
+#: The largest share of the segments a *done* may leave out as gross errors. A pose source
+#: fails in a few percent of its samples (at 5%, more than a tenth of 60 segments with
+#: probability 0.03); a larger share is more likely the model failing in the hardest driving
+#: (slip), which down-weighting hides.
+MAX_GROSS_SHARE = 0.1
 #: The screen (:meth:`StoppingRule.decide` with ``previous``) says *not yet* without the batch
 #: calibration only when its statistic exceeds this: its noise levels are an earlier look's
 #: followed by a factor per group, not the calibration's own REML and tests, and the
@@ -223,6 +237,9 @@ class StoppingRule:
         if not result.fit.ok:
             return self._not_yet(n, f"the model does not fit the data: {result.fit.message}",
                                  tolerances, result)
+        doubt = _doubt(result)
+        if doubt:
+            return self._not_yet(n, doubt, tolerances, result)
         dof = result.n_segments - len(result.parameter_names)
         if dof < MIN_RESIDUAL_DOF:
             return self._not_yet(n, f"{dof} residual degrees of freedom per noise channel; the "
@@ -308,6 +325,29 @@ class StoppingRule:
                  result: CalibrationResult | None = None) -> StopDecision:
         return StopDecision(False, math.inf, reason, n, math.nan, {}, tolerances or {},
                             math.inf, None, result)
+
+
+def _doubt(result: CalibrationResult) -> str | None:
+    """Why a fit that passed the calibration's tests is not yet enough for a *done*, in
+    words: a driving test failing at STOP_DRIVING_LEVEL, or more than MAX_GROSS_SHARE of the
+    segments left out as gross errors; None when neither."""
+    from excite.calibration.fit_tests import driving_misfit
+    from excite.stats.chi2 import chi2_survival
+
+    test = driving_misfit(result, STOP_DRIVING_LEVEL)
+    if test is not None:
+        return (f"{', '.join(test.moved)} change with the {test.driving} (score "
+                f"{test.statistic:.3g}, {test.dof} dof, p = "
+                f"{chi2_survival(test.statistic, test.dof):.2g}): the driving tests pass the "
+                f"calibration's level but not the rule's {STOP_DRIVING_LEVEL:.0%}; slip biases "
+                "the estimates beyond their std")
+    gross = result.gross_errors
+    if gross is not None and gross.segments.size > MAX_GROSS_SHARE * gross.n_segments:
+        return (f"{gross.segments.size} of {gross.n_segments} segments "
+                f"({gross.segments.size / gross.n_segments:.0%}) left out as gross errors, more "
+                f"than the rule's {MAX_GROSS_SHARE:.0%}: so many are more likely slip in the "
+                "hardest driving than a pose source's failures")
+    return None
 
 
 class StoppingSession:

@@ -30,7 +30,7 @@ from excite.calibration.noise import ChainWhitener, NoiseLevels
 from excite.calibration.noise_rounds import EstimatedNoise
 from excite.calibration.options import TEST_LEVEL, SensorPoseOption
 from excite.calibration.result import CalibrationResult, FitTest
-from excite.calibration.slip_tests import FAMILY_LEVEL, DrivingTest, driving_tests
+from excite.calibration.slip_tests import FAMILY_LEVEL, DrivingTest, driving_tests, fails_at
 from excite.calibration.solver import Loss, Problem, complement, normal_system
 from excite.calibration.starts import Starts, sensor_pose_estimate
 from excite.calibration.wander import HeadingWander, estimate_wander
@@ -39,7 +39,7 @@ from excite.logs.segments import Segments
 from excite.stats.autocorrelation import ljung_box, runs_of
 from excite.stats.chi2 import chi2_quantile, chi2_survival
 
-__all__ = ["fit_verdict", "pooled_over_kinds"]
+__all__ = ["driving_misfit", "fit_verdict", "pooled_over_kinds"]
 
 FloatArray = NDArray[np.float64]
 #: Whitened residuals correlate with |dtheta| "significantly" above this z value.
@@ -208,9 +208,14 @@ ONE_ARC_WORDS = ("; or, if the segments were cut from a continuous drive, they a
 
 
 def _reported(tests: tuple[DrivingTest, ...]) -> DrivingTest | None:
-    """The failing driving test the fit's words give: the acceleration's, else a slipping
-    one (whose residuals grow the most), else the most significant; None when none fails."""
-    failed = [t for t in tests if t.failed]
+    """The failing driving test the fit's words give (:func:`_first_of`)."""
+    return _first_of([t for t in tests if t.failed])
+
+
+def _first_of(failed: list[DrivingTest]) -> DrivingTest | None:
+    """Of the failing driving tests ``failed``, the one to report: the acceleration's, else
+    a slipping one (whose residuals grow the most), else the most significant; None when
+    there is none."""
     if not failed:
         return None
     for t in failed:
@@ -267,6 +272,18 @@ def _by(t: DrivingTest) -> str:
     compared = ">" if t.statistic > t.threshold else "<="
     return (f"by up to {t.shift:.3g} of {whose} std per std of the {t.driving}; score "
             f"{t.statistic:.3g} {compared} {t.threshold:.3g}, {t.dof} dof")
+
+
+def driving_misfit(result: CalibrationResult, level: float) -> DrivingTest | None:
+    """The driving test of ``result``'s fit that fails when the three are one family at
+    ``level`` (:func:`excite.calibration.slip_tests.fails_at`), of those the std do not
+    cover (:func:`pooled_over_kinds`: a change that is not slip, where the std were widened
+    by the kinds of motion's spread), chosen as the fit's words choose; None when none
+    fails. The stopping rule asks it at its own level (:mod:`excite.stopping`)."""
+    h, tests = result.heterogeneity, result.fit.driving_tests or ()
+    covered = (h is not None and h.detected and h.by == "motion"
+               and h.pooling == "random effects")
+    return _first_of([t for t in tests if fails_at(t, level) and (t.slipping or not covered)])
 
 
 def pooled_over_kinds(result: CalibrationResult) -> CalibrationResult:

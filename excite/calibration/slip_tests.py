@@ -78,7 +78,7 @@ from excite.stats.autocorrelation import LjungBox, at_least, long_run_covariance
 from excite.stats.chi2 import chi2_quantile, chi2_survival
 
 __all__ = ["DRIVING", "FAMILY_LEVEL", "MAX_TESTED", "DrivingTest", "driving_measures",
-           "driving_tests"]
+           "driving_tests", "fails_at"]
 
 FloatArray = NDArray[np.float64]
 #: The measures of the driving, in the order they are tested and reported.
@@ -275,20 +275,26 @@ def _driving_test(name: str, names: tuple[str, ...], own: FloatArray,
     test = DrivingTest(name, base.statistic, base.dof, threshold,
                        float(ratio.max(initial=0.0)), moved, growth, growth_ratio, pose,
                        pose_dof, False, False)
-    return replace(test, failed=_fails(test), slipping=_slipping(test))
+    return replace(test, failed=fails_at(test, DRIVING_TEST_LEVEL), slipping=_slipping(test))
 
 
-def _fails(test: DrivingTest) -> bool:
-    """Whether a driving test fails the fit: its change is material, and significant, or
-    the mounting's part of it is (a mounting does not move with the driving)."""
-    return bool(test.moved) and (test.statistic > test.threshold or _mounting_moves(test))
+def fails_at(test: DrivingTest, level: float) -> bool:
+    """Whether the driving test ``test`` fails the fit when the three tests are one family
+    at ``level`` (each at 1 - (1 - level) / 3, Bonferroni): its change is material, and
+    significant, or the mounting's part of it is (a mounting does not move with the
+    driving). At DRIVING_TEST_LEVEL this is ``test.failed``; the stopping rule asks it at
+    its own, stricter level (:mod:`excite.stopping`)."""
+    each = (1.0 - level) / len(DRIVING)
+    return bool(test.moved) and (chi2_survival(test.statistic, test.dof) < each
+                                 or _mounting_moves(test, each))
 
 
-def _mounting_moves(test: DrivingTest) -> bool:
+def _mounting_moves(test: DrivingTest, each: float = 1.0 - FAMILY_LEVEL) -> bool:
     """Whether the score test of the sensor pose's part alone (``pose_statistic``) is
-    significant at FAMILY_LEVEL: the mounting would have to change with the driving."""
+    significant at the level ``each`` (one test's; default FAMILY_LEVEL's): the mounting
+    would have to change with the driving."""
     return (test.pose_statistic is not None and test.pose_dof is not None
-            and chi2_survival(test.pose_statistic, test.pose_dof) < 1.0 - FAMILY_LEVEL)
+            and chi2_survival(test.pose_statistic, test.pose_dof) < each)
 
 
 def _slipping(test: DrivingTest) -> bool:

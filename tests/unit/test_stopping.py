@@ -200,3 +200,54 @@ def test_a_decision_built_as_before_is_not_screened():
     decision = StopDecision(False, math.inf, "no calibration yet", 3, math.nan, {}, {},
                             math.inf, None, None)
     assert not decision.screened and decision.to_dict()["screened"] is False
+
+
+def _gross(seg: Segments, count: int, rng: np.random.Generator) -> Segments:
+    """``seg`` with pose errors far beyond the noise (3-10 cm, 0.15-0.3 rad) on ``count``
+    rows spread over it."""
+    a = seg.as_array().copy()
+    rows = np.linspace(0, len(seg) - 1, count).round().astype(int)
+    size = rng.uniform(1.0, 3.0, (count, 1)) * rng.choice([-1.0, 1.0], (count, 3))
+    a[rows, 2:] += size * np.array([0.03, 0.03, 0.1])
+    return Segments.from_array(a)
+
+
+def test_a_done_leaves_out_at_most_a_tenth_of_the_segments_as_gross_errors():
+    rng = np.random.default_rng(5)
+    seg = lesson_dataset(rng, 200, dphi_std=2.0)
+    rule = StoppingRule(target=0.02, sensor_pose="axle")
+    few = rule.decide(_gross(seg, 6, rng))  # 3%: a pose source's failures
+    assert few.result.gross_errors.segments.size == 6
+    assert few.done, few.reason
+    many = rule.decide(_gross(seg, 30, rng))  # 15%: left out by the calibration, not by the rule
+    assert many.result.gross_errors.segments.size == 30 and many.result.fit.ok
+    assert not many.done and math.isinf(many.statistic)
+    assert "30 of 200 segments (15%) left out as gross errors" in many.reason
+
+
+def test_a_done_needs_the_driving_tests_passed_at_the_rule_s_level():
+    from dataclasses import replace
+
+    from excite.calibration.fit_tests import driving_misfit
+    from excite.calibration.slip_tests import fails_at
+    from excite.stats.chi2 import chi2_quantile
+    from excite.stopping import STOP_DRIVING_LEVEL, _doubt
+
+    seg = lesson_dataset(np.random.default_rng(6), 200, dphi_std=2.0)
+    decision = StoppingRule(target=0.02, sensor_pose="axle").decide(seg)
+    assert decision.done
+    result = decision.result
+    tests = result.fit.driving_tests
+    turn = next(t for t in tests if t.driving == "turn rate")
+    assert not turn.failed and not fails_at(turn, 0.99)
+    # the score between the calibration's quantile and the rule's, the change material
+    between = 0.5 * (chi2_quantile(1 - (1 - 0.99) / 3, turn.dof)
+                     + chi2_quantile(1 - (1 - STOP_DRIVING_LEVEL) / 3, turn.dof))
+    moved = replace(turn, statistic=between, moved=("b",))
+    assert not fails_at(moved, 0.99) and fails_at(moved, STOP_DRIVING_LEVEL)
+    doubted = replace(result, fit=replace(result.fit, driving_tests=tuple(
+        moved if t is turn else t for t in tests)))
+    assert driving_misfit(result, STOP_DRIVING_LEVEL) is None
+    assert driving_misfit(doubted, STOP_DRIVING_LEVEL) is moved
+    assert driving_misfit(doubted, 0.99) is None
+    assert "not the rule's 95%" in _doubt(doubted)
