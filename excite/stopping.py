@@ -28,11 +28,11 @@ benchmarks).
 The rule also says *not yet* whenever the batch result cannot be trusted: parameters not
 determined (exit 3 of ``excite calibrate``), a model that does not fit (exit 4), a driving
 test that passes the calibration's level but not the rule's STOP_DRIVING_LEVEL, more than
-MAX_GROSS_SHARE of the segments left out as gross errors, too few
-segments to estimate the noise levels (fewer than MIN_RESIDUAL_DOF residual degrees of
-freedom per channel), or a channel of independent segments fitted exactly (its noise level at
-its floor). It predicts how many more segments the current way of
-driving needs from the growth of the information so far (std ~ 1 / sqrt(segments)).
+MAX_GROSS_SHARE of the segments left out as gross errors, too few segments to estimate the
+noise levels (fewer than MIN_RESIDUAL_DOF residual degrees of freedom per channel), or a
+channel of independent segments fitted exactly (its noise level at its floor). It predicts
+how many more segments the current way of driving needs from the growth of the information
+so far (std ~ 1 / sqrt(segments)).
 
 Asked after every segment of a growing log (:meth:`StoppingRule.session`, or
 :meth:`StoppingRule.decide` with the previous decision), most looks skip the batch

@@ -280,10 +280,17 @@ def driving_misfit(result: CalibrationResult, level: float) -> DrivingTest | Non
     cover (:func:`pooled_over_kinds`: a change that is not slip, where the std were widened
     by the kinds of motion's spread), chosen as the fit's words choose; None when none
     fails. The stopping rule asks it at its own level (:mod:`excite.stopping`)."""
-    h, tests = result.heterogeneity, result.fit.driving_tests or ()
-    covered = (h is not None and h.detected and h.by == "motion"
-               and h.pooling == "random effects")
-    return _first_of([t for t in tests if fails_at(t, level) and (t.slipping or not covered)])
+    covered = _kinds_widened(result)
+    return _first_of([t for t in result.fit.driving_tests or ()
+                      if fails_at(t, level) and (t.slipping or not covered)])
+
+
+def _kinds_widened(result: CalibrationResult) -> bool:
+    """Whether the heterogeneity stage found the kinds of motion of one log disagreeing and
+    widened the std to cover their spread (random effects)."""
+    h = result.heterogeneity
+    return (h is not None and h.detected and h.by == "motion"
+            and h.pooling == "random effects")
 
 
 def pooled_over_kinds(result: CalibrationResult) -> CalibrationResult:
@@ -292,9 +299,8 @@ def pooled_over_kinds(result: CalibrationResult) -> CalibrationResult:
     (random effects) and the fit failed only by a driving test that is not slipping: the
     change of the parameters with the driving is the kinds' difference the std cover
     (:mod:`excite.calibration.slip_tests`, "The verdict"). Unchanged otherwise."""
-    h, fit = result.heterogeneity, result.fit
-    if (fit.ok or h is None or not h.detected or h.by != "motion"
-            or h.pooling != "random effects" or not fit.driving_tests):
+    fit = result.fit
+    if fit.ok or not _kinds_widened(result) or not fit.driving_tests:
         return result
     worst = _reported(fit.driving_tests)
     if worst is None or any(t.failed and t.slipping for t in fit.driving_tests) \
