@@ -42,7 +42,8 @@ from excite.errors import DataError, ExciteError
 from excite.live.result import Command, LiveResult
 from excite.live.session import LiveSession
 from excite.live.settings import LiveTopics
-from excite.logs.bag_reader import headings
+from excite.logs.orientation import headings
+from excite.logs.timeseries import sample_at
 
 __all__ = ["INTERRUPTED", "POSE_TYPES", "SessionFailed", "run_live", "stop_on_signals"]
 
@@ -191,8 +192,8 @@ class LiveNode:
         pose = POSE_TYPES[self._pose_type][1](msg)
         q = pose.orientation
         try:
-            theta = float(headings(f"{self.topics.pose_topic}", np.array([t]),
-                                   np.array([[q.x, q.y, q.z, q.w]]))[0])
+            theta = float(headings(np.array([[q.x, q.y, q.z, q.w]]),
+                                   lambda _: sample_at(self.topics.pose_topic, t))[0])
         except DataError as exc:
             self.session.abort(str(exc))
             return

@@ -20,10 +20,9 @@ the way out (:func:`bag_path_problem`).
   the transforms from ``parent`` to ``child`` in ``tf2_msgs/msg/TFMessage`` messages on
   ``/tf``. Only direct parent -> child transforms are used (no chaining through other frames,
   no inversion, not ``/tf_static``); record the transform you need directly. Leading ``/`` of
-  frame ids (ROS 1) are ignored. x, y in m; heading = yaw of the orientation quaternion (rad,
-  computed free of the quaternion's length). The world frame must be z-up: an orientation
-  tilted more than MAX_TILT (45 degrees) from it is an error (most often a Y-up motion capture
-  stream); roll and pitch below that (a ramp) are fine.
+  frame ids (ROS 1) are ignored. x, y in m; heading = yaw of the orientation quaternion
+  (:mod:`excite.logs.orientation`: free of the quaternion's length; the world frame must be
+  z-up, a tilt beyond 45 degrees is an error, most often a Y-up motion capture stream).
 * Times are the messages' header stamps (s), not receive times; each stream is put in stamp
   order. Messages stamped zero (not set) before the first stamped message of their topic are
   skipped and counted (published before the clock ran), as are exact repeats (same stamp,
@@ -35,7 +34,6 @@ Writing bags: :mod:`excite.logs.bag_writer`.
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -46,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from excite.errors import DataError
+from excite.logs.orientation import headings
 from excite.logs.timeseries import TimeSeries, sample_at
 
 __all__ = ["POSE_TYPES", "BAG_SUFFIXES", "JOINT_STATES", "MISSING_EXTRA", "BagLog",
@@ -64,11 +63,6 @@ POSE_TYPES: dict[str, Callable[[Any], Any]] = {
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 #: The topic of the wheels' JointState messages, unless told otherwise (reading and writing).
 JOINT_STATES = "/joint_states"
-#: Quaternions shorter than this are no rotation (an orientation never set is all zeros).
-MIN_QUATERNION_NORM = 1e-3
-#: The largest tilt (rad) of the pose's z axis from the world z axis: a ground robot's sensor
-#: stays near z-up (a ramp tilts it a few degrees); more means another frame convention.
-MAX_TILT = math.radians(45.0)
 #: Why a JointState message naming both wheels is skipped: its position array is empty.
 NO_POSITIONS = "without wheel positions"
 MISSING_EXTRA = "reading bags needs the ros extra: pip install 'excite[ros]'"
@@ -186,36 +180,6 @@ class _Joints(_Stream):
         return list(self.table(3).T)
 
 
-def headings(where: str, t: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Headings (rad, in (-pi, pi]) of orientation quaternions ``q`` (n, 4: x, y, z, w) stamped
-    ``t`` (s): the rotation about z of their ZYX Euler angles, i.e. the direction of the body
-    x axis projected on the world xy plane. The quaternions need not have unit length (the
-    heading and the tilt are computed free of it).
-
-    Raises DataError naming the topic and stamp for a quaternion that is not finite or
-    shorter than MIN_QUATERNION_NORM (an orientation never set is all zeros), and for a body
-    z axis tilted more than MAX_TILT from the world z axis (a ground robot's pose is near
-    z-up; more tilt means another frame convention, most often Y-up from motion capture).
-    """
-    x, y, z, w = q.T
-    norm2 = np.sum(q * q, axis=1)
-    bad = ~(np.isfinite(norm2) & (norm2 >= MIN_QUATERNION_NORM**2))
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise DataError(f"{sample_at(where, t[i])}: the orientation quaternion (x, y, z, w) = "
-                        f"({x[i]}, {y[i]}, {z[i]}, {w[i]}) is not a rotation (zero length "
-                        "or not finite)")
-    tilt = np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y) / norm2, -1.0, 1.0))
-    if np.any(tilt > MAX_TILT):
-        i = int(np.argmax(tilt))
-        raise DataError(f"{sample_at(where, t[i])}: the pose's z axis is tilted "
-                        f"{math.degrees(tilt[i]):.1f} degrees from the world z axis (the "
-                        f"largest tilt; a ground robot stays within "
-                        f"{math.degrees(MAX_TILT):.0f}): a Y-up frame? Motion capture systems "
-                        "often stream Y-up; convert the poses to Z-up")
-    return np.arctan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
-
-
 def _planar(position: Any, q: Any) -> tuple[float, ...]:
     """What a pose row keeps: x, y (m) and the orientation quaternion's x, y, z, w."""
     return position.x, position.y, q.x, q.y, q.z, q.w
@@ -227,7 +191,7 @@ class _PoseStream(_Stream):
     def columns(self) -> list[np.ndarray]:
         """[t (s), x, y (m), theta (rad, wrapped)]."""
         t, x, y, *q = self.table(7).T
-        return [t, x, y, headings(self.where, t, np.column_stack(q))]
+        return [t, x, y, headings(np.column_stack(q), lambda i: sample_at(self.where, t[i]))]
 
 
 class _Poses(_PoseStream):
@@ -466,7 +430,7 @@ def read_bag_log(
     unsupported type (listing the supported ones), a joint is unknown (listing the joints
     present) or never has a position, no transform parent -> child exists (listing the frame
     pairs present), an orientation is no rotation (zero length, not finite) or tilted over
-    MAX_TILT (a Y-up frame), or a stream is invalid (no stamps set, a zero stamp after
+    45 degrees (a Y-up frame), or a stream is invalid (no stamps set, a zero stamp after
     stamped messages, two messages with one stamp and different values, too few samples).
     """
     name = os.fspath(path)

@@ -55,6 +55,7 @@ UNITS: dict[str, dict[str, tuple[float, float]]] = {
               "degree": _DEGREE, "degrees": _DEGREE, "°": _DEGREE},
     "count": {"ticks": (1.0, 1.0), "tick": (1.0, 1.0), "counts": (1.0, 1.0),
               "count": (1.0, 1.0)},
+    "number": {},  # dimensionless (a quaternion's components): no unit
 }
 _ALL_UNITS = {unit for units in UNITS.values() for unit in units}
 _DELIMITER_NAMES = {",": "commas", ";": "semicolons", "\t": "tabs"}
@@ -199,7 +200,7 @@ def _factor(text: str, unit: str | None, quantity: str, where: str) -> tuple[flo
     units = UNITS[quantity]
     if unit not in units:
         raise DataError(f"{where}: column {text!r}: unit {unit!r} is not a unit of "
-                        f"{quantity} ({', '.join(units)})")
+                        f"{quantity} ({', '.join(units) or 'it has none'})")
     return units[unit]
 
 

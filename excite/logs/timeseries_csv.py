@@ -5,10 +5,13 @@ Columns (header required, any order): ``t`` (s), the wheel angles ``phi_L,phi_R`
 encoder ticks ``ticks_L,ticks_R`` (with ticks_per_rev), and the pose ``x,y`` (m), ``theta``
 (rad, may be wrapped), each also under the names of :data:`ALIASES` and with a unit in the
 header (``t [ms]``, ``yaw (deg)``: converted to s, m, rad); other columns are not read, with a
-note naming them. Separated by commas, semicolons or tabs (:mod:`excite.logs.csv_table`). In
-one file, a row leaves a stream's cells empty when that stream has no sample at its time.
-Blank lines and ``#`` comments are ignored. Every error is one line naming the file and line
-(docs/formats.md, "Time-series logs").
+note naming them. Instead of ``theta``, an orientation quaternion ``qx,qy,qz,qw`` (``qx,qy``
+may be left out: a planar rotation) gives the heading, its yaw
+(:mod:`excite.logs.orientation`: free of the quaternion's length; a z-up world frame).
+Separated by commas, semicolons or tabs (:mod:`excite.logs.csv_table`). In one file, a row
+leaves a stream's cells empty when that stream has no sample at its time. Blank lines and
+``#`` comments are ignored. Every error is one line naming the file and line (docs/formats.md,
+"Time-series logs").
 """
 
 from __future__ import annotations
@@ -16,13 +19,14 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from excite.core.arrays import BoolArray, FloatArray, IntArray
 from excite.errors import DataError
 from excite.logs.csv_table import (
+    Column,
     Header,
     content_lines,
     delimiter_of,
@@ -32,6 +36,7 @@ from excite.logs.csv_table import (
     parse_header,
     read_columns,
 )
+from excite.logs.orientation import headings
 from excite.logs.segments import read_text
 from excite.logs.timeseries import (
     ANGLE_COLUMNS,
@@ -42,8 +47,8 @@ from excite.logs.timeseries import (
     unwrapped_counter,
 )
 
-__all__ = ["ALIASES", "read_timeseries", "write_timeseries", "timeseries_streams",
-           "is_timeseries_csv", "header_hint"]
+__all__ = ["ALIASES", "QUATERNION_COLUMNS", "read_timeseries", "write_timeseries",
+           "timeseries_streams", "is_timeseries_csv", "header_hint"]
 
 PathArg = str | os.PathLike[str]
 OnNote = Callable[[str], None]
@@ -59,12 +64,17 @@ ALIASES: dict[str, tuple[str, ...]] = {
        for s, side in (("L", "left"), ("R", "right"))},
     **{axis: (axis, f"pos_{axis}", f"position_{axis}", f"pose_{axis}") for axis in "xy"},
     "theta": ("theta", "yaw", "heading"),
+    **{f"q{axis}": (f"q{axis}", f"q_{axis}", f"quat_{axis}", f"quaternion_{axis}",
+                    f"orientation_{axis}") for axis in "xyzw"},
 }
+#: The orientation quaternion's columns (x, y, z, w; dimensionless): the heading is its yaw
+#: when the header has no theta (qx, qy may be left out: a rotation about z alone).
+QUATERNION_COLUMNS = ("qx", "qy", "qz", "qw")
 _NAMES = {alias.lower(): column for column, aliases in ALIASES.items() for alias in aliases}
 #: The quantity of each column (the units it may be written in: excite.logs.csv_table.UNITS).
 _QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
                **dict.fromkeys(TICK_COLUMNS, "count"), "x": "length", "y": "length",
-               "theta": "angle"}
+               "theta": "angle", **dict.fromkeys(QUATERNION_COLUMNS, "number")}
 _EXPECTED = "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two"
 # Header names of columns not read that look like a wheel's or an orientation's.
 _WHEEL_LIKE = re.compile(r"left|right|wheel|enc|tick")
@@ -121,7 +131,7 @@ def _hint(header: Header) -> str:
                      "phi_L, phi_R (rad) or ticks_L, ticks_R (see docs/formats.md)")
     if turns and "theta" not in labels:
         hints.append(f"{', '.join(map(repr, turns))} not read: give the heading as theta "
-                     "(rad), not a quaternion")
+                     "(rad) or as the quaternion qx, qy, qz, qw")
     return "".join(f"; {hint}" for hint in hints)
 
 
@@ -131,8 +141,38 @@ def _parse_header(line: str, where: str) -> Header:
     if "t" not in header.labels:
         raise DataError(f"{where}: no time column t (s); the header names {header.found()} "
                         f"(expected {_EXPECTED}){_hint(header)}")
+    header = _orientation(header, where)
     _check_column_set(header, where)
     return header
+
+
+def _orientation(header: Header, where: str) -> Header:
+    """The header with the quaternion columns not read when it has theta; DataError for a
+    quaternion without qz or qw, or with one of qx, qy."""
+    quaternion = [c for c in header.columns if c.label in QUATERNION_COLUMNS]
+    if not quaternion:
+        return header
+    if "theta" in header.labels:
+        read = tuple(c for c in header.columns if c not in quaternion)
+        positions = {c.index for c in read}
+        return replace(header, columns=read, ignored=tuple(
+            text or f"(unnamed column {i + 1})" for i, text in enumerate(header.texts)
+            if i not in positions))
+    labels = {c.label for c in quaternion}
+    missing = [c for c in ("qz", "qw") if c not in labels]
+    if not missing and len(labels & {"qx", "qy"}) == 1:
+        missing = sorted({"qx", "qy"} - labels)
+    if missing:
+        raise DataError(f"{where}: the quaternion has no column {missing[0]} (the heading is "
+                        "the yaw of qx, qy, qz, qw; qx and qy may both be left out); the "
+                        f"header names {header.found()}")
+    return header
+
+
+def _pose_labels(labels: Sequence[str]) -> set[str]:
+    """The pose columns (POSE_COLUMNS) among ``labels``, the quaternion standing for theta."""
+    found = set(POSE_COLUMNS) & set(labels)
+    return found | {"theta"} if {"qz", "qw"} <= set(labels) else found
 
 
 def _check_column_set(header: Header, where: str) -> None:
@@ -143,7 +183,7 @@ def _check_column_set(header: Header, where: str) -> None:
         raise DataError(f"{where}: both wheel angles (phi_L, phi_R) and ticks "
                         "(ticks_L, ticks_R); give one kind")
     groups = [(present, expected) for present, expected in (
-        (angles, ANGLE_COLUMNS), (ticks, TICK_COLUMNS), (set(POSE_COLUMNS) & set(columns),
+        (angles, ANGLE_COLUMNS), (ticks, TICK_COLUMNS), (_pose_labels(columns),
                                                          POSE_COLUMNS)) if present]
     if not groups:
         raise DataError(f"{where}: neither encoder (phi_L, phi_R) nor pose (x, y, theta) "
@@ -190,10 +230,43 @@ def _read_table(path: PathArg, note: OnNote) -> _Table:
     for line in header.notes(name):
         note(line)
     values, empty = read_columns(name, numbers[1:], lines[1:], header, allow_empty=True)
-    table = _Table(name, header, values, empty, np.asarray(numbers[1:], dtype=np.int64),
-                   numbers[0])
+    table = _heading_of_quaternion(_Table(name, header, values, empty,
+                                          np.asarray(numbers[1:], dtype=np.int64), numbers[0]))
+    if table.header is not header:
+        note(f"{name}: theta is the yaw of the quaternion "
+             f"{', '.join(c for c in QUATERNION_COLUMNS if c in header.labels)}")
     _check_empty_cells(table)
     return table
+
+
+def _heading_of_quaternion(table: _Table) -> _Table:
+    """The table with its quaternion columns replaced by theta, their yaw (rad); unchanged
+    without them. DataError naming the line of a row with some of the quaternion's cells
+    empty, or of a quaternion that is no rotation or tilted from z-up
+    (:func:`excite.logs.orientation.headings`)."""
+    labels = table.columns
+    if "qw" not in labels:
+        return table
+    index = [labels.index(c) for c in QUATERNION_COLUMNS if c in labels]
+    empty = table.empty[:, index]
+    partial = empty.any(axis=1) & ~empty.all(axis=1)
+    if partial.any():
+        row = int(np.argmax(partial))
+        column = labels[index[int(np.argmax(empty[row]))]]
+        raise DataError(f"{table.name}:{table.lines[row]}: {column} is empty but other "
+                        "quaternion cells are not")
+    q = np.zeros((len(table.lines), 4))
+    for axis, column in enumerate(QUATERNION_COLUMNS):
+        if column in labels:
+            q[:, axis] = table.values[:, labels.index(column)]
+    filled = np.flatnonzero(~empty[:, 0])
+    theta = np.full(len(table.lines), np.nan)
+    theta[filled] = headings(q[filled], lambda i: f"{table.name}:{table.lines[filled[i]]}")
+    keep = [i for i, label in enumerate(labels) if label not in QUATERNION_COLUMNS]
+    columns = (*(table.header.columns[i] for i in keep), Column("theta", -1, "theta"))
+    return replace(table, header=replace(table.header, columns=columns),
+                   values=np.column_stack([table.values[:, keep], theta]),
+                   empty=np.column_stack([table.empty[:, keep], empty[:, 0]]))
 
 
 def _first_line(path: PathArg) -> str | None:
@@ -228,6 +301,7 @@ def timeseries_streams(path: PathArg) -> frozenset[str]:
     labels = _labels(line) if line is not None else set()
     if not labels:
         return frozenset()
+    labels |= _pose_labels(list(labels))
     groups = {"encoder": (ANGLE_COLUMNS, TICK_COLUMNS), "pose": (POSE_COLUMNS,)}
     complete = {kind for kind, options in groups.items()
                 if any(labels >= set(names) for names in options)}

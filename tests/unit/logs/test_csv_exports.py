@@ -128,6 +128,44 @@ def test_columns_not_read_are_named_in_a_note_and_never_parsed(tmp_path, plain):
     assert notes == [f"{trailing}: columns not read: (unnamed column 7)"]
 
 
+@pytest.mark.parametrize("names, planar, length", [
+    (("qx", "qy", "qz", "qw"), False, 1.0),
+    (("orientation.x", "orientation.y", "orientation.z", "orientation.w"), False, 2.5),
+    (("quat_z", "quat_w"), True, 1.0),
+])
+def test_a_quaternion_gives_the_heading(tmp_path, plain, names, planar, length):
+    """Quaternion columns instead of theta: its yaw, equal to theta to rounding whatever the
+    quaternion's length, with a note; a few degrees of roll and pitch (a ramp) change
+    nothing."""
+    path, header, rows = plain
+    out_rows = []
+    for k, row in enumerate(rows):
+        if not row[5]:
+            out_rows.append(row[:5] + [""] * len(names))
+            continue
+        half = 0.5 * float(row[5])
+        roll = 0.0 if planar else 0.05 * math.sin(k)  # rad, about the body x axis
+        cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+        q = (sr * math.cos(half), sr * math.sin(half), cr * math.sin(half), cr * math.cos(half))
+        out_rows.append(row[:5] + [repr(length * v) for v in (q[2:] if planar else q)])
+    out = export(tmp_path / "quaternion.csv", header[:5] + list(names), out_rows, ";")
+    series, notes = read(out)
+    reference = read_timeseries(path)
+    assert_same(series, reference, rtol=1e-12)
+    labels = ", ".join(("qz", "qw") if planar else ("qx", "qy", "qz", "qw"))
+    assert notes == [f"{out}: theta is the yaw of the quaternion {labels}"]
+    assert timeseries_streams(out) == {"encoder", "pose"}
+
+
+def test_theta_is_read_and_a_quaternion_beside_it_is_not(tmp_path, plain):
+    path, header, rows = plain
+    out = export(tmp_path / "both.csv", header + ["qz", "qw"],
+                 [row + (["nonsense", "1"] if row[5] else ["", ""]) for row in rows], ";")
+    series, notes = read(out)
+    assert_same(series, read_timeseries(path))
+    assert notes == [f"{out}: columns not read: qz, qw"]
+
+
 def scaled(rows, factors):
     """The rows with each filled cell multiplied by its column's factor (written as the
     shortest text of the product)."""
@@ -207,12 +245,23 @@ GOOD_ROWS = "0;0;0;0;0;0\n0.1;1;1;0.05;0;0\n0.2;2;2;0.1;0;0\n"
     ("time;left;right;x;y;yaw\n0;0;0;0;0;0\n", "log.csv: only pose columns; give the other "
      "stream too (a second file with t,phi_L,phi_R, or all columns in one file); 'left', "
      "'right' not read: wheel columns are named phi_L, phi_R (rad) or ticks_L, ticks_R"),
-    ("time,enc_left,enc_right,x,y,qz,qw\n", "log.csv:1: missing column theta (expected "
-     "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two); the header "
-     "names 'time', 'enc_left', 'enc_right', 'x', 'y', 'qz', 'qw'; 'enc_left', 'enc_right' not "
-     "read: wheel columns are named phi_L, phi_R (rad) or ticks_L, ticks_R (see "
-     "docs/formats.md); 'qz', 'qw' not read: give the heading as theta (rad), not a "
-     "quaternion"),
+    ("time,enc_left,enc_right,x,y,qz,qw\n", "log.csv: only pose columns; give the other "
+     "stream too (a second file with t,phi_L,phi_R, or all columns in one file); 'enc_left', "
+     "'enc_right' not read: wheel columns are named phi_L, phi_R (rad) or ticks_L, ticks_R"),
+    ("time,phi_L,phi_R,x,y,rotation_z,rotation_w\n", "log.csv:1: missing column theta "
+     "(expected t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two); "
+     "the header names 'time', 'phi_L', 'phi_R', 'x', 'y', 'rotation_z', 'rotation_w'"),
+    ("time,phi_L,phi_R,x,y,q_x,q_y,q_w\n", "log.csv:1: the quaternion has no column qz (the "
+     "heading is the yaw of qx, qy, qz, qw; qx and qy may both be left out)"),
+    ("time,phi_L,phi_R,x,y,qx,qz,qw\n", "log.csv:1: the quaternion has no column qy"),
+    ("t,phi_L,phi_R,x,y,qz,qw\n0,0,0,0,0,0,1\n0.1,1,1,0.1,0,,1\n", "log.csv:3: qz is empty "
+     "but other quaternion cells are not"),
+    ("t,phi_L,phi_R,x,y,qz,qw\n0,0,0,0,0,0,1\n0.1,1,1,0.1,0,0,0\n", "log.csv:3: the "
+     "orientation quaternion (x, y, z, w) = (0.0, 0.0, 0.0, 0.0) is not a rotation"),
+    ("t,phi_L,phi_R,x,y,qx,qy,qz,qw\n0,0,0,0,0,0,0,0,1\n0.1,1,1,0.1,0,0.7071,0,0,0.7071\n",
+     "log.csv:3: the pose's z axis is tilted 90.0 degrees from the world z axis"),
+    ("t,phi_L,phi_R,x,y,qz,qw [deg]\n", "log.csv:1: column 'qw [deg]': unit 'deg' is not a "
+     "unit of number (it has none)"),
     ("Zeit;X;Y;Gier\n", "log.csv:1: no time column t (s); the header names 'Zeit', 'X', 'Y', "
      "'Gier' (expected t,phi_L,phi_R,x,y,theta in one file"),
     ("time;battery\n", "log.csv:1: neither encoder (phi_L, phi_R) nor pose (x, y, theta) "
@@ -230,6 +279,8 @@ def test_what_cannot_be_read_safely_is_a_one_line_error(tmp_path, text, message)
 
 @pytest.mark.parametrize("header, streams", [
     ("time;x (m);y (m);yaw [deg];z", {"pose"}),
+    ("time;x;y;qx;qy;qz;qw", {"pose"}),
+    ("time;x;y;orientation.z;orientation.w", {"pose"}),
     ("stamp\tleft_ticks\tright_ticks\tbattery", {"encoder"}),
     ('"Time [s]","Phi_L","Phi_R"', {"encoder"}),
     ("time;left;right;x;y;yaw", {"pose"}),
