@@ -222,14 +222,25 @@ class StoppingRule:
     def _calibrated(self, segments: Segments, nominal: Params | ArrayLike | None
                     ) -> StopDecision:
         """The decision from the batch calibration of ``segments``."""
-        n = len(segments)
         try:
             from excite.calibration.pipeline import calibrate
 
             result = calibrate(segments, initial=nominal, sensor_pose=self.sensor_pose,
                                ticks_per_rev=self.ticks_per_rev)
         except ExciteError as exc:  # too few segments for the noise levels, no motion, ...
-            return self._not_yet(n, f"no calibration yet: {exc}")
+            return self._not_yet(len(segments), f"no calibration yet: {exc}")
+        return self.judge(result, segments)
+
+    def judge(self, result: CalibrationResult, segments: Segments | None = None
+              ) -> StopDecision:
+        """The decision for a calibration already made (``result``, e.g. of several logs by
+        :func:`excite.calibration.logs.calibrate_logs`, whose std then include the logs'
+        spread), by the conditions of :meth:`decide` (this rule's ``sensor_pose`` and
+        ``ticks_per_rev`` are not used: the calibration's own are). ``segments``: the data
+        it was made from (all of them, gross errors included: the count the rule reports and
+        predicts from; without them, the calibration's count); their times give
+        ``seconds_to_go`` (None without them)."""
+        n = result.n_segments if segments is None else len(segments)
         tolerances = self._tolerances(result)
         if not result.identifiable:
             return self._not_yet(n, "the data do not determine the parameters yet: "
@@ -259,8 +270,9 @@ class StoppingRule:
         reason = (f"every parameter within its tolerance at {self.confidence:.0%} "
                   f"(the widest, {worst}, at {statistic:.2f} of it)" if done else
                   f"{worst} at {statistic:.2f} of its tolerance at {self.confidence:.0%}")
+        seconds = None if segments is None else _seconds(segments, to_go)
         return StopDecision(done, statistic, reason, n, quantile, half, tolerances, to_go,
-                            _seconds(segments, to_go), result)
+                            seconds, result)
 
     def _tolerances(self, result: CalibrationResult) -> dict[str, float]:
         """Each parameter's tolerance in its unit: target x value for r_L, r_R, b (m); with

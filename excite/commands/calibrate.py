@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from typing import TYPE_CHECKING, get_args
 
 from excite.calibration.options import CalibrationLoss
@@ -19,11 +20,13 @@ from excite.commands.args import (
 )
 from excite.commands.exit_status import calibration_status
 from excite.commands.logs import LOG_FILES, add_log_options
-from excite.commands.options import add_result_options
+from excite.commands.options import add_done_options, add_result_options
 
 if TYPE_CHECKING:
+    from excite.calibration.logs import LogCalibration
     from excite.calibration.result import CalibrationResult
     from excite.core.kinematics import Params
+    from excite.stopping import StopDecision
 
 #: What ``excite calibrate --help`` says the command does.
 DESCRIPTION = """Estimate the wheel radii r_L, r_R and the wheel separation b (m), and the external
@@ -66,6 +69,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      "they disagree beyond their std; the fit then fails (exit status 4). "
                      "Default: when they disagree, report std that cover the spread (random "
                      "effects)")
+    add_done_options(cal)
     add_log_options(cal)
     cal.set_defaults(handler=run)
 
@@ -77,6 +81,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.force_yaml and not args.ros2_yaml:
         raise UsageError("--force-yaml needs --ros2-yaml OUT.yaml")
+    if args.target_confidence is not None and args.target is None:
+        raise UsageError("--target-confidence needs --target")
     sigma = sigma_arg(args.sigma) if args.sigma else None
     initial = params_arg(args.init) if args.init else None
     sensor_pose = sensor_pose_arg(args.sensor_pose)
@@ -86,8 +92,12 @@ def run(args: argparse.Namespace) -> int:
                                  heterogeneity="common" if args.common_params else "random")
     result, validation = calibration.result, calibration.holdout
     estimated_pose = result.sensor_pose if result.sensor_pose_std is not None else None
+    done = None if args.target is None else _judged(args, calibration)
     if args.json:
         report = result.to_dict()
+        if done is not None:
+            report["target"] = {"value": args.target, "confidence": done[0],
+                                "decision": done[1].to_dict()}
         report["inputs"] = [part.describe() for part in calibration.parts]
         if initial is not None:
             report["nominal"] = dict(zip(("r_L", "r_R", "b"), initial.as_array().tolist(),
@@ -101,6 +111,8 @@ def run(args: argparse.Namespace) -> int:
         print(result.summary(initial))
         if estimated_pose is not None:
             print(f"  sensor transform: {static_transform_command(estimated_pose)}")
+        if done is not None:
+            print(_done_line(args.target, *done))
         if validation is not None:
             print(f"\nheld-out logs ({len(validation.result.logs)}), nominal (--init) vs "
                   "calibrated:")
@@ -109,6 +121,33 @@ def run(args: argparse.Namespace) -> int:
     if args.ros2_yaml:
         export_yaml(args, result, initial, status)
     return status
+
+
+def _judged(args: argparse.Namespace, calibration: LogCalibration
+            ) -> tuple[float, StopDecision]:
+    """--target: the confidence and the stopping rule's decision on the calibration."""
+    from excite.logs.segments import Segments
+    from excite.stopping import DEFAULT_CONFIDENCE, StoppingRule
+
+    confidence = (DEFAULT_CONFIDENCE if args.target_confidence is None
+                  else args.target_confidence)
+    segments = Segments.concatenate([part.segments for part in calibration.parts])
+    return confidence, StoppingRule(args.target, confidence).judge(calibration.result,
+                                                                   segments)
+
+
+def _done_line(target: float, confidence: float, decision: StopDecision) -> str:
+    """The report's line for --target: done, or not yet with how much more driving."""
+    head = f"target {target:.3g} at {confidence:.0%}: "
+    if decision.done:
+        return f"{head}done: {decision.reason}"
+    more = ""
+    if math.isfinite(decision.segments_to_go):
+        seconds = ("" if decision.seconds_to_go is None
+                   else f" (about {decision.seconds_to_go:.0f} s)")
+        more = (f"; about {decision.segments_to_go:.0f} more segments{seconds} of driving like "
+                "this would get there")
+    return f"{head}not yet: {decision.reason}{more}"
 
 
 def export_yaml(args: argparse.Namespace, result: CalibrationResult, initial: Params | None,

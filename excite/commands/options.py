@@ -162,6 +162,24 @@ def add_target_options(parser: argparse.ArgumentParser) -> None:
                         "--target)")
 
 
+def add_done_options(parser: argparse.ArgumentParser) -> None:
+    """--target T and --target-confidence C of ``excite calibrate``: is the calibration of
+    these logs good enough, and how much more driving would make it so (the stopping rule,
+    :meth:`excite.stopping.StoppingRule.judge`)."""
+    parser.add_argument("--target", type=_open_unit("--target", "a relative error"),
+                        default=None, metavar="T",
+                        help="say whether the calibration is good enough: r_L, r_R and b "
+                        "within relative error T (0.002 = 0.2%%; sensor x, y within T x b, its "
+                        "angle within T rad) at --target-confidence, by the stopping rule of "
+                        "excite live; if not yet, how many more segments (and seconds) of "
+                        "driving like this would get there (default: off)")
+    parser.add_argument("--target-confidence", type=_open_unit("--target-confidence",
+                                                              "a confidence"),
+                        default=None, metavar="C",
+                        help=f"its confidence, in (0, 1) (default {DEFAULT_CONFIDENCE}; only "
+                        "with --target)")
+
+
 def add_backend_options(parser: argparse.ArgumentParser,
                         local: str = "worker processes on this machine") -> None:
     """--backend local|ray and --address (where the episodes or trials run); ``local`` says

@@ -3,6 +3,7 @@ forced (and then marked unsafe), implausible nominal values refused with the lik
 calibrate report that leads with what to do, and validate's verdict with its exit status."""
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -210,3 +211,48 @@ def test_validate_help_documents_the_verdict_and_its_exit_status(capsys):
         run_cli(capsys, "validate", "--help")
     text = " ".join(capsys.readouterr().out.split())
     assert f"at least {MARGIN:g} worse" in text and f"{EXIT_WORSE} when it is worse" in text
+
+
+# --------------------------------------------------------------------------- --target
+
+
+def test_calibrate_says_whether_the_target_is_reached_and_how_much_more_driving(capsys,
+                                                                                 tmp_path):
+    """--target: the stopping rule's decision on the calibration of a recorded log, done or
+    not yet with the segments and seconds still needed, in the report and the JSON; the
+    exit status is the calibration's."""
+    log = write_log(tmp_path, "log", synthetic_log(np.random.default_rng(3), 60.0, TRUTH,
+                                                   SENSOR, pose_noise=(2e-3, 2e-3)).series)
+    code, out, _ = run_cli(capsys, "calibrate", *log, "--target", "0.01")
+    assert code == 0
+    assert out.splitlines()[-1].startswith("target 0.01 at 95%: done: every parameter within "
+                                           "its tolerance at 95%")
+    code, out, _ = run_cli(capsys, "calibrate", *log, "--target", "0.0001", "--json",
+                           "--target-confidence", "0.9")
+    target = json.loads(out)["target"]
+    decision = target["decision"]
+    assert code == 0 and target["value"] == 0.0001 and target["confidence"] == 0.9
+    assert not decision["done"] and decision["statistic"] > 1
+    n = decision["n_segments"]
+    assert decision["segments_to_go"] == math.ceil(n * decision["statistic"] ** 2) - n
+    assert decision["seconds_to_go"] == pytest.approx(decision["segments_to_go"], rel=0.2)
+    code, out, _ = run_cli(capsys, "calibrate", *log, "--target", "0.0001",
+                           "--target-confidence", "0.9")
+    assert out.splitlines()[-1] == (
+        f"target 0.0001 at 90%: not yet: {decision['reason']}; about "
+        f"{decision['segments_to_go']:.0f} more segments (about "
+        f"{decision['seconds_to_go']:.0f} s) of driving like this would get there")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--target", "2"], "argument --target: must be a relative error strictly between 0 and "
+     "1, got '2'"),
+    (["--target", "x"], "argument --target: not a number: 'x'"),
+    (["--target-confidence", "0.9"], "--target-confidence needs --target"),
+    (["--target", "0.01", "--target-confidence", "1"], "argument --target-confidence: must "
+     "be a confidence strictly between 0 and 1, got '1'"),
+])
+def test_bad_targets_of_calibrate_are_one_line_errors(capsys, tmp_path, rng, args, message):
+    path = tmp_path / "s.csv"
+    save_segments(path, lesson_dataset(rng, 30))
+    assert_one_line_error(*run_cli(capsys, "calibrate", path, *args)[::2], message)

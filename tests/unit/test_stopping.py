@@ -72,6 +72,19 @@ def test_the_prediction_of_segments_to_go_is_close_to_when_it_stops():
     assert predicted / 1.6 <= stop <= predicted * 1.6, (predicted, stop)
 
 
+def test_a_calibration_already_made_is_judged_as_the_rule_decides():
+    """judge(result, segments) is decide(segments) without calibrating again: every field but
+    the result object; without the segments, no seconds to go."""
+    segments = _log_segments(5, 50.0)
+    rule = StoppingRule(target=0.004)
+    decided = rule.decide(segments)
+    judged = rule.judge(decided.result, segments)
+    assert judged.to_dict() == decided.to_dict() and judged.result is decided.result
+    assert decided.seconds_to_go is not None or decided.done
+    bare = rule.judge(decided.result)
+    assert bare.seconds_to_go is None and bare.statistic == decided.statistic
+
+
 def test_bad_targets_are_refused():
     for target in (0.0, 1.0, -0.1, "0.1"):
         with pytest.raises(ValueError, match="target"):
