@@ -445,7 +445,7 @@ class ChainWhitener:
 
     def __init__(self, segments: Segments, levels: NoiseLevels,
                  wheels: WheelNoise | None = None):
-        self._factor = _banded_cholesky(chain_band(segments, levels, wheels))
+        self._factor = _rounded_cholesky(chain_band(segments, levels, wheels))
         self.n = len(segments)
         self.wheels = wheels
         self.geometry: Segments | None = segments
@@ -492,6 +492,31 @@ class ChainWhitener:
         from scipy.linalg import cho_solve_banded
 
         return cho_solve_banded((self._factor, True), rows, check_finite=False)
+
+
+#: The relative raises of a covariance band's diagonal tried, in turn, when its factorization
+#: fails by rounding (:func:`_rounded_cholesky`).
+ROUNDING_JITTER = (1e-14, 1e-12, 1e-10)
+
+
+def _rounded_cholesky(band: FloatArray) -> FloatArray:
+    """:func:`_banded_cholesky` of a covariance built from noise levels (:func:`chain_band`),
+    which is positive semi-definite by construction (a sum of squared levels times positive
+    semi-definite units): where its factorization fails, it fails by rounding (a level at its
+    floor beside a level many decades larger, e.g. pose positions far more precise than the
+    heading's lever arm), and the diagonal raised by ROUNDING_JITTER (relative) in turn
+    factorizes it. LinAlgError when none does."""
+    try:
+        return _banded_cholesky(band)
+    except np.linalg.LinAlgError:
+        for jitter in ROUNDING_JITTER:
+            raised = band.copy()
+            raised[0] *= 1.0 + jitter
+            try:
+                return _banded_cholesky(raised)
+            except np.linalg.LinAlgError:
+                continue
+        raise
 
 
 def _banded_cholesky(band: FloatArray) -> FloatArray:
