@@ -20,7 +20,7 @@ from excite.commands.args import (
 )
 from excite.commands.exit_status import calibration_status
 from excite.commands.logs import LOG_FILES, add_log_options
-from excite.commands.options import add_done_options, add_result_options
+from excite.commands.options import add_result_options, add_target_options
 
 if TYPE_CHECKING:
     from excite.calibration.logs import LogCalibration
@@ -69,7 +69,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      "they disagree beyond their std; the fit then fails (exit status 4). "
                      "Default: when they disagree, report std that cover the spread (random "
                      "effects)")
-    add_done_options(cal)
+    add_target_options(cal, judged="calibration")
     add_log_options(cal)
     cal.set_defaults(handler=run)
 

@@ -143,41 +143,34 @@ def _open_unit(option: str, what: str):
     return parse
 
 
-def add_target_options(parser: argparse.ArgumentParser) -> None:
-    """--target T and --target-confidence C: every episode runs until the stopping rule says
-    the calibration is within T (the env's target mode)."""
+#: What --target does, by command: compare runs every episode to it, calibrate judges its
+#: calibration against it.
+_TARGET_HELP = {
+    "episodes": "run every episode until the stopping rule (the batch calibration of the "
+    "segments so far) says r_L, r_R and b are within relative error T (0.005 = 0.5%%; sensor x, "
+    "y within T x b, its angle within T rad) or the budget ends it, and report the time to "
+    "target, the false stops and the error at the stop; in (0, 1), dimensionless (default: "
+    "off, fixed --segments)",
+    "calibration": "say whether the calibration is good enough: r_L, r_R and b within relative "
+    "error T (0.002 = 0.2%%; sensor x, y within T x b, its angle within T rad) at "
+    "--target-confidence, by the stopping rule of excite live; if not yet, how many more "
+    "segments (and seconds) of driving like this would get there (default: off)",
+}
+
+
+def add_target_options(parser: argparse.ArgumentParser, judged: str = "episodes") -> None:
+    """--target T and --target-confidence C: with ``judged`` "episodes" (compare, tune) every
+    episode runs until the stopping rule says the calibration is within T (the env's target
+    mode); with "calibration" (calibrate) the stopping rule judges the calibration made
+    (:meth:`excite.stopping.StoppingRule.judge`)."""
     parser.add_argument("--target", type=_open_unit("--target", "a relative error"),
-                        default=None, metavar="T",
-                        help="run every episode until the stopping rule (the batch "
-                        "calibration of the segments so far) says r_L, r_R and b are within "
-                        "relative error T (0.005 = 0.5%%; sensor x, y within T x b, its "
-                        "angle within T rad) or the budget ends it, and report the time to "
-                        "target, the false stops and the error at the stop; in (0, 1), "
-                        "dimensionless (default: off, fixed --segments)")
+                        default=None, metavar="T", help=_TARGET_HELP[judged])
     parser.add_argument("--target-confidence", type=_open_unit("--target-confidence",
                                                               "a confidence"),
                         default=None, metavar="C",
                         help="the stopping rule's confidence that every parameter is within "
                         f"the target, in (0, 1) (default {DEFAULT_CONFIDENCE}; only with "
                         "--target)")
-
-
-def add_done_options(parser: argparse.ArgumentParser) -> None:
-    """--target T and --target-confidence C of ``excite calibrate``: is the calibration of
-    these logs good enough, and how much more driving would make it so (the stopping rule,
-    :meth:`excite.stopping.StoppingRule.judge`)."""
-    parser.add_argument("--target", type=_open_unit("--target", "a relative error"),
-                        default=None, metavar="T",
-                        help="say whether the calibration is good enough: r_L, r_R and b "
-                        "within relative error T (0.002 = 0.2%%; sensor x, y within T x b, its "
-                        "angle within T rad) at --target-confidence, by the stopping rule of "
-                        "excite live; if not yet, how many more segments (and seconds) of "
-                        "driving like this would get there (default: off)")
-    parser.add_argument("--target-confidence", type=_open_unit("--target-confidence",
-                                                              "a confidence"),
-                        default=None, metavar="C",
-                        help=f"its confidence, in (0, 1) (default {DEFAULT_CONFIDENCE}; only "
-                        "with --target)")
 
 
 def add_backend_options(parser: argparse.ArgumentParser,
