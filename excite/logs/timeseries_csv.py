@@ -263,7 +263,8 @@ def _heading_of_quaternion(table: _Table) -> _Table:
     theta = np.full(len(table.lines), np.nan)
     theta[filled] = headings(q[filled], lambda i: f"{table.name}:{table.lines[filled[i]]}")
     keep = [i for i, label in enumerate(labels) if label not in QUATERNION_COLUMNS]
-    columns = (*(table.header.columns[i] for i in keep), Column("theta", -1, "theta"))
+    derived = Column("theta", -1, "theta")  # computed, at no position in a row
+    columns = (*(table.header.columns[i] for i in keep), derived)
     return replace(table, header=replace(table.header, columns=columns),
                    values=np.column_stack([table.values[:, keep], theta]),
                    empty=np.column_stack([table.empty[:, keep], empty[:, 0]]))
