@@ -28,7 +28,7 @@ import math
 import operator
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import repeat
 
 import numpy as np
@@ -104,6 +104,14 @@ class Header:
         """The header's fields as written, for messages: "'t', 'x', 'yaw [deg]'"."""
         return ", ".join(repr(text) for text in self.texts)
 
+    def without(self, labels: Sequence[str]) -> Header:
+        """This layout with the columns ``labels`` not read (named among the ignored, in the
+        header's order)."""
+        read = tuple(c for c in self.columns if c.label not in labels)
+        positions = {c.index for c in read}
+        return replace(self, columns=read, ignored=tuple(
+            _unread_name(text, i) for i, text in enumerate(self.texts) if i not in positions))
+
     def notes(self, name: str) -> list[str]:
         """One-line notes for the user: the columns not read, the units converted."""
         notes = []
@@ -114,6 +122,11 @@ class Header:
         if converted:
             notes.append(f"{name}: units converted: {', '.join(converted)}")
         return notes
+
+
+def _unread_name(text: str, index: int) -> str:
+    """How a note names a column not read: its header text, or its place when unnamed."""
+    return text or f"(unnamed column {index + 1})"
 
 
 def _base_unit(unit: str | None) -> str:
@@ -216,7 +229,7 @@ def parse_header(line: str, aliases: Mapping[str, str], quantities: Mapping[str,
     for index, text in enumerate(texts):
         label, unit = label_of(text, aliases)
         if label is None:
-            ignored.append(text or f"(unnamed column {index + 1})")
+            ignored.append(_unread_name(text, index))
             continue
         if label in columns:
             first = columns[label].text

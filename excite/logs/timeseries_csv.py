@@ -153,11 +153,7 @@ def _orientation(header: Header, where: str) -> Header:
     if not quaternion:
         return header
     if "theta" in header.labels:
-        read = tuple(c for c in header.columns if c not in quaternion)
-        positions = {c.index for c in read}
-        return replace(header, columns=read, ignored=tuple(
-            text or f"(unnamed column {i + 1})" for i, text in enumerate(header.texts)
-            if i not in positions))
+        return header.without(QUATERNION_COLUMNS)
     labels = {c.label for c in quaternion}
     missing = [c for c in ("qz", "qw") if c not in labels]
     if not missing and len(labels & {"qx", "qy"}) == 1:
