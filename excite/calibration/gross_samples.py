@@ -29,7 +29,9 @@ and z_k^2 = |u_k|^2 chi-square with 3 degrees of freedom.
   :data:`PASSES` times) until it no longer rejects. A repaired segment that is a candidate
   again with a chained neighbour that is one too (its run's first or last sample was bad
   too, the sample they share) joins the neighbour's run; one that is a candidate again
-  alone is left out whole. Joining keeps the chain whole: with white pose noise the
+  alone is left out whole, and so is a run that grew by joining and then does not agree
+  with the other segments (below: an error that no sample explains, such as a step of the
+  pose source that stays). Joining keeps the chain whole: with white pose noise the
   information of a chain grows faster than its length (each sample ties the dead reckoning
   from the chain's start), and a run left out in its middle breaks it in two, which on a
   120-segment log can double the std of the wheel radii.
@@ -174,6 +176,13 @@ def _attributed(data: Segments, chosen: IntArray, z2: FloatArray, threshold: flo
     return np.flatnonzero(out).astype(np.int64)
 
 
+def _shifts(fits: Fits, parts: list[IntArray]) -> tuple[list[int], FloatArray]:
+    """The repaired segments made of several (indices into ``fits.fitter.data``) and their
+    :func:`shift_statistics`."""
+    whole = [i for i, part in enumerate(parts) if part.size > 1]
+    return whole, shift_statistics(fits, whole)
+
+
 def _joins(data: Segments, chosen: IntArray, k: int) -> bool:
     """Whether segment ``k`` of ``data`` is chained to a neighbour among ``chosen``: the
     sample they share is the bad one, and their runs join into one."""
@@ -298,18 +307,29 @@ def screen_chain(fits: Fits, refit: Callable[[Segments], Fits]
     assert found is not None
     if not flagged.any():
         return original, plain, found
-    runs = _runs(original, flagged & ~left_out)
     # a bad sample's two segments err in opposite senses, and their composition, where it
     # cancels, agrees with the other segments: the runs the repair made whole are explained;
     # slip, which adds up, is not, and the candidates left unexplained are tested against
     # the driving
+    whole, shifts = _shifts(fits, parts)
+    threshold = test_threshold(len(data))
+    # a run that grew by joining and still does not agree holds an error no sample explains
+    # (a step of the pose source that stays): left out, as a candidate again alone is
+    spoilt = [i for i, shift in zip(whole, shifts, strict=True)
+              if not shift <= threshold and grown[parts[i]].any()]
+    if spoilt:
+        for i in spoilt:
+            left_out[parts[i]] = True
+        data, parts = merged(original, flagged, left_out)
+        fits = refit(data)
+        whole, shifts = _shifts(fits, parts)
+        threshold = test_threshold(len(data))
+    runs = _runs(original, flagged & ~left_out)
     unexplained = left_out.copy()
     for run in runs:
         if run.size == 1 or grown[run].any():
             unexplained[run] = True
-    whole = [i for i, part in enumerate(parts) if part.size > 1]
-    threshold = test_threshold(len(data))
-    for i, shift in zip(whole, shift_statistics(fits, whole), strict=True):
+    for i, shift in zip(whole, shifts, strict=True):
         if not shift <= threshold:
             unexplained[parts[i]] = True
     why = (follows_driving(original, np.flatnonzero(unexplained).astype(np.int64))
