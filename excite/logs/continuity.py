@@ -10,6 +10,11 @@ and jumps, with the thresholds of all detection in segmentation (:class:`Limits`
   rate over ``Limits.max_wheel_rate`` (rad/s, e.g. a counter reset); segmentation drops the
   segments containing one, and :func:`check_continuity` refuses a log with one for uses that
   follow the whole log (dead reckoning).
+* Excursions: a jump out and a jump back within ``Limits.max_excursion`` pose samples, the
+  track continuous across them (a marker swap, a scan matcher's bad match, a frame of another
+  object): those samples are off the track, and segmentation leaves them out
+  (:func:`excursions`) rather than drop the segments around them, which would break the
+  chain of segments that share pose samples.
 
 The per-stream checks (:func:`check_encoders`, :func:`check_poses`, :func:`find_gaps`) are the
 first stages of :func:`excite.logs.segmentation.segment_timeseries`.
@@ -29,7 +34,7 @@ from excite.logs.timeseries import Stream, TimeSeries
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
 __all__ = ["Limits", "Gap", "StreamCheck", "check_continuity", "check_encoders", "check_poses",
-           "find_gaps", "refuse_long_gaps", "flagged_overlaps", "pose_noise"]
+           "excursions", "find_gaps", "refuse_long_gaps", "flagged_overlaps", "pose_noise"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -62,6 +67,9 @@ class Limits:
         the limit by about 1 m there.
     max_wheel_rate (rad/s): wheel rate between consecutive encoder samples above which the
         step is a jump (a counter reset or overflow).
+    max_excursion: the most consecutive pose samples between a jump out and a jump back that
+        are left out as off the track when the step across them is no jump (at 50 Hz, 0.1 s;
+        a longer departure is more likely a relocalisation and its return another).
     still_wheel (rad), still_distance (m), still_heading (rad): a segment is a standstill when
         both wheels turned at most still_wheel and the sensor moved at most still_distance and
         turned at most still_heading.
@@ -86,6 +94,7 @@ class Limits:
     max_turn_rate: float = 6.0 * math.pi
     jump_sigmas: float = 6.0
     max_wheel_rate: float = 200.0
+    max_excursion: int = 5
     still_wheel: float = 0.02
     still_distance: float = 0.01
     still_heading: float = 0.01
@@ -164,13 +173,44 @@ def check_poses(ts: TimeSeries, window: float, limits: Limits,
     plus jump_sigmas times the noise of a difference of two poses (``noise``: a sample's std,
     xy and theta)."""
     gap, missed = _gap_flags(ts.t_pose, window, limits.max_gap)
-    dt = np.diff(ts.t_pose)
-    moved = np.hypot(np.diff(ts.x), np.diff(ts.y))
-    turned = np.abs(np.diff(ts.theta))
+    before, after = np.arange(ts.t_pose.size - 1), np.arange(1, ts.t_pose.size)
+    return StreamCheck(gap, _jumps(ts, before, after, limits, noise), missed)
+
+
+def _jumps(ts: TimeSeries, before: IntArray, after: IntArray, limits: Limits,
+           noise: tuple[float, float]) -> BoolArray:
+    """Whether the step from pose sample ``before`` to ``after`` is a jump (see
+    :func:`check_poses`)."""
+    dt = ts.t_pose[after] - ts.t_pose[before]
+    moved = np.hypot(ts.x[after] - ts.x[before], ts.y[after] - ts.y[before])
+    turned = np.abs(ts.theta[after] - ts.theta[before])
     spread = limits.jump_sigmas * math.sqrt(2.0)
-    jump = ((moved > limits.max_speed * dt + spread * noise[0])
+    return ((moved > limits.max_speed * dt + spread * noise[0])
             | (turned > limits.max_turn_rate * dt + spread * noise[1]))
-    return StreamCheck(gap, jump, missed)
+
+
+def excursions(ts: TimeSeries, poses: StreamCheck, limits: Limits,
+               noise: tuple[float, float]) -> IntArray:
+    """The pose samples off the track (indices): each run of at most
+    ``limits.max_excursion`` samples from a jump out to the first jump (``poses.jump``) after
+    which the pose is back on the track, with no gap among them: the step from the sample
+    before the run to the sample after it is no jump."""
+    jumps = np.flatnonzero(poses.jump)
+    gaps = np.concatenate(([0], np.cumsum(poses.gap)))
+    off = np.zeros(ts.t_pose.size, dtype=bool)
+    k = 0
+    while k + 1 < jumps.size:  # from each jump out, the first jump back that returns
+        out = int(jumps[k])
+        k += 1
+        for m in range(k, jumps.size):
+            back = int(jumps[m])  # the run: samples out + 1 .. back
+            if back - out > limits.max_excursion or gaps[back + 1] != gaps[out]:
+                break
+            if not _jumps(ts, np.array([out]), np.array([back + 1]), limits, noise)[0]:
+                off[out + 1:back + 1] = True
+                k = m + 1
+                break
+    return np.flatnonzero(off).astype(np.int64)
 
 
 #: What most often makes each stream jump, for the messages about a jump.

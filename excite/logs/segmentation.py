@@ -30,7 +30,9 @@ Detection, never silent averaging (all of it in :class:`SegmentationReport`)
 * Gaps, dropouts and jumps of either stream (:mod:`excite.logs.continuity`). With
   ``on_gap="error"`` (the default) a gap longer than the window is an error naming the file
   and line (or time) where the stream resumes; otherwise every gap splits the log and no
-  segment spans it. Segments containing a jump are dropped.
+  segment spans it. Segments containing a jump are dropped; a few pose samples off the
+  track (a jump out and a jump back, the track continuous across them) are left out instead,
+  so that the segments around them stay (:func:`~excite.logs.continuity.excursions`).
 * Segments in which neither wheel turned more than ``Limits.still_wheel`` are, by how far the
   sensor moved and turned, one of three (see :class:`~excite.logs.continuity.Limits`):
   - standstills: the sensor stayed within the still limits (``Limits.still_distance``,
@@ -47,7 +49,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -63,17 +65,18 @@ from excite.logs.continuity import (
     StreamCheck,
     check_encoders,
     check_poses,
+    excursions,
     find_gaps,
     flagged_overlaps,
     pose_noise,
     refuse_long_gaps,
 )
 from excite.logs.segments import MIN_SEGMENTS, Segments
-from excite.logs.timeseries import TimeSeries, unwrapped_words
+from excite.logs.timeseries import TimeSeries, unwrapped_words, without_poses
 
 __all__ = ["SegmentationReport", "SegmentedLog", "segment_timeseries", "POSE_JUMP",
            "ENCODER_JUMP", "STANDSTILL", "CARRIED", "CUT_BY_GAP", "END_OF_LOG",
-           "OUTSIDE_ENCODERS", "INSIDE_ENCODER_GAP"]
+           "OUTSIDE_ENCODERS", "INSIDE_ENCODER_GAP", "OFF_TRACK"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -84,6 +87,8 @@ POSE_JUMP, ENCODER_JUMP, STANDSTILL = "pose jump", "encoder jump", "standstill"
 CARRIED = "pose moved while the wheels stood still"
 CUT_BY_GAP, END_OF_LOG = "cut by a gap", "end of log"
 OUTSIDE_ENCODERS, INSIDE_ENCODER_GAP = "outside the encoder time range", "inside an encoder gap"
+OFF_TRACK = ("off the track (out and back beyond the jump limits: a marker swap or a bad "
+             "match), left out")
 #: The most sub-steps per segment (_substeps); sub-steps are one encoder period long up to this.
 #: One arc per encoder period is dead reckoning at the encoder rate: coarser sub-steps (50 ms)
 #: left a systematic model error of ~1e-5 m per 1 s segment on curving paths, which biased the
@@ -354,8 +359,9 @@ def _merged(ranges: list[tuple[float, float]]) -> tuple[tuple[float, float], ...
 
 def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: int,
             stretches: _Stretches, gaps: list[Gap], encoders: StreamCheck,
-            poses: StreamCheck, ts: TimeSeries) -> SegmentationReport:
-    """What was kept and dropped, and why (dropped ranges on the encoder clock)."""
+            poses: StreamCheck, ts: TimeSeries, off_track: int) -> SegmentationReport:
+    """What was kept and dropped, and why (dropped ranges on the encoder clock;
+    ``off_track``: the pose samples left out as off the track)."""
     ranges = {reason: [(t_pose[a], t_pose[b]) for a, b in zip(cut.start[mask], cut.end[mask],
                                                               strict=True)]
               for reason, mask in reasons.items()}
@@ -367,7 +373,7 @@ def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: 
         dropped_ranges={reason: _merged([(float(a), float(b)) for a, b in r])
                         for reason, r in ranges.items()},
         samples_dropped={OUTSIDE_ENCODERS: stretches.outside,
-                         INSIDE_ENCODER_GAP: stretches.in_gap},
+                         INSIDE_ENCODER_GAP: stretches.in_gap, OFF_TRACK: off_track},
         gaps=tuple(gaps),
         dropouts={"encoder": encoders.dropouts, "pose": poses.dropouts},
         unwrapped_wheels=ts.unwrapped_wheels,
@@ -455,6 +461,10 @@ def segment_timeseries(
     noise = pose_noise(ts)
     encoders, poses = (check_encoders(ts, window, limits),
                        check_poses(ts, window, limits, noise))
+    off_track = excursions(ts, poses, limits, noise)
+    if off_track.size:  # left out, the jumps around them gone
+        ts = without_poses(ts, off_track)
+        poses = replace(check_poses(ts, window, limits, noise), dropouts=poses.dropouts)
     gaps = find_gaps(ts, encoders, poses)
     if on_gap == "error":
         refuse_long_gaps(gaps, window)
@@ -466,7 +476,7 @@ def segment_timeseries(
     reasons = _drop_reasons(ts, t_pose, cut, rows, encoders, poses, limits, noise)
     keep = ~np.logical_or.reduce(list(reasons.values()))
     report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses,
-                     ts)
+                     ts, off_track.size)
     _refuse_too_few_segments(ts, report)
     return _segmented_log(ts, wheels, t_pose, cut.start[keep], cut.end[keep], rows[keep],
                           report)

@@ -202,12 +202,29 @@ def during(series: TimeSeries, start: float | None = None, end: float | None = N
         if mask.sum() < 2:
             raise DataError(f"{series.source[k]}: fewer than 2 {name} samples between "
                             f"{lo:g} and {hi:g} s")
-    lines = tuple(None if a is None else a[m] for a, m in zip(series.lines, keep, strict=True))
-    (enc, pose) = keep
-    return TimeSeries(series.t_enc[enc], series.phi_L[enc], series.phi_R[enc],
-                      series.t_pose[pose], series.x[pose], series.y[pose],
-                      series.theta[pose], source=series.source, lines=lines,
-                      unwrapped_counters=series.unwrapped_counters)
+    return _subset(series, *keep)
+
+
+def without_poses(series: TimeSeries, index: IntArray) -> TimeSeries:
+    """``series`` without the pose samples ``index`` (each sample keeps its line for
+    messages)."""
+    keep = np.ones(series.t_pose.size, dtype=bool)
+    keep[index] = False
+    return _subset(series, np.ones(series.t_enc.size, dtype=bool), keep)
+
+
+def _subset(series: TimeSeries, enc: NDArray[np.bool_], pose: NDArray[np.bool_]
+            ) -> TimeSeries:
+    """The samples of ``series`` where ``enc`` and ``pose`` (one per sample) are true (the
+    wheels it unwrapped still named as such)."""
+    lines = tuple(None if a is None else a[m]
+                  for a, m in zip(series.lines, (enc, pose), strict=True))
+    subset = TimeSeries(series.t_enc[enc], series.phi_L[enc], series.phi_R[enc],
+                        series.t_pose[pose], series.x[pose], series.y[pose],
+                        series.theta[pose], source=series.source, lines=lines,
+                        unwrapped_counters=series.unwrapped_counters)
+    object.__setattr__(subset, "unwrapped_wheels", series.unwrapped_wheels)
+    return subset
 
 
 def tick_angle(ticks_per_rev: float) -> float:

@@ -24,6 +24,7 @@ from excite.logs.segmentation import (
     ENCODER_JUMP,
     END_OF_LOG,
     INSIDE_ENCODER_GAP,
+    OFF_TRACK,
     OUTSIDE_ENCODERS,
     POSE_JUMP,
     STANDSTILL,
@@ -718,19 +719,31 @@ def test_short_gaps_split_without_error_and_dropouts_are_bridged(sim):
     assert lenient.report.gaps == () and lenient.report.dropouts["pose"] == 4
 
 
-def test_pose_jump_drops_the_affected_segments(sim):
+def test_pose_jump_drops_the_affected_segments_and_samples_off_the_track_are_left_out(sim):
+    """A relocalisation (a step that stays) drops the segment that holds it; a spike inside a
+    window and two samples off the track at a boundary (out and back: a marker swap) are left
+    out as samples, so no segment around them is lost and the chain stays whole."""
     ts = make_log(sim)
-    x = ts.x.copy()
+    x, theta = ts.x.copy(), ts.theta.copy()
     x[np.searchsorted(ts.t_pose, T0 + 12.5)] += 0.3  # a spike inside a window
+    at = np.searchsorted(ts.t_pose, T0 + 15.0)  # two samples off the track at a boundary
+    x[at:at + 2] -= 0.4
+    theta[at] += 0.6
     x[np.searchsorted(ts.t_pose, T0 + 20.0):] += 0.5  # a relocalisation step at a boundary
-    jumped = TimeSeries(ts.t_enc, ts.phi_L, ts.phi_R, ts.t_pose, x, ts.y, ts.theta)
+    jumped = TimeSeries(ts.t_enc, ts.phi_L, ts.phi_R, ts.t_pose, x, ts.y, theta)
     log = segment_timeseries(jumped, window=1.0)
     report = log.report
-    assert report.segments_dropped[POSE_JUMP] == 2
-    assert report.dropped_ranges[POSE_JUMP] == ((T0 + 12.0, T0 + 13.0), (T0 + 19.0, T0 + 20.0))
+    assert report.segments_dropped[POSE_JUMP] == 1
+    assert report.dropped_ranges[POSE_JUMP] == ((T0 + 19.0, T0 + 20.0),)
+    assert report.samples_dropped[OFF_TRACK] == 3
+    assert "3 pose samples unused: off the track" in report.summary()
     np.testing.assert_allclose(log.segments.as_array(), exact_rows(sim, log.t_start, log.t_end),
                                rtol=0, atol=1e-12)
-    assert not log.shares_endpoints[np.searchsorted(log.t_start, T0 + 13.0)]
+    # the boundary at 15 s moved to the first sample back on the track; the chain is whole
+    k = np.searchsorted(log.t_start, T0 + 15.0)
+    assert log.t_start[k] == pytest.approx(ts.t_pose[at + 2])
+    assert log.shares_endpoints[1:np.searchsorted(log.t_start, T0 + 19.0)].all()
+    assert not log.shares_endpoints[np.searchsorted(log.t_start, T0 + 20.0)]
 
 
 def test_too_few_segments_names_the_stream_behind_the_drops(sim):
@@ -741,8 +754,7 @@ def test_too_few_segments_names_the_stream_behind_the_drops(sim):
     noisy[::7] = 0.0  # every 7th sample from another publisher
     with pytest.raises(DataError, match=r"^bag /joint_states: 0 segment\(s\).*encoder jump"):
         segment_timeseries(dataclasses.replace(ts, phi_L=noisy), window=1.0)
-    x = ts.x.copy()
-    x[::5] += 1.0  # poses that jump everywhere
+    x = ts.x + np.arange(ts.x.size) // 5 * 1.0  # poses that jump everywhere, and stay
     with pytest.raises(DataError, match=r"^bag /pose: 0 segment\(s\).*pose jump"):
         segment_timeseries(dataclasses.replace(ts, x=x), window=1.0)
 
