@@ -10,11 +10,19 @@ import argparse
 import math
 from pathlib import Path
 
+from excite.core.plausible import (
+    MAX_RADIUS_RATIO,
+    MAX_SEPARATION,
+    RADIUS_RANGE,
+    TYPICAL_RADIUS,
+    TYPICAL_SEPARATION,
+    typical,
+)
 from excite.errors import ExciteError
 
 __all__ = ["PARAMS_VALUES", "SIGMA_VALUES", "POSE_VALUES", "POSE_NOISE_VALUES", "UsageError",
            "floats", "sigma_arg", "params_arg", "plausible_params",
-           "RADIUS_RANGE", "MAX_RADIUS_RATIO", "MAX_SEPARATION", "sensor_pose_arg",
+           "sensor_pose_arg",
            "pose_noise_arg",
            "fraction_arg", "positive_int", "nonnegative_int", "env_id", "robot_preset",
            "output_folder", "check_parent_folder", "check_output_file"]
@@ -69,31 +77,15 @@ def sigma_arg(text: str) -> tuple[float, ...]:
     return floats(text, SIGMA_VALUES, "--sigma")
 
 
-#: Nominal wheel parameters no real differential drive lies outside of (m): each wheel radius
-#: in RADIUS_RANGE, the two radii within a factor MAX_RADIUS_RATIO of each other, the wheel
-#: separation longer than the larger radius and at most MAX_SEPARATION.
-RADIUS_RANGE = (0.005, 2.0)
-MAX_RADIUS_RATIO = 2.0
-MAX_SEPARATION = 20.0
-#: Typical wheel radii and separations (m): a hint names a unit (cm or mm typed for m) when
-#: the values converted from it fall in these ranges.
-_TYPICAL_RADIUS = (0.01, 1.0)
-_TYPICAL_SEPARATION = (0.05, 5.0)
 _UNITS = (("centimetres", "cm", 100.0), ("millimetres", "mm", 1000.0))
-
-
-def _typical(r_L: float, r_R: float, b: float) -> bool:
-    low, high = _TYPICAL_RADIUS
-    return (low <= min(r_L, r_R) and max(r_L, r_R) <= high and max(r_L, r_R) < b
-            and _TYPICAL_SEPARATION[0] <= b <= _TYPICAL_SEPARATION[1])
 
 
 def _unit_hint(values: tuple[float, float, float], index: int) -> str:
     """'centimetres given as metres? 5 cm = 0.05' for the units in which all three values
     (else the value at ``index`` alone) are typical; '' when none is."""
-    units = [u for u in _UNITS if _typical(*(v / u[2] for v in values))]
+    units = [u for u in _UNITS if typical(*(v / u[2] for v in values))]
     if not units:
-        low, high = _TYPICAL_SEPARATION if index == 2 else _TYPICAL_RADIUS
+        low, high = TYPICAL_SEPARATION if index == 2 else TYPICAL_RADIUS
         units = [u for u in _UNITS if low <= values[index] / u[2] <= high]
     if not units:
         return ""
@@ -106,9 +98,8 @@ def _unit_hint(values: tuple[float, float, float], index: int) -> str:
 
 def plausible_params(values: tuple[float, float, float], text: str, what: str) -> None:
     """UsageError, naming the likely unit, unless the nominal wheel parameters RL,RR,B (m)
-    lie within the bounds no real differential drive violates (:data:`RADIUS_RANGE`,
-    :data:`MAX_RADIUS_RATIO`, :data:`MAX_SEPARATION`, a separation longer than the wheel
-    radius)."""
+    lie within the bounds no real differential drive violates
+    (:mod:`excite.core.plausible`)."""
     r_L, r_R, b = values
     low, high = RADIUS_RANGE
 

@@ -91,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
                                  holdout=args.holdout, on_note=print_note,
                                  heterogeneity="common" if args.common_params else "random")
     result, validation = calibration.result, calibration.holdout
+    _refuse_implausible(args.files, result)
     estimated_pose = result.sensor_pose if result.sensor_pose_std is not None else None
     done = None if args.target is None else _judged(args, calibration)
     if args.json:
@@ -121,6 +122,21 @@ def run(args: argparse.Namespace) -> int:
     if args.ros2_yaml:
         export_yaml(args, result, initial, status)
     return status
+
+
+def _refuse_implausible(files: list[str], result: CalibrationResult) -> None:
+    """UsageError when the data determine wheel parameters no real robot has (a log in other
+    units than excite reads), naming the likely units."""
+    from excite.core.plausible import implausible, log_unit_hint
+
+    values = result.params.as_array()
+    what = implausible(*values) if result.identifiable else None
+    if what is None:
+        return
+    hint = log_unit_hint(*values) or ("positions in m, headings and wheel angles in rad? "
+                                      "docs/formats.md")
+    raise UsageError(f"{', '.join(files)}: the calibration gives {what}, which no real "
+                     f"robot has: {hint}")
 
 
 def _judged(args: argparse.Namespace, calibration: LogCalibration

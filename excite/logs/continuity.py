@@ -214,9 +214,9 @@ def excursions(ts: TimeSeries, poses: StreamCheck, limits: Limits,
 
 
 #: What most often makes each stream jump, for the messages about a jump.
-ENCODER_JUMP_HINT = ("a counter that overflows or resets, or a second publisher of the wheel "
-                     "joints? (wheel angles must be cumulative; ticks as counted, with "
-                     "--ticks-per-rev)")
+ENCODER_JUMP_HINT = ("a counter that overflows or resets, a second publisher of the wheel "
+                     "joints, or wheel angles in degrees? (wheel angles must be cumulative, "
+                     "in rad; ticks as counted, with --ticks-per-rev)")
 POSE_JUMP_HINT = "a relocalisation, or headings in degrees? (theta is in rad)"
 
 

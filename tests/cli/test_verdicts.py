@@ -156,6 +156,26 @@ def test_just_outside_the_bounds_is_implausible(values):
         plausible_params(values, "", "--init")
 
 
+@pytest.mark.parametrize("scale, fragment", [
+    ((1.0, 1.0, 1000.0, 1000.0, 1.0), "positions in millimetres read as metres? (a robot "
+                                       "with r_L 0.05"),
+    ((1.0, 1.0, 100.0, 100.0, 1.0), "positions in centimetres read as metres?"),
+    ((180 / math.pi, 180 / math.pi, 1.0, 1.0, 1.0), "wheel angles in degrees read as "
+                                                     "radians? (a robot with r_L 0.05"),
+])
+def test_a_log_in_other_units_is_a_one_line_error_naming_them(capsys, tmp_path, scale,
+                                                               fragment):
+    """Positions in mm or cm, or wheel angles in degrees, calibrate to wheel parameters no
+    real robot has: refused, never 'use these values' (nor a controller file)."""
+    seg = lesson_dataset(np.random.default_rng(4), 100, sigma=(1e-3, 1e-3, 1e-3))
+    path = tmp_path / "units.csv"
+    save_segments(path, type(seg)(*(seg.as_array() * np.array(scale)).T))
+    code, out, err = run_cli(capsys, "calibrate", path, "--ros2-yaml", tmp_path / "c.yaml")
+    assert out == "" and not (tmp_path / "c.yaml").exists()
+    assert_one_line_error(code, err, f"{path}: the calibration gives ", "which no real robot "
+                          "has: ", fragment)
+
+
 # --------------------------------------------------------------------------- validate
 
 

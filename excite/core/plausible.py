@@ -1,0 +1,69 @@
+"""The wheel parameters no real differential drive lies outside of, and what a value outside
+them most likely means: nominal values typed in the wrong unit (``--init``), or a calibration
+of a log recorded in other units than excite reads (positions in mm, wheel angles in degrees).
+
+Bounds (m): each wheel radius in :data:`RADIUS_RANGE`, the two radii within a factor
+:data:`MAX_RADIUS_RATIO` of each other, the wheel separation longer than the larger radius and
+at most :data:`MAX_SEPARATION`. Hints name a unit when the values converted from it fall in the
+typical ranges (:data:`TYPICAL_RADIUS`, :data:`TYPICAL_SEPARATION`).
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["RADIUS_RANGE", "MAX_RADIUS_RATIO", "MAX_SEPARATION", "TYPICAL_RADIUS",
+           "TYPICAL_SEPARATION", "implausible", "typical", "log_unit_hint"]
+
+RADIUS_RANGE = (0.005, 2.0)
+MAX_RADIUS_RATIO = 2.0
+MAX_SEPARATION = 20.0
+TYPICAL_RADIUS = (0.01, 1.0)
+TYPICAL_SEPARATION = (0.05, 5.0)
+
+#: How a log in other units scales the calibrated (r_L, r_R, b): positions in cm or mm read as
+#: m scale all three up; wheel angles in degrees (or revolutions) read as rad scale the radii
+#: by pi / 180 (or 2 pi) and leave b.
+_LOG_UNITS = (("positions in millimetres", (1000.0, 1000.0, 1000.0)),
+              ("positions in centimetres", (100.0, 100.0, 100.0)),
+              ("wheel angles in degrees", (math.pi / 180.0, math.pi / 180.0, 1.0)),
+              ("wheel angles in revolutions", (2.0 * math.pi, 2.0 * math.pi, 1.0)))
+
+
+def typical(r_L: float, r_R: float, b: float) -> bool:
+    """Whether the three values (m) are a typical robot's."""
+    low, high = TYPICAL_RADIUS
+    return (low <= min(r_L, r_R) and max(r_L, r_R) <= high and max(r_L, r_R) < b
+            and TYPICAL_SEPARATION[0] <= b <= TYPICAL_SEPARATION[1])
+
+
+def implausible(r_L: float, r_R: float, b: float) -> str | None:
+    """What about the wheel parameters (m) no real differential drive has, in words (e.g.
+    'a wheel radius of 50 m'); None when nothing."""
+    low, high = RADIUS_RANGE
+    for radius in (r_L, r_R):
+        if not low <= radius <= high:
+            return (f"a wheel radius of {radius:.4g} m (real ones are {1e3 * low:g} mm to "
+                    f"{high:g} m)")
+    if max(r_L, r_R) > MAX_RADIUS_RATIO * min(r_L, r_R):
+        return (f"wheel radii of {r_L:.4g} m and {r_R:.4g} m (a factor "
+                f"{max(r_L, r_R) / min(r_L, r_R):.3g} apart)")
+    if b > MAX_SEPARATION:
+        return f"a wheel separation of {b:.4g} m (at most {MAX_SEPARATION:g} m)"
+    if b <= max(r_L, r_R):
+        return (f"a wheel separation of {b:.4g} m, no longer than the wheel radius "
+                f"{max(r_L, r_R):.4g} m")
+    return None
+
+
+def log_unit_hint(r_L: float, r_R: float, b: float) -> str:
+    """The units of a log that would have given these calibrated values (m) for a typical
+    robot, e.g. 'positions in millimetres read as metres? (a robot with r_L 0.05 m, r_R
+    0.051 m, b 0.3 m would give these values)'; '' when none would."""
+    for words, scale in _LOG_UNITS:
+        values = (r_L / scale[0], r_R / scale[1], b / scale[2])
+        if typical(*values):
+            unit = "metres" if words.startswith("positions") else "radians"
+            return (f"{words} read as {unit}? (a robot with r_L {values[0]:.3g} m, r_R "
+                    f"{values[1]:.3g} m, b {values[2]:.3g} m would give these values)")
+    return ""
