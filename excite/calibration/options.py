@@ -16,6 +16,7 @@ from excite.core.arrays import FloatArray
 from excite.core.information import as_sigma
 from excite.core.models import SensorPose
 from excite.errors import DataError
+from excite.logs.segment_bounds import first_impossible
 from excite.logs.segments import Segments
 
 __all__ = ["DEFAULT_MAX_RELATIVE_STD", "TEST_LEVEL", "CalibrationLoss", "FitOptions",
@@ -87,7 +88,8 @@ def checked_inputs(segments: Segments | ArrayLike, sigma: ArrayLike | None,
     """The segments (an (N, 5) array in CSV column order becomes :class:`Segments`) and the
     given noise std (sigma_x [m], sigma_y [m], sigma_theta [rad]; None: to be estimated),
     after checking the inputs in this order: at least 3 segments (DataError), the loss, the
-    sensor-pose option and the trim fraction (ValueError), some wheel moves (DataError), the
+    sensor-pose option and the trim fraction (ValueError), some wheel moves (DataError), no
+    segment that no robot drives (:mod:`excite.logs.segment_bounds`, DataError), the
     wiring (:func:`excite.calibration.wiring.check_wiring`, DataError), sigma (ValueError)."""
     seg = segments if isinstance(segments, Segments) else Segments.from_array(segments)
     if len(seg) < 3:
@@ -101,5 +103,11 @@ def checked_inputs(segments: Segments | ArrayLike, sigma: ArrayLike | None,
         raise ValueError(f"trim must be a fraction in [0, 0.5), got {trim}")
     if not np.any(seg.dphi_L) and not np.any(seg.dphi_R):
         raise DataError("no segment moves: every wheel increment is 0")
+    rows = seg.as_array()
+    if seg.t_start is not None and seg.t_end is not None:
+        rows = np.column_stack([rows, seg.t_start, seg.t_end])
+    impossible = first_impossible(rows)
+    if impossible is not None:
+        raise DataError(f"segment {impossible[0]}: {impossible[1]}")
     check_wiring(seg)
     return seg, None if sigma is None else as_sigma(sigma)

@@ -42,6 +42,7 @@ from excite.logs.csv_table import (
     plain_header,
     read_columns,
 )
+from excite.logs.segment_bounds import first_impossible
 
 __all__ = [
     "COLUMNS",
@@ -256,13 +257,14 @@ def _looks_like_tuples(text: str) -> bool:
     return False
 
 
-def _csv_rows(name: str, text: str, on_note: OnNote | None = None) -> FloatArray:
+def _csv_rows(name: str, text: str, on_note: OnNote | None = None
+              ) -> tuple[FloatArray, list[int]]:
     """Rows (n, 5) of a segment CSV in column order, or (n, 7) with the time columns the
-    header names, in base units; on_note told the columns not read and the units converted.
-    DataError naming file and line if malformed."""
+    header names, in base units, and each row's line; on_note told the columns not read and
+    the units converted. DataError naming file and line if malformed."""
     numbers, lines = content_lines(text)
     if not lines:
-        return np.zeros((0, len(COLUMNS)))
+        return np.zeros((0, len(COLUMNS))), []
     delimiter = delimiter_of(lines[0])
     if is_header(header_fields(lines[0], delimiter), delimiter):
         header = _segment_header(lines[0], f"{name}:{numbers[0]}")
@@ -273,7 +275,7 @@ def _csv_rows(name: str, text: str, on_note: OnNote | None = None) -> FloatArray
         header = plain_header(COLUMNS, delimiter)
     values, _ = read_columns(name, numbers, lines, header)
     order = [header.labels.index(c) for c in COLUMNS + TIME_COLUMNS if c in header.labels]
-    return values[:, order]
+    return values[:, order], list(numbers)
 
 
 def _segments(rows: ArrayLike) -> Segments:
@@ -388,10 +390,15 @@ def _load_rows(path: str | os.PathLike[str], on_note: OnNote | None = None
         rows = _tuple_rows(name, text)
         if not rows:
             raise DataError(f"{name}: no segments (the tuple file has no JSON objects)")
+        where = [f"{name}: object {k + 1}" for k in range(len(rows))]
     else:
-        rows = _csv_rows(name, text, on_note)
+        rows, numbers = _csv_rows(name, text, on_note)
         if not len(rows):
             raise DataError(f"{name}: no segments (the file is empty or has only a header)")
+        where = [f"{name}:{line}" for line in numbers]
+    impossible = first_impossible(np.asarray(rows, dtype=float))
+    if impossible is not None:
+        raise DataError(f"{where[impossible[0]]}: {impossible[1]}")
     return name, rows
 
 
@@ -413,8 +420,8 @@ def load_segments(path: str | os.PathLike[str], *, on_note: OnNote | None = None
     Raises DataError naming the file (and line, and for a tuple file the object number) for:
     a missing or unreadable file, binary content, a header that is not a segment CSV's, a
     unit that does not fit its column, a wrong column count, text or NaN/inf in a number,
-    decimal commas and points mixed, invalid JSON, a missing or bad key, T <= 0, fewer than
-    3 segments.
+    decimal commas and points mixed, invalid JSON, a missing or bad key, T <= 0, a segment
+    no robot drives (:mod:`excite.logs.segment_bounds`), fewer than 3 segments.
     """
     name, rows = _load_rows(path, on_note)
     if len(rows) < MIN_SEGMENTS:

@@ -156,15 +156,19 @@ def test_just_outside_the_bounds_is_implausible(values):
         plausible_params(values, "", "--init")
 
 
-@pytest.mark.parametrize("scale, fragment", [
-    ((1.0, 1.0, 1000.0, 1000.0, 1.0), "positions in millimetres read as metres? (a robot "
-                                       "with r_L 0.05"),
-    ((1.0, 1.0, 100.0, 100.0, 1.0), "positions in centimetres read as metres?"),
-    ((180 / math.pi, 180 / math.pi, 1.0, 1.0, 1.0), "wheel angles in degrees read as "
-                                                     "radians? (a robot with r_L 0.05"),
+@pytest.mark.parametrize("scale, fragments", [
+    ((1.0, 1.0, 100.0, 100.0, 1.0), ("the calibration gives a wheel radius of",
+                                     "which no real robot has: positions in centimetres read "
+                                     "as metres? (a robot with r_L 0.05")),
+    ((180 / math.pi, 180 / math.pi, 1.0, 1.0, 1.0), (
+        "which no real robot has: wheel angles in degrees read as radians? (a robot with "
+        "r_L 0.05",)),
+    # beyond any robot row by row: refused as the file is read
+    ((1.0, 1.0, 1000.0, 1000.0, 1.0), (":2: the sensor moved ", "rows are: values in other "
+                                       "units? (excite reads m and rad")),
 ])
 def test_a_log_in_other_units_is_a_one_line_error_naming_them(capsys, tmp_path, scale,
-                                                               fragment):
+                                                               fragments):
     """Positions in mm or cm, or wheel angles in degrees, calibrate to wheel parameters no
     real robot has: refused, never 'use these values' (nor a controller file)."""
     seg = lesson_dataset(np.random.default_rng(4), 100, sigma=(1e-3, 1e-3, 1e-3))
@@ -172,8 +176,34 @@ def test_a_log_in_other_units_is_a_one_line_error_naming_them(capsys, tmp_path, 
     save_segments(path, type(seg)(*(seg.as_array() * np.array(scale)).T))
     code, out, err = run_cli(capsys, "calibrate", path, "--ros2-yaml", tmp_path / "c.yaml")
     assert out == "" and not (tmp_path / "c.yaml").exists()
-    assert_one_line_error(code, err, f"{path}: the calibration gives ", "which no real robot "
-                          "has: ", fragment)
+    assert_one_line_error(code, err, str(path), *fragments)
+
+
+@pytest.mark.parametrize("row, fragment", [
+    ((6.0, 5.7, 0.27, -0.1, -9999.0), ":5: dtheta_gt -9999 rad, more than any robot turns on "
+                                      "wheel increments of 6 and 5.7 rad (at most 24.3 rad): "
+                                      "a corrupt row or a missing-value sentinel?"),
+    ((6.0, 5.7, 1e300, -0.1, 0.2), ":5: the sensor moved 1e+300 m"),
+    ((1e200, 5.7, 0.27, -0.1, 0.2), ":5: dphi_L 1e+200 rad, more than any segment turns a "
+                                    "wheel (1e+06 rad)"),
+])
+def test_a_row_no_robot_drives_is_a_one_line_error_naming_its_line(capsys, tmp_path, rng,
+                                                                   row, fragment):
+    """One corrupt row decides a least-squares fit before any test of gross errors sees it
+    (it crashed the solver, or came back 'not determined' or 'use these values' with a std of
+    1e20 %): refused as the file is read, naming its line; the library's calibrate() says the
+    same of the segment."""
+    from excite import calibrate
+
+    rows = lesson_dataset(rng, 40).as_array()
+    rows[3] = row
+    path = tmp_path / "corrupt.csv"
+    save_segments(path, type(lesson_dataset(rng, 3))(*rows.T))
+    code, out, err = run_cli(capsys, "calibrate", path)
+    assert out == ""
+    assert_one_line_error(code, err, f"{path}{fragment}")
+    with pytest.raises(ExciteError, match="^segment 3: "):
+        calibrate(rows)
 
 
 # --------------------------------------------------------------------------- validate
