@@ -192,9 +192,11 @@ def _check_column_set(header: Header, where: str) -> None:
                             f"the header names {header.found()}{_hint(header)}")
 
 
-def _check_empty_cells(table: _Table) -> None:
-    """t is always filled; each stream's cells in a row are all filled or all empty; a row
-    fills at least one stream."""
+def _checked_cells(table: _Table, note: OnNote) -> _Table:
+    """The table after checking that t is always filled and each stream's cells in a row are
+    all filled or all empty; a row that fills no stream is an error, unless the file has
+    columns not read (a merged export whose other topics have rows of their own): such rows
+    are then left out, and ``note`` told how many."""
     groups = [g for g in (table.encoder_columns, POSE_COLUMNS if table.has_pose else None) if g]
     t_empty = table.empty[:, table.columns.index("t")]
     if t_empty.any():
@@ -209,9 +211,15 @@ def _check_empty_cells(table: _Table) -> None:
             raise DataError(f"{table.name}:{table.lines[row]}: {column} is empty but other "
                             f"{'/'.join(group)} cells are not")
         filled_any |= ~empty[:, 0]
-    if not filled_any.all():
+    if filled_any.all():
+        return table
+    if not table.header.ignored:
         row = int(np.argmin(filled_any))
         raise DataError(f"{table.name}:{table.lines[row]}: the row has only a time, no values")
+    note(f"{table.name}: {int(np.sum(~filled_any))} rows with values only in the columns not "
+         "read left out")
+    return replace(table, values=table.values[filled_any], empty=table.empty[filled_any],
+                   lines=table.lines[filled_any])
 
 
 def _read_table(path: PathArg, note: OnNote) -> _Table:
@@ -231,8 +239,7 @@ def _read_table(path: PathArg, note: OnNote) -> _Table:
     if table.header is not header:
         note(f"{name}: theta is the yaw of the quaternion "
              f"{', '.join(c for c in QUATERNION_COLUMNS if c in header.labels)}")
-    _check_empty_cells(table)
-    return table
+    return _checked_cells(table, note)
 
 
 def _heading_of_quaternion(table: _Table) -> _Table:

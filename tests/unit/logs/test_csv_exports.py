@@ -128,6 +128,26 @@ def test_columns_not_read_are_named_in_a_note_and_never_parsed(tmp_path, plain):
     assert notes == [f"{trailing}: columns not read: (unnamed column 7)"]
 
 
+def test_rows_of_the_columns_not_read_alone_are_left_out_with_a_note(tmp_path, plain):
+    """A merged export of several topics: a battery sample on a row of its own (only a time
+    and the battery) is left out, and a note counts them; without columns not read, a row
+    with only a time is still an error naming its line."""
+    path, header, rows = plain
+    table = [header + ["battery"]]
+    for k, row in enumerate(rows):
+        table.append(row + [""])
+        if k % 3 == 0:
+            table.append([f"{float(row[0]) + 1e-4:.6f}"] + [""] * (len(header) - 1) + ["12.3"])
+    merged = tmp_path / "merged.csv"
+    merged.write_text("\n".join(",".join(r) for r in table) + "\n")
+    series, notes = read(merged)
+    assert_same(series, read_timeseries(path))
+    skipped = len(table) - 1 - len(rows)
+    assert notes == [f"{merged}: columns not read: battery",
+                     f"{merged}: {skipped} rows with values only in the columns not read "
+                     "left out"]
+
+
 @pytest.mark.parametrize("names, planar, length", [
     (("qx", "qy", "qz", "qw"), False, 1.0),
     (("orientation.x", "orientation.y", "orientation.z", "orientation.w"), False, 2.5),
