@@ -273,6 +273,12 @@ def _csv_rows(name: str, text: str, on_note: OnNote | None = None
         numbers, lines = numbers[1:], lines[1:]
     else:
         header = plain_header(COLUMNS, delimiter)
+        width = len(header_fields(lines[0], delimiter))
+        if width != len(COLUMNS):
+            raise DataError(f"{name}:{numbers[0]}: {width} columns and no header: a segment "
+                            f"CSV has {len(COLUMNS)} ({','.join(COLUMNS)}; a header names "
+                            "any others), a time-series CSV needs its header "
+                            "(t,phi_L,phi_R,x,y,theta)")
     values, _ = read_columns(name, numbers, lines, header)
     order = [header.labels.index(c) for c in COLUMNS + TIME_COLUMNS if c in header.labels]
     return values[:, order], list(numbers)

@@ -39,6 +39,9 @@ def test_round_trip_is_exact(tmp_path, rng):
         (HEADER, "no segments"),
         (HEADER + "1,1,0.05,0,0\n2,2,0.1,0,0\n", "2 segment(s); at least 3"),
         (HEADER + ROWS + "1,2,3,4\n", ":5: expected 5 columns, found 4"),
+        ("0,0,0,0,0,0\n1,1,1,0.05,0,0\n", ":1: 6 columns and no header: a segment CSV has 5 "
+         "(dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt; a header names any others), a time-series "
+         "CSV needs its header (t,phi_L,phi_R,x,y,theta)"),
         (HEADER + ROWS + "1,2,3,4,5,6\n", ":5: expected 5 columns, found 6"),
         (ROWS + "1,2,abc,4,5\n", ":4: dx_gt is not a number: 'abc'"),
         (ROWS + "1,2,3,nan,5\n", ":4: dy_gt is not finite: 'nan'"),
