@@ -34,7 +34,8 @@ from excite.logs.timeseries import Stream, TimeSeries
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
 __all__ = ["Limits", "Gap", "StreamCheck", "check_continuity", "check_encoders", "check_poses",
-           "excursions", "find_gaps", "refuse_long_gaps", "flagged_overlaps", "pose_noise"]
+           "excursions", "off_track", "find_gaps", "refuse_long_gaps", "flagged_overlaps",
+           "pose_noise"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -211,6 +212,14 @@ def excursions(ts: TimeSeries, poses: StreamCheck, limits: Limits,
                 k = m + 1
                 break
     return np.flatnonzero(off).astype(np.int64)
+
+
+def off_track(ts: TimeSeries, limits: Limits | None = None) -> IntArray:
+    """The pose samples off the track of a log followed whole (:func:`excursions`, gaps
+    not considered), with the default ``limits``."""
+    limits = limits or Limits()
+    noise = pose_noise(ts)
+    return excursions(ts, check_poses(ts, math.inf, limits, noise), limits, noise)
 
 
 #: What most often makes each stream jump, for the messages about a jump.

@@ -23,7 +23,7 @@ from typing import Literal
 
 from excite.errors import DataError
 from excite.logs.bag_reader import JOINT_STATES, bag_path_problem, is_bag_path, read_bag_log
-from excite.logs.continuity import check_continuity
+from excite.logs.continuity import check_continuity, off_track
 from excite.logs.segmentation import SegmentedLog, segment_timeseries
 from excite.logs.segments import Segments, check_not_utf16, load_segments
 from excite.logs.time_offset import (
@@ -32,7 +32,7 @@ from excite.logs.time_offset import (
     estimate_time_offset,
     noticeable_time_offset,
 )
-from excite.logs.timeseries import TimeSeries, during, unwrapped_words
+from excite.logs.timeseries import TimeSeries, during, unwrapped_words, without_poses
 from excite.logs.timeseries_csv import header_hint, read_timeseries, timeseries_streams
 
 __all__ = ["LogOptions", "DEFAULT_LOG_OPTIONS", "Input", "Log", "Part", "OnNote",
@@ -255,6 +255,11 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
     series, skipped = _read_series(source, options, note)
     series = during(series, options.start, options.end)
     if whole:
+        off = off_track(series)
+        if off.size:
+            series = without_poses(series, off)
+            note(f"{source.name}: {off.size} pose sample(s) off the track (out and back beyond "
+                 "the jump limits: a marker swap or a bad match) left out")
         check_continuity(series)
         unwrapped = unwrapped_words(series.unwrapped_wheels, series.unwrapped_counters)
         if unwrapped:

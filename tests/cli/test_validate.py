@@ -367,6 +367,31 @@ def test_a_log_that_jumps_is_not_dead_reckoned(capsys, tmp_path, noisy_log, para
     assert_one_line_error(code, err, fragment.format(line=k + 2))
 
 
+def test_pose_samples_off_the_track_are_left_out_of_dead_reckoning(capsys, tmp_path,
+                                                                   noisy_log, params_file):
+    """A marker swap (two samples 0.5 m off, then back on the track) is no relocalisation:
+    the samples are left out with a note and the log is validated, the line of a later real
+    jump still named right."""
+    series = noisy_log.series
+    k = int(np.searchsorted(series.t_pose, series.t_pose[0] + 10.0))
+    x = series.x.copy()
+    x[k:k + 2] += 0.5
+    swapped = TimeSeries(series.t_enc, series.phi_L, series.phi_R, series.t_pose, x,
+                         series.y, series.theta)
+    files = write_log(tmp_path, "log", swapped)
+    code, out, err = run_cli(capsys, "validate", *files, "--params", params_file, "--nominal",
+                             "0.05,0.05,0.3")
+    assert code in (0, 7), err
+    assert "2 pose sample(s) off the track" in err and "verdict" in out
+    j = int(np.searchsorted(series.t_pose, series.t_pose[0] + 20.0))
+    x[j:] += 0.5  # and a relocalisation later on
+    files = write_log(tmp_path, "log2", TimeSeries(series.t_enc, series.phi_L, series.phi_R,
+                                                   series.t_pose, x, series.y, series.theta))
+    code, _, err = run_cli(capsys, "validate", *files, "--params", params_file, "--nominal",
+                           "0.05,0.05,0.3")
+    assert code == 2 and f"log2.pose.csv:{j + 2}: the pose jumps" in err
+
+
 def test_a_counter_that_overflows_is_unwrapped_and_said_so(capsys, tmp_path, params_file):
     """validate follows a 16-bit tick counter through its overflows (as calibrate does) and says
     so on stderr, since it prints no segmentation report."""
