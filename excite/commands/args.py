@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+from collections.abc import Sequence
 from pathlib import Path
 
 from excite.core.plausible import (
@@ -16,13 +18,14 @@ from excite.core.plausible import (
     RADIUS_RANGE,
     TYPICAL_RADIUS,
     TYPICAL_SEPARATION,
+    implausible_mounting,
     typical,
 )
 from excite.errors import ExciteError
 
 __all__ = ["PARAMS_VALUES", "SIGMA_VALUES", "POSE_VALUES", "POSE_NOISE_VALUES", "UsageError",
            "floats", "sigma_arg", "params_arg", "plausible_params",
-           "sensor_pose_arg",
+           "sensor_pose_arg", "check_not_an_input",
            "pose_noise_arg",
            "fraction_arg", "positive_int", "nonnegative_int", "env_id", "robot_preset",
            "output_folder", "check_parent_folder", "check_output_file"]
@@ -151,9 +154,14 @@ def sensor_pose_arg(text: str, option: str = "--sensor-pose"):
     if len(parts) != 3:
         raise UsageError(f"{option} must be {expected} (m, m, rad), got {text!r}")
     try:
-        return SensorPose(*map(float, parts))
+        pose = SensorPose(*map(float, parts))
     except ValueError:
         raise UsageError(f"{option}: {POSE_VALUES} must be finite numbers, got {text!r}") from None
+    what = implausible_mounting(pose.x, pose.y)
+    if what is not None:
+        raise UsageError(f"{option} {text}: {what} is implausible ({POSE_VALUES} are in m, m, "
+                         "rad)")
+    return pose
 
 
 def pose_noise_arg(text: str) -> tuple[float, float]:
@@ -247,3 +255,19 @@ def check_output_file(out: Path) -> None:
     if out.is_dir():
         raise UsageError(f"cannot write {out}: it is a folder; give a file name")
     check_parent_folder(out)
+
+
+def check_not_an_input(out: str | os.PathLike[str], inputs: Sequence[str | os.PathLike[str]],
+                       option: str) -> None:
+    """UsageError when the output ``out`` (of ``option``) is one of the ``inputs`` (the same
+    file, by any name): writing it would destroy the input."""
+    if not os.path.exists(out):
+        return
+    for path in inputs:
+        try:
+            same = os.path.samefile(out, path)
+        except OSError:  # an input that is no file (checked where it is read)
+            continue
+        if same:
+            raise UsageError(f"{option} {out} is the input {path}: writing it would overwrite "
+                             f"the input; choose another {option}")

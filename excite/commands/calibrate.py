@@ -13,6 +13,7 @@ from excite.commands.args import (
     POSE_VALUES,
     SIGMA_VALUES,
     UsageError,
+    check_not_an_input,
     fraction_arg,
     params_arg,
     sensor_pose_arg,
@@ -81,6 +82,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.force_yaml and not args.ros2_yaml:
         raise UsageError("--force-yaml needs --ros2-yaml OUT.yaml")
+    if args.ros2_yaml:
+        check_not_an_input(args.ros2_yaml, args.files, "--ros2-yaml")
     if args.target_confidence is not None and args.target is None:
         raise UsageError("--target-confidence needs --target")
     sigma = sigma_arg(args.sigma) if args.sigma else None

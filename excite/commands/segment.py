@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 
-from excite.commands.args import UsageError
+from excite.commands.args import UsageError, check_not_an_input
 from excite.commands.exit_status import EXIT_OK
 from excite.commands.logs import LOG_FILES, add_log_options
 
@@ -36,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from excite.logs.inputs import segment_logs
     from excite.logs.segments import Segments, save_segments
 
+    check_not_an_input(args.out, args.logs, "--out")
     parts = segment_logs(args.logs, log_options(args), on_note=print_note)
     segments = Segments.concatenate([part.segments for part in parts])
     try:

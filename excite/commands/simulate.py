@@ -90,6 +90,7 @@ def _check_output(args: argparse.Namespace, out: Path) -> None:
         check_parent_folder(out)
     else:
         check_output_file(out)
+    check_output_file(truth_path(out))  # before the log is written: never one without it
     if args.storage is not None and args.format != "bag":
         raise UsageError("--storage applies to --format bag")
     if args.pose_noise is not None and args.format == "segments":

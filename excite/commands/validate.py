@@ -12,11 +12,14 @@ from excite.commands.args import (
     PARAMS_VALUES,
     POSE_VALUES,
     UsageError,
+    check_not_an_input,
     params_arg,
+    plausible_params,
     sensor_pose_arg,
 )
 from excite.commands.exit_status import EXIT_OK, EXIT_USAGE, EXIT_WORSE
 from excite.commands.logs import LOG_FILES, add_log_options
+from excite.core.plausible import implausible_mounting
 from excite.validation.verdict import MARGIN
 
 #: What ``excite validate --help`` says the command does.
@@ -64,6 +67,17 @@ def run(args: argparse.Namespace) -> int:
     from excite.validation.dead_reckoning import read_params_file
 
     result_file = read_params_file(args.params)
+    for key, params in (("params", result_file.params), ("nominal", result_file.nominal)):
+        if params is not None:  # as --init and --nominal are checked
+            values = tuple(float(v) for v in params.as_array())
+            plausible_params(values, ",".join(f"{v:g}" for v in values),
+                             f'{args.params}: "{key}"')
+    pose = result_file.sensor_pose
+    what = None if pose is None else implausible_mounting(pose.x, pose.y)
+    if what is not None:
+        raise UsageError(f'{args.params}: "sensor_pose": {what} is implausible')
+    if args.plot:
+        check_not_an_input(args.plot, [*args.logs, args.params], "--plot")
     nominal_params = (params_arg(args.nominal, "--nominal") if args.nominal
                       else result_file.nominal)
     if nominal_params is None:

@@ -4,20 +4,24 @@ of a log recorded in other units than excite reads (positions in mm, wheel angle
 
 Bounds (m): each wheel radius in :data:`RADIUS_RANGE`, the two radii within a factor
 :data:`MAX_RADIUS_RATIO` of each other, the wheel separation longer than the larger radius and
-at most :data:`MAX_SEPARATION`. Hints name a unit when the values converted from it fall in the
-typical ranges (:data:`TYPICAL_RADIUS`, :data:`TYPICAL_SEPARATION`).
+at most :data:`MAX_SEPARATION`; a sensor's offset from the axle midpoint at most
+:data:`MAX_SENSOR_OFFSET` in x and y. Hints name a unit when the values converted from it fall
+in the typical ranges (:data:`TYPICAL_RADIUS`, :data:`TYPICAL_SEPARATION`).
 """
 
 from __future__ import annotations
 
 import math
 
-__all__ = ["RADIUS_RANGE", "MAX_RADIUS_RATIO", "MAX_SEPARATION", "TYPICAL_RADIUS",
-           "TYPICAL_SEPARATION", "implausible", "typical", "log_unit_hint"]
+__all__ = ["RADIUS_RANGE", "MAX_RADIUS_RATIO", "MAX_SEPARATION", "MAX_SENSOR_OFFSET",
+           "TYPICAL_RADIUS", "TYPICAL_SEPARATION", "implausible", "implausible_mounting",
+           "typical", "log_unit_hint"]
 
 RADIUS_RANGE = (0.005, 2.0)
 MAX_RADIUS_RATIO = 2.0
 MAX_SEPARATION = 20.0
+#: m: no sensor is mounted farther from the axle midpoint (in x or y).
+MAX_SENSOR_OFFSET = MAX_SEPARATION
 TYPICAL_RADIUS = (0.01, 1.0)
 TYPICAL_SEPARATION = (0.05, 5.0)
 
@@ -53,6 +57,15 @@ def implausible(r_L: float, r_R: float, b: float) -> str | None:
     if b <= max(r_L, r_R):
         return (f"a wheel separation of {b:.4g} m, no longer than the wheel radius "
                 f"{max(r_L, r_R):.4g} m")
+    return None
+
+
+def implausible_mounting(x: float, y: float) -> str | None:
+    """What about a sensor mounting (m, body frame) no robot has, in words; None when
+    nothing."""
+    if max(abs(x), abs(y)) > MAX_SENSOR_OFFSET:
+        return (f"a sensor {max(abs(x), abs(y)):.4g} m from the axle midpoint (at most "
+                f"{MAX_SENSOR_OFFSET:g} m)")
     return None
 
 
