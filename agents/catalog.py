@@ -14,7 +14,6 @@ A new protocol (e.g. a slip-aware planner) is one more registry entry, or a call
 
 from __future__ import annotations
 
-import importlib
 import inspect
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
@@ -24,6 +23,7 @@ import numpy as np
 
 from agents.protocols import Protocol, ProtocolError, Value, check_action, resolve_settings
 from excite.errors import one_line_repr
+from excite.plugins import import_user_module
 
 __all__ = ["PROTOCOLS", "ProtocolError", "ProtocolSpec", "register", "protocol_class",
            "parse_protocol", "parse_protocols", "check_distinct", "make_protocol", "with_policy",
@@ -119,7 +119,7 @@ def protocol_class(name: str) -> type[Protocol]:
                             "or give module:Class")
     module_name, _, attribute = entry_point.partition(":")
     try:
-        module = importlib.import_module(module_name)
+        module = import_user_module(module_name)
     except Exception as exc:
         if (isinstance(exc, ModuleNotFoundError) and exc.name is not None
                 and module_name.startswith(exc.name)):

@@ -355,10 +355,11 @@ def _resumable_rows(out_dir: Path, settings: CompareSettings,
     """The complete rows already in ``out_dir`` that this run may keep, and the digests of the
     protocols' files (label -> sha256, for those that name files), after checking
     DIR/config.json (read once, written once when it changes): the settings must be the
-    stored ones (a CompareError otherwise), and each protocol's results are tied to the
-    content of the files its settings name (a learned policy): a protocol whose files changed
-    since its results were made is a CompareError (resuming would mix or silently reuse
-    results of another policy); the digests of the others are recorded."""
+    stored ones (a CompareError otherwise; rows without a config.json too), and each
+    protocol's results are tied to the content of the files its settings name (a learned
+    policy): a protocol whose files changed since its results were made is a CompareError
+    (resuming would mix or silently reuse results of another policy); the digests of the
+    others are recorded."""
     config = out_dir / "config.json"
     stored = _read_config(config)
     if stored is not None:
@@ -371,6 +372,9 @@ def _resumable_rows(out_dir: Path, settings: CompareSettings,
                 "and --target-confidence")
     rows = read_complete_rows(out_dir / "segments.csv", settings.segments,
                               settings.final_only, settings.target is not None)
+    if stored is None and rows:
+        raise CompareError(f"{out_dir / 'segments.csv'} holds results but {config} is missing: "
+                           "cannot tell which settings made them; use another --out")
     known = dict((stored or {}).get(FILES_KEY, {}))
     present = {row["protocol"] for row in rows}
     for spec in specs:

@@ -23,7 +23,6 @@ is estimated; sigma (sigma_x [m], sigma_y [m], sigma_theta [rad])).
 
 from __future__ import annotations
 
-import importlib
 import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -38,6 +37,7 @@ from excite.errors import EstimatorError, one_line_repr
 from excite.estimators.ekf import ExtendedKalmanFilter
 from excite.estimators.online import OnlineEstimator
 from excite.estimators.window import SlidingWindowSmoother
+from excite.plugins import import_user_module
 
 __all__ = [
     "DEFAULT_ESTIMATOR",
@@ -221,7 +221,7 @@ def _import_factory(spec: str) -> Callable[..., Estimator]:
     """The callable ``factory`` of ``module:factory`` (attribute paths may be dotted)."""
     module_name, _, path = spec.partition(":")
     try:
-        target = importlib.import_module(module_name)
+        target = import_user_module(module_name)
     except Exception as exc:  # a user's module (built-ins are never imported here)
         raise EstimatorError(f"estimator {spec!r}: cannot import module {module_name!r} "
                              f"({type(exc).__name__}: {exc})") from None

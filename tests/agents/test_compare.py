@@ -436,6 +436,17 @@ def test_run_comparison_rejects_no_or_repeated_estimators(tmp_path):
 
 
 @pytest.mark.slow
+def test_resume_refuses_results_without_their_settings(tmp_path):
+    """Rows whose config.json is gone cannot be tied to their settings: a run with another
+    seed reused seed 0's episodes and labelled them seed 5 (found by fuzzing)."""
+    out = tmp_path / "run"
+    run_comparison(out, ["arcs"], 2, CompareSettings(IDEAL, 3, 0), workers=1, progress=False)
+    (out / "config.json").unlink()
+    with pytest.raises(CompareError, match="holds results but .*config.json is missing"):
+        run_comparison(out, ["arcs"], 2, CompareSettings(IDEAL, 3, 5), workers=1,
+                       progress=False)
+
+
 def test_resume_refuses_results_of_a_policy_file_changed_at_the_same_path(tmp_path):
     """The label learned:policy=PATH names a path, not a policy: a file retrained at the same
     path must not reuse the old file's results (the folder ties them to its sha256)."""

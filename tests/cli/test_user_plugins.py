@@ -306,3 +306,19 @@ def test_a_policy_file_changed_during_a_comparison_stops_it(plugins, tmp_path, c
     assert "its files here differ from those the comparison started with" in message
     rows = (tmp_path / "c" / "segments.csv").read_text().splitlines()
     assert len(rows) == 1 + 2  # the header and episode 0's two segments
+
+
+def test_the_installed_command_finds_a_user_module_in_the_working_folder():
+    """The console script `excite` (not `python -m excite.cli`) does not put the working
+    folder on sys.path: `cd examples; excite protocols custom_protocol:Sweep`, as the README
+    says, failed with "no module named 'custom_protocol'" (found by fuzzing)."""
+    import subprocess
+    from pathlib import Path
+
+    command = Path(sys.executable).with_name("excite")
+    assert command.exists(), "the package is installed with its console script"
+    examples = Path(__file__).resolve().parents[2] / "examples"
+    done = subprocess.run([str(command), "protocols", "custom_protocol:Sweep"], cwd=examples,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("custom_protocol:Sweep")
