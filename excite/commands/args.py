@@ -25,7 +25,7 @@ from excite.errors import ExciteError
 
 __all__ = ["PARAMS_VALUES", "SIGMA_VALUES", "POSE_VALUES", "POSE_NOISE_VALUES", "UsageError",
            "floats", "sigma_arg", "params_arg", "plausible_params",
-           "sensor_pose_arg", "check_not_an_input",
+           "sensor_pose_arg", "check_not_an_input", "check_writable",
            "pose_noise_arg",
            "fraction_arg", "positive_int", "nonnegative_int", "env_id", "robot_preset",
            "output_folder", "check_parent_folder", "check_output_file"]
@@ -271,3 +271,18 @@ def check_not_an_input(out: str | os.PathLike[str], inputs: Sequence[str | os.Pa
         if same:
             raise UsageError(f"{option} {out} is the input {path}: writing it would overwrite "
                              f"the input; choose another {option}")
+
+
+def check_writable(out: Path) -> None:
+    """UsageError unless the file ``out`` can be written now (opened for appending; a file
+    this creates is removed again): for results written only after a long run, such as a
+    live session on a robot."""
+    check_output_file(out)
+    existed = out.exists()
+    try:
+        with open(out, "a"):
+            pass
+    except OSError as exc:
+        raise UsageError(f"cannot write {out}: {exc.strerror or exc}") from None
+    if not existed:
+        out.unlink()

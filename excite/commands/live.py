@@ -11,7 +11,7 @@ from excite.commands.args import (
     PARAMS_VALUES,
     POSE_VALUES,
     UsageError,
-    check_output_file,
+    check_writable,
     floats,
     params_arg,
     positive_number,
@@ -234,8 +234,8 @@ def run(args: argparse.Namespace) -> int:
     settings = settings_from(args)
     protocol, observe = _protocol(args.protocol, settings)
     for path in (args.out, Path(args.ros2_yaml) if args.ros2_yaml else None):
-        if path is not None:
-            check_output_file(path)
+        if path is not None:  # before the robot moves: the results come after the drive
+            check_writable(path)
     if args.record is not None and args.record.exists():
         raise UsageError(f"cannot record to {args.record}: it exists")
     if args.force_yaml and not args.ros2_yaml:
@@ -262,22 +262,30 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if recorder is not None:
             recorder.__exit__(None, None, None)
-    _report(args, result, settings)
+    unwritten = _report(args, result, settings)
     if failure is not None:
         raise failure
+    if unwritten is not None:
+        raise unwritten
     return {"done": EXIT_OK, "out_of_time": EXIT_OUT_OF_TIME}.get(
         result.outcome, EXIT_INTERRUPTED if result.reason == INTERRUPTED else EXIT_ABORTED)
 
 
-def _report(args: argparse.Namespace, result, settings) -> None:
+def _report(args: argparse.Namespace, result, settings) -> UsageError | None:
     """A finished session's result: the JSON file and output, the closing lines and the
-    calibration's report, the note on the recorded bag, the ROS 2 parameter file."""
+    calibration's report, the note on the recorded bag, the ROS 2 parameter file; the error
+    when the JSON file could not be written (all the rest is shown all the same)."""
     from excite.commands.logs import print_note
     from excite.live.report import closing_lines, result_dict
 
     report = result_dict(result, settings.nominal)
+    unwritten = None  # the report is printed and the parameters written all the same
     if args.out is not None:
-        args.out.write_text(json.dumps(report, indent=2) + "\n")
+        try:
+            args.out.write_text(json.dumps(report, indent=2) + "\n")
+        except OSError as exc:
+            unwritten = UsageError(f"cannot write {args.out}: {exc.strerror or exc} (the "
+                                   "session's report is printed above)")
     if args.json:
         print(json.dumps(report, indent=2))
     else:
@@ -298,6 +306,7 @@ def _report(args: argparse.Namespace, result, settings) -> None:
 
         export_yaml(args, result.calibration, settings.nominal,
                     calibration_status(result.calibration))
+    return unwritten
 
 
 def _recorder(path: Path | None):

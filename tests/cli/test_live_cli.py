@@ -48,6 +48,20 @@ def test_live_refuses_an_output_in_a_missing_folder(capsys, tmp_path):
     assert_one_line_error(code, err, "no such directory")
 
 
+def test_live_refuses_an_output_it_cannot_write_before_the_robot_moves(capsys, tmp_path):
+    """The result files are written after the drive: one the system refuses (here /proc) is
+    an error before the session, not an internal error after it with the report lost. An
+    output that can be written is left as it was (nothing created by the check)."""
+    code, _, err = run_cli(capsys, "live", *TOPICS, "--robot", "default", "--out",
+                           "/proc/excite-live.json")
+    assert_one_line_error(code, err, "cannot write /proc/excite-live.json")
+    code, _, err = run_cli(capsys, "live", *TOPICS, "--robot", "default", "--ros2-yaml",
+                           "/proc/excite-live.yaml")
+    assert_one_line_error(code, err, "cannot write /proc/excite-live.yaml")
+    run_cli(capsys, "live", *TOPICS, "--robot", "default", "--out", tmp_path / "r.json")
+    assert not (tmp_path / "r.json").exists()
+
+
 #: Bad sim-robot options and the words of their error.
 BAD_SIM_ROBOT = {
     "--cut pose:1": "--cut",
