@@ -137,7 +137,7 @@ def load_tuned(path: str | Path) -> dict:
         document = json.loads(Path(path).read_text())
     except OSError as exc:
         raise TunedError(f"cannot read tuned settings {path}: {exc.strerror}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError):
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError):
         raise TunedError(f"{path}: not valid JSON") from None
     required = {"excite_tuned": int, "env_id": str, "segments": int, "robot": str,
                 "tuning_seeds": list, "protocols": dict}
@@ -151,6 +151,9 @@ def load_tuned(path: str | Path) -> dict:
     for label, entry in document["protocols"].items():
         if not (isinstance(entry, dict) and isinstance(entry.get("settings"), dict)):
             raise TunedError(f"{path}: protocol {label!r} has no settings")
+    if not all(isinstance(seed, int) and not isinstance(seed, bool)
+               for seed in document["tuning_seeds"]):
+        raise TunedError(f"{path}: tuning_seeds must be a list of integers (episode seeds)")
     return document
 
 

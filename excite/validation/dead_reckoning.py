@@ -459,6 +459,8 @@ def _numbers(path: str, value: object, key: str, names: tuple[str, ...], positiv
     numbers = []
     for name in names:
         number = value.get(name)
+        if isinstance(number, int) and not isinstance(number, bool):
+            number = float(number) if abs(number) < 2**1023 else math.inf  # no OverflowError
         if (isinstance(number, bool) or not isinstance(number, int | float)
                 or not math.isfinite(number) or (positive and number <= 0)):
             raise DataError(f"{path}: {key}.{name} must be {what}, got {json.dumps(number)}")
@@ -476,6 +478,8 @@ def read_params_file(path: str) -> ParamsFile:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise DataError(f"{path}:{exc.lineno}: not valid JSON: {exc.msg}") from None
+    except RecursionError:
+        raise DataError(f"{path}: not valid JSON: nested too deeply") from None
     if not isinstance(data, dict):
         raise DataError(f"{path}: expected a JSON object (the output of excite calibrate "
                         "--json)")

@@ -222,6 +222,12 @@ def test_compare_refuses_tuned_settings_chosen_on_its_own_episodes(tmp_path, cap
     path.write_text("{not json")
     code, _, err = run_cli(capsys, "compare", "--tuned", path, "--out", tmp_path / "c")
     assert_one_line_error(code, err, "not valid JSON")
+    path.write_text("[" * 100_000 + "]" * 100_000)  # nested too deeply for the parser
+    code, _, err = run_cli(capsys, "compare", "--tuned", path, "--out", tmp_path / "c")
+    assert_one_line_error(code, err, "not valid JSON")
+    path.write_text(json.dumps({**forged, "tuning_seeds": [[1], [2]]}))
+    code, _, err = run_cli(capsys, "compare", "--tuned", path, "--out", tmp_path / "c")
+    assert_one_line_error(code, err, "tuning_seeds must be a list of integers")
     code, _, err = run_cli(capsys, "tune", "--out", tmp_path / "tuned.txt")
     assert_one_line_error(code, err, "--out must name a .json file")
 

@@ -292,6 +292,10 @@ GOOD = '{"params": {"r_L": 0.05, "r_R": 0.05, "b": 0.3}}'
 
 @pytest.mark.parametrize("content, options, fragments", [
     (None, NOMINAL_OPTION, ["missing.json", "no such file"]),
+    ('{"params": {"r_L": 1' + "0" * 400 + ', "r_R": 0.05, "b": 0.3}}', NOMINAL_OPTION,
+     ["result.json: params.r_L must be a positive length in meters, got Infinity"]),
+    ("[" * 100_000 + "]" * 100_000, NOMINAL_OPTION, ["result.json: not valid JSON: nested too "
+                                                     "deeply"]),
     ("{not json", NOMINAL_OPTION, ["result.json:1", "not valid JSON"]),
     ("[1, 2]", NOMINAL_OPTION, ["result.json", "JSON object"]),
     ('{"sensor_pose": null}', NOMINAL_OPTION, ["result.json", "params"]),
