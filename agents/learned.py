@@ -82,13 +82,24 @@ class LearnedPolicy(Protocol):
                 errors.append(f"{algo.__name__}: {exc}")
         else:
             raise ProtocolError(f"{path}: not a stable-baselines3 policy ({errors[0][:200]})")
+        if not all(bool(torch.isfinite(p).all()) for p in self.model.policy.parameters()):
+            raise ProtocolError(f"{path}: the policy's weights are not finite (NaN or inf): "
+                                "its training diverged")
         norm_path = normalization_path(path)
         try:
             with open(norm_path, "rb") as handle:
-                self.normalization: VecNormalize = pickle.load(handle)
-        except (OSError, pickle.UnpicklingError, EOFError, AttributeError) as exc:
+                normalization = pickle.load(handle)
+        except Exception as exc:  # noqa: BLE001 (unpickling raises any kind on a bad file)
             raise ProtocolError(f"{norm_path}: cannot load the observation normalization "
-                                f"saved with the policy ({exc})") from None
+                                f"saved with the policy ({type(exc).__name__}: "
+                                f"{str(exc)[:200]})") from None
+        rms = getattr(normalization, "obs_rms", None)
+        if not isinstance(normalization, VecNormalize) or np.shape(
+                getattr(rms, "mean", None)) != tuple(self.model.observation_space.shape):
+            raise ProtocolError(f"{norm_path}: not the observation normalization of this "
+                                "policy (a VecNormalize of its observations' shape "
+                                f"{tuple(self.model.observation_space.shape)})")
+        self.normalization: VecNormalize = normalization
         self.path = path
         space = self.model.action_space
         if not (isinstance(space, Box) and space.shape == (2,)):

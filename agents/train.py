@@ -31,6 +31,7 @@ from __future__ import annotations
 import importlib.util
 import inspect
 import json
+import math
 import time
 import warnings
 from collections.abc import Iterator, Mapping
@@ -115,6 +116,8 @@ def read_yaml(path: Path, what: str, error: type[ExciteError]) -> Any:
         return yaml.load(path.read_text(), Loader=_UniqueKeyLoader)  # noqa: S506 (safe)
     except OSError as exc:
         raise error(f"cannot read {what} {path}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise error(f"{path}: not a text file (a {what} is YAML text)") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" (line {mark.line + 1})" if mark is not None else ""
@@ -187,6 +190,28 @@ def check_config(config: Mapping[str, Any], source: Path | str) -> None:
             raise fail(name, f"must be a whole number, got {value!r}")
         if key == "learning_rate" and not (_is_number(value) and value > 0):
             raise fail(name, f"must be a positive number, got {value!r}")
+        if key in _AT_LEAST_ONE and not _is_whole(value, 1):
+            raise fail(name, f"must be a whole number >= 1, got {value!r}")
+    for section in ("hyperparams", "policy_kwargs"):
+        for key, value in config.get(section, {}).items():
+            if not _finite(value):
+                raise fail(f"{section}.{key}", f"must be finite, got {value!r}")
+
+
+#: Hyperparameters that count something every update needs at least one of.
+_AT_LEAST_ONE = frozenset({"n_steps", "batch_size", "n_epochs", "train_freq"})
+
+
+def _finite(value: Any) -> bool:
+    """Whether every number in ``value`` (nested lists and mappings too) is finite: a NaN
+    or an infinite hyperparameter trains a policy of NaN weights without an error."""
+    if isinstance(value, float):
+        return math.isfinite(value)
+    if isinstance(value, Mapping):
+        return all(_finite(v) for v in value.values())
+    if isinstance(value, list | tuple):
+        return all(_finite(v) for v in value)
+    return True
 
 
 def _is_number(value: Any) -> bool:

@@ -84,6 +84,35 @@ def test_bad_policy_files_are_one_line_errors(tmp_path, capsys):
     assert code == 2 and "invalid choice: 'dqn'" in capsys.readouterr().err
 
 
+def test_a_policy_of_nan_weights_or_a_foreign_normalization_is_a_one_line_error(tmp_path):
+    """A policy whose training diverged (NaN weights) or whose NAME.vecnormalize.pkl is
+    garbage, another policy's or not a VecNormalize: named when loaded, never an internal
+    error in the middle of a comparison (found by fuzzing)."""
+    import pickle
+    import shutil
+
+    import torch
+    from stable_baselines3 import PPO
+
+    from agents.learned import SHIPPED_POLICY
+    from agents.train import normalization_path
+
+    policy = tmp_path / "p.zip"
+    shutil.copy(SHIPPED_POLICY, policy)
+    for content, fragment in [(b"garbage", "cannot load the observation normalization"),
+                              (pickle.dumps({"a": 1}), "not the observation normalization")]:
+        normalization_path(policy).write_bytes(content)
+        with pytest.raises(ProtocolError, match=fragment):
+            make_protocol(f"learned:policy={policy}")
+    shutil.copy(normalization_path(SHIPPED_POLICY), normalization_path(policy))
+    model = PPO.load(str(policy), device="cpu")
+    with torch.no_grad():
+        next(model.policy.parameters()).fill_(float("nan"))
+    model.save(str(policy))
+    with pytest.raises(ProtocolError, match="weights are not finite"):
+        make_protocol(f"learned:policy={policy}")
+
+
 def test_native_vec_env_adapter_resets_in_the_same_step():
     """SB3's conventions on the native vector env: the step that ends an episode returns the
     next episode's first observation, the last one in terminal_observation, and marks the
@@ -189,7 +218,10 @@ def test_configs_extend_others_and_bad_configs_are_errors(tmp_path):
 
 def _yaml(tmp_path, name, document):
     path = tmp_path / name
-    path.write_text(document if isinstance(document, str) else yaml.safe_dump(document))
+    if isinstance(document, bytes):
+        path.write_bytes(document)
+    else:
+        path.write_text(document if isinstance(document, str) else yaml.safe_dump(document))
     return path
 
 
@@ -282,6 +314,10 @@ BAD_CONFIGS = [
     ("hyperparams: {n_steps: lots}\n", "hyperparams.n_steps: must be a number, got 'lots'"),
     ("hyperparams: {n_steps: 64.5}\n", "hyperparams.n_steps: must be a whole number"),
     ("hyperparams: {learning_rate: -1}\n", "hyperparams.learning_rate: must be a positive"),
+    ("hyperparams: {n_epochs: 0}\n", "hyperparams.n_epochs: must be a whole number >= 1, got 0"),
+    ("hyperparams: {gae_lambda: .nan}\n", "hyperparams.gae_lambda: must be finite, got nan"),
+    ("hyperparams: {learning_rate: .inf}\n", "hyperparams.learning_rate: must be finite"),
+    ("policy_kwargs: {log_std_init: .nan}\n", "policy_kwargs.log_std_init: must be finite"),
     ("algo: sac\n", "hyperparams.n_epochs: not an argument of SAC (algo: sac; a ppo config?"),
     ("algo: dqn\n", "algo: unknown algorithm 'dqn'"),
     ("env_id: excite/Nope-v0\n", "env_id/env_kwargs/robots: Environment `Nope` doesn't exist"),
@@ -314,6 +350,7 @@ def test_bad_training_config_is_a_one_line_error_naming_file_and_key(tmp_path, c
         ("extends: ppo\nhyperparams:\n  gamma: 0.9\n  gamma: 0.99\n",
          "bad.yaml: not valid YAML (line 4): duplicate key 'gamma'"),
         ("- a list\n", "training config {tmp}/bad.yaml must be a mapping"),
+        (b"\x80\x81\xfe binary", "bad.yaml: not a text file (a training config is YAML text)"),
         ("", "bad.yaml: env_id: required"),
     ],
 )
