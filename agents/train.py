@@ -6,7 +6,7 @@ Layout of the output folder ``DIR``::
     DIR/checkpoints/ckpt_<N>_steps.zip (+ ckpt_vecnormalize_<N>_steps.pkl)   every checkpoint_freq
     DIR/best_model.zip (+ best_model.vecnormalize.pkl)  best evaluation on held-out robots
     DIR/final_model.zip (+ final_model.vecnormalize.pkl)
-    DIR/monitor/                      Monitor episode logs;  DIR/eval/evaluations.npz
+    DIR/eval/evaluations.npz          the evaluations on held-out robots (EvalCallback)
     DIR/train_summary.json            timesteps, wall time, fps
     DIR/tensorboard/                  when tensorboard is installed
 

@@ -193,7 +193,9 @@ def add_run_folder(parser: argparse.ArgumentParser, text: str) -> None:
 
 
 def run_folder(args: argparse.Namespace) -> Path:
-    """The folder of :func:`add_run_folder`; UsageError when it is a file."""
+    """The folder of :func:`add_run_folder`; UsageError when it is empty or a file."""
+    if not args.out.strip():  # Path("") is the working folder
+        raise UsageError("--out is empty; give a folder")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out} is a file, not a folder")

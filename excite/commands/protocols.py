@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import re
 
+from excite.commands.args import UsageError
 from excite.commands.exit_status import EXIT_OK
 
 SYNTAX = ("Write a protocol NAME[:KEY=VALUE...] (e.g. umbmark:speed=0.2), a user's protocol "
@@ -24,6 +25,12 @@ def run(args: argparse.Namespace) -> int:
     from agents.catalog import PROTOCOLS, protocol_class
 
     names = args.names or list(PROTOCOLS)
+    for name in names:
+        registered = name.partition(":")[0]
+        if ":" in name and registered in PROTOCOLS:
+            raise UsageError(f"{name}: excite protocols takes a name ({registered}) or a "
+                             "user's module:Class; settings (NAME:KEY=VALUE) go where a "
+                             "protocol runs (compare, simulate, live)")
     classes = {name: protocol_class(name) for name in names}
     rows = {name: [(p.name, p.kind.__name__, p.format(p.default) or '""',
                     f"[{p.format(p.low)}, {p.format(p.high)}]" if p.low is not None else "",

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from excite.commands.args import (
     PARAMS_VALUES,
@@ -21,6 +22,9 @@ from excite.commands.exit_status import EXIT_OK, EXIT_USAGE, EXIT_WORSE
 from excite.commands.logs import LOG_FILES, add_log_options
 from excite.core.plausible import implausible_mounting
 from excite.validation.verdict import MARGIN
+
+#: The image formats --plot writes, by its suffix.
+PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg")
 
 #: What ``excite validate --help`` says the command does.
 DESCRIPTION = """Dead-reckon each log's encoders (exact arcs between encoder samples, from the log's
@@ -53,8 +57,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      "default: the calibrated one, so that the comparison measures the wheel "
                      "calibration")
     val.add_argument("--plot", metavar="OUT.png",
-                     help="write an overlay of the measured, nominal and calibrated paths "
-                     "(needs the sim extra: matplotlib); default: no plot")
+                     help="write an overlay of the measured, nominal and calibrated paths, "
+                     "as .png, .pdf, .svg or .jpg by the suffix (needs the sim extra: "
+                     "matplotlib); default: no plot")
     val.add_argument("--json", action="store_true",
                      help="print one JSON object instead of the report")
     add_log_options(val, segmentation=False)
@@ -76,7 +81,10 @@ def run(args: argparse.Namespace) -> int:
     what = None if pose is None else implausible_mounting(pose.x, pose.y)
     if what is not None:
         raise UsageError(f'{args.params}: "sensor_pose": {what} is implausible')
-    if args.plot:
+    if args.plot is not None:
+        if Path(args.plot).suffix.lower() not in PLOT_SUFFIXES:
+            raise UsageError(f"--plot {args.plot!r}: name a {', '.join(PLOT_SUFFIXES)} file "
+                             "(the suffix sets the format)")
         check_not_an_input(args.plot, [*args.logs, args.params], "--plot")
     nominal_params = (params_arg(args.nominal, "--nominal") if args.nominal
                       else result_file.nominal)
@@ -89,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     calibrated = (result_file.params, result_file.sensor_pose)
     result = validate_logs(args.logs, calibrated, (nominal_params, nominal_pose),
                            log_options(args), on_note=print_note).result
-    if args.plot:
+    if args.plot is not None:
         from excite.validation.plot import plot_validation
 
         try:
@@ -100,6 +108,6 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(result.to_dict(), indent=2))
     else:
         print(result.summary())
-        if args.plot:
+        if args.plot is not None:
             print(f"wrote the path overlay to {args.plot}")
     return EXIT_WORSE if result.verdict == "worse" else EXIT_OK

@@ -187,6 +187,13 @@ def _lone_stream(path: str, streams: frozenset[str]) -> DataError:
 
 
 def _not_a_log(source: Input) -> DataError:
+    """The error for an input that is no log: what reading it as a segment file finds
+    wrong (an empty file, a folder, binary data, a header of neither format), or that it is a
+    segment file."""
+    try:
+        load_segments(source.name)
+    except DataError as exc:
+        return exc
     return DataError(f"{source.name}: a segment file, not a time-series log or bag")
 
 

@@ -1,5 +1,6 @@
-"""The PNG of ``excite validate --plot``: per log, the measured sensor path (ground truth) and
-the paths dead-reckoned with the nominal and the calibrated robot, in the world frame (m).
+"""The image of ``excite validate --plot`` (PNG, PDF, SVG or JPEG by its suffix): per log, the
+measured sensor path (ground truth) and the paths dead-reckoned with the nominal and the
+calibrated robot, in the world frame (m).
 
 matplotlib (the ``sim`` extra) is imported when a plot is drawn, never with this module; the
 figure is rendered by the Agg canvas directly (no pyplot, no global backend switch).
@@ -19,9 +20,10 @@ MAX_POINTS = 5000
 
 
 def plot_validation(result: ValidationResult, path: str | os.PathLike[str]) -> None:
-    """Write a PNG with one panel per log: measured, nominal and calibrated sensor paths
-    (x, y in m, equal axes), the start marked, the end-point errors in the legend. Raises
-    OSError when the file cannot be written, ModuleNotFoundError without matplotlib."""
+    """Write an image (its format by the suffix) with one panel per log: measured, nominal and
+    calibrated sensor paths (x, y in m, equal axes), the start marked, the end-point errors in
+    the legend. Raises OSError when the file cannot be written, ModuleNotFoundError without
+    matplotlib."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -49,4 +51,4 @@ def plot_validation(result: ValidationResult, path: str | os.PathLike[str]) -> N
         axes.set_title("+".join(map(os.path.basename, log.file.split("+"))), fontsize=10)
         axes.grid(alpha=0.3)
         axes.legend(fontsize=8, loc="best")
-    figure.savefig(path, dpi=110, format="png")
+    figure.savefig(path, dpi=110)  # the format of its suffix

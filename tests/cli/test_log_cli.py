@@ -362,3 +362,32 @@ def test_slip_that_grows_with_acceleration_fails_the_fit(capsys, tmp_path, proto
     if code:
         assert fit["message"].startswith("r_L, r_R and b differ between the segments whose "
                                          "wheels speed up or slow down")
+
+
+@pytest.mark.parametrize("make, fragment", [
+    (lambda p: p.write_text(""), "empty.csv: no segments (the file is empty"),
+    (lambda p: p.mkdir(), "is a directory"),
+    (lambda p: p.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00"), "binary data"),
+    (lambda p: p.write_text("foo,bar\n1,2\n"), ":1: the header names 'foo', 'bar': neither a "
+                                              "segment CSV"),
+    (lambda p: p.write_text("dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt\n1,1,0.1,0,0\n"
+                            "2,2,0.2,0,0\n3,3,0.3,0,0\n"), "a segment file, not a "
+                                                         "time-series log or bag"),
+])
+def test_a_command_that_needs_a_log_names_what_is_wrong_with_another_input(capsys, tmp_path,
+                                                                           make, fragment):
+    """segment and validate need a time-series log or bag: an empty file, a folder, a picture
+    or a CSV of neither format was called "a segment file" (found by fuzzing); now each is
+    named for what it is."""
+    from tests.conftest import assert_one_line_error
+
+    path = tmp_path / "empty.csv"
+    make(path)
+    code, _, err = run_cli(capsys, "segment", path, "--out", tmp_path / "o.csv")
+    assert_one_line_error(code, err, fragment)
+    from tests.cli.test_validate import write_params
+
+    params = write_params(tmp_path / "p.json", Params(0.05, 0.051, 0.3), None)
+    code, _, err = run_cli(capsys, "validate", path, "--params", params, "--nominal",
+                           "0.05,0.05,0.3")
+    assert_one_line_error(code, err, fragment)

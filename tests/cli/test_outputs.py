@@ -70,9 +70,9 @@ def test_validate_checks_the_values_of_its_params_file(capsys, tmp_path, log_csv
     code, _, err = run_cli(capsys, "validate", log_csv, "--params", far)
     assert_one_line_error(code, err, 'far.json: "sensor_pose": a sensor 1e+300 m from the '
                           "axle midpoint (at most 20 m) is implausible")
-    good = write_params(tmp_path / "good.json", TRUTH, None,
+    good = write_params(tmp_path / "good.svg", TRUTH, None,  # a name --plot could write
                         nominal={"r_L": 0.05, "r_R": 0.05, "b": 0.3})
-    code, _, err = run_cli(capsys, "validate", log_csv, "--params", good, "--plot", log_csv)
+    code, _, err = run_cli(capsys, "validate", log_csv, "--params", good, "--plot", good)
     assert_one_line_error(code, err, "--plot", "is the input")
     json.loads(good.read_text())  # untouched
 
@@ -83,3 +83,16 @@ def test_an_implausible_sensor_mounting_option_is_a_one_line_error(capsys, tmp_p
     code, _, err = run_cli(capsys, "calibrate", path, "--sensor-pose", "100,0,0")
     assert_one_line_error(code, err, "--sensor-pose 100,0,0: a sensor 100 m from the axle "
                           "midpoint (at most 20 m) is implausible")
+
+
+@pytest.mark.parametrize("command", [["train"], ["sweep", "sweep.yaml"]])
+def test_an_empty_run_folder_is_a_one_line_error(capsys, command):
+    """Path('') is the working folder: a sweep wrote its whole folder there (found by
+    fuzzing); compare already refused an empty --out."""
+    code, _, err = run_cli(capsys, *command, "--out", "")
+    assert_one_line_error(code, err, "--out is empty; give a folder")
+
+
+def test_protocols_with_settings_names_the_syntax(capsys):
+    code, _, err = run_cli(capsys, "protocols", "arcs:speed=0.2")
+    assert_one_line_error(code, err, "arcs:speed=0.2: excite protocols takes a name (arcs)")

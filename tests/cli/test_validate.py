@@ -266,6 +266,14 @@ def test_params_from_calibrate_and_plot(capsys, tmp_path, rng, log_files):
                              "0.05,0.05,0.3", "--plot", png)
     assert code == 0 and err == "" and str(png) in out
     assert png.read_bytes()[:8] == PNG_SIGNATURE
+    pdf = tmp_path / "overlay.pdf"  # the suffix sets the format
+    code, _, _ = run_cli(capsys, "validate", *log_files, "--params", params, "--nominal",
+                         "0.05,0.05,0.3", "--plot", pdf)
+    assert code == 0 and pdf.read_bytes()[:5] == b"%PDF-"
+    for bad in ("overlay.gif", ""):
+        code, _, err = run_cli(capsys, "validate", *log_files, "--params", params,
+                               "--nominal", "0.05,0.05,0.3", "--plot", bad)
+        assert_one_line_error(code, err, f"--plot {bad!r}: name a .png, .pdf, .svg, .jpg file")
 
 
 @pytest.mark.slow
