@@ -82,6 +82,11 @@ class LearnedPolicy(Protocol):
                 errors.append(f"{algo.__name__}: {exc}")
         else:
             raise ProtocolError(f"{path}: not a stable-baselines3 policy ({errors[0][:200]})")
+        space = self.model.action_space
+        if not (isinstance(space, Box) and space.shape == (2,)):
+            raise ProtocolError(f"{path}: the policy's actions are {space}, not two wheel-speed "
+                                "commands (a Box of shape (2,)): it was not trained on excite's "
+                                "environments")
         if not all(bool(torch.isfinite(p).all()) for p in self.model.policy.parameters()):
             raise ProtocolError(f"{path}: the policy's weights are not finite (NaN or inf): "
                                 "its training diverged")
@@ -101,11 +106,6 @@ class LearnedPolicy(Protocol):
                                 f"{tuple(self.model.observation_space.shape)})")
         self.normalization: VecNormalize = normalization
         self.path = path
-        space = self.model.action_space
-        if not (isinstance(space, Box) and space.shape == (2,)):
-            raise ProtocolError(f"{path}: the policy's actions are {space}, not two wheel-speed "
-                                "commands (a Box of shape (2,)): it was not trained on excite's "
-                                "environments")
         self.observation_shape = tuple(self.model.observation_space.shape)
 
     def incompatibility(self, observation_shape: tuple[int, ...]) -> str | None:
