@@ -25,7 +25,7 @@ from excite.errors import ExciteError
 
 __all__ = ["PARAMS_VALUES", "SIGMA_VALUES", "POSE_VALUES", "POSE_NOISE_VALUES", "UsageError",
            "floats", "sigma_arg", "params_arg", "plausible_params",
-           "sensor_pose_arg", "check_not_an_input", "check_writable",
+           "sensor_pose_arg", "check_not_an_input", "check_writable", "seed_int",
            "pose_noise_arg",
            "fraction_arg", "positive_int", "nonnegative_int", "env_id", "robot_preset",
            "output_folder", "check_parent_folder", "check_output_file"]
@@ -207,6 +207,18 @@ def positive_int(text: str) -> int:
 def nonnegative_int(text: str) -> int:
     """A whole number >= 0 (argparse type)."""
     return _whole_number(text, 0)
+
+
+#: Seeds are below this: numpy's legacy seeding (stable-baselines3, Ray) takes 32 bits.
+SEED_LIMIT = 2**32
+
+
+def seed_int(text: str) -> int:
+    """A seed: a whole number in [0, SEED_LIMIT) (argparse type)."""
+    value = _whole_number(text, 0)
+    if value >= SEED_LIMIT:
+        raise argparse.ArgumentTypeError(f"must be below 2**32 = {SEED_LIMIT}, got {value}")
+    return value
 
 
 def env_id(text: str) -> str:

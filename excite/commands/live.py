@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 from excite.commands.args import (
@@ -156,7 +157,9 @@ def _robot(args: argparse.Namespace):
     from excite.contracts import Traction
     from excite.core.arena import DEFAULT_CHASSIS
 
-    if (args.nominal is None) == (args.robot is None):
+    if args.nominal is not None and args.robot is not None:
+        raise UsageError("give --nominal or --robot, not both (--robot sets the nominal robot)")
+    if args.nominal is None and args.robot is None:
         raise UsageError("give the nominal robot: --nominal RL,RR,B (with --max-wheel-speed) "
                          "or --robot PRESET")
     if args.robot is not None:
@@ -208,8 +211,17 @@ def settings_from(args: argparse.Namespace):
             max_wheel_acceleration=args.max_wheel_accel,
             sensor_pose=sensor_pose_arg(args.sensor_pose),
             **{field: getattr(args, field) for _, field, _, _ in _SESSION_NUMBERS})
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    except ValueError as exc:  # named as the options that set the fields
+        message = str(exc)
+        for field, flag in _OPTION_OF.items():
+            message = re.sub(rf"\b{field}\b", flag, message)
+        raise UsageError(message) from None
+
+
+#: The option that sets each field of LiveSettings, for its errors.
+_OPTION_OF = {field: flag for flag, field, _, _ in _SESSION_NUMBERS} | {
+    "speed_fraction": "--speed-fraction", "max_wheel_acceleration": "--max-wheel-accel",
+    "max_wheel_speed": "--max-wheel-speed", "radius": "--radius"}
 
 
 def _protocol(text: str, settings):

@@ -19,9 +19,9 @@ from typing import TYPE_CHECKING, Any
 from excite.commands.args import (
     UsageError,
     env_id,
-    nonnegative_int,
     positive_int,
     robot_preset,
+    seed_int,
 )
 from excite.registration import DEFAULT_BUDGET, DEFAULT_ENV_ID, ENTRY_POINT, ENV_IDS
 from excite.stopping import DEFAULT_CONFIDENCE
@@ -75,9 +75,9 @@ def add_result_options(parser, nominal: str) -> None:
 
 
 def add_seed_option(parser: argparse.ArgumentParser, text: str) -> None:
-    """--seed S, a whole number >= 0 (default DEFAULT_SEED); ``text`` is its help: what it
-    seeds."""
-    parser.add_argument("--seed", type=nonnegative_int, default=DEFAULT_SEED, metavar="S",
+    """--seed S, a whole number in [0, 2**32) (default DEFAULT_SEED); ``text`` is its help:
+    what it seeds."""
+    parser.add_argument("--seed", type=seed_int, default=DEFAULT_SEED, metavar="S",
                         help=text)
 
 

@@ -17,10 +17,10 @@ from excite.commands.args import (
     check_output_file,
     check_parent_folder,
     env_id,
-    nonnegative_int,
     pose_noise_arg,
     positive_int,
     robot_preset,
+    seed_int,
 )
 from excite.commands.exit_status import EXIT_OK
 from excite.commands.options import (
@@ -57,7 +57,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      "for the env's segment duration")
     add_seed_option(sim, "seed of the episode: hidden robot, sensor mounting, start, noise and "
                     "the protocol's draws (default %(default)s)")
-    sim.add_argument("--robot-seed", type=nonnegative_int, metavar="R",
+    sim.add_argument("--robot-seed", type=seed_int, metavar="R",
                      help="drive the hidden robot and sensor mounting of seed R's episode "
                      "(default: --seed's): logs with other --seed and one --robot-seed are "
                      "logs of one robot (e.g. held-out logs for excite validate)")

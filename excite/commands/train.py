@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from excite.commands.args import UsageError, nonnegative_int, positive_int
+from excite.commands.args import UsageError, positive_int, seed_int
 from excite.commands.exit_status import EXIT_OK
 from excite.commands.options import add_run_folder, run_folder
 
@@ -30,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      "environments (default %(default)s)")
     trn.add_argument("--n-envs", type=positive_int, default=None, metavar="E",
                      help="parallel environments (default: the config's n_envs)")
-    trn.add_argument("--seed", type=nonnegative_int, default=None, metavar="S",
+    trn.add_argument("--seed", type=seed_int, default=None, metavar="S",
                      help="seed of the training (default: the config's seed, else 0)")
     trn.add_argument("--config", metavar="FILE.yaml",
                      help="training config: hyperparameters, environments, evaluation "

@@ -364,6 +364,9 @@ def test_bad_train_options_are_one_line_errors(tmp_path, capsys):
     afile = _yaml(tmp_path, "afile", "x")
     code, _, err = run_cli(capsys, "train", "--seed", "-1", "--out", tmp_path / "o")
     assert_one_line_error(code, err, "--seed: must be at least 0")
+    for command in ("train", "compare", "simulate"):  # numpy's legacy seeding takes 32 bits
+        code, _, err = run_cli(capsys, command, "--seed", str(2**32), "--out", tmp_path / "o")
+        assert_one_line_error(code, err, "--seed: must be below 2**32")
     code, _, err = run_cli(capsys, "train", "--out", afile)
     assert_one_line_error(code, err, f"--out {afile} is a file, not a folder")
     code, _, err = run_cli(capsys, "train", "--out", tmp_path / "o", "--resume")

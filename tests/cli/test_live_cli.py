@@ -11,13 +11,13 @@ TOPICS = ["--left-wheel", "l", "--right-wheel", "r", "--pose-topic", "/pose"]
 @pytest.mark.parametrize("args, words", [
     ([], "--nominal RL,RR,B"),
     (["--nominal", "0.05,0.05,0.3"], "--max-wheel-speed"),
-    (["--nominal", "0.05,0.05,0.3", "--robot", "default"], "--nominal"),
+    (["--nominal", "0.05,0.05,0.3", "--robot", "default"], "give --nominal or --robot, not both"),
     (["--nominal", "5,5,30", "--max-wheel-speed", "20"], "--nominal"),
     (["--robot", "default", "--area", "0,0,1"], "--area"),
     (["--robot", "default", "--area", "1,0,0,1"], "X0 < X1"),
     (["--robot", "default", "--area", "0,0,1,1", "--radius", "1"], "--area or --radius"),
     (["--robot", "default", "--rate", "10"], "at least 20 Hz"),
-    (["--robot", "default", "--speed-fraction", "1.5"], "speed_fraction"),
+    (["--robot", "default", "--speed-fraction", "1.5"], "--speed-fraction must be in (0, 1]"),
     (["--robot", "default", "--target", "2"], "target"),
     (["--robot", "default", "--target", "0"], "--target"),
     (["--nominal", "0.05,0.05,0.3", "--max-wheel-speed", "20"], "slip_aware needs"),
@@ -28,7 +28,8 @@ TOPICS = ["--left-wheel", "l", "--right-wheel", "r", "--pose-topic", "/pose"]
     (["--robot", "default", "--force-yaml"], "--force-yaml needs --ros2-yaml"),
     (["--robot", "default", "--sensor-pose", "1,2"], "--sensor-pose"),
     (["--robot", "default", "--silence-timeout", "5", "--abort-timeout", "1"],
-     "abort_timeout"),
+     "--abort-timeout must be at least --silence-timeout"),
+    (["--robot", "default", "--target-confidence", "1"], "--target-confidence must be in (0, 1)"),
 ])
 def test_bad_live_input(capsys, args, words):
     code, _, err = run_cli(capsys, "live", *TOPICS, *args)
