@@ -366,10 +366,11 @@ def _resumable_rows(out_dir: Path, settings: CompareSettings,
         compared = {**asdict(CompareSettings()), **stored}  # keys added since: defaults
         compared.pop(FILES_KEY, None)
         if compared != asdict(settings):
-            raise CompareError(
-                f"{out_dir} holds a comparison with other settings ({compared}); "
-                "use another --out or the same --env, --segments, --seed, --robot, --target "
-                "and --target-confidence")
+            differ = ", ".join(f"{key} {compared[key]!r} (now {value!r})"
+                               for key, value in asdict(settings).items()
+                               if compared.get(key) != value)
+            raise CompareError(f"{out_dir} holds episodes of other settings: {differ}; use "
+                               "another --out or the same settings")
     rows = read_complete_rows(out_dir / "segments.csv", settings.segments,
                               settings.final_only, settings.target is not None)
     if stored is None and rows:

@@ -4,7 +4,6 @@ plus each segment's time span)."""
 from __future__ import annotations
 
 import argparse
-import sys
 
 import numpy as np
 
@@ -49,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
                              initial_estimate(segments))
     worst, typical = float(error.max()), float(np.median(error))
     print(f"wrote {len(segments)} segments to {args.out}")
-    print(f"each row is one arc: within the segments the curvature changes, and one arc per "
-          f"segment misses the motion by up to {worst:.2e} m (median {typical:.2e} m); "
-          "excite calibrate on the log itself composes the sub-steps", file=sys.stderr)
+    print_note(f"each row is one arc: within the segments the curvature changes, and one arc "
+               f"per segment misses the motion by up to {worst:.2e} m (median {typical:.2e} "
+               "m); excite calibrate on the log itself composes the sub-steps")
     return EXIT_OK

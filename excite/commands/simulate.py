@@ -31,6 +31,7 @@ from excite.commands.options import (
 )
 from excite.logs.bag_reader import BAG_SUFFIXES, JOINT_STATES
 from excite.logs.bag_writer import LEFT_WHEEL, POSE_TOPIC, RIGHT_WHEEL, STORAGES
+from excite.logs.segments import TUPLE_SUFFIX
 
 FORMATS = ("segments", "timeseries", "bag")
 #: What ``excite simulate --help`` says the command does.
@@ -91,6 +92,9 @@ def _check_output(args: argparse.Namespace, out: Path) -> None:
     else:
         check_output_file(out)
     check_output_file(truth_path(out))  # before the log is written: never one without it
+    if args.format != "bag" and out.suffix.lower() in (*BAG_SUFFIXES, TUPLE_SUFFIX):
+        raise UsageError(f"--format {args.format} writes a CSV; a {out.suffix} name would be "
+                         "read as another format: name it .csv (or --format bag)")
     if args.storage is not None and args.format != "bag":
         raise UsageError("--storage applies to --format bag")
     if args.pose_noise is not None and args.format == "segments":

@@ -153,7 +153,8 @@ def test_rerun_adds_only_what_is_missing_and_rejects_other_settings(tmp_path):
     rows = run_comparison(tmp_path, ["spin", "arcs"], 3, settings, workers=2, progress=False)
     keys = [(r["protocol"], r["episode"], r["segment"]) for r in _rows_parsed(tmp_path, 4)]
     assert len(keys) == len(set(keys)) == 2 * 3 * 4 == len(rows)
-    with pytest.raises(CompareError, match="other settings"):
+    with pytest.raises(CompareError, match=r"other settings: segments 4 \(now 5\); use "
+                       "another --out or the same settings"):
         run_comparison(tmp_path, ["spin"], 1, CompareSettings(IDEAL, 5, 0), progress=False)
 
 

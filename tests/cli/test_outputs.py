@@ -96,3 +96,12 @@ def test_an_empty_run_folder_is_a_one_line_error(capsys, command):
 def test_protocols_with_settings_names_the_syntax(capsys):
     code, _, err = run_cli(capsys, "protocols", "arcs:speed=0.2")
     assert_one_line_error(code, err, "arcs:speed=0.2: excite protocols takes a name (arcs)")
+
+
+@pytest.mark.parametrize("name", ["run.tuple", "run.bag", "run.mcap"])
+def test_simulate_refuses_a_name_of_another_format(capsys, tmp_path, name):
+    """A segment CSV written as run.tuple was read back as a tuple file (found by fuzzing)."""
+    code, _, err = run_cli(capsys, "simulate", "--protocol", "arcs", "--segments", "3",
+                           "--out", tmp_path / name)
+    assert_one_line_error(code, err, "writes a CSV; a ", "name it .csv")
+    assert not any(tmp_path.iterdir())
