@@ -103,10 +103,9 @@ def checked_inputs(segments: Segments | ArrayLike, sigma: ArrayLike | None,
         raise ValueError(f"trim must be a fraction in [0, 0.5), got {trim}")
     if not np.any(seg.dphi_L) and not np.any(seg.dphi_R):
         raise DataError("no segment moves: every wheel increment is 0")
-    rows = seg.as_array()
-    if seg.t_start is not None and seg.t_end is not None:
-        rows = np.column_stack([rows, seg.t_start, seg.t_end])
-    impossible = first_impossible(rows)
+    timed = seg.t_start is not None and seg.t_end is not None
+    impossible = first_impossible(seg.dphi_L, seg.dphi_R, seg.dx, seg.dy, seg.dtheta,
+                                  seg.t_end - seg.t_start if timed else None)
     if impossible is not None:
         raise DataError(f"segment {impossible[0]}: {impossible[1]}")
     check_wiring(seg)

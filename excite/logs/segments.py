@@ -402,7 +402,8 @@ def _load_rows(path: str | os.PathLike[str], on_note: OnNote | None = None
         if not len(rows):
             raise DataError(f"{name}: no segments (the file is empty or has only a header)")
         where = [f"{name}:{line}" for line in numbers]
-    impossible = first_impossible(np.asarray(rows, dtype=float))
+    a = np.asarray(rows, dtype=float)
+    impossible = first_impossible(*a[:, :5].T, a[:, 6] - a[:, 5] if a.shape[1] >= 7 else None)
     if impossible is not None:
         raise DataError(f"{where[impossible[0]]}: {impossible[1]}")
     return name, rows
