@@ -366,9 +366,10 @@ def _resumable_rows(out_dir: Path, settings: CompareSettings,
         compared = {**asdict(CompareSettings()), **stored}  # keys added since: defaults
         compared.pop(FILES_KEY, None)
         if compared != asdict(settings):
-            differ = ", ".join(f"{key} {compared[key]!r} (now {value!r})"
-                               for key, value in asdict(settings).items()
-                               if compared.get(key) != value)
+            now = asdict(settings)
+            differ = ", ".join(f"{key} {compared.get(key)!r} (now {now.get(key)!r})"
+                               for key in sorted(set(now) | set(compared))
+                               if compared.get(key) != now.get(key))
             raise CompareError(f"{out_dir} holds episodes of other settings: {differ}; use "
                                "another --out or the same settings")
     rows = read_complete_rows(out_dir / "segments.csv", settings.segments,

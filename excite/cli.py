@@ -136,13 +136,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
         return EXIT_OK
-    except OSError as exc:
-        if exc.filename is None or os.environ.get("EXCITE_DEBUG"):
-            raise
-        # a path the system refuses (no such folder, a name too long, a read-only place):
-        # the user's input, not a bug
-        print(f"excite: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
-        return EXIT_USAGE
     except KeyboardInterrupt:
         print("excite: interrupted (compare, tune and sweep keep finished work: re-run the "
               "same command to continue)", file=sys.stderr)
@@ -154,6 +147,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             return EXIT_USAGE
         if os.environ.get("EXCITE_DEBUG"):
             raise
+        if isinstance(exc, OSError) and exc.filename is not None:
+            # a path the system refuses (no such folder, a name too long, a read-only
+            # place): the user's input, not a bug
+            print(f"excite: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
+            return EXIT_USAGE
         print(f"excite: internal error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return EXIT_FAILURE
 

@@ -183,12 +183,11 @@ def _shifts(fits: Fits, parts: list[IntArray]) -> tuple[list[int], FloatArray]:
     return whole, shift_statistics(fits, whole)
 
 
-def _joins(data: Segments, chosen: IntArray, k: int) -> bool:
-    """Whether segment ``k`` of ``data`` is chained to a neighbour among ``chosen``: the
-    sample they share is the bad one, and their runs join into one."""
-    chained = chained_mask(data)
+def _joins(chained: BoolArray, chosen: set[int], k: int) -> bool:
+    """Whether segment ``k`` is chained (``chained``, per segment) to a neighbour among
+    ``chosen``: the sample they share is the bad one, and their runs join into one."""
     return bool((k > 0 and chained[k] and k - 1 in chosen)
-                or (k + 1 < len(data) and chained[k + 1] and k + 1 in chosen))
+                or (k + 1 < chained.size and chained[k + 1] and k + 1 in chosen))
 
 
 def _runs(data: Segments, flagged: BoolArray) -> list[IntArray]:
@@ -284,10 +283,11 @@ def screen_chain(fits: Fits, refit: Callable[[Segments], Fits]
             break
         size = size[chosen]
         more, out = flagged.copy(), left_out.copy()
+        chained, picked = chained_mask(data), set(chosen.tolist())
         for c in chosen:
             if not more[parts[c]].all():
                 more[parts[c]] = True
-            elif _joins(data, chosen, int(c)):  # a repaired segment, a candidate again
+            elif _joins(chained, picked, int(c)):  # a repaired segment, a candidate again
                 grown[parts[c]] = True
             else:
                 out[parts[c]] = True

@@ -4,10 +4,11 @@ plus each segment's time span)."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 
-from excite.commands.args import UsageError, check_not_an_input
+from excite.commands.args import UsageError, check_not_an_input, check_output_file
 from excite.commands.exit_status import EXIT_OK
 from excite.commands.logs import LOG_FILES, add_log_options
 
@@ -35,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from excite.logs.inputs import segment_logs
     from excite.logs.segments import Segments, save_segments
 
+    check_output_file(Path(args.out))
     check_not_an_input(args.out, args.logs, "--out")
     parts = segment_logs(args.logs, log_options(args), on_note=print_note)
     segments = Segments.concatenate([part.segments for part in parts])

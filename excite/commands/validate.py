@@ -72,7 +72,9 @@ def run(args: argparse.Namespace) -> int:
     from excite.validation.dead_reckoning import read_params_file
 
     result_file = read_params_file(args.params)
-    for key, params in (("params", result_file.params), ("nominal", result_file.nominal)):
+    used = [("params", result_file.params)] + ([] if args.nominal else
+                                               [("nominal", result_file.nominal)])
+    for key, params in used:
         if params is not None:  # as --init and --nominal are checked
             values = tuple(float(v) for v in params.as_array())
             plausible_params(values, ",".join(f"{v:g}" for v in values),

@@ -30,12 +30,12 @@ from numpy.typing import NDArray
 
 from excite.core.kinematics import MAX_RADIUS_TO_TRACK
 from excite.errors import DataError
-from excite.logs.timeseries import Stream, TimeSeries
+from excite.logs.timeseries import Stream, TimeSeries, without_poses
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
 __all__ = ["Limits", "Gap", "StreamCheck", "check_continuity", "check_encoders", "check_poses",
-           "excursions", "off_track", "find_gaps", "refuse_long_gaps", "flagged_overlaps",
-           "pose_noise"]
+           "excursions", "left_on_track", "on_track", "find_gaps", "refuse_long_gaps",
+           "flagged_overlaps", "pose_noise"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -195,7 +195,8 @@ def excursions(ts: TimeSeries, poses: StreamCheck, limits: Limits,
     """The pose samples off the track (indices): each run of at most
     ``limits.max_excursion`` samples from a jump out to the first jump (``poses.jump``) after
     which the pose is back on the track, with no gap among them: the step from the sample
-    before the run to the sample after it is no jump."""
+    before the run to the sample after it is no jump (and turns less than pi, so that the
+    headings unwrap the same without the run)."""
     jumps = np.flatnonzero(poses.jump)
     gaps = np.concatenate(([0], np.cumsum(poses.gap)))
     off = np.zeros(ts.t_pose.size, dtype=bool)
@@ -207,19 +208,42 @@ def excursions(ts: TimeSeries, poses: StreamCheck, limits: Limits,
             back = int(jumps[m])  # the run: samples out + 1 .. back
             if back - out > limits.max_excursion or gaps[back + 1] != gaps[out]:
                 break
-            if not _jumps(ts, np.array([out]), np.array([back + 1]), limits, noise)[0]:
+            across = np.array([out]), np.array([back + 1])
+            # back on the track, and the heading across unambiguous to unwrap
+            if (not _jumps(ts, *across, limits, noise)[0]
+                    and abs(ts.theta[back + 1] - ts.theta[out]) < math.pi):
                 off[out + 1:back + 1] = True
                 k = m + 1
                 break
     return np.flatnonzero(off).astype(np.int64)
 
 
-def off_track(ts: TimeSeries, limits: Limits | None = None) -> IntArray:
-    """The pose samples off the track of a log followed whole (:func:`excursions`, gaps
-    not considered), with the default ``limits``."""
+def left_on_track(ts: TimeSeries, poses: StreamCheck, limits: Limits,
+                  noise: tuple[float, float]) -> tuple[TimeSeries, StreamCheck, int]:
+    """``ts`` without its pose samples off the track (:func:`excursions`), the pose stream's
+    check on the samples left, and how many were left out. The jumps are found again; a
+    bridged interval is a gap only where an interval it bridges was one (a sample left out is
+    no gap: an excursion holds none); the dropouts stay as counted on the stream as
+    recorded."""
+    off = excursions(ts, poses, limits, noise)
+    if not off.size:
+        return ts, poses, 0
+    kept = np.setdiff1d(np.arange(ts.t_pose.size), off)
+    thinned = without_poses(ts, off)
+    gaps = np.concatenate(([0], np.cumsum(poses.gap)))
+    bridged = gaps[kept[1:]] > gaps[kept[:-1]]
+    jump = _jumps(thinned, np.arange(kept.size - 1), np.arange(1, kept.size), limits, noise)
+    return thinned, StreamCheck(bridged, jump, poses.dropouts), int(off.size)
+
+
+def on_track(ts: TimeSeries, limits: Limits | None = None) -> tuple[TimeSeries, int]:
+    """A log followed whole without its pose samples off the track (:func:`left_on_track`,
+    with the default ``limits``), and how many were left out."""
     limits = limits or Limits()
     noise = pose_noise(ts)
-    return excursions(ts, check_poses(ts, math.inf, limits, noise), limits, noise)
+    thinned, _, count = left_on_track(ts, check_poses(ts, math.inf, limits, noise), limits,
+                                      noise)
+    return thinned, count
 
 
 #: What most often makes each stream jump, for the messages about a jump.

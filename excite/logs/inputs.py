@@ -23,16 +23,16 @@ from typing import Literal
 
 from excite.errors import DataError
 from excite.logs.bag_reader import JOINT_STATES, bag_path_problem, is_bag_path, read_bag_log
-from excite.logs.continuity import check_continuity, off_track
-from excite.logs.segmentation import SegmentedLog, segment_timeseries
-from excite.logs.segments import Segments, check_not_utf16, load_segments
+from excite.logs.continuity import check_continuity, on_track
+from excite.logs.segmentation import OFF_TRACK, SegmentedLog, segment_timeseries
+from excite.logs.segments import Segments, check_not_utf16, form_problem, load_segments
 from excite.logs.time_offset import (
     MAX_TIME_OFFSET,
     OffsetHint,
     estimate_time_offset,
     noticeable_time_offset,
 )
-from excite.logs.timeseries import TimeSeries, during, unwrapped_words, without_poses
+from excite.logs.timeseries import TimeSeries, during, unwrapped_words
 from excite.logs.timeseries_csv import header_hint, read_timeseries, timeseries_streams
 
 __all__ = ["LogOptions", "DEFAULT_LOG_OPTIONS", "Input", "Log", "Part", "OnNote",
@@ -187,14 +187,11 @@ def _lone_stream(path: str, streams: frozenset[str]) -> DataError:
 
 
 def _not_a_log(source: Input) -> DataError:
-    """The error for an input that is no log: what reading it as a segment file finds
-    wrong (an empty file, a folder, binary data, a header of neither format), or that it is a
-    segment file."""
-    try:
-        load_segments(source.name)
-    except DataError as exc:
-        return exc
-    return DataError(f"{source.name}: a segment file, not a time-series log or bag")
+    """The error for an input that is no log: what keeps it from being a segment file by its
+    form (an empty file, a folder, binary data, a header of neither format), or that it is
+    one."""
+    return form_problem(source.name) or DataError(
+        f"{source.name}: a segment file, not a time-series log or bag")
 
 
 def group_inputs(paths: Sequence[str]) -> list[Input]:
@@ -262,11 +259,9 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
     series, skipped = _read_series(source, options, note)
     series = during(series, options.start, options.end)
     if whole:
-        off = off_track(series)
-        if off.size:
-            series = without_poses(series, off)
-            note(f"{source.name}: {off.size} pose sample(s) off the track (out and back beyond "
-                 "the jump limits: a marker swap or a bad match) left out")
+        series, off = on_track(series)
+        if off:
+            note(f"{source.name}: {off} pose sample(s) {OFF_TRACK}")
         check_continuity(series)
         unwrapped = unwrapped_words(series.unwrapped_wheels, series.unwrapped_counters)
         if unwrapped:

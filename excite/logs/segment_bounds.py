@@ -10,10 +10,12 @@ the calibration's gross errors, :mod:`excite.calibration.gross_errors`), from th
 * turn: |dtheta| <= MAX_RADIUS_TO_TRACK (|dphi_L| + |dphi_R|) + :data:`TURN_SLACK` (rad): r / b
   is below 1 on any differential drive, and the slack covers a heading wrapped twice and any
   noise;
-* travel: |(dx, dy)| <= r_max max(|dphi_L|, |dphi_R|) + 2 ``max_sensor_arm`` +
-  :data:`TRAVEL_SLACK` (m), r_max the largest plausible wheel radius (2 m);
-* wheels: |dphi| <= ``max_wheel_rate`` (t_end - t_start) with the time columns, else
-  |dphi| <= :data:`MAX_WHEEL_TURN` (rad).
+* travel: |(dx, dy)| <= r_max max(|dphi_L|, |dphi_R|) + d min(turn, 2) + :data:`TRAVEL_SLACK`
+  (m): the axle's travel, r_max the largest plausible wheel radius (2 m), and the chord of a
+  sensor d = MAX_SENSOR_OFFSET (20 m) from the axle midpoint turned by at most the turn bound
+  (rad) without its slack;
+* wheels: |dphi| <= ``max_wheel_rate`` (t_end - t_start) with the time columns (where
+  t_end > t_start), else |dphi| <= :data:`MAX_WHEEL_TURN` (rad).
 """
 
 from __future__ import annotations
@@ -24,10 +26,10 @@ import numpy as np
 
 from excite.core.arrays import FloatArray
 from excite.core.kinematics import MAX_RADIUS_TO_TRACK
-from excite.core.plausible import RADIUS_RANGE
+from excite.core.plausible import MAX_SENSOR_OFFSET, RADIUS_RANGE
 from excite.logs.continuity import Limits
 
-__all__ = ["MAX_WHEEL_TURN", "TRAVEL_SLACK", "TURN_SLACK", "UNITS_SHARE", "first_impossible"]
+__all__ = ["MAX_WHEEL_TURN", "TRAVEL_SLACK", "TURN_SLACK", "first_impossible"]
 
 #: rad: the slack of the turn bound (two turns).
 TURN_SLACK = 4.0 * math.pi
@@ -37,8 +39,6 @@ TRAVEL_SLACK = 1.0
 MAX_WHEEL_TURN = 1e6
 
 _HINT = "a corrupt row or a missing-value sentinel?"
-#: More than this share of the rows beyond the bounds is no corrupt row: other units.
-UNITS_SHARE = 0.5
 
 
 def first_impossible(dphi_L: FloatArray, dphi_R: FloatArray, dx: FloatArray, dy: FloatArray,
@@ -55,36 +55,34 @@ def first_impossible(dphi_L: FloatArray, dphi_R: FloatArray, dx: FloatArray, dy:
         return None
     left, right = np.abs(dphi_L), np.abs(dphi_R)
     most = np.maximum(left, right)
-    left += right  # the turn bound, in place
-    left *= MAX_RADIUS_TO_TRACK
-    left += TURN_SLACK
-    bad = np.abs(dtheta) > left
-    travel_bound = most * RADIUS_RANGE[1]
-    travel_bound += 2.0 * limits.max_sensor_arm + TRAVEL_SLACK
+    turn = (left + right) * MAX_RADIUS_TO_TRACK  # the most a robot turns on them
+    bad = np.abs(dtheta) > turn + TURN_SLACK
+    # the axle's travel, and the chord of a sensor on the farthest mounting (at most 2 x arm)
+    travel_bound = most * RADIUS_RANGE[1] + MAX_SENSOR_OFFSET * np.minimum(turn, 2.0)
+    travel_bound += TRAVEL_SLACK
     with np.errstate(over="ignore"):  # 1e300 squared is inf, beyond any bound all the same
         bad |= dx * dx + dy * dy > travel_bound * travel_bound
-    wheel_bound = MAX_WHEEL_TURN if duration is None else limits.max_wheel_rate * np.abs(duration)
+    wheel_bound = _wheel_bounds(duration, limits)
     bad |= most > wheel_bound
     if not bad.any():
         return None
     k = int(np.argmax(bad))
-    if bad.mean() > UNITS_SHARE:
-        hint = (f"{int(bad.sum())} of {bad.size} rows are: values in other units? (excite "
-                "reads m and rad; a unit in the header converts, e.g. dx_gt [mm], dphi_L "
-                "[deg])")
-    else:
-        hint = _HINT
+    count = int(bad.sum())
+    hint = _HINT if count == 1 else (
+        f"{count} of {bad.size} rows are: values in other units? (excite reads m and rad; a "
+        "unit in the header converts, e.g. dx_gt [mm], dphi_L [deg]), or corrupt rows")
     wheels = f"{dphi_L[k]:.6g} and {dphi_R[k]:.6g} rad"
+    timed = duration is not None and duration[k] > 0
     for name, value in (("dphi_L", dphi_L[k]), ("dphi_R", dphi_R[k])):
-        if duration is not None and abs(value) > limits.max_wheel_rate * abs(duration[k]):
+        if timed and abs(value) > limits.max_wheel_rate * duration[k]:
             return k, (f"{name} {value:.6g} rad in {duration[k]:.6g} s, faster than any wheel "
                        f"turns ({limits.max_wheel_rate:g} rad/s): {hint}")
-        if duration is None and abs(value) > MAX_WHEEL_TURN:
+        if not timed and abs(value) > MAX_WHEEL_TURN:
             return k, (f"{name} {value:.6g} rad, more than any segment turns a wheel "
                        f"({MAX_WHEEL_TURN:g} rad): {hint}")
-    if abs(dtheta[k]) > left[k]:
+    if abs(dtheta[k]) > turn[k] + TURN_SLACK:
         return k, (f"dtheta_gt {dtheta[k]:.6g} rad, more than any robot turns on wheel "
-                   f"increments of {wheels} (at most {left[k]:.3g} rad): {hint}")
+                   f"increments of {wheels} (at most {turn[k] + TURN_SLACK:.3g} rad): {hint}")
     return k, (f"the sensor moved {math.hypot(dx[k], dy[k]):.6g} m (dx_gt {dx[k]:.6g}, dy_gt "
                f"{dy[k]:.6g}), more than any robot moves on wheel increments of {wheels} "
                f"(at most {travel_bound[k]:.3g} m): {hint}")
@@ -101,8 +99,17 @@ def _within_the_slacks(dphi_L: FloatArray, dphi_R: FloatArray, dx: FloatArray, d
     """Whether every segment is within the bounds by their slacks alone (no turn and no
     travel beyond them, every wheel within the slowest segment's bound): the common case,
     settled by a few reductions before any per-segment bound is built."""
-    wheel_bound = (MAX_WHEEL_TURN if duration is None
-                   else limits.max_wheel_rate * float(np.abs(duration).min()))
-    travel_slack = (2.0 * limits.max_sensor_arm + TRAVEL_SLACK) / math.sqrt(2.0)
+    wheel_bound = MAX_WHEEL_TURN if duration is None else float(
+        np.min(_wheel_bounds(duration, limits)))
+    travel_slack = TRAVEL_SLACK / math.sqrt(2.0)  # whatever the turn
     return (_largest(dphi_L, dphi_R) <= wheel_bound and _largest(dtheta) <= TURN_SLACK
             and _largest(dx, dy) <= travel_slack)
+
+
+def _wheel_bounds(duration: FloatArray | None, limits: Limits) -> FloatArray | float:
+    """The most a wheel turns in each segment (rad): ``limits.max_wheel_rate`` times its
+    duration (s), or MAX_WHEEL_TURN where the duration is unknown or not positive (times
+    rounded to the same stamp say nothing of the rate)."""
+    if duration is None:
+        return MAX_WHEEL_TURN
+    return np.where(duration > 0, limits.max_wheel_rate * duration, MAX_WHEEL_TURN)

@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -65,14 +65,14 @@ from excite.logs.continuity import (
     StreamCheck,
     check_encoders,
     check_poses,
-    excursions,
     find_gaps,
     flagged_overlaps,
+    left_on_track,
     pose_noise,
     refuse_long_gaps,
 )
 from excite.logs.segments import MIN_SEGMENTS, Segments
-from excite.logs.timeseries import TimeSeries, unwrapped_words, without_poses
+from excite.logs.timeseries import TimeSeries, unwrapped_words
 
 __all__ = ["SegmentationReport", "SegmentedLog", "segment_timeseries", "POSE_JUMP",
            "ENCODER_JUMP", "STANDSTILL", "CARRIED", "CUT_BY_GAP", "END_OF_LOG",
@@ -118,7 +118,7 @@ class SegmentationReport:
     standstill, cut by a gap, end of log: the unfinished window or keyframe at the end of a
     stretch). dropped_ranges: the time ranges of those segments per reason (s, encoder clock,
     adjacent ones merged). samples_dropped: pose samples unused, per reason (outside the
-    encoder time range, inside an encoder gap). gaps: every gap, in time order. dropouts:
+    encoder time range, inside an encoder gap, off the track). gaps: every gap, in time order. dropouts:
     missed samples per stream, bridged. unwrapped_wheels: the wheel columns that were wrapped
     modulo 2 pi and were unwrapped (TimeSeries.unwrapped_wheels).
     """
@@ -461,10 +461,7 @@ def segment_timeseries(
     noise = pose_noise(ts)
     encoders, poses = (check_encoders(ts, window, limits),
                        check_poses(ts, window, limits, noise))
-    off_track = excursions(ts, poses, limits, noise)
-    if off_track.size:  # left out, the jumps around them gone
-        ts = without_poses(ts, off_track)
-        poses = replace(check_poses(ts, window, limits, noise), dropouts=poses.dropouts)
+    ts, poses, off_track = left_on_track(ts, poses, limits, noise)
     gaps = find_gaps(ts, encoders, poses)
     if on_gap == "error":
         refuse_long_gaps(gaps, window)
@@ -476,7 +473,7 @@ def segment_timeseries(
     reasons = _drop_reasons(ts, t_pose, cut, rows, encoders, poses, limits, noise)
     keep = ~np.logical_or.reduce(list(reasons.values()))
     report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses,
-                     ts, off_track.size)
+                     ts, off_track)
     _refuse_too_few_segments(ts, report)
     return _segmented_log(ts, wheels, t_pose, cut.start[keep], cut.end[keep], rows[keep],
                           report)

@@ -52,6 +52,7 @@ __all__ = [
     "load_segment_files",
     "load_segments",
     "check_not_utf16",
+    "form_problem",
     "read_text",
     "save_segments",
 ]
@@ -282,6 +283,26 @@ def _csv_rows(name: str, text: str, on_note: OnNote | None = None
     values, _ = read_columns(name, numbers, lines, header)
     order = [header.labels.index(c) for c in COLUMNS + TIME_COLUMNS if c in header.labels]
     return values[:, order], list(numbers)
+
+
+def form_problem(path: str | os.PathLike[str]) -> DataError | None:
+    """What keeps ``path`` from being a segment file by its form (no such file, a folder,
+    binary or empty text, a header of neither format), without reading its rows; None when
+    it is one (its rows may still be bad)."""
+    name = os.fspath(path)
+    try:
+        text = read_text(name, "tuple" if name.lower().endswith(TUPLE_SUFFIX) else "CSV")
+        if name.lower().endswith(TUPLE_SUFFIX) or _looks_like_tuples(text):
+            return None
+        numbers, lines = content_lines(text)
+        if not lines:
+            return DataError(f"{name}: empty (no segments and no header)")
+        delimiter = delimiter_of(lines[0])
+        if is_header(header_fields(lines[0], delimiter), delimiter):
+            _segment_header(lines[0], f"{name}:{numbers[0]}")
+    except DataError as exc:
+        return exc
+    return None
 
 
 def _segments(rows: ArrayLike) -> Segments:

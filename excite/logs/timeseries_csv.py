@@ -216,8 +216,8 @@ def _checked_cells(table: _Table, note: OnNote) -> _Table:
     if not table.header.ignored:
         row = int(np.argmin(filled_any))
         raise DataError(f"{table.name}:{table.lines[row]}: the row has only a time, no values")
-    note(f"{table.name}: {int(np.sum(~filled_any))} rows with values only in the columns not "
-         "read left out")
+    note(f"{table.name}: {int(np.sum(~filled_any))} rows without encoder or pose values left "
+         "out (a merged export's other columns)")
     return replace(table, values=table.values[filled_any], empty=table.empty[filled_any],
                    lines=table.lines[filled_any])
 

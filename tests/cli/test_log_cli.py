@@ -365,7 +365,7 @@ def test_slip_that_grows_with_acceleration_fails_the_fit(capsys, tmp_path, proto
 
 
 @pytest.mark.parametrize("make, fragment", [
-    (lambda p: p.write_text(""), "empty.csv: no segments (the file is empty"),
+    (lambda p: p.write_text(""), "empty.csv: empty (no segments and no header)"),
     (lambda p: p.mkdir(), "is a directory"),
     (lambda p: p.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00"), "binary data"),
     (lambda p: p.write_text("foo,bar\n1,2\n"), ":1: the header names 'foo', 'bar': neither a "
@@ -373,6 +373,8 @@ def test_slip_that_grows_with_acceleration_fails_the_fit(capsys, tmp_path, proto
     (lambda p: p.write_text("dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt\n1,1,0.1,0,0\n"
                             "2,2,0.2,0,0\n3,3,0.3,0,0\n"), "a segment file, not a "
                                                          "time-series log or bag"),
+    (lambda p: p.write_text("dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt\n1,1,0.1,0,0\n"),
+     "a segment file, not a time-series log or bag"),  # whatever its rows
 ])
 def test_a_command_that_needs_a_log_names_what_is_wrong_with_another_input(capsys, tmp_path,
                                                                            make, fragment):

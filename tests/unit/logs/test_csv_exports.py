@@ -144,8 +144,8 @@ def test_rows_of_the_columns_not_read_alone_are_left_out_with_a_note(tmp_path, p
     assert_same(series, read_timeseries(path))
     skipped = len(table) - 1 - len(rows)
     assert notes == [f"{merged}: columns not read: battery",
-                     f"{merged}: {skipped} rows with values only in the columns not read "
-                     "left out"]
+                     f"{merged}: {skipped} rows without encoder or pose values left out (a "
+                     "merged export's other columns)"]
 
 
 @pytest.mark.parametrize("names, planar, length", [

@@ -746,6 +746,46 @@ def test_pose_jump_drops_the_affected_segments_and_samples_off_the_track_are_lef
     assert not log.shares_endpoints[np.searchsorted(log.t_start, T0 + 20.0)]
 
 
+@pytest.mark.parametrize("rate, count, window", [(50.0, 5, 1.0), (50.0, 3, 1.0),
+                                                  (10.0, 5, 0.5)])
+def test_samples_off_the_track_leave_no_phantom_gap(rate, count, window):
+    """The interval that bridges samples left out is no gap (a review found 3-5 samples made
+    one, which cut the chain again, and at 10 Hz with 0.5 s windows refused the log)."""
+    from excite.logs.synthetic import synthetic_log
+
+    ts = synthetic_log(np.random.default_rng(8), 60.0, pose_rate=rate,
+                       pose_noise=(1e-3, 1e-3)).series
+    at = int(np.searchsorted(ts.t_pose, ts.t_pose[0] + 20.3))
+    x = ts.x.copy()
+    x[at:at + count] += 0.8
+    log = segment_timeseries(TimeSeries(ts.t_enc, ts.phi_L, ts.phi_R, ts.t_pose, x, ts.y,
+                                        ts.theta), window=window)
+    clean = segment_timeseries(ts, window=window)
+    assert log.report.samples_dropped[OFF_TRACK] == count
+    assert log.report.gaps == () and sum(log.report.segments_dropped.values()) == sum(
+        clean.report.segments_dropped.values())
+    assert log.shares_endpoints[1:].all() and len(log.segments) == len(clean.segments)
+
+
+def test_samples_off_the_track_are_kept_where_the_heading_across_them_is_ambiguous():
+    """A fast spin seen at 5 Hz: across two samples left out the heading would turn by more
+    than pi, which unwrapping the rest could not tell from a turn the other way; those
+    samples stay (and the jumps around them drop their segments)."""
+    from excite.logs.continuity import Limits, check_poses, excursions, pose_noise
+    from excite.logs.synthetic import synthetic_log
+
+    ts = synthetic_log(np.random.default_rng(5), 20.0, turn_rate=11.0, pose_rate=5.0,
+                       pose_noise=(1e-3, 1e-3)).series
+    at = int(np.argmax(np.abs(ts.theta[3:] - ts.theta[:-3]))) + 1  # the fastest turn
+    assert abs(ts.theta[at + 2] - ts.theta[at - 1]) > np.pi  # three periods at ~11 rad/s
+    x = ts.x.copy()
+    x[at:at + 2] += 3.0
+    spiked = TimeSeries(ts.t_enc, ts.phi_L, ts.phi_R, ts.t_pose, x, ts.y, ts.theta)
+    noise = pose_noise(spiked)
+    poses = check_poses(spiked, 1.0, Limits(), noise)
+    assert poses.jump[at - 1] and excursions(spiked, poses, Limits(), noise).size == 0
+
+
 def test_too_few_segments_names_the_stream_behind_the_drops(sim):
     """A bag's wheels that jump everywhere (a second JointState publisher sending zeros):
     the error names the encoder stream, not the poses."""
