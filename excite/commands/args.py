@@ -13,13 +13,13 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from excite.core.plausible import (
-    MAX_RADIUS_RATIO,
     MAX_SEPARATION,
     RADIUS_RANGE,
     TYPICAL_RADIUS,
     TYPICAL_SEPARATION,
     implausible_mounting,
     typical,
+    violation,
 )
 from excite.errors import ExciteError
 
@@ -102,33 +102,28 @@ def _unit_hint(values: tuple[float, float, float], index: int) -> str:
 def plausible_params(values: tuple[float, float, float], text: str, what: str) -> None:
     """UsageError, naming the likely unit, unless the nominal wheel parameters RL,RR,B (m)
     lie within the bounds no real differential drive violates
-    (:mod:`excite.core.plausible`)."""
+    (:func:`excite.core.plausible.violation`)."""
+    broken = violation(*values)
+    if broken is None:
+        return
     r_L, r_R, b = values
     low, high = RADIUS_RANGE
-
-    def fail(problem: str, hint: str, verb: str = "is") -> UsageError:
-        return UsageError(f"{what} {text}: {problem} {verb} implausible ({hint})")
-
-    for index, radius in enumerate((r_L, r_R)):
-        if radius > high:
-            raise fail(f"a wheel radius of {radius:g} m", _unit_hint(values, index)
-                       or f"wheel radii are {1e3 * low:g} mm to {high:g} m")
-        if radius < low:
-            raise fail(f"a wheel radius of {radius:g} m",
-                       f"wheel radii are {1e3 * low:g} mm to {high:g} m; {PARAMS_VALUES} are "
-                       "in metres")
-    if max(r_L, r_R) > MAX_RADIUS_RATIO * min(r_L, r_R):
-        raise fail(f"wheel radii of {r_L:g} m and {r_R:g} m",
-                   f"they differ by a factor {max(r_L, r_R) / min(r_L, r_R):.3g}; "
-                   f"{PARAMS_VALUES} are the left and right wheel radii and the wheel "
-                   "separation", verb="are")
-    if b > MAX_SEPARATION:
-        raise fail(f"a wheel separation of {b:g} m", _unit_hint(values, 2)
-                   or f"at most {MAX_SEPARATION:g} m")
-    if b <= max(r_L, r_R):
-        raise fail(f"a wheel separation of {b:g} m, no longer than the wheel radius "
-                   f"{max(r_L, r_R):g} m,",
-                   f"{PARAMS_VALUES}: B is the distance between the wheels' contact points")
+    subject, verb = broken.subject, "is"
+    if broken.kind == "large":
+        hint = (_unit_hint(values, broken.index)
+                or f"wheel radii are {1e3 * low:g} mm to {high:g} m")
+    elif broken.kind == "small":
+        hint = f"wheel radii are {1e3 * low:g} mm to {high:g} m; {PARAMS_VALUES} are in metres"
+    elif broken.kind == "ratio":
+        verb = "are"
+        hint = (f"they differ by a factor {max(r_L, r_R) / min(r_L, r_R):.3g}; "
+                f"{PARAMS_VALUES} are the left and right wheel radii and the wheel separation")
+    elif broken.kind == "far":
+        hint = _unit_hint(values, 2) or f"at most {MAX_SEPARATION:g} m"
+    else:
+        subject += ","
+        hint = f"{PARAMS_VALUES}: B is the distance between the wheels' contact points"
+    raise UsageError(f"{what} {text}: {subject} {verb} implausible ({hint})")
 
 
 def params_arg(text: str, what: str = "--init"):

@@ -12,9 +12,11 @@ in the typical ranges (:data:`TYPICAL_RADIUS`, :data:`TYPICAL_SEPARATION`).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 __all__ = ["RADIUS_RANGE", "MAX_RADIUS_RATIO", "MAX_SEPARATION", "MAX_SENSOR_OFFSET",
-           "TYPICAL_RADIUS", "TYPICAL_SEPARATION", "implausible", "implausible_mounting",
+           "TYPICAL_RADIUS", "TYPICAL_SEPARATION", "Violation", "implausible",
+           "implausible_mounting", "violation",
            "typical", "log_unit_hint"]
 
 RADIUS_RANGE = (0.005, 2.0)
@@ -41,23 +43,58 @@ def typical(r_L: float, r_R: float, b: float) -> bool:
             and TYPICAL_SEPARATION[0] <= b <= TYPICAL_SEPARATION[1])
 
 
+@dataclass(frozen=True)
+class Violation:
+    """The first bound the wheel parameters (m) break.
+
+    Attributes
+    ----------
+    kind : str
+        "large" or "small" (a wheel radius outside RADIUS_RANGE), "ratio" (the radii more
+        than MAX_RADIUS_RATIO apart), "far" (the separation over MAX_SEPARATION) or "short"
+        (the separation no longer than the larger radius).
+    index : int
+        Which value: 0 or 1 a radius (r_L, r_R), 2 the separation.
+    subject : str
+        The values in words, e.g. 'a wheel radius of 50 m'.
+    bound : str
+        The bound in words, e.g. 'real ones are 5 mm to 2 m'.
+    """
+
+    kind: str
+    index: int
+    subject: str
+    bound: str
+
+
+def violation(r_L: float, r_R: float, b: float) -> Violation | None:
+    """The first bound the wheel parameters (m) break, in the order of the module doc; None
+    when they are plausible."""
+    low, high = RADIUS_RANGE
+    for index, radius in enumerate((r_L, r_R)):
+        if not low <= radius <= high:
+            return Violation("large" if radius > high else "small", index,
+                             f"a wheel radius of {radius:.4g} m",
+                             f"real ones are {1e3 * low:g} mm to {high:g} m")
+    if max(r_L, r_R) > MAX_RADIUS_RATIO * min(r_L, r_R):
+        return Violation("ratio", 0, f"wheel radii of {r_L:.4g} m and {r_R:.4g} m",
+                         f"a factor {max(r_L, r_R) / min(r_L, r_R):.3g} apart")
+    if b > MAX_SEPARATION:
+        return Violation("far", 2, f"a wheel separation of {b:.4g} m",
+                         f"at most {MAX_SEPARATION:g} m")
+    if b <= max(r_L, r_R):
+        return Violation("short", 2, f"a wheel separation of {b:.4g} m, no longer than the "
+                         f"wheel radius {max(r_L, r_R):.4g} m", "")
+    return None
+
+
 def implausible(r_L: float, r_R: float, b: float) -> str | None:
     """What about the wheel parameters (m) no real differential drive has, in words (e.g.
-    'a wheel radius of 50 m'); None when nothing."""
-    low, high = RADIUS_RANGE
-    for radius in (r_L, r_R):
-        if not low <= radius <= high:
-            return (f"a wheel radius of {radius:.4g} m (real ones are {1e3 * low:g} mm to "
-                    f"{high:g} m)")
-    if max(r_L, r_R) > MAX_RADIUS_RATIO * min(r_L, r_R):
-        return (f"wheel radii of {r_L:.4g} m and {r_R:.4g} m (a factor "
-                f"{max(r_L, r_R) / min(r_L, r_R):.3g} apart)")
-    if b > MAX_SEPARATION:
-        return f"a wheel separation of {b:.4g} m (at most {MAX_SEPARATION:g} m)"
-    if b <= max(r_L, r_R):
-        return (f"a wheel separation of {b:.4g} m, no longer than the wheel radius "
-                f"{max(r_L, r_R):.4g} m")
-    return None
+    'a wheel radius of 50 m (real ones are 5 mm to 2 m)'); None when nothing."""
+    broken = violation(r_L, r_R, b)
+    if broken is None:
+        return None
+    return broken.subject + (f" ({broken.bound})" if broken.bound else "")
 
 
 def implausible_mounting(x: float, y: float) -> str | None:

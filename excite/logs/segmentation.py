@@ -118,9 +118,9 @@ class SegmentationReport:
     standstill, cut by a gap, end of log: the unfinished window or keyframe at the end of a
     stretch). dropped_ranges: the time ranges of those segments per reason (s, encoder clock,
     adjacent ones merged). samples_dropped: pose samples unused, per reason (outside the
-    encoder time range, inside an encoder gap, off the track). gaps: every gap, in time order. dropouts:
-    missed samples per stream, bridged. unwrapped_wheels: the wheel columns that were wrapped
-    modulo 2 pi and were unwrapped (TimeSeries.unwrapped_wheels).
+    encoder time range, inside an encoder gap, off the track). gaps: every gap, in time
+    order. dropouts: missed samples per stream, bridged. unwrapped_wheels: the wheel columns
+    that were wrapped modulo 2 pi and were unwrapped (TimeSeries.unwrapped_wheels).
     """
 
     n_segments: int
