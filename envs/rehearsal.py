@@ -70,14 +70,18 @@ class Rehearsal:
 
 def rehearse(folder: Path, live_args: list[str], sim_args: list[str] = (),
              signal_after: tuple[int, int] | None = None, timeout: float = 240.0,
-             speed: float = SPEED) -> Rehearsal:
+             speed: float = SPEED, signal_to: str = "live",
+             companion: list[str] | None = None) -> Rehearsal:
     """``excite sim-robot`` (``sim_args``, ``speed`` times real time) and ``excite live``
     (``live_args``) against it, their files in ``folder``; ``signal_after`` (signal,
-    segments): send the signal to live once it printed that many status lines; ``timeout``:
-    wall seconds the live process may take."""
+    segments): send the signal once live printed that many status lines, to ``signal_to``:
+    "live", "job" (live's whole process group, as a terminal's Ctrl-C) or "robot" (the
+    simulated robot); ``timeout``: wall seconds the live process may take; ``companion``: a
+    command run beside them in their domain (e.g. a node that advertises a topic), stopped
+    at the end."""
     env = ros_env()
     truth, log = folder / "truth.json", folder / "robot.csv"
-    live = None
+    live = other = None
     sim = subprocess.Popen(
         [*EXCITE, "sim-robot", "--speed", str(speed), "--truth", str(truth), "--log",
          str(log), *sim_args], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -85,10 +89,14 @@ def rehearse(folder: Path, live_args: list[str], sim_args: list[str] = (),
     try:
         line = sim.stdout.readline()
         assert "ready" in line, (line, sim.stderr.read() if sim.poll() is not None else "")
+        if companion is not None:
+            other = subprocess.Popen(companion, env=env, stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.DEVNULL)
         live = subprocess.Popen(
             [*EXCITE, "live", "--use-sim-time", "--out", str(folder / "result.json"),
              "--record", str(folder / "session.mcap"), *live_args],
-            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            start_new_session=signal_to == "job")
         signalled = None
         lines: list[str] = []
         if signal_after is not None:
@@ -98,11 +106,14 @@ def rehearse(folder: Path, live_args: list[str], sim_args: list[str] = (),
                 assert text, "live ended before the signal"
                 lines.append(text)
             signalled = time.time()
-            live.send_signal(sig)
+            if signal_to == "job":
+                os.killpg(live.pid, sig)
+            else:
+                (sim if signal_to == "robot" else live).send_signal(sig)
         out, err = live.communicate(timeout=timeout)
         out = "".join(lines) + out
     finally:
-        for process in (live, sim):  # never leave a node behind, whatever happened
+        for process in (live, sim, other):  # never leave a node behind, whatever happened
             if process is not None and process.poll() is None:
                 process.send_signal(signal.SIGINT)
         if live is not None:
@@ -114,8 +125,15 @@ def rehearse(folder: Path, live_args: list[str], sim_args: list[str] = (),
             sim.communicate(timeout=30)
         except subprocess.TimeoutExpired:
             sim.kill()
+        if other is not None:
+            try:
+                other.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                other.kill()
     result_path = folder / "result.json"
+    robot_log = (np.loadtxt(log, delimiter=",", skiprows=1, ndmin=2) if log.exists()
+                 else np.zeros((0, 8)))  # none from a robot killed
     return Rehearsal(live.returncode, out, err,
                    json.loads(result_path.read_text()) if result_path.exists() else None,
-                   json.loads(truth.read_text()),
-                   np.loadtxt(log, delimiter=",", skiprows=1, ndmin=2), signalled, folder)
+                   json.loads(truth.read_text()) if truth.exists() else {},
+                   robot_log, signalled, folder)

@@ -10,8 +10,12 @@ it receives or sends in a bag (rosbags' writer) when asked.
 
 Safety: a zero command is published on every way out (done, out of time, a fault, Ctrl-C,
 SIGTERM, an exception); the session stops the robot while a stream is silent. A clock that
-stops (the simulator's ``/clock`` gone) aborts the session after ``abort_timeout`` seconds of
-wall time.
+stops (the simulator's ``/clock`` gone) stops the ticks of the command timer: watched on wall
+time between them, it has the robot commanded to zero after ``silence_timeout`` seconds and
+the session aborted after ``abort_timeout``. A topic that is advertised but sends nothing for
+``wait`` seconds after the node subscribed is an error before the robot moves. The stopping
+rule's process ignores SIGINT (a terminal's Ctrl-C reaches it too; the node ends the session)
+and is terminated when the session ends.
 """
 
 from __future__ import annotations
@@ -126,6 +130,8 @@ class LiveNode:
         self._wheel_index: tuple[int, int] | None = None
         self._joints_seen: set[str] = set()
         self._first_joint_state: float | None = None
+        self._first_pose: float | None = None  # monotonic s of the first pose message
+        self._connected: float | None = None  # monotonic s when the topics were subscribed
         self._pose_type: str | None = None
         self._statuses = 0
         self._last_clock = (None, time.monotonic())
@@ -166,6 +172,38 @@ class LiveNode:
         if self.recorder is not None:
             self.recorder.add_topic(t.joint_states, JOINT_STATE)
             self.recorder.add_topic(t.pose_topic, "geometry_msgs/msg/PoseStamped")
+        self._connected = time.monotonic()
+
+    def check_streams(self) -> None:
+        """Before the session starts: DataError naming each topic that is advertised but
+        has sent nothing for ``topics.wait`` s since the node subscribed (a motion-capture
+        body not tracked, a driver not running): the session would wait for it forever."""
+        if self.session.state != "waiting" or self._connected is None:
+            return
+        t = self.topics
+        if time.monotonic() - self._connected <= t.wait:
+            return
+        silent = [topic for topic, first in ((t.joint_states, self._first_joint_state),
+                                             (t.pose_topic, self._first_pose))
+                  if first is None]
+        if silent:
+            raise DataError(f"nothing on {' nor '.join(silent)} for {t.wait:g} s after "
+                            "subscribing (the topic is advertised, but no message arrives: "
+                            "is its publisher sending, the body tracked?)")
+
+    def watch_clock(self) -> None:
+        """Between the ticks, on wall time: the node's clock (``/clock`` with use_sim_time)
+        drives the command timer, so a clock that stops stops the ticks too. While it has
+        not moved for ``silence_timeout`` s the robot is commanded to zero; after
+        ``abort_timeout`` s the session is aborted (:meth:`_check_clock`)."""
+        if self.session.ended or self.session.state == "waiting":
+            return
+        now = self._now()
+        self._check_clock(now)
+        last, since = self._last_clock
+        if (not self.session.ended
+                and time.monotonic() - since > self.session.settings.silence_timeout):
+            self.publish(Command(0.0, 0.0, 0.0, 0.0))
 
     # -- input --------------------------------------------------------------------------------
     def _now(self) -> float:
@@ -188,6 +226,8 @@ class LiveNode:
                 t, names, [float(p) for p in msg.position]))
 
     def _on_pose(self, msg: Any) -> None:
+        if self._first_pose is None:
+            self._first_pose = time.monotonic()
         t = _seconds(msg.header.stamp) or self._now()
         pose = POSE_TYPES[self._pose_type][1](msg)
         q = pose.orientation
@@ -285,7 +325,7 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
     # The stopping rule's batch calibration runs in a process of its own: in a thread it
     # would hold the interpreter while the callbacks fall behind the streams.
     pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=os.nice, initargs=(DECISION_NICENESS,))
+                               initializer=_decision_worker)
     session.executor = pool
     executor = SingleThreadedExecutor(context=context)
     node: LiveNode | None = None
@@ -300,6 +340,8 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
             try:
                 while not session.ended and not interrupted.is_set():
                     executor.spin_once(timeout_sec=min(period, 0.05))
+                    node.check_streams()
+                    node.watch_clock()
             except Exception as exc:  # stop, keep what was recorded, then report it
                 if session.state == "waiting":  # never started: nothing to keep
                     raise
@@ -318,6 +360,26 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
                 node.stop()
             executor.remove_node(node.node)
             node.node.destroy_node()
-        pool.shutdown(wait=False, cancel_futures=True)
+        _close(pool)
         executor.shutdown(timeout_sec=1.0)
         context.try_shutdown()
+
+
+def _decision_worker() -> None:
+    """The decisions' process: lower priority (DECISION_NICENESS), and deaf to SIGINT: a
+    terminal's Ctrl-C reaches every process of the job, and the node, not the worker, ends
+    the session (a worker interrupted mid-decision lost the session's report)."""
+    os.nice(DECISION_NICENESS)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _close(pool: ProcessPoolExecutor) -> None:
+    """Shut the decisions' process down now: a decision still running is of no use once
+    the session ended, and waiting for it at the interpreter's exit left a second Ctrl-C or
+    SIGTERM with the default handlers."""
+    processes = list(getattr(pool, "_processes", {}).values())  # CPython's, since 3.3
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(timeout=2.0)

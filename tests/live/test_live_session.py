@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import signal
 import subprocess
+import sys
 from statistics import NormalDist
 
 import numpy as np
@@ -188,3 +189,60 @@ def test_a_missing_topic_names_the_topics_seen(session_dir):
     lines = _error_lines(s)
     assert len(lines) == 1 and "/mocap" in lines[0] and "/pose [geometry_msgs/msg/PoseStamped]" \
         in lines[0], s.err
+
+
+def _last_recorded_command(session_dir):
+    """The last command live recorded in its bag (v m/s, omega rad/s): what it published
+    last, on its own side (a robot killed keeps no log)."""
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([session_dir / "session.mcap"]) as reader:
+        connections = [c for c in reader.connections if c.topic == "/cmd_vel"]
+        last = None
+        for connection, _, raw in reader.messages(connections=connections):
+            last = reader.deserialize(raw, connection.msgtype)
+    assert last is not None, "no command recorded"
+    return last.twist.linear.x, last.twist.angular.z
+
+
+def test_a_clock_that_stops_stops_the_robot_and_aborts(session_dir):
+    """The simulator killed mid-session: /clock stops, and with it the command timer's ticks
+    (found by fuzzing: live kept spinning with its last command non-zero). Watched on wall
+    time, the robot is commanded to zero and the session aborted after --abort-timeout."""
+    import time
+
+    start = time.time()
+    s = rehearse(session_dir, [*LIVE, "--abort-timeout", "3", "--max-time", "120"],
+                 ["--seed", "4"], signal_after=(signal.SIGKILL, 2), signal_to="robot",
+                 timeout=90)
+    assert s.code == 6, (s.out, s.err)
+    assert "the clock stopped" in s.result["live"]["reason"]
+    assert time.time() - s.signalled < 30 and time.time() - start < 120
+    assert _last_recorded_command(session_dir) == (0.0, 0.0)
+
+
+def test_ctrl_c_to_the_job_keeps_the_report(session_dir):
+    """A terminal's Ctrl-C reaches every process of the job, the stopping rule's worker too
+    (found by fuzzing: a worker interrupted mid-decision lost the report and --out): the
+    worker ignores it, the node stops the robot and writes everything."""
+    s = rehearse(session_dir, LIVE, ["--seed", "2"], signal_after=(signal.SIGINT, 3),
+                 signal_to="job")
+    assert s.code == 130, (s.out, s.err)
+    assert s.result is not None and s.result["live"]["outcome"] == "aborted"
+    assert "Traceback" not in s.err and len(_error_lines(s)) <= 2, s.err
+    assert s.log[-1, 4] == 0 and s.log[-1, 5] == 0
+
+
+def test_an_advertised_topic_that_never_publishes_is_bad_input(session_dir):
+    """A pose topic that exists but sends nothing (a motion-capture body not tracked): the
+    session waited forever (found by fuzzing); now an error after --wait, the robot never
+    commanded."""
+    from pathlib import Path
+
+    silent = [sys.executable, str(Path(__file__).with_name("silent_topic.py")), "/mocap:pose"]
+    s = rehearse(session_dir, [*WHEELS[:4], "--pose-topic", "/mocap", "--robot", "default",
+                               "--wait", "3"], ["--seed", "9"], companion=silent, timeout=60)
+    assert s.code == 2, (s.out, s.err)
+    lines = _error_lines(s)
+    assert len(lines) == 1 and "nothing on /mocap for 3 s" in lines[0], s.err
+    assert not np.any(s.log[:, 4] != 0)  # never moved
