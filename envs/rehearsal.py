@@ -71,14 +71,14 @@ class Rehearsal:
 def rehearse(folder: Path, live_args: list[str], sim_args: list[str] = (),
              signal_after: tuple[int, int] | None = None, timeout: float = 240.0,
              speed: float = SPEED, signal_to: str = "live",
-             companion: list[str] | None = None) -> Rehearsal:
+             companion: list[str] | None = None, sim_time: bool = True) -> Rehearsal:
     """``excite sim-robot`` (``sim_args``, ``speed`` times real time) and ``excite live``
     (``live_args``) against it, their files in ``folder``; ``signal_after`` (signal,
     segments): send the signal once live printed that many status lines, to ``signal_to``:
     "live", "job" (live's whole process group, as a terminal's Ctrl-C) or "robot" (the
     simulated robot); ``timeout``: wall seconds the live process may take; ``companion``: a
     command run beside them in their domain (e.g. a node that advertises a topic), stopped
-    at the end."""
+    at the end; ``sim_time``: live follows the robot's ``/clock`` (--use-sim-time)."""
     env = ros_env()
     truth, log = folder / "truth.json", folder / "robot.csv"
     live = other = None
@@ -93,7 +93,8 @@ def rehearse(folder: Path, live_args: list[str], sim_args: list[str] = (),
             other = subprocess.Popen(companion, env=env, stdout=subprocess.DEVNULL,
                                      stderr=subprocess.DEVNULL)
         live = subprocess.Popen(
-            [*EXCITE, "live", "--use-sim-time", "--out", str(folder / "result.json"),
+            [*EXCITE, "live", *(["--use-sim-time"] if sim_time else []),
+             "--out", str(folder / "result.json"),
              "--record", str(folder / "session.mcap"), *live_args],
             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             start_new_session=signal_to == "job")

@@ -23,6 +23,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -132,6 +133,8 @@ class LiveNode:
         self._first_joint_state: float | None = None
         self._first_pose: float | None = None  # monotonic s of the first pose message
         self._connected: float | None = None  # monotonic s when the topics were subscribed
+        self._last_stamp: dict[str, float] = {}  # the latest usable stamp of each topic (s)
+        self._noted: set[str] = set()  # topics whose bad messages were noted
         self._pose_type: str | None = None
         self._statuses = 0
         self._last_clock = (None, time.monotonic())
@@ -146,12 +149,15 @@ class LiveNode:
                  if not name.startswith(("/rosout", "/parameter_events"))]
         return ", ".join(shown) or "none"
 
-    def connect(self, executor: SingleThreadedExecutor) -> None:
+    def connect(self, executor: SingleThreadedExecutor, interrupted: threading.Event) -> bool:
         """Wait (``topics.wait`` s of wall time) for the topics, then subscribe; DataError
-        naming the topics and types seen when one is missing or of another type."""
+        naming the topics and types seen when one is missing or of another type; False when
+        ``interrupted`` first (Ctrl-C, SIGTERM)."""
         t = self.topics
         deadline = time.monotonic() + t.wait
         while True:
+            if interrupted.is_set():
+                return False
             seen = self._topics()
             joint_ok = JOINT_STATE in seen.get(t.joint_states, [])
             pose_types = [k for k in seen.get(t.pose_topic, []) if k in POSE_TYPES]
@@ -173,6 +179,7 @@ class LiveNode:
             self.recorder.add_topic(t.joint_states, JOINT_STATE)
             self.recorder.add_topic(t.pose_topic, "geometry_msgs/msg/PoseStamped")
         self._connected = time.monotonic()
+        return True
 
     def check_streams(self) -> None:
         """Before the session starts: DataError naming each topic that is advertised but
@@ -180,6 +187,7 @@ class LiveNode:
         body not tracked, a driver not running): the session would wait for it forever."""
         if self.session.state != "waiting" or self._connected is None:
             return
+        self._check_stamps()
         t = self.topics
         if time.monotonic() - self._connected <= t.wait:
             return
@@ -190,6 +198,26 @@ class LiveNode:
             raise DataError(f"nothing on {' nor '.join(silent)} for {t.wait:g} s after "
                             "subscribing (the topic is advertised, but no message arrives: "
                             "is its publisher sending, the body tracked?)")
+        if t.use_sim_time and self._now() == 0.0:
+            raise DataError(f"no /clock for {t.wait:g} s with --use-sim-time (is the "
+                            "simulator publishing it?)")
+
+    def _check_stamps(self) -> None:
+        """Before the session starts: DataError when the messages are stamped on another
+        clock than the node's (more than ``abort_timeout`` s apart): every stream would look
+        silent."""
+        if self.session.state != "waiting" or (self.topics.use_sim_time and self._now() == 0):
+            return
+        now = self._now()
+        far = {topic: stamp - now for topic, stamp in self._last_stamp.items()
+               if abs(stamp - now) > self.session.settings.abort_timeout}
+        if far:
+            offsets = ", ".join(f"{topic} {offset:+.3g} s" for topic, offset in far.items())
+            clock = "/clock" if self.topics.use_sim_time else "the system clock"
+            fix = "without" if self.topics.use_sim_time else "with"
+            raise DataError(f"the messages are stamped on another clock than the node's "
+                            f"({clock}): {offsets} from it; {fix} --use-sim-time, or the "
+                            "computers' clocks synchronised?")
 
     def watch_clock(self) -> None:
         """Between the ticks, on wall time: the node's clock (``/clock`` with use_sim_time)
@@ -209,6 +237,19 @@ class LiveNode:
     def _now(self) -> float:
         return self.node.get_clock().now().nanoseconds * 1e-9
 
+    def _usable(self, topic: str, t: float, values: Any) -> bool:
+        """Whether a message can be used: a stamp >= 0 and finite values. A message that
+        cannot is left out (a robot's bad message is no bug here; a stream of them goes
+        silent, which stops the robot), and the first of each topic noted on stderr."""
+        if t >= 0 and np.all(np.isfinite(np.asarray(values, dtype=float))):
+            self._last_stamp[topic] = t
+            return True
+        if topic not in self._noted:
+            self._noted.add(topic)
+            print(f"excite: note: {topic}: a message with a stamp before 0 or a value that is "
+                  "not finite left out (and any more like it)", file=sys.stderr, flush=True)
+        return False
+
     def _on_joints(self, msg: JointState) -> None:
         t = _seconds(msg.header.stamp) or self._now()
         names = list(msg.name)
@@ -220,6 +261,8 @@ class LiveNode:
             return
         i, j = names.index(wheels[0]), names.index(wheels[1])
         self._wheel_index = (i, j)
+        if not self._usable(self.topics.joint_states, t, (msg.position[i], msg.position[j])):
+            return
         self.session.add_wheels(t, float(msg.position[i]), float(msg.position[j]))
         if self.recorder is not None:
             self.recorder.write(self.topics.joint_states, t, self.recorder.joint_state(
@@ -231,6 +274,9 @@ class LiveNode:
         t = _seconds(msg.header.stamp) or self._now()
         pose = POSE_TYPES[self._pose_type][1](msg)
         q = pose.orientation
+        if not self._usable(self.topics.pose_topic, t, (pose.position.x, pose.position.y,
+                                                         q.x, q.y, q.z, q.w)):
+            return
         try:
             theta = float(headings(np.array([[q.x, q.y, q.z, q.w]]),
                                    lambda _: sample_at(self.topics.pose_topic, t))[0])
@@ -264,6 +310,7 @@ class LiveNode:
         """One command: the session's at the node's time."""
         now = self._now()
         self._check_wheel_names()
+        self._check_stamps()
         self._check_clock(now)
         try:
             self.publish(self.session.command(now))
@@ -334,7 +381,9 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
         with stop_on_signals() as interrupted:
             node = LiveNode(session, topics, context, recorder, on_status)
             executor.add_node(node.node)
-            node.connect(executor)
+            if not node.connect(executor, interrupted):  # never started: nothing to stop
+                session.abort(INTERRUPTED)
+                return session.finish()
             period = 1.0 / topics.rate
             node.node.create_timer(period, node.tick)
             try:

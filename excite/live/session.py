@@ -49,7 +49,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Callable
-from concurrent.futures import Executor, Future
+from concurrent.futures import BrokenExecutor, Executor, Future
 from dataclasses import replace
 
 import numpy as np
@@ -313,9 +313,17 @@ class LiveSession:
             self._pending = self.executor.submit(decide_log, *args)
 
     def _take_decision(self, wait: bool = False) -> None:
-        """The executor's decision when it has come back, or ``wait`` for it."""
+        """The executor's decision when it has come back, or ``wait`` for it. A decisions'
+        process that died (killed, out of memory) aborts the session, which keeps its
+        report; any other failure of the decision is raised (once)."""
         if self._pending is not None and (wait or self._pending.done()):
-            decision, self._pending = self._pending.result(), None
+            pending, self._pending = self._pending, None
+            try:
+                decision = pending.result()
+            except (BrokenExecutor, OSError) as exc:
+                self.abort(f"the stopping rule's process failed ({type(exc).__name__}: "
+                           f"{exc})")
+                return
             self._accept(decision)
 
     def _accept(self, decision: StopDecision | None) -> None:

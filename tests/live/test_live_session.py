@@ -240,9 +240,47 @@ def test_an_advertised_topic_that_never_publishes_is_bad_input(session_dir):
     from pathlib import Path
 
     silent = [sys.executable, str(Path(__file__).with_name("silent_topic.py")), "/mocap:pose"]
+    # --wait long enough for the companion's discovery on a loaded machine (3 s was not)
     s = rehearse(session_dir, [*WHEELS[:4], "--pose-topic", "/mocap", "--robot", "default",
-                               "--wait", "3"], ["--seed", "9"], companion=silent, timeout=60)
+                               "--wait", "8"], ["--seed", "9"], companion=silent, timeout=90)
     assert s.code == 2, (s.out, s.err)
     lines = _error_lines(s)
-    assert len(lines) == 1 and "nothing on /mocap for 3 s" in lines[0], s.err
+    assert len(lines) == 1 and "nothing on /mocap for 8 s" in lines[0], s.err
     assert not np.any(s.log[:, 4] != 0)  # never moved
+
+
+def test_streams_stamped_on_another_clock_are_bad_input(session_dir):
+    """Streams stamped on the simulator's clock, the node on the system's (no
+    --use-sim-time; a robot or motion-capture computer whose clock is off the same way): it
+    aborted at once as "silent for longer than 10 s" (found by fuzzing); now an error naming
+    the offset before the robot moves."""
+    env_args = [*WHEELS, "--robot", "default"]
+    s = rehearse(session_dir, env_args, ["--seed", "3"], timeout=60, sim_time=False)
+    assert s.code == 2, (s.out, s.err)
+    lines = _error_lines(s)
+    assert len(lines) == 1 and "stamped on another clock than the node's" in lines[0], s.err
+    assert not np.any(s.log[:, 4] != 0)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_while_waiting_for_the_topics_ends_at_once(session_dir, sig):
+    """Ctrl-C while live waits for topics that do not come: it waited out --wait first
+    (found by fuzzing); now it ends at once, interrupted, the robot never commanded."""
+    import time
+
+    from envs.rehearsal import ros_env
+
+    live = subprocess.Popen([*EXCITE, "live", *WHEELS[:4], "--pose-topic", "/nothing",
+                             "--robot", "default", "--wait", "60", "--out",
+                             str(session_dir / "result.json")], env=ros_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(4.0)  # up and waiting
+    sent = time.time()
+    live.send_signal(sig)
+    try:
+        out, err = live.communicate(timeout=20)
+    finally:
+        if live.poll() is None:
+            live.kill()
+    assert live.returncode == 130, (out, err)
+    assert time.time() - sent < 10
