@@ -70,6 +70,8 @@ class Stream:
         self.values: list[tuple[float, ...]] = []
         self.width = width
         self.out_of_order = 0
+        #: The stamp of the latest sample whose values differ from the one before (s).
+        self.last_change: float | None = None
 
     def add(self, t: float, values: tuple[float, ...]) -> bool:
         if not (math.isfinite(t) and all(map(math.isfinite, values))):
@@ -77,8 +79,11 @@ class Stream:
         if self.t and t <= self.t[-1]:
             self.out_of_order += 1
             return False
+        values = tuple(map(float, values))
+        if not self.values or values != self.values[-1]:
+            self.last_change = float(t)
         self.t.append(float(t))
-        self.values.append(tuple(map(float, values)))
+        self.values.append(values)
         return True
 
     @property

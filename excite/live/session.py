@@ -76,6 +76,12 @@ __all__ = ["MIN_SPEED_SCALE", "LiveSession"]
 MIN_SPEED_SCALE = 0.25
 
 
+#: rad: wheels that turned this much while the poses repeated one value: the pose source is
+#: frozen (any robot moves its sensor by a millimetre or more on it, and a real source's noise
+#: changes its values even when standing still).
+FROZEN_WHEEL_TURN = 0.2
+
+
 class LiveSession:
     """Drives a robot with ``protocol`` until calibrated (see the module docstring).
 
@@ -161,7 +167,7 @@ class LiveSession:
         """Stage 1: start, silence, time limit, and the wheels against the command."""
         if self._wheels.last is None or self._poses.last is None:
             return
-        age = max(now - self._wheels.last, now - self._poses.last)
+        age = max(now - self._wheels.last, self._pose_age(now))
         if age > self.settings.silence_timeout:
             self._silent_since = self._silent_since or now - age
             if now - self._silent_since > self.settings.abort_timeout:
@@ -193,11 +199,28 @@ class LiveSession:
             self._end("aborted", f"the robot's footprint is {-clearance:.2f} m outside the "
                       f"safe area {self._area.to_text()} (m, pose frame): stopped")
 
+    def _pose_age(self, now: float) -> float:
+        """How long the poses have said nothing new (s): since the last sample, or, while
+        the wheels turned more than FROZEN_WHEEL_TURN since the poses last changed, since
+        that change (a source that repeats its last pose, a motion-capture body lost, is as
+        blind as a silent one, and the safe area is watched on the poses)."""
+        age = now - self._poses.last
+        changed = self._poses.last_change
+        if changed is None or now - changed <= age:
+            return age
+        then, latest = self._wheels.at(changed), self._wheels.at(self._wheels.last)
+        if then is None or latest is None or np.max(np.abs(latest - then)) <= FROZEN_WHEEL_TURN:
+            return age
+        return now - changed
+
     def _silence_text(self, now: float) -> str:
-        silent = [name for name, last in (("the wheel angles", self._wheels.last),
-                                          ("the poses", self._poses.last))
-                  if now - last > self.settings.silence_timeout]
-        return f"{' and '.join(silent)} silent; robot stopped"
+        silent = [name for name, age in (("the wheel angles", now - self._wheels.last),
+                                         ("the poses", self._pose_age(now)))
+                  if age > self.settings.silence_timeout]
+        frozen = (now - self._poses.last <= self.settings.silence_timeout
+                  < self._pose_age(now))
+        what = " (they repeat one pose while the wheels turn)" if frozen else ""
+        return f"{' and '.join(silent)} silent{what}; robot stopped"
 
     def _begin(self, now: float) -> None:
         """Start (or resume after a silence): a new segment from now."""

@@ -120,6 +120,30 @@ def test_silent_streams_stop_the_robot_then_it_resumes_or_aborts():
     assert session.command(robot.t + 1.0).is_zero
 
 
+def test_a_pose_source_that_repeats_one_pose_stops_the_robot_then_aborts():
+    """Poses that keep arriving but repeat one value while the wheels turn (a lost
+    motion-capture body held at its last pose): the robot drove on blind, out of the safe
+    area by metres (found by fuzzing). Now as blind as a silence: stopped, then aborted."""
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=3)
+    session = LiveSession(_settings(abort_timeout=3.0), make_protocol("arcs"), seed=3)
+    _drive(session, robot, until=4.0)
+    assert session.state == "running"
+    frozen = robot.measured_pose()[1:]
+    sent = []
+    while not session.ended and robot.t < 10.0:
+        robot.step(0.02)
+        session.add_wheels(*robot.wheel_angles())
+        session.add_pose(robot.t, *frozen)  # fresh stamps, the same pose
+        command = session.command(robot.t)
+        robot.speeds = np.array([command.left, command.right])
+        sent.append((robot.t, command.left, command.right))
+    sent = np.array(sent)
+    moving = sent[np.any(sent[:, 1:] != 0, axis=1), 0]
+    assert moving.max() <= 4.0 + 1.5  # stopped within the silence timeout of the freeze
+    assert session.state == "aborted"
+    assert "poses silent (they repeat one pose while the wheels turn)" in session.reason
+
+
 def test_the_time_limit_ends_the_session_out_of_time():
     robot = EXAMPLE.ToyRobot(TRUTH, seed=4)
     session = LiveSession(_settings(max_time=5.0), make_protocol("slip_aware"), seed=4)
