@@ -6,6 +6,9 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import signal
+import threading
+from contextlib import contextmanager
 from pathlib import Path
 
 from excite.commands.args import (
@@ -274,7 +277,11 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if recorder is not None:
             recorder.__exit__(None, None, None)
-    unwritten = _report(args, result, settings)
+            streams = (topics.joint_states, topics.pose_topic)
+            if not any(recorder.written.get(topic) for topic in streams):
+                _remove(args.record)  # nothing received: no bag to refuse the next --record
+    with _signals_held():  # the robot is stopped; the report and files take a moment
+        unwritten = _report(args, result, settings)
     if failure is not None:
         raise failure
     if unwritten is not None:
@@ -319,6 +326,32 @@ def _report(args: argparse.Namespace, result, settings) -> UsageError | None:
         export_yaml(args, result.calibration, settings.nominal,
                     calibration_status(result.calibration))
     return unwritten
+
+
+@contextmanager
+def _signals_held():
+    """While inside (in the main thread): SIGINT and SIGTERM ignored, so that a second
+    Ctrl-C after the session ended cannot cut its report and files short (the robot is
+    stopped by then); the handlers restored on the way out."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def _remove(path: Path) -> None:
+    """Remove a bag that holds nothing of the robot (a rosbag2 folder, or a ROS 1 file)."""
+    import shutil
+
+    if path.is_dir():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
 
 
 def _recorder(path: Path | None):

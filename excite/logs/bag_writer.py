@@ -67,6 +67,8 @@ class BagWriter:
         self.types: dict[str, Any] = self.store.types
         self._errors = (Writer1Error, Writer2Error, OSError)
         self._connections: dict[str, Any] = {}
+        #: Messages written so far, by topic.
+        self.written: dict[str, int] = {}
         try:
             if self.ros1:
                 self._writer: Any = Writer1(self.path)
@@ -99,6 +101,7 @@ class BagWriter:
         serialize = self.store.serialize_ros1 if self.ros1 else self.store.serialize_cdr
         self._writer.write(self._connections[topic], _ns(received),
                            serialize(msg, msg.__msgtype__))
+        self.written[topic] = self.written.get(topic, 0) + 1
 
     def header(self, t: float, frame_id: str = "") -> Any:
         """A std_msgs Header stamped ``t`` s (whole ns)."""

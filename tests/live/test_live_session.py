@@ -189,6 +189,8 @@ def test_a_missing_topic_names_the_topics_seen(session_dir):
     lines = _error_lines(s)
     assert len(lines) == 1 and "/mocap" in lines[0] and "/pose [geometry_msgs/msg/PoseStamped]" \
         in lines[0], s.err
+    # nothing recorded: no empty bag left to refuse the next --record
+    assert not (session_dir / "session.mcap").exists()
 
 
 def _last_recorded_command(session_dir):
