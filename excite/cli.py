@@ -16,10 +16,8 @@ import os
 import signal
 import sys
 import textwrap
-import threading
 import warnings
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 
 from excite import __version__
 from excite.commands import (
@@ -45,6 +43,7 @@ from excite.commands.exit_status import (
 )
 from excite.commands.parser import CommandsHelpFormatter, Parser
 from excite.errors import ExciteError
+from excite.signals import handled
 
 __all__ = ["main", "build_parser"]
 
@@ -98,22 +97,14 @@ def _missing_extra(exc: ModuleNotFoundError, command: str | None) -> str | None:
             f"pip install 'excite[{extra}]'").replace("excite  ", "excite ")
 
 
-@contextmanager
-def _terminate_as_interrupt() -> Iterator[None]:
+def _terminate_as_interrupt():
     """SIGTERM (a job scheduler, ``kill``) ends a command as Ctrl-C does: finished work kept,
     worker pools shut down, one line on stderr (in the main thread; restored afterwards)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
 
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    return handled((signal.SIGTERM,), interrupt)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

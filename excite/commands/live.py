@@ -7,8 +7,6 @@ import argparse
 import json
 import re
 import signal
-import threading
-from contextlib import contextmanager
 from pathlib import Path
 
 from excite.commands.args import (
@@ -328,20 +326,13 @@ def _report(args: argparse.Namespace, result, settings) -> UsageError | None:
     return unwritten
 
 
-@contextmanager
 def _signals_held():
     """While inside (in the main thread): SIGINT and SIGTERM ignored, so that a second
     Ctrl-C after the session ended cannot cut its report and files short (the robot is
     stopped by then); the handlers restored on the way out."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+    from excite.signals import handled
+
+    return handled((signal.SIGINT, signal.SIGTERM), signal.SIG_IGN)
 
 
 def _remove(path: Path) -> None:

@@ -13,7 +13,7 @@ from excite.live.area import Area
 from excite.logs.timeseries import TimeSeries
 from excite.stopping import StopDecision
 
-__all__ = ["OUTCOMES", "Command", "LiveResult", "LiveStatus"]
+__all__ = ["OUTCOMES", "STOP", "Command", "LiveResult", "LiveStatus"]
 
 #: How a session ends.
 OUTCOMES = ("done", "out_of_time", "aborted")
@@ -32,6 +32,10 @@ class Command:
     @property
     def is_zero(self) -> bool:
         return self.left == 0.0 and self.right == 0.0
+
+
+#: The command that stops the robot.
+STOP = Command(0.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)

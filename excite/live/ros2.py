@@ -44,11 +44,12 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 
 from excite.errors import DataError, ExciteError
-from excite.live.result import Command, LiveResult
+from excite.live.result import STOP, Command, LiveResult
 from excite.live.session import LiveSession
 from excite.live.settings import LiveTopics
 from excite.logs.orientation import headings
 from excite.logs.timeseries import sample_at
+from excite.signals import handled
 
 __all__ = ["INTERRUPTED", "POSE_TYPES", "SessionFailed", "run_live", "stop_on_signals"]
 
@@ -101,16 +102,8 @@ def stop_on_signals() -> Iterator[threading.Event]:
     robot and ends); the previous handlers are restored on the way out. In a thread other
     than the main one (where Python cannot install handlers) the event is only yielded."""
     event = threading.Event()
-    if threading.current_thread() is not threading.main_thread():
+    with handled((signal.SIGINT, signal.SIGTERM), lambda *_: event.set()):
         yield event
-        return
-    previous = {s: signal.signal(s, lambda *_: event.set()) for s in (signal.SIGINT,
-                                                                       signal.SIGTERM)}
-    try:
-        yield event
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
 
 
 class LiveNode:
@@ -228,10 +221,10 @@ class LiveNode:
             return
         now = self._now()
         self._check_clock(now)
-        last, since = self._last_clock
+        since = self._last_clock[1]
         if (not self.session.ended
                 and time.monotonic() - since > self.session.settings.silence_timeout):
-            self.publish(Command(0.0, 0.0, 0.0, 0.0))
+            self.publish(STOP)
 
     # -- input --------------------------------------------------------------------------------
     def _now(self) -> float:
@@ -352,9 +345,8 @@ class LiveNode:
         """Publish a zero command (a few times), and wait up to ``timeout`` s for the
         subscribers to acknowledge it: a node destroyed right after publishing may take its
         last messages with it."""
-        zero = Command(0.0, 0.0, 0.0, 0.0)
         for _ in range(repeats):
-            self.publish(zero)
+            self.publish(STOP)
         self.publisher.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9)))
 
 

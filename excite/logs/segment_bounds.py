@@ -72,14 +72,14 @@ def first_impossible(dphi_L: FloatArray, dphi_R: FloatArray, dx: FloatArray, dy:
         f"{count} of {bad.size} rows are: values in other units? (excite reads m and rad; a "
         "unit in the header converts, e.g. dx_gt [mm], dphi_L [deg]), or corrupt rows")
     wheels = f"{dphi_L[k]:.6g} and {dphi_R[k]:.6g} rad"
-    timed = duration is not None and duration[k] > 0
-    for name, value in (("dphi_L", dphi_L[k]), ("dphi_R", dphi_R[k])):
-        if timed and abs(value) > limits.max_wheel_rate * duration[k]:
+    bound_k = np.broadcast_to(wheel_bound, most.shape)[k]
+    if most[k] > bound_k:  # the left wheel named first when both are beyond
+        name, value = ("dphi_L", dphi_L[k]) if left[k] > bound_k else ("dphi_R", dphi_R[k])
+        if duration is not None and duration[k] > 0:
             return k, (f"{name} {value:.6g} rad in {duration[k]:.6g} s, faster than any wheel "
                        f"turns ({limits.max_wheel_rate:g} rad/s): {hint}")
-        if not timed and abs(value) > MAX_WHEEL_TURN:
-            return k, (f"{name} {value:.6g} rad, more than any segment turns a wheel "
-                       f"({MAX_WHEEL_TURN:g} rad): {hint}")
+        return k, (f"{name} {value:.6g} rad, more than any segment turns a wheel "
+                   f"({MAX_WHEEL_TURN:g} rad): {hint}")
     if abs(dtheta[k]) > turn[k] + TURN_SLACK:
         return k, (f"dtheta_gt {dtheta[k]:.6g} rad, more than any robot turns on wheel "
                    f"increments of {wheels} (at most {turn[k] + TURN_SLACK:.3g} rad): {hint}")

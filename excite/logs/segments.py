@@ -267,8 +267,8 @@ def _csv_rows(name: str, text: str, on_note: OnNote | None = None
     if not lines:
         return np.zeros((0, len(COLUMNS))), []
     delimiter = delimiter_of(lines[0])
-    if is_header(header_fields(lines[0], delimiter), delimiter):
-        header = _segment_header(lines[0], f"{name}:{numbers[0]}")
+    header = _header_of(name, numbers, lines)
+    if header is not None:
         for note in header.notes(name) if on_note is not None else ():
             on_note(note)
         numbers, lines = numbers[1:], lines[1:]
@@ -291,18 +291,32 @@ def form_problem(path: str | os.PathLike[str]) -> DataError | None:
     it is one (its rows may still be bad)."""
     name = os.fspath(path)
     try:
-        text = read_text(name, "tuple" if name.lower().endswith(TUPLE_SUFFIX) else "CSV")
-        if name.lower().endswith(TUPLE_SUFFIX) or _looks_like_tuples(text):
+        text, tuples = _text(name)
+        if tuples:
             return None
         numbers, lines = content_lines(text)
         if not lines:
             return DataError(f"{name}: empty (no segments and no header)")
-        delimiter = delimiter_of(lines[0])
-        if is_header(header_fields(lines[0], delimiter), delimiter):
-            _segment_header(lines[0], f"{name}:{numbers[0]}")
+        _header_of(name, numbers, lines)
     except DataError as exc:
         return exc
     return None
+
+
+def _text(name: str) -> tuple[str, bool]:
+    """The file's text and whether it is a tuple file (by its name, else its content)."""
+    is_tuple_name = name.lower().endswith(TUPLE_SUFFIX)
+    text = read_text(name, "tuple" if is_tuple_name else "CSV")
+    return text, is_tuple_name or _looks_like_tuples(text)
+
+
+def _header_of(name: str, numbers: Sequence[int], lines: Sequence[str]) -> Header | None:
+    """The segment header of a CSV's first content line; None when that line is numbers;
+    DataError for a header of another format."""
+    delimiter = delimiter_of(lines[0])
+    if not is_header(header_fields(lines[0], delimiter), delimiter):
+        return None
+    return _segment_header(lines[0], f"{name}:{numbers[0]}")
 
 
 def _segments(rows: ArrayLike) -> Segments:
@@ -411,9 +425,8 @@ def _load_rows(path: str | os.PathLike[str], on_note: OnNote | None = None
     not check the minimum number of segments.
     """
     name = os.fspath(path)
-    is_tuple_name = name.lower().endswith(TUPLE_SUFFIX)
-    text = read_text(name, "tuple" if is_tuple_name else "CSV")
-    if is_tuple_name or _looks_like_tuples(text):
+    text, tuples = _text(name)
+    if tuples:
         rows = _tuple_rows(name, text)
         if not rows:
             raise DataError(f"{name}: no segments (the tuple file has no JSON objects)")
