@@ -63,7 +63,12 @@ def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal,
 
 class Stream:
     """Samples of one stream with strictly increasing stamps (late or repeated ones are
-    counted and left out)."""
+    counted and left out).
+
+    Besides its samples, what a stream that goes silent needs to say why: ``left_out``, why
+    its latest messages were not used (set by :meth:`add` for stamps that go back, by a
+    transport for messages it could not read; None once a sample is used again), and
+    ``lag``, how long after its stamp the latest sample arrived (s; None when not told)."""
 
     def __init__(self, width: int) -> None:
         self.t: list[float] = []
@@ -72,18 +77,26 @@ class Stream:
         self.out_of_order = 0
         #: The stamp of the latest sample whose values differ from the one before (s).
         self.last_change: float | None = None
+        self.left_out: str | None = None
+        self.lag: float | None = None
 
-    def add(self, t: float, values: tuple[float, ...]) -> bool:
+    def add(self, t: float, values: tuple[float, ...], received: float | None = None) -> bool:
+        """Add a sample stamped ``t`` (s) that arrived at ``received`` (s, the same clock;
+        None: not known); False (and counted) when its stamp is not after the last one's."""
         if not (math.isfinite(t) and all(map(math.isfinite, values))):
             raise ValueError(f"a sample must be finite, got t={t!r}, {values!r}")
         if self.t and t <= self.t[-1]:
             self.out_of_order += 1
+            self.left_out = (f"stamps at or before {self.t[-1]:.3f} s, the last one used: "
+                             "they went back")
             return False
         values = tuple(map(float, values))
         if not self.values or values != self.values[-1]:
             self.last_change = float(t)
         self.t.append(float(t))
         self.values.append(values)
+        self.left_out = None
+        self.lag = None if received is None else float(received) - float(t)
         return True
 
     @property

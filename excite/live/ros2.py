@@ -20,6 +20,7 @@ and is terminated when the session ends.
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 import signal
@@ -126,8 +127,9 @@ class LiveNode:
         self._first_joint_state: float | None = None
         self._first_pose: float | None = None  # monotonic s of the first pose message
         self._connected: float | None = None  # monotonic s when the topics were subscribed
-        self._last_stamp: dict[str, float] = {}  # the latest usable stamp of each topic (s)
-        self._noted: set[str] = set()  # topics whose bad messages were noted
+        self._last_stamp: dict[str, float] = {}  # the latest finite stamp of each topic (s)
+        self._noted: set[tuple[str, str]] = set()  # (topic, kind) of bad messages noted
+        self._left_out: dict[str, str] = {}  # why each topic's latest message was left out
         self._pose_type: str | None = None
         self._statuses = 0
         self._last_clock = (None, time.monotonic())
@@ -177,7 +179,8 @@ class LiveNode:
     def check_streams(self) -> None:
         """Before the session starts: DataError naming each topic that is advertised but
         has sent nothing for ``topics.wait`` s since the node subscribed (a motion-capture
-        body not tracked, a driver not running): the session would wait for it forever."""
+        body not tracked, a driver not running), or whose latest messages all had to be left
+        out (and why): the session would wait for it forever."""
         if self.session.state != "waiting" or self._connected is None:
             return
         self._check_stamps()
@@ -191,6 +194,10 @@ class LiveNode:
             raise DataError(f"nothing on {' nor '.join(silent)} for {t.wait:g} s after "
                             "subscribing (the topic is advertised, but no message arrives: "
                             "is its publisher sending, the body tracked?)")
+        if self._left_out:  # messages arrive, and none of a topic's latest can be used
+            topic, why = next(iter(self._left_out.items()))
+            raise DataError(f"no usable message on {topic} for {t.wait:g} s after "
+                            f"subscribing: {why}")
         if t.use_sim_time and self._now() == 0.0:
             raise DataError(f"no /clock for {t.wait:g} s with --use-sim-time (is the "
                             "simulator publishing it?)")
@@ -230,45 +237,73 @@ class LiveNode:
     def _now(self) -> float:
         return self.node.get_clock().now().nanoseconds * 1e-9
 
-    def _usable(self, topic: str, t: float, values: Any) -> bool:
-        """Whether a message can be used: a stamp >= 0 and finite values. A message that
-        cannot is left out (a robot's bad message is no bug here; a stream of them goes
-        silent, which stops the robot), and the first of each topic noted on stderr."""
-        if t >= 0 and np.all(np.isfinite(np.asarray(values, dtype=float))):
+    def _usable(self, topic: str, stream: str, t: float, now: float, values: Any) -> bool:
+        """Whether a message stamped ``t`` that arrived at ``now`` (s, the node's clock) can
+        be used: a stamp >= 0, not ahead of the node's clock by more than the silence
+        timeout (a clock ahead would hide a silence: the robot would drive on blind), and
+        finite values. A message that cannot is left out (a robot's bad message is no bug
+        here; a stream of them goes silent, which stops the robot, and the session says
+        why), and the first of each kind on each topic noted on stderr."""
+        if math.isfinite(t):
             self._last_stamp[topic] = t
-            return True
-        if topic not in self._noted:
-            self._noted.add(topic)
-            print(f"excite: note: {topic}: a message with a stamp before 0 or a value that is "
-                  "not finite left out (and any more like it)", file=sys.stderr, flush=True)
-        return False
+        ahead = t - now if now > 0 else 0.0  # no clock yet (use_sim_time): nothing to judge
+        if not (t >= 0 and np.all(np.isfinite(np.asarray(values, dtype=float)))):
+            self._leave_out(topic, stream, "not finite",
+                            "a stamp before 0 or a value that is not finite")
+            return False
+        if ahead > self.session.settings.silence_timeout:
+            self._leave_out(topic, stream, "ahead",
+                            f"stamped {ahead:.3g} s ahead of the node's clock")
+            return False
+        self._left_out.pop(topic, None)
+        return True
+
+    def _leave_out(self, topic: str, stream: str, kind: str, why: str) -> None:
+        """A message of ``topic`` (the session's ``stream``) left out for ``why``: told to
+        the session, kept for the start's checks, and the first of each ``kind`` on each
+        topic noted on stderr."""
+        self._left_out[topic] = why
+        self.session.left_out(stream, f"messages on {topic} left out: {why}")
+        if (topic, kind) not in self._noted:
+            self._noted.add((topic, kind))
+            print(f"excite: note: {topic}: a message left out ({why}), and any more like it",
+                  file=sys.stderr, flush=True)
 
     def _on_joints(self, msg: JointState) -> None:
-        t = _seconds(msg.header.stamp) or self._now()
+        now = self._now()
+        t = _seconds(msg.header.stamp) or now
         names = list(msg.name)
         self._joints_seen.update(names)
         if self._first_joint_state is None:
             self._first_joint_state = time.monotonic()
         wheels = (self.topics.left_wheel, self.topics.right_wheel)
-        if not all(w in names for w in wheels) or len(msg.position) != len(names):
+        topic = self.topics.joint_states
+        missing = [w for w in wheels if w not in names]
+        if missing or len(msg.position) != len(names):
+            if self._wheel_index is not None:  # a change after the wheels were read
+                self._leave_out(topic, "wheels", "names", (
+                    f"no joint {' nor '.join(map(repr, missing))} in them (joints: "
+                    f"{', '.join(names) or 'none'})" if missing else
+                    f"{len(msg.position)} positions for {len(names)} joint names"))
             return
         i, j = names.index(wheels[0]), names.index(wheels[1])
         self._wheel_index = (i, j)
-        if not self._usable(self.topics.joint_states, t, (msg.position[i], msg.position[j])):
+        if not self._usable(topic, "wheels", t, now, (msg.position[i], msg.position[j])):
             return
-        self.session.add_wheels(t, float(msg.position[i]), float(msg.position[j]))
+        self.session.add_wheels(t, float(msg.position[i]), float(msg.position[j]), now)
         if self.recorder is not None:
-            self.recorder.write(self.topics.joint_states, t, self.recorder.joint_state(
+            self.recorder.write(topic, t, self.recorder.joint_state(
                 t, names, [float(p) for p in msg.position]))
 
     def _on_pose(self, msg: Any) -> None:
         if self._first_pose is None:
             self._first_pose = time.monotonic()
-        t = _seconds(msg.header.stamp) or self._now()
+        now = self._now()
+        t = _seconds(msg.header.stamp) or now
         pose = POSE_TYPES[self._pose_type][1](msg)
         q = pose.orientation
-        if not self._usable(self.topics.pose_topic, t, (pose.position.x, pose.position.y,
-                                                         q.x, q.y, q.z, q.w)):
+        if not self._usable(self.topics.pose_topic, "poses", t, now,
+                            (pose.position.x, pose.position.y, q.x, q.y, q.z, q.w)):
             return
         try:
             theta = float(headings(np.array([[q.x, q.y, q.z, q.w]]),
@@ -277,7 +312,7 @@ class LiveNode:
             self.session.abort(str(exc))
             return
         x, y = float(pose.position.x), float(pose.position.y)
-        self.session.add_pose(t, x, y, theta)
+        self.session.add_pose(t, x, y, theta, now)
         if self.recorder is not None:  # as PoseStamped, whatever the topic's type
             self.recorder.write(self.topics.pose_topic, t, self.recorder.pose_stamped(
                 t, x, y, theta, msg.header.frame_id or "map", (q.x, q.y, q.z, q.w)))

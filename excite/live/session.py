@@ -14,6 +14,10 @@ the command to send now; read its status; finish it::
         send(session.command(now()))
     result = session.finish()
 
+A transport that has to leave a stream's messages out (unreadable, stamped ahead of its clock)
+tells the session why (:meth:`LiveSession.left_out`): when that stream goes silent, the
+session's reason says so.
+
 Each call of :meth:`LiveSession.command` is one pass of a pipeline of named stages:
 
 1. **watch**: the streams' silence (stop the robot after ``silence_timeout``, resume when
@@ -133,13 +137,26 @@ class LiveSession:
         self._slowdowns: list[tuple[float, float]] = []
 
     # -- input --------------------------------------------------------------------------------
-    def add_wheels(self, t: float, phi_L: float, phi_R: float) -> None:
-        """The wheel angles (rad, cumulative) at stamp ``t`` (s)."""
-        self._wheels.add(t, (phi_L, phi_R))
+    def add_wheels(self, t: float, phi_L: float, phi_R: float,
+                   received: float | None = None) -> None:
+        """The wheel angles (rad, cumulative) at stamp ``t`` (s), which arrived at
+        ``received`` (s, the commands' clock; None: not known)."""
+        self._wheels.add(t, (phi_L, phi_R), received)
 
-    def add_pose(self, t: float, x: float, y: float, theta: float) -> None:
-        """The external sensor's pose (x, y in m, theta in rad) at stamp ``t`` (s)."""
-        self._poses.add(t, (x, y, theta))
+    def add_pose(self, t: float, x: float, y: float, theta: float,
+                 received: float | None = None) -> None:
+        """The external sensor's pose (x, y in m, theta in rad) at stamp ``t`` (s), which
+        arrived at ``received`` (s; None: not known)."""
+        self._poses.add(t, (x, y, theta), received)
+
+    def left_out(self, stream: str, reason: str) -> None:
+        """Why the latest messages of ``stream`` ("wheels" or "poses") could not be used
+        (a transport's words, e.g. "the JointState messages no longer name ..."): what the
+        session says when that stream goes silent. A sample used again clears it."""
+        streams = {"wheels": self._wheels, "poses": self._poses}
+        if stream not in streams:
+            raise ValueError(f"stream must be 'wheels' or 'poses', got {stream!r}")
+        streams[stream].left_out = reason
 
     def abort(self, reason: str) -> None:
         """End the session now as *aborted* (e.g. interrupted); the command becomes zero."""
@@ -171,8 +188,8 @@ class LiveSession:
         if age > self.settings.silence_timeout:
             self._silent_since = self._silent_since or now - age
             if now - self._silent_since > self.settings.abort_timeout:
-                self._end("aborted", self._silence_text(now) + " for longer than "
-                          f"{self.settings.abort_timeout:g} s")
+                self._end("aborted", self._silence_text(
+                    now, f" for longer than {self.settings.abort_timeout:g} s"))
             elif self._state == "running":
                 self._state, self._reason = "paused", self._silence_text(now)
             return
@@ -213,14 +230,26 @@ class LiveSession:
             return age
         return now - changed
 
-    def _silence_text(self, now: float) -> str:
-        silent = [name for name, age in (("the wheel angles", now - self._wheels.last),
-                                         ("the poses", self._pose_age(now)))
-                  if age > self.settings.silence_timeout]
-        frozen = (now - self._poses.last <= self.settings.silence_timeout
-                  < self._pose_age(now))
-        what = " (they repeat one pose while the wheels turn)" if frozen else ""
-        return f"{' and '.join(silent)} silent{what}; robot stopped"
+    def _silence_text(self, now: float, lasting: str = "") -> str:
+        """Which streams are silent (``lasting``: for how long, in words), each with why when
+        it is known: messages left out (and why), messages that arrive later than the
+        silence timeout after their stamps, or poses that repeat one value while the wheels
+        turn."""
+        timeout = self.settings.silence_timeout
+        frozen = now - self._poses.last <= timeout < self._pose_age(now)
+        parts = []
+        for name, stream, age in (("the wheel angles", self._wheels, now - self._wheels.last),
+                                  ("the poses", self._poses, self._pose_age(now))):
+            if age <= timeout:
+                continue
+            why = stream.left_out
+            if why is None and stream.lag is not None and stream.lag > timeout:
+                why = (f"they arrive {stream.lag:.3g} s after their stamps: stamped on "
+                       "another clock, or held up on the way")
+            if why is None and stream is self._poses and frozen:
+                why = "they repeat one pose while the wheels turn"
+            parts.append(f"{name} silent{lasting}" + (f" ({why})" if why else ""))
+        return f"{' and '.join(parts)}; robot stopped"
 
     def _begin(self, now: float) -> None:
         """Start (or resume after a silence): a new segment from now."""

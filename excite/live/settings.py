@@ -113,6 +113,10 @@ class LiveSettings:
             _positive(name, getattr(self, name))
         for name in ("max_wheel_acceleration", "max_time"):
             _positive(name, getattr(self, name), allow_inf=True)
+        if self.segment_duration > self.max_time:
+            raise ValueError(f"segment_duration ({self.segment_duration:g} s) must be at most "
+                             f"max_time ({self.max_time:g} s): a session of one unfinished "
+                             "maneuver never decides")
         if not (isinstance(self.speed_fraction, (int, float)) and 0 < self.speed_fraction <= 1):
             raise ValueError(f"speed_fraction must be in (0, 1], got {self.speed_fraction!r}")
         if self.radius is not None:

@@ -30,6 +30,8 @@ TOPICS = ["--left-wheel", "l", "--right-wheel", "r", "--pose-topic", "/pose"]
     (["--robot", "default", "--silence-timeout", "5", "--abort-timeout", "1"],
      "--abort-timeout must be at least --silence-timeout"),
     (["--robot", "default", "--target-confidence", "1"], "--target-confidence must be in (0, 1)"),
+    (["--robot", "default", "--segment-duration", "1e300"],
+     "--segment-duration (1e+300 s) must be at most --max-time (600 s)"),
 ])
 def test_bad_live_input(capsys, args, words):
     code, _, err = run_cli(capsys, "live", *TOPICS, *args)

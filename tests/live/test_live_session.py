@@ -286,3 +286,35 @@ def test_a_signal_while_waiting_for_the_topics_ends_at_once(session_dir, sig):
             live.kill()
     assert live.returncode == 130, (out, err)
     assert time.time() - sent < 10
+
+
+@pytest.mark.parametrize("fault, words", [
+    ("drop_left", "no joint 'left_wheel_joint' in them (joints: right_wheel_joint"),
+    ("ahead", "stamped 100 s ahead of the node's clock"),
+    ("negative", "a stamp before 0 or a value that is not finite"),
+], ids=["a wheel dropped", "stamps jump ahead", "a negative stamp"])
+def test_joint_states_that_cannot_be_used_stop_the_robot_and_say_why(session_dir, fault,
+                                                                     words):
+    """Joint states that keep coming but cannot be used: a driver that stops naming a wheel,
+    a clock that jumps ahead, a stamp before 0 (found by fuzzing: they read "the wheel angles
+    silent", or "the wheels do not turn" when a stamp far ahead hid the silence). Relayed
+    through a node that spoils them mid-session: the robot is stopped within the silence
+    timeout, and the session aborts saying what is wrong with them."""
+    from pathlib import Path
+
+    spoilt = session_dir / "spoilt.txt"
+    relay = [sys.executable, str(Path(__file__).with_name("relay.py")), fault, "30",
+             str(spoilt)]
+    s = rehearse(session_dir, [*LIVE[:-1], "0.001", "--joint-states", "/relay_joints",
+                               "--abort-timeout", "3", "--max-time", "200"],
+                 ["--seed", "12"], companion=relay, timeout=120)
+    assert s.code == 6, (s.out, s.err)
+    reason = s.result["live"]["reason"]
+    assert reason.startswith("the wheel angles silent for longer than 3 s (messages on "
+                             "/relay_joints left out: "), reason
+    assert words in reason, reason
+    start = float(spoilt.read_text())
+    assert _first_command(s) < start, "the session had not started when the fault began"
+    assert s.zero_after(start) - start <= 1.0
+    assert s.log[-1, 4] == 0 and s.log[-1, 5] == 0
+    assert "Traceback" not in s.err

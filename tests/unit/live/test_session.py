@@ -141,8 +141,55 @@ def test_a_pose_source_that_repeats_one_pose_stops_the_robot_then_aborts():
     moving = sent[np.any(sent[:, 1:] != 0, axis=1), 0]
     assert moving.max() <= 4.0 + 1.5  # stopped within the silence timeout of the freeze
     assert session.state == "aborted"
-    assert "poses silent (they repeat one pose while the wheels turn)" in session.reason
+    assert ("poses silent for longer than 3 s (they repeat one pose while the wheels turn)"
+            in session.reason)
 
+
+
+def test_a_silence_says_why_the_stream_went_silent():
+    """A stream that goes silent because its messages cannot be used says why (found by
+    fuzzing: a JointState that stopped naming a wheel, or stamps that jumped, read "the wheel
+    angles silent" or "the wheels do not turn"): the transport's reason, stamps that went
+    back, or messages arriving later than the silence timeout after their stamps."""
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=3)
+    session = LiveSession(_settings(abort_timeout=3.0), make_protocol("arcs"), seed=3)
+    _drive(session, robot, until=4.0)
+    assert session.state == "running"
+    why = "messages on /joint_states left out: no joint 'left' in them (joints: right)"
+    session.left_out("wheels", why)
+    _drive(session, robot, until=5.0, wheels=False)
+    assert session.state == "paused"
+    assert f"the wheel angles silent ({why})" in session.reason
+    # a usable sample clears the reason: the stream is running again
+    _drive(session, robot, until=6.0)
+    assert session.state == "running"
+    # stamps that go back: every later sample is left out, and said so
+    last = robot.t
+    sent = []
+    while robot.t < 7.0:
+        robot.step(0.02)
+        _, phi_L, phi_R = robot.wheel_angles()
+        session.add_wheels(last - 10.0, phi_L, phi_R)
+        session.add_pose(*robot.measured_pose())
+        sent.append(session.command(robot.t))
+    assert session.state == "paused" and sent[-1].is_zero
+    assert "the wheel angles silent (stamps at or before" in session.reason
+    assert "they went back" in session.reason
+    # poses that arrive a second after their stamps (on another clock): the session never
+    # starts, and aborts saying why
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=4)
+    session = LiveSession(_settings(abort_timeout=3.0), make_protocol("arcs"), seed=4)
+    while not session.ended and robot.t < 5.0:
+        robot.step(0.02)
+        session.add_wheels(*robot.wheel_angles(), received=robot.t)
+        t, x, y, theta = robot.measured_pose()
+        session.add_pose(t - 1.0, x, y, theta, received=t)
+        assert session.command(robot.t).is_zero
+    assert session.state == "aborted"
+    assert "the poses silent for longer than 3 s (they arrive 1 s after their stamps" \
+        in session.reason
+    with pytest.raises(ValueError, match="stream must be"):
+        session.left_out("joints", "x")
 
 def test_the_time_limit_ends_the_session_out_of_time():
     robot = EXAMPLE.ToyRobot(TRUTH, seed=4)

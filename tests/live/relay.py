@@ -1,0 +1,71 @@
+"""A node between the simulated robot and live that spoils the joint states after a while (a
+driver that changes its joint names, a clock that jumps, a bad stamp), until SIGINT or SIGTERM:
+``python relay.py FAULT AFTER FILE`` republishes ``/joint_states`` on ``/relay_joints``; from
+AFTER s (the messages' own stamps) past the first one on, each message has FAULT:
+"drop_left" (no left wheel in it), "ahead" (stamped 100 s later) or "negative" (stamped at
+-1 s). The stamp of the first spoilt message (s) is written to FILE."""
+
+import signal
+import sys
+from pathlib import Path
+
+import rclpy
+from builtin_interfaces.msg import Time
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import JointState
+
+FAULTS = ("drop_left", "ahead", "negative")
+
+
+def spoilt(msg: JointState, fault: str) -> JointState:
+    out = JointState()
+    out.header = msg.header
+    out.name, out.position = list(msg.name), list(msg.position)
+    if fault == "drop_left":
+        keep = [i for i, name in enumerate(out.name) if name != "left_wheel_joint"]
+        out.name = [out.name[i] for i in keep]
+        out.position = [out.position[i] for i in keep]
+    elif fault == "ahead":
+        out.header.stamp = Time(sec=msg.header.stamp.sec + 100,
+                                nanosec=msg.header.stamp.nanosec)
+    else:
+        out.header.stamp = Time(sec=-1, nanosec=0)
+    return out
+
+
+def main() -> None:
+    fault, after, file = sys.argv[1], float(sys.argv[2]), Path(sys.argv[3])
+    if fault not in FAULTS:
+        raise SystemExit(f"FAULT must be one of {', '.join(FAULTS)}, got {fault!r}")
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = Node("relay", context=context)
+    out = node.create_publisher(JointState, "/relay_joints", 50)
+    first: list[float] = []
+
+    def relay(msg: JointState) -> None:
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if not first:
+            first.append(t)
+        if t - first[0] >= after:
+            if not file.exists():
+                file.write_text(f"{t}\n")
+            msg = spoilt(msg, fault)
+        out.publish(msg)
+
+    node.create_subscription(JointState, "/joint_states", relay, 50)
+    stop: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.append(1))
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    while not stop:
+        executor.spin_once(timeout_sec=0.1)
+    node.destroy_node()
+    context.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
