@@ -37,6 +37,7 @@ from excite.logs.inputs import (
     Part,
     group_inputs,
     note_taker,
+    note_unused_options,
     read_log,
     segment_inputs,
 )
@@ -121,6 +122,7 @@ def _validated(inputs: Sequence[Input], options: LogOptions, calibrated: Robot,
     """Each log read whole and dead-reckoned with both robots, in order."""
     notes: list[str] = []
     note = note_taker(notes, on_note)
+    note_unused_options(inputs, options, note)
     validations = []
     for source in inputs:
         log = read_log(source, options, whole=True, on_note=note)
@@ -179,9 +181,11 @@ def calibrate_logs(
     """
     if holdout and initial is None:
         raise DataError("--holdout compares with the nominal robot: give --init RL,RR,B (m)")
-    used, held = _split_holdout(group_inputs(paths), holdout)
+    inputs = group_inputs(paths)
+    used, held = _split_holdout(inputs, holdout)
     notes: list[str] = []
     note = note_taker(notes, on_note)
+    note_unused_options(inputs, options, note)
     parts = segment_inputs(used, options, on_note=note)
     for part in parts:
         _check_part(part, initial, note)

@@ -36,8 +36,8 @@ from excite.logs.timeseries import TimeSeries, during, unwrapped_words
 from excite.logs.timeseries_csv import header_hint, read_timeseries, timeseries_streams
 
 __all__ = ["LogOptions", "DEFAULT_LOG_OPTIONS", "Input", "Log", "Part", "OnNote",
-           "note_taker", "group_inputs", "read_log", "segment_log", "segment_inputs",
-           "segment_logs"]
+           "note_taker", "note_unused_options", "group_inputs", "read_log", "segment_log",
+           "segment_inputs", "segment_logs"]
 
 #: What is told each note for the user as it arises (the command line prints it).
 OnNote = Callable[[str], None]
@@ -81,6 +81,28 @@ class LogOptions:
 
 #: The options the command line starts from (its defaults are read from here).
 DEFAULT_LOG_OPTIONS = LogOptions()
+
+#: The options only bags read, and those only logs (time-series and bags) read.
+BAG_ONLY = ("joint_states", "left_wheel", "right_wheel", "pose_topic", "tf")
+LOG_ONLY = ("window", "min_distance", "min_angle", "split_at_gaps", "ticks_per_rev",
+            "time_offset", "max_time_offset", "start", "end")
+
+
+def note_unused_options(inputs: Sequence[Input], options: LogOptions, note: OnNote) -> None:
+    """Tell ``note`` of the options set away from their defaults that none of ``inputs``
+    reads (bag options without a bag, log options with segment files only), by their
+    command-line flags: a user who gives them expects them to do something."""
+    kinds = {source.kind for source in inputs}
+    for only, wanted, missing in ((BAG_ONLY, "bags", "no input is a bag"),
+                                  (LOG_ONLY, "time-series logs and bags",
+                                   "every input is a segment file")):
+        if kinds & ({"bag"} if only is BAG_ONLY else {"bag", "timeseries"}):
+            continue
+        unused = [name for name in only
+                  if getattr(options, name) != getattr(DEFAULT_LOG_OPTIONS, name)]
+        if unused:
+            flags = ", ".join("--" + name.replace("_", "-") for name in unused)
+            note(f"{flags} ignored: read from {wanted} only, and {missing}")
 
 
 @dataclass(frozen=True)
@@ -306,4 +328,6 @@ def segment_logs(paths: Sequence[str], options: LogOptions = DEFAULT_LOG_OPTIONS
     segment_files = [source for source in inputs if source.kind == "segments"]
     if segment_files:
         raise _not_a_log(segment_files[0])
+    if on_note is not None:
+        note_unused_options(inputs, options, on_note)
     return segment_inputs(inputs, options, on_note=on_note)

@@ -393,3 +393,30 @@ def test_a_command_that_needs_a_log_names_what_is_wrong_with_another_input(capsy
     code, _, err = run_cli(capsys, "validate", path, "--params", params, "--nominal",
                            "0.05,0.05,0.3")
     assert_one_line_error(code, err, fragment)
+
+
+def test_options_no_input_reads_are_noted(capsys, tmp_path, logs):
+    """Bag options given with CSVs only, and log options with segment files only, did
+    nothing without a word; now a note names them, and the result is what it is without
+    them."""
+    code, out, err = run_cli(capsys, "calibrate", logs[0], "--pose-topic", "/mocap",
+                             "--left-wheel", "l", "--json")
+    assert code == 0
+    notes = [line for line in err.splitlines() if line.startswith("excite: note:")]
+    assert notes == ["excite: note: --left-wheel, --pose-topic ignored: read from bags only, "
+                     "and no input is a bag"]
+    _, plain, err = run_cli(capsys, "calibrate", logs[0], "--json")
+    assert json.loads(plain)["params"] == json.loads(out)["params"] and "note" not in err
+    segments = tmp_path / "segments.csv"
+    assert run_cli(capsys, "segment", logs[0], "--out", str(segments))[0] == 0
+    code, _, err = run_cli(capsys, "calibrate", str(segments), "--window", "2",
+                           "--split-at-gaps")
+    assert code == 0
+    assert ("excite: note: --window, --split-at-gaps ignored: read from time-series logs and "
+            "bags only, and every input is a segment file") in err
+    # a segment file beside a log: the log reads them, no note
+    code, _, err = run_cli(capsys, "calibrate", str(segments), logs[1], "--window", "2")
+    assert code in (0, 3, 4) and "ignored" not in err
+    code, _, err = run_cli(capsys, "segment", logs[0], "--out", str(tmp_path / "s2.csv"),
+                           "--tf", "map:base")
+    assert code == 0 and "--tf ignored: read from bags only" in err
