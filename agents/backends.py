@@ -32,6 +32,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from excite.errors import ExciteError
+from excite.processes import shut_down_now
 
 LOCAL, RAY = BACKENDS = ("local", "ray")
 #: Least work (s) per Ray task, so scheduling and serialisation (milliseconds per task, more
@@ -41,9 +42,14 @@ RAY_TASK_SECONDS = 1.0
 ORPHAN_CHECK_SECONDS = 1.0
 
 
-def _exit_with_parent() -> None:
+def _start_worker() -> None:
     """Initializer of a local worker: a daemon thread ends the process when its parent is
-    gone (reparented: the parent was killed, so no one will read its results)."""
+    gone (reparented: the parent was killed, so no one will read its results); SIGTERM ends
+    it (a forked worker inherits the command line's SIGTERM-as-Ctrl-C, under which a worker
+    told to stop went on to its next task), and SIGINT is left to the parent, which ends the
+    workers when it is interrupted (a terminal's Ctrl-C reaches every process of the job)."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     parent = os.getppid()
 
     def watch() -> None:
@@ -130,10 +136,6 @@ class Executor:
         """``fn(*task)`` for every task, each result yielded as its task finishes."""
         raise NotImplementedError
 
-    def cancel(self) -> None:
-        """Cancel the tasks not finished yet (when the caller stops early)."""
-        raise NotImplementedError
-
 
 class _LocalExecutor(Executor):
     def __init__(self, pool: ProcessPoolExecutor):
@@ -145,10 +147,6 @@ class _LocalExecutor(Executor):
             finished, self.pending = wait(self.pending, return_when=FIRST_COMPLETED)
             for future in finished:
                 yield future.result()
-
-    def cancel(self):
-        for future in self.pending:
-            future.cancel()
 
 
 class _RayExecutor(Executor):
@@ -172,7 +170,8 @@ class _RayExecutor(Executor):
                         raise exc.cause from None
                     raise
 
-    def cancel(self):
+    def cancel(self) -> None:
+        """Cancel the tasks not finished yet (when the caller stops early)."""
         import ray
 
         for ref in self.pending:
@@ -192,19 +191,21 @@ def check_backend(name: str, address: str | None = None) -> None:
 @contextmanager
 def open_backend(name: str = LOCAL, address: str | None = None,
                  workers: int | None = None) -> Iterator[Executor]:
-    """An :class:`Executor` of backend ``name`` for the duration of the block; pending tasks
-    are cancelled when the block ends early. ``workers`` bounds the local pool's processes
-    (Ray schedules by the cluster's CPUs)."""
+    """An :class:`Executor` of backend ``name`` for the duration of the block; when the block
+    ends early (an exception, Ctrl-C) pending tasks are cancelled and local workers
+    terminated at once, their running tasks unwaited for. ``workers`` bounds the local
+    pool's processes (Ray schedules by the cluster's CPUs)."""
     check_backend(name, address)
     if name == LOCAL:
         pool = ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1,
-                                   initializer=_exit_with_parent)
+                                   initializer=_start_worker)
         executor: Executor = _LocalExecutor(pool)
         try:
             yield executor
-        finally:
-            executor.cancel()
-            pool.shutdown(cancel_futures=True)
+        except BaseException:  # interrupted, or a task failed: the running tasks' results
+            shut_down_now(pool)  # would not be kept, so the workers end now, unwaited for
+            raise
+        pool.shutdown()
     else:
         with ray_session(address):
             executor = _RayExecutor()

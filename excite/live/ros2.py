@@ -50,6 +50,7 @@ from excite.live.session import LiveSession
 from excite.live.settings import LiveTopics
 from excite.logs.orientation import headings
 from excite.logs.timeseries import sample_at
+from excite.processes import shut_down_now
 from excite.signals import handled
 
 __all__ = ["INTERRUPTED", "POSE_TYPES", "SessionFailed", "run_live", "stop_on_signals"]
@@ -436,7 +437,9 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
                 node.stop()
             executor.remove_node(node.node)
             node.node.destroy_node()
-        _close(pool)
+        # a decision still running is of no use once the session ended, and waiting for it
+        # at the interpreter's exit left a second Ctrl-C or SIGTERM with the default handlers
+        shut_down_now(pool)
         executor.shutdown(timeout_sec=1.0)
         context.try_shutdown()
 
@@ -447,15 +450,3 @@ def _decision_worker() -> None:
     the session (a worker interrupted mid-decision lost the session's report)."""
     os.nice(DECISION_NICENESS)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def _close(pool: ProcessPoolExecutor) -> None:
-    """Shut the decisions' process down now: a decision still running is of no use once
-    the session ended, and waiting for it at the interpreter's exit left a second Ctrl-C or
-    SIGTERM with the default handlers."""
-    processes = list(getattr(pool, "_processes", {}).values())  # CPython's, since 3.3
-    pool.shutdown(wait=False, cancel_futures=True)
-    for process in processes:
-        process.terminate()
-    for process in processes:
-        process.join(timeout=2.0)

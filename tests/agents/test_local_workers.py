@@ -38,10 +38,10 @@ def _alive(pids: set[int]) -> set[int]:
     return alive
 
 
-def _started_compare(out: Path) -> tuple[subprocess.Popen, set[int]]:
+def _started_compare(out: Path, segments: int = 30) -> tuple[subprocess.Popen, set[int]]:
     proc = subprocess.Popen([sys.executable, "-m", "excite.cli", "compare", "--protocols",
-                             "greedy", "--episodes", "40", "--segments", "30", "--workers",
-                             "2", "--out", str(out)],
+                             "greedy", "--episodes", "40", "--segments", str(segments),
+                             "--workers", "2", "--out", str(out)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     workers: set[int] = set()
@@ -63,6 +63,30 @@ def test_workers_end_with_their_parent(tmp_path, sig):
     proc.wait(timeout=60)
     if sig == signal.SIGTERM:  # as Ctrl-C: one line, finished work kept
         assert proc.returncode == 130 and "interrupted" in proc.stderr.read()
+    deadline = time.monotonic() + 15
+    while _alive(workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _alive(workers)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("to_job", [False, True], ids=["SIGTERM to compare", "SIGINT to the job"])
+def test_an_interrupted_compare_does_not_wait_for_its_running_episodes(tmp_path, to_job):
+    """SIGTERM to compare alone (``kill``, a job scheduler), or SIGINT to every process of
+    the job (a terminal's Ctrl-C), while long episodes run: their results would not be kept,
+    and on SIGTERM compare waited for them to finish; now it ends at once, with the one line
+    of an interrupt."""
+    proc, workers = _started_compare(tmp_path / "out", segments=5000)
+    time.sleep(2.0)
+    start = time.monotonic()
+    if to_job:
+        for pid in {proc.pid} | workers:
+            os.kill(pid, signal.SIGINT)
+    else:
+        proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=300)
+    assert time.monotonic() - start < 10.0
+    assert proc.returncode == 130 and "interrupted" in proc.stderr.read()
     deadline = time.monotonic() + 15
     while _alive(workers) and time.monotonic() < deadline:
         time.sleep(0.2)
