@@ -7,7 +7,9 @@ inputs, each calibrated alone with its own noise levels (:func:`across_logs`); o
 input's segments by the kind of motion (:mod:`excite.calibration.motion_kinds`). Only r_L,
 r_R, b are compared: the sensor mounting is shared by every group (between inputs, each
 input's estimate is combined under one mounting by generalised least squares, so its
-uncertainty is carried into the wheels'). The test: Cochran's Q of the groups' estimates,
+uncertainty is carried into the wheels'), after a test that the inputs' own mountings agree
+(:class:`MountingTest`, at MOUNTING_LEVEL): mountings that differ fail the fit, and each
+input's wheels are then compared with its own mounting. The test: Cochran's Q of the groups' estimates,
 chi-square with 3 (G - 1) degrees of freedom under agreement (F with estimated noise
 levels), at LEVEL (:mod:`excite.stats.meta_analysis`). When they disagree (:func:`applied`),
 with ``heterogeneity="random"``, r_L, r_R, b and their covariance cover the spread under the
@@ -41,8 +43,9 @@ from excite.stats.meta_analysis import leave_one_out, pairwise_z, pool
 if TYPE_CHECKING:
     from excite.calibration.result import CalibrationResult, FitTest
 
-__all__ = ["LEVEL", "POOLING_LEVEL", "HeterogeneityOption", "Group", "Heterogeneity", "Comparison",
-           "check_option", "assessed", "across_logs", "applied"]
+__all__ = ["LEVEL", "POOLING_LEVEL", "MOUNTING_LEVEL", "HeterogeneityOption", "Group",
+           "Heterogeneity", "MountingTest", "Comparison", "check_option", "assessed",
+           "across_logs", "applied"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -61,6 +64,10 @@ POOLING_LEVEL = 0.25
 _NAMES = AXLE.names
 #: Two groups' estimates of a parameter this many combined std apart are named as differing.
 _NAMED_Z = 2.0
+#: The level of the test that the logs' sensor mountings agree (their own estimates, Cochran's
+#: Q as for r_L, r_R, b): one mounting is the model, so a disagreement fails the fit, at the
+#: fit tests' strictness (99.9%).
+MOUNTING_LEVEL = 0.001
 
 
 @dataclass(frozen=True)
@@ -104,7 +111,9 @@ class Heterogeneity:
     group_covariance (3G, 3G): the
     joint covariance of the groups' estimates (m^2, group-major; the groups of one log are
     correlated). group_fits: between logs, each log's own fit test (ok, message), in the
-    order of ``groups``; empty for kinds of motion.
+    order of ``groups``; empty for kinds of motion. mounting: between logs whose sensor
+    mounting is estimated, the test that their mountings agree (:class:`MountingTest`);
+    None otherwise.
     """
 
     by: str
@@ -122,6 +131,7 @@ class Heterogeneity:
     spread_covariance: FloatArray
     group_covariance: FloatArray
     group_fits: tuple[tuple[bool, str], ...] = ()
+    mounting: MountingTest | None = None
 
     @property
     def what(self) -> str:
@@ -136,7 +146,8 @@ class Heterogeneity:
                 "between_std": dict(zip(_NAMES, map(float, self.between_std), strict=True)),
                 "most_different": list(self.most_different),
                 "differences": self.differences,
-                "groups": [group.to_dict() for group in self.groups]}
+                "groups": [group.to_dict() for group in self.groups],
+                "mounting": None if self.mounting is None else self.mounting.to_dict()}
 
     def plain_lines(self) -> list[str]:
         """The report's line among what a user acts on: empty when the groups agree."""
@@ -179,6 +190,31 @@ class Heterogeneity:
                                for n, v, s in zip(_NAMES, group.params, group.std, strict=True))
             lines.append(f"    {group.name}: {values} ({group.n_segments} segments)")
         return lines
+
+
+@dataclass(frozen=True)
+class MountingTest:
+    """Whether the logs' sensor mountings agree: each log's own estimate (l_x, l_y in m,
+    l_theta in rad) against their common one, Cochran's Q (``statistic``, ``dof`` 3 (G - 1),
+    ``p_value`` as for r_L, r_R, b) at MOUNTING_LEVEL. ``differ``: p_value < MOUNTING_LEVEL.
+    ``words``: each log's mounting in words, when they differ (else "")."""
+
+    statistic: float
+    dof: int
+    p_value: float
+    differ: bool
+    words: str
+
+    def to_dict(self) -> dict:
+        return {"differ": self.differ, "statistic": self.statistic, "dof": self.dof,
+                "p_value": self.p_value, "level": MOUNTING_LEVEL}
+
+    def fit_message(self) -> str:
+        """The fit line's reason when the mountings differ."""
+        return (f"the sensor mounting differs between the logs ({self.words}; Q "
+                f"{self.statistic:.3g}, {self.dof} dof, p {_p_text(self.p_value)}): one "
+                "mounting does not fit them (the sensor, or its rigid body, was moved or "
+                "defined anew between them); calibrate each log alone")
 
 
 def _p_text(p_value: float) -> str:
@@ -292,23 +328,56 @@ def across_logs(parts: Sequence[tuple[str, Segments]], pooled: CalibrationResult
         note("the logs were not tested for agreement: fewer than two of them determine the "
              "parameters alone")
         return None
+    mounting = None
     if estimates[0].size == 6:
+        mounting = _mounting_test(names, estimates, covariances, _theta(pooled), min(dofs))
+    if mounting is not None and not mounting.differ:
         wheels, covariance = _shared_mounting(estimates, covariances)
-    else:
-        wheels = np.stack(estimates)
+    else:  # each log's wheels with its own mounting (the axle, or mountings that differ)
+        wheels = np.stack([e[:3] for e in estimates])
         covariance = np.zeros((3 * len(names), 3 * len(names)))
         for i, c in enumerate(covariances):
-            covariance[3 * i:3 * i + 3, 3 * i:3 * i + 3] = c
+            covariance[3 * i:3 * i + 3, 3 * i:3 * i + 3] = c[:3, :3]
     center = pooled.params.as_array()
     comparison = Comparison("logs", tuple(names), tuple(counts), center,
                              AXLE.column_scale(center), wheels, covariance, min(dofs))
-    return replace(assessed(comparison), group_fits=tuple(fits))
+    return replace(assessed(comparison), group_fits=tuple(fits), mounting=mounting)
+
+
+def _mounting_test(names: list[str], estimates: list[FloatArray],
+                   covariances: list[FloatArray], middle: FloatArray,
+                   residual_dof: float) -> MountingTest:
+    """The test that the logs' mountings agree (:class:`MountingTest`), from each log's own
+    (wheels, mounting) estimate and covariance in the relative units about the pooled fit's
+    parameters ``middle`` (6,)."""
+    mountings = np.stack([e[3:] for e in estimates])
+    covariance = np.zeros((3 * len(names), 3 * len(names)))
+    for i, c in enumerate(covariances):
+        covariance[3 * i:3 * i + 3, 3 * i:3 * i + 3] = c[3:, 3:]
+    pooled = pool(mountings, covariance, residual_dof)
+    differ = pooled.p_value < MOUNTING_LEVEL
+    words = ""
+    if differ:
+        scale = SENSOR_POSE.column_scale(middle)[3:]
+        values = middle[3:] + mountings * scale
+        std = np.sqrt(np.einsum("gii->gi", np.stack([c[3:, 3:] for c in covariances]))) * scale
+        words = "; ".join(
+            f"{name}: x {_with_std(100 * v[0], 100 * e[0], 'cm')}, y "
+            f"{_with_std(100 * v[1], 100 * e[1], 'cm')}, theta "
+            f"{_with_std(math.degrees(v[2]), math.degrees(e[2]), 'deg')}"
+            for name, v, e in zip(names, values, std, strict=True))
+    return MountingTest(pooled.statistic, pooled.dof, pooled.p_value, bool(differ), words)
 
 
 def _millimetres(value: float, std: float) -> str:
     """``value ± std`` in mm, to the std's second significant digit."""
-    digits = max(0, 1 - math.floor(math.log10(max(1e3 * std, 1e-12))))
-    return f"{1e3 * value:.{digits}f} ± {1e3 * std:.{digits}f} mm"
+    return _with_std(1e3 * value, 1e3 * std, "mm")
+
+
+def _with_std(value: float, std: float, unit: str) -> str:
+    """``value ± std unit``, to the std's second significant digit."""
+    digits = max(0, 1 - math.floor(math.log10(max(std, 1e-12))))
+    return f"{value:.{digits}f} ± {std:.{digits}f} {unit}"
 
 
 def _differences(c: Comparison, params: FloatArray, std: FloatArray) -> str:
@@ -406,9 +475,19 @@ def applied(result: CalibrationResult, heterogeneity: Heterogeneity | None,
     between logs r_L, r_R, b and their covariance from the random-effects pool, within one
     log the common fit's with ``spread_covariance`` added (module docstring); the sensor
     pose and the rest kept, the fit test the logs' own when they disagree. With "common" and
-    ``detected``, the common fit failing its fit test."""
+    ``detected``, the common fit failing its fit test. Logs whose sensor mountings differ
+    fail the fit test whatever the option (:meth:`MountingTest.fit_message`)."""
     if heterogeneity is None:
         return result
+    if heterogeneity.mounting is not None and heterogeneity.mounting.differ:
+        fit = replace(result.fit, ok=False, message=heterogeneity.mounting.fit_message())
+        return replace(_applied(result, heterogeneity, option), fit=fit)
+    return _applied(result, heterogeneity, option)
+
+
+def _applied(result: CalibrationResult, heterogeneity: Heterogeneity,
+             option: HeterogeneityOption) -> CalibrationResult:
+    """:func:`applied` but for mountings that differ."""
     if not heterogeneity.detected and (option == "common"
                                        or heterogeneity.pooling != "random effects"):
         return replace(result, heterogeneity=replace(heterogeneity, pooling="common"))

@@ -19,7 +19,7 @@ from excite.commands.args import (
     sensor_pose_arg,
     sigma_arg,
 )
-from excite.commands.exit_status import calibration_status
+from excite.commands.exit_status import EXIT_OK, calibration_status
 from excite.commands.logs import LOG_FILES, add_log_options
 from excite.commands.options import add_result_options, add_target_options
 
@@ -97,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
     _refuse_implausible(args.files, result)
     estimated_pose = result.sensor_pose if result.sensor_pose_std is not None else None
     done = None if args.target is None else _judged(args, calibration)
+    status = calibration_status(result)
     if args.json:
         report = result.to_dict()
         if done is not None:
@@ -113,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         for part in calibration.parts:
             print(part.describe())
         print(result.summary(initial))
-        if estimated_pose is not None:
+        if estimated_pose is not None and status == EXIT_OK:  # as --ros2-yaml: usable only
             print(f"  sensor transform: {static_transform_command(estimated_pose)}")
         if done is not None:
             print(_done_line(args.target, *done))
@@ -121,7 +122,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"\nheld-out logs ({len(validation.result.logs)}), nominal (--init) vs "
                   "calibrated:")
             print(validation.result.summary())
-    status = calibration_status(result)
     if args.ros2_yaml:
         export_yaml(args, result, initial, status)
     return status

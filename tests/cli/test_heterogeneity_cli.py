@@ -68,3 +68,30 @@ def test_one_file_of_one_robot_is_tested_between_kinds_of_motion(capsys, two_rob
     assert code == 0
     h = json.loads(out)["heterogeneity"]
     assert h["by"] == "motion" and len(h["groups"]) >= 2
+
+
+def test_files_whose_sensor_mountings_differ_fail_the_fit(capsys, tmp_path):
+    """One robot, the sensor mounted anew between two files: exit 4 naming both mountings,
+    and no static-transform command for a mounting that fits neither."""
+    from excite.core.models import SENSOR_POSE
+
+    paths = []
+    for name, mounting, seed in (("a.csv", (0.10, -0.03, 0.40), 1),
+                                 ("b.csv", (0.07, 0.0, 0.10), 2)):
+        rng = np.random.default_rng(seed)
+        dphi_L, dphi_R = rng.normal(0.0, 2.0, 150), rng.normal(0.0, 2.0, 150)
+        truth, _ = SENSOR_POSE.evaluate(dphi_L, dphi_R, np.r_[TRUTH.as_array(), mounting],
+                                        jacobian=False)
+        rows = np.column_stack([dphi_L, dphi_R, truth.T + rng.normal(0.0, 2e-3, (150, 3))])
+        path = tmp_path / name
+        np.savetxt(path, rows, delimiter=",", header="dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt",
+                   comments="")
+        paths.append(str(path))
+    code, out, _ = run_cli(capsys, "calibrate", *paths)
+    assert code == 4
+    assert "fit             = NO: the sensor mounting differs between the logs (" in out
+    assert "sensor transform" not in out
+    code, out, _ = run_cli(capsys, "calibrate", *paths, "--json")
+    mounting = json.loads(out)["heterogeneity"]["mounting"]
+    assert code == 4 and mounting["differ"] and mounting["dof"] == 3
+    assert mounting["p_value"] < mounting["level"] == 0.001
