@@ -23,7 +23,10 @@ Sub-steps: a segment cut from a log need not be one arc (the curvature changes w
 With ``substeps=True`` the wheel increments are (..., N, K): each segment's K consecutive
 sub-increments (zero-padded: a zero sub-increment is the identity), and the body's motion is
 their composition o = a_1 (+) a_2 (+) ... (+) a_K (:func:`compose_substeps`); the sensor
-transform then applies to o as before. With K = 1 it is the single arc.
+transform then applies to o as before. With K = 1 it is the single arc. Each sub-step is an
+arc corrected for the change of its speed and turn rate within it (:func:`curvature_change`,
+from its neighbours): one arc per sub-step erred by O(h^2) of the sub-step h over a segment,
+the corrected one by O(h^3).
 
 Wheel Jacobian: ``wheel_jacobian`` gives the derivatives of the measured increment by the wheel
 increments themselves, (..., N, 2) -> (..., N, 3, 2) (m/rad, rad/rad), or by each sub-increment
@@ -191,6 +194,69 @@ def _parameter(theta: FloatArray, i: int, trailing: int = 1) -> FloatArray | flo
     return float(theta[i]) if theta.ndim == 1 else theta[(..., i) + (None,) * trailing]
 
 
+def _central(a: FloatArray | float) -> FloatArray | float:
+    """a_(k+1) - a_(k-1) along the last axis (sub-steps), a zero beyond either end."""
+    if np.ndim(a) == 0:
+        return 0.0
+    padded = np.pad(a, [(0, 0)] * (np.ndim(a) - 1) + [(1, 1)])
+    return padded[..., 2:] - padded[..., :-2]
+
+
+def curvature_change(arc: Arc, prediction: FloatArray, jac: FloatArray | None) -> None:
+    """Correct consecutive sub-step arcs (``arc``: (..., K), equal durations h) for the change
+    of speed and turn rate within each, in place: ``prediction`` (3, ..., K) and ``jac``
+    (3, 3, ..., K, by r_L, r_R, b; or None).
+
+    An arc takes speed v and turn rate w as constant over its sub-step. With v + v' t and
+    w + w' t the increment's lateral part differs, to leading order, by
+    h^3 (v' w - v w') / 12 in the sub-step's frame (nothing along it, nothing in heading),
+    which vanishes at constant curvature. The rates from the neighbours by central
+    differences, (ds_(k+1) - ds_(k-1)) / 2h and the same of dtheta, give
+    dy_k += ((ds_(k+1) - ds_(k-1)) dtheta_k - ds_k (dtheta_(k+1) - dtheta_(k-1))) / 24 (m).
+    A zero beyond a segment's ends (its padding too) halves the term of its first and last
+    sub-step, an O(h^3) error of two sub-steps; the O(h^2) error of every sub-step is gone
+    (synthetic smooth driving, 1 s segments: 1.5e-5 m to 2.5e-7 m at h = 20 ms)."""
+    ds, dth = arc.ds, arc.dtheta
+    change_ds, change_th = _central(ds), _central(dth)
+    prediction[1] += (change_ds * dth - ds * change_th) / 24.0
+    if jac is None:
+        return
+    for k in range(3):
+        g_ds, g_th = arc.d_ds[k], arc.d_dtheta[k]
+        jac[1, k] += (_central(g_ds) * dth + change_ds * g_th - g_ds * change_th
+                      - ds * _central(g_th)) / 24.0
+
+
+def _shifted(a: FloatArray, by: int) -> FloatArray:
+    """a_(k - by) along the last axis (sub-steps), a zero beyond either end."""
+    out = np.zeros_like(a)
+    if by > 0:
+        out[..., by:] = a[..., :-by]
+    else:
+        out[..., :by] = a[..., -by:]
+    return out
+
+
+def _curvature_change_by_wheels(out: FloatArray, arc: Arc, prediction: FloatArray,
+                                d_ds: tuple, d_dtheta: tuple) -> None:
+    """Add to the composition's derivatives by each wheel sub-increment (3, 2, ..., K),
+    in place, what it moves through :func:`curvature_change`: the lateral term of its own
+    sub-step and of its two neighbours (m/rad), each turned by that sub-step's heading.
+    ``prediction``: the corrected sub-steps (3, ..., K); ``d_ds``, ``d_dtheta``: ds and
+    dtheta of a sub-step by each wheel's sub-increment (m/rad, rad/rad)."""
+    c, s, _ = _world_substeps(prediction)
+    ds, dth = arc.ds, arc.dtheta
+    change_ds, change_th = _central(ds), _central(dth)
+    for w in range(2):
+        a, b = d_ds[w], d_dtheta[w]
+        own = (change_ds * b - a * change_th) / 24.0  # of this sub-step's term
+        cross = (a * dth - ds * b) / 24.0  # of the next sub-step's term, by this one's
+        after = _shifted(cross, 1)  # on the term of sub-step k - 1, by sub-increment k
+        before = -_shifted(cross, -1)  # on the term of sub-step k + 1, by sub-increment k
+        out[0, w] -= s * own + _shifted(s, 1) * after + _shifted(s, -1) * before
+        out[1, w] += c * own + _shifted(c, 1) * after + _shifted(c, -1) * before
+
+
 def compose_substeps(prediction: FloatArray, jac: FloatArray | None
                      ) -> tuple[FloatArray, FloatArray | None]:
     """The composition a_1 (+) ... (+) a_K of body increments (3, ..., K) along the last
@@ -278,6 +344,7 @@ class AxleModel(SegmentModel):
         prediction[0], prediction[1], prediction[2] = arc.dx, arc.dy, arc.dtheta
         jac = arc.fill_jacobian(np.empty((3, 3) + shape)) if jacobian else None
         if substeps:
+            curvature_change(arc, prediction, jac)
             return compose_substeps(prediction, jac) + (None,)
         return prediction, jac, arc
 
@@ -299,7 +366,10 @@ class AxleModel(SegmentModel):
         if not substeps:
             return jac
         prediction = np.stack(np.broadcast_arrays(arc.dx, arc.dy, arc.dtheta))
-        return substep_derivatives(prediction, jac)
+        curvature_change(arc, prediction, None)
+        out = substep_derivatives(prediction, jac)
+        _curvature_change_by_wheels(out, arc, prediction, d_ds, d_dtheta)
+        return out
 
     def evaluate_scalar(self, dphi_L, dphi_R, theta):
         r_L, r_R, b = theta[0], theta[1], theta[2]

@@ -151,9 +151,19 @@ def test_substep_jacobian_equals_finite_differences(r_L, r_R, b, left, right, l_
 
 
 def test_substeps_compose_the_arcs_and_zero_padding_is_the_identity(rng):
+    """The composition of the sub-steps' arcs, each with the lateral term of its change of
+    curvature (excite.core.models.curvature_change), written out here one sub-step at a
+    time; padding changes nothing, and one sub-step is the arc."""
     sub_L, sub_R = rng.normal(0, 3, (7, 4)), rng.normal(0, 3, (7, 4))
     theta = np.array([0.05, 0.051, 0.3, 0.1, -0.05, 0.4])
     arcs = AXLE.predict(sub_L, sub_R, theta[:3])  # (7, 4, 3)
+    ds = 0.5 * (theta[0] * sub_L + theta[1] * sub_R)
+    dth = (theta[1] * sub_R - theta[0] * sub_L) / theta[2]
+    for k in range(4):
+        before = (ds[:, k - 1], dth[:, k - 1]) if k > 0 else (0.0, 0.0)
+        after = (ds[:, k + 1], dth[:, k + 1]) if k < 3 else (0.0, 0.0)
+        arcs[:, k, 1] += ((after[0] - before[0]) * dth[:, k]
+                          - ds[:, k] * (after[1] - before[1])) / 24.0
     body = arcs[:, 0]
     for k in range(1, 4):
         body = compose(body, arcs[:, k])
