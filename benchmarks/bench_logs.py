@@ -73,7 +73,10 @@ def synthetic_source(args: argparse.Namespace, i: int
                         slip=args.slip, ticks_per_rev=args.ticks_per_rev,
                         pose_noise_time=args.pose_noise_time,
                         encoder_jitter=args.encoder_jitter, pose_jitter=args.pose_jitter,
-                        encoder_rate=args.encoder_rate, pose_rate=args.pose_rate)
+                        encoder_rate=args.encoder_rate, pose_rate=args.pose_rate,
+                        **{key: value for key, value in (("speed", args.forward_speed),
+                                                         ("turn_rate", args.turn_rate))
+                           if value is not None})
     return (log.series, np.append(log.params.as_array(), SENSOR.as_array()),
             (args.pose_noise, args.pose_noise), args.ticks_per_rev)
 
@@ -163,6 +166,12 @@ def main() -> None:
                         help="rad / sqrt(s) per wheel (synthetic)")
     parser.add_argument("--encoder-rate", type=float, default=100.0, help="Hz (synthetic)")
     parser.add_argument("--pose-rate", type=float, default=50.0, help="Hz (synthetic)")
+    parser.add_argument("--forward-speed", type=float, default=None,
+                        help="m/s, the middle of the forward speed's range (synthetic; "
+                        "default synthetic_log's)")
+    parser.add_argument("--turn-rate", type=float, default=None,
+                        help="rad/s, the turn rate's amplitude (synthetic; default "
+                        "synthetic_log's)")
     parser.add_argument("--ticks-per-rev", type=int, default=None,
                         help="(synthetic) encoders count whole ticks of this resolution "
                              "(default: exact angles)")
