@@ -9,9 +9,9 @@ r_R, b are compared: the sensor mounting is shared by every group (between input
 input's estimate is combined under one mounting by generalised least squares, so its
 uncertainty is carried into the wheels'), after a test that the inputs' own mountings agree
 (:class:`MountingTest`, at MOUNTING_LEVEL): mountings that differ fail the fit, and each
-input's wheels are then compared with its own mounting. The test: Cochran's Q of the groups' estimates,
-chi-square with 3 (G - 1) degrees of freedom under agreement (F with estimated noise
-levels), at LEVEL (:mod:`excite.stats.meta_analysis`). When they disagree (:func:`applied`),
+input's wheels are then compared with its own mounting. The test: Cochran's Q of the groups'
+estimates, chi-square with 3 (G - 1) degrees of freedom under agreement (F with estimated
+noise levels), at LEVEL (:mod:`excite.stats.meta_analysis`). When they disagree (:func:`applied`),
 with ``heterogeneity="random"``, r_L, r_R, b and their covariance cover the spread under the
 random-effects model (Knapp-Hartung's adjustment for few groups): between logs, the
 random-effects pool; within one log, the common fit of the log's mix of driving, with the

@@ -10,8 +10,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 #: excite's layers, lowest first: a module may import its own layer and the ones before it.
 #: commands and cli, the composition root, may import any layer (the heavy ones lazily).
-LAYERS = ("errors", "plugins", "signals", "processes", "core", "contracts", "stats", "logs", "validation",
-          "calibration", "stopping", "estimators", "registration", "live", "commands", "cli")
+LAYERS = ("errors", "plugins", "signals", "processes", "core", "contracts", "stats", "logs",
+          "validation", "calibration", "stopping", "estimators", "registration", "live",
+          "commands", "cli")
 
 
 def _imports(path: Path, top_level_only: bool = False) -> list[str]:
