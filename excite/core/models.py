@@ -194,18 +194,21 @@ def _parameter(theta: FloatArray, i: int, trailing: int = 1) -> FloatArray | flo
     return float(theta[i]) if theta.ndim == 1 else theta[(..., i) + (None,) * trailing]
 
 
-def _central(a: FloatArray | float) -> FloatArray | float:
+def _central(a: FloatArray) -> FloatArray:
     """a_(k+1) - a_(k-1) along the last axis (sub-steps), a zero beyond either end."""
-    if np.ndim(a) == 0:
-        return 0.0
-    padded = np.pad(a, [(0, 0)] * (np.ndim(a) - 1) + [(1, 1)])
-    return padded[..., 2:] - padded[..., :-2]
+    out = np.zeros_like(a)
+    if a.shape[-1] > 1:
+        np.subtract(a[..., 2:], a[..., :-2], out=out[..., 1:-1])
+        out[..., 0] = a[..., 1]
+        out[..., -1] = -a[..., -2]
+    return out
 
 
-def curvature_change(arc: Arc, prediction: FloatArray, jac: FloatArray | None) -> None:
-    """Correct consecutive sub-step arcs (``arc``: (..., K), equal durations h) for the change
-    of speed and turn rate within each, in place: ``prediction`` (3, ..., K) and ``jac``
-    (3, 3, ..., K, by r_L, r_R, b; or None).
+def curvature_change(arc: Arc, b: FloatArray | float, prediction: FloatArray,
+                     jac: FloatArray | None) -> None:
+    """Correct consecutive sub-step arcs (``arc``: (..., K), equal durations h, of wheel
+    separation ``b``, m) for the change of speed and turn rate within each, in place:
+    ``prediction`` (3, ..., K) and ``jac`` (3, 3, ..., K, by r_L, r_R, b; or None).
 
     An arc takes speed v and turn rate w as constant over its sub-step. With v + v' t and
     w + w' t the increment's lateral part differs, to leading order, by
@@ -221,10 +224,14 @@ def curvature_change(arc: Arc, prediction: FloatArray, jac: FloatArray | None) -
     prediction[1] += (change_ds * dth - ds * change_th) / 24.0
     if jac is None:
         return
-    for k in range(3):
+    # the parameters move ds and dtheta through 0.5 phi_L, 0.5 phi_R (d_ds) and -phi_L / b,
+    # phi_R / b, -dtheta / b (d_dtheta): their central differences from two of the wheels'
+    half_L, half_R = _central(arc.d_ds[0]), _central(arc.d_ds[1])
+    changes = ((half_L, -2.0 * half_L / b), (half_R, 2.0 * half_R / b), (0.0, -change_th / b))
+    for k, (change_g_ds, change_g_th) in enumerate(changes):
         g_ds, g_th = arc.d_ds[k], arc.d_dtheta[k]
-        jac[1, k] += (_central(g_ds) * dth + change_ds * g_th - g_ds * change_th
-                      - ds * _central(g_th)) / 24.0
+        jac[1, k] += (change_g_ds * dth + change_ds * g_th - g_ds * change_th
+                      - ds * change_g_th) / 24.0
 
 
 def _shifted(a: FloatArray, by: int) -> FloatArray:
@@ -336,15 +343,15 @@ class AxleModel(SegmentModel):
         phi_L, phi_R = _broadcast_increments(dphi_L, dphi_R)
         theta = np.asarray(theta, dtype=float)
         trailing = 1 + substeps
-        arc = Arc(phi_L, phi_R, *(_parameter(theta, i, trailing) for i in range(3)),
-                  derivatives=jacobian)
+        r_L, r_R, b = (_parameter(theta, i, trailing) for i in range(3))
+        arc = Arc(phi_L, phi_R, r_L, r_R, b, derivatives=jacobian)
         shape = np.broadcast_shapes(phi_L.shape, theta.shape[:-1] + (1,) * min(phi_L.ndim,
                                                                                trailing))
         prediction = np.empty((3,) + shape)
         prediction[0], prediction[1], prediction[2] = arc.dx, arc.dy, arc.dtheta
         jac = arc.fill_jacobian(np.empty((3, 3) + shape)) if jacobian else None
         if substeps:
-            curvature_change(arc, prediction, jac)
+            curvature_change(arc, b, prediction, jac)
             return compose_substeps(prediction, jac) + (None,)
         return prediction, jac, arc
 
@@ -366,7 +373,7 @@ class AxleModel(SegmentModel):
         if not substeps:
             return jac
         prediction = np.stack(np.broadcast_arrays(arc.dx, arc.dy, arc.dtheta))
-        curvature_change(arc, prediction, None)
+        curvature_change(arc, b, prediction, None)
         out = substep_derivatives(prediction, jac)
         _curvature_change_by_wheels(out, arc, prediction, d_ds, d_dtheta)
         return out
