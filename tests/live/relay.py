@@ -5,15 +5,11 @@ AFTER s (the messages' own stamps) past the first one on, each message has FAULT
 "drop_left" (no left wheel in it), "ahead" (stamped 100 s later) or "negative" (stamped at
 -1 s). The stamp of the first spoilt message (s) is written to FILE."""
 
-import signal
 import sys
 from pathlib import Path
 
-import rclpy
 from builtin_interfaces.msg import Time
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
+from companion import node, spin_until_signalled
 from sensor_msgs.msg import JointState
 
 FAULTS = ("drop_left", "ahead", "negative")
@@ -39,10 +35,8 @@ def main() -> None:
     fault, after, file = sys.argv[1], float(sys.argv[2]), Path(sys.argv[3])
     if fault not in FAULTS:
         raise SystemExit(f"FAULT must be one of {', '.join(FAULTS)}, got {fault!r}")
-    context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = Node("relay", context=context)
-    out = node.create_publisher(JointState, "/relay_joints", 50)
+    relay_node = node("relay")
+    out = relay_node.create_publisher(JointState, "/relay_joints", 50)
     first: list[float] = []
 
     def relay(msg: JointState) -> None:
@@ -55,16 +49,8 @@ def main() -> None:
             msg = spoilt(msg, fault)
         out.publish(msg)
 
-    node.create_subscription(JointState, "/joint_states", relay, 50)
-    stop: list[int] = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.append(1))
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    while not stop:
-        executor.spin_once(timeout_sec=0.1)
-    node.destroy_node()
-    context.try_shutdown()
+    relay_node.create_subscription(JointState, "/joint_states", relay, 50)
+    spin_until_signalled(relay_node)
 
 
 if __name__ == "__main__":
