@@ -197,7 +197,8 @@ class MountingTest:
     """Whether the logs' sensor mountings agree: each log's own estimate (l_x, l_y in m,
     l_theta in rad) against their common one, Cochran's Q (``statistic``, ``dof`` 3 (G - 1),
     ``p_value`` as for r_L, r_R, b) at MOUNTING_LEVEL. ``differ``: p_value < MOUNTING_LEVEL.
-    ``words``: each log's mounting in words, when they differ (else "")."""
+    ``words``: each log's mounting in words (theta in [-180, 180) deg), and with more than two
+    logs the one most different from the others, when they differ (else "")."""
 
     statistic: float
     dof: int
@@ -361,11 +362,15 @@ def _mounting_test(names: list[str], estimates: list[FloatArray],
         scale = SENSOR_POSE.column_scale(middle)[3:]
         values = middle[3:] + mountings * scale
         std = np.sqrt(np.einsum("gii->gi", np.stack([c[3:, 3:] for c in covariances]))) * scale
+        values[:, 2] = np.remainder(values[:, 2] + math.pi, 2 * math.pi) - math.pi
         words = "; ".join(
             f"{name}: x {_with_std(100 * v[0], 100 * e[0], 'cm')}, y "
             f"{_with_std(100 * v[1], 100 * e[1], 'cm')}, theta "
             f"{_with_std(math.degrees(v[2]), math.degrees(e[2]), 'deg')}"
             for name, v, e in zip(names, values, std, strict=True))
+        if len(names) > 2:
+            odd = names[int(np.argmax(leave_one_out(mountings, covariance)))]
+            words += f"; most different: {odd}"
     return MountingTest(pooled.statistic, pooled.dof, pooled.p_value, bool(differ), words)
 
 

@@ -118,11 +118,15 @@ def _pooled(parts: Sequence[Part]) -> Segments:
 
 
 def _validated(inputs: Sequence[Input], options: LogOptions, calibrated: Robot,
-               nominal: Robot, on_note: OnNote | None) -> ValidatedLogs:
-    """Each log read whole and dead-reckoned with both robots, in order."""
+               nominal: Robot, on_note: OnNote | None, *,
+               note_unused: bool = False) -> ValidatedLogs:
+    """Each log read whole and dead-reckoned with both robots, in order; ``note_unused``:
+    first note the options none of them reads (the held-out logs of calibrate_logs are
+    noted with its other inputs)."""
     notes: list[str] = []
     note = note_taker(notes, on_note)
-    note_unused_options(inputs, options, note)
+    if note_unused:
+        note_unused_options(inputs, options, note)
     validations = []
     for source in inputs:
         log = read_log(source, options, whole=True, on_note=note)
@@ -143,7 +147,8 @@ def validate_logs(paths: Sequence[str], calibrated: Robot, nominal: Robot,
     Raises DataError for a segment file, a log that cannot be read or whose streams jump, and
     as validate_log does.
     """
-    return _validated(group_inputs(paths), options, calibrated, nominal, on_note)
+    return _validated(group_inputs(paths), options, calibrated, nominal, on_note,
+                      note_unused=True)
 
 
 def calibrate_logs(

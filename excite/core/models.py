@@ -244,14 +244,13 @@ def _shifted(a: FloatArray, by: int) -> FloatArray:
     return out
 
 
-def _curvature_change_by_wheels(out: FloatArray, arc: Arc, prediction: FloatArray,
+def _curvature_change_by_wheels(out: FloatArray, arc: Arc, c: FloatArray, s: FloatArray,
                                 d_ds: tuple, d_dtheta: tuple) -> None:
     """Add to the composition's derivatives by each wheel sub-increment (3, 2, ..., K),
     in place, what it moves through :func:`curvature_change`: the lateral term of its own
-    sub-step and of its two neighbours (m/rad), each turned by that sub-step's heading.
-    ``prediction``: the corrected sub-steps (3, ..., K); ``d_ds``, ``d_dtheta``: ds and
-    dtheta of a sub-step by each wheel's sub-increment (m/rad, rad/rad)."""
-    c, s, _ = _world_substeps(prediction)
+    sub-step and of its two neighbours (m/rad), each turned by that sub-step's heading
+    (``c``, ``s``: its cosine and sine, (..., K)). ``d_ds``, ``d_dtheta``: ds and dtheta of
+    a sub-step by each wheel's sub-increment (m/rad, rad/rad)."""
     ds, dth = arc.ds, arc.dtheta
     change_ds, change_th = _central(ds), _central(dth)
     for w in range(2):
@@ -287,12 +286,14 @@ def compose_substeps(prediction: FloatArray, jac: FloatArray | None
     return out, out_jac
 
 
-def substep_derivatives(prediction: FloatArray, jac: FloatArray) -> FloatArray:
+def substep_derivatives(prediction: FloatArray, jac: FloatArray,
+                        world: tuple | None = None) -> FloatArray:
     """Derivatives (3, Q, ..., K) of the composition a_1 (+) ... (+) a_K (body increments
     (3, ..., K), :func:`compose_substeps`) by Q quantities each of which moves only its own
     sub-step k, given d a_k / d q (3, Q, ..., K): R(Theta_k) d a_k,xy + J (X - W_<=k)
-    d a_k,theta, with W_<=k the displacement up to and including sub-step k (m, rad)."""
-    c, s, world = _world_substeps(prediction)
+    d a_k,theta, with W_<=k the displacement up to and including sub-step k (m, rad).
+    ``world``: :func:`_world_substeps` of ``prediction`` when the caller has it."""
+    c, s, world = _world_substeps(prediction) if world is None else world
     tail_x, tail_y = _tails(world, (world[0].sum(axis=-1), world[1].sum(axis=-1)))
     return np.stack([c * jac[0] - s * jac[1] - tail_y * jac[2],
                      s * jac[0] + c * jac[1] + tail_x * jac[2], jac[2]])
@@ -374,8 +375,9 @@ class AxleModel(SegmentModel):
             return jac
         prediction = np.stack(np.broadcast_arrays(arc.dx, arc.dy, arc.dtheta))
         curvature_change(arc, b, prediction, None)
-        out = substep_derivatives(prediction, jac)
-        _curvature_change_by_wheels(out, arc, prediction, d_ds, d_dtheta)
+        world = _world_substeps(prediction)
+        out = substep_derivatives(prediction, jac, world)
+        _curvature_change_by_wheels(out, arc, world[0], world[1], d_ds, d_dtheta)
         return out
 
     def evaluate_scalar(self, dphi_L, dphi_R, theta):

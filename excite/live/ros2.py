@@ -280,11 +280,13 @@ class LiveNode:
         wheels = (self.topics.left_wheel, self.topics.right_wheel)
         topic = self.topics.joint_states
         missing = [w for w in wheels if w not in names]
+        if len(missing) == 2:  # another publisher's joints (an arm, a gripper): not ours
+            return
         if missing or len(msg.position) != len(names):
             if self._wheel_index is not None:  # a change after the wheels were read
                 self._leave_out(topic, "wheels", "names", (
-                    f"no joint {' nor '.join(map(repr, missing))} in them (joints: "
-                    f"{', '.join(names) or 'none'})" if missing else
+                    f"no joint {missing[0]!r} in them (joints: {', '.join(names)})"
+                    if missing else
                     f"{len(msg.position)} positions for {len(names)} joint names"))
             return
         i, j = names.index(wheels[0]), names.index(wheels[1])

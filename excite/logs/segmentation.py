@@ -95,7 +95,7 @@ OFF_TRACK = ("off the track (out and back beyond the jump limits: a marker swap 
 #: wheel radii by 1.7 standard deviations at 0.5 mm pose noise (benchmarks/bench_logs.py).
 MAX_SUBSTEPS = 256
 #: s, the longest sub-step: slower encoders get several sub-steps per period, through the cubic
-#: interpolant (:func:`_wheel_angles`). One arc per 40 ms period biased b by 0.65 standard
+#: interpolant (:func:`wheel_angles`). One arc per 40 ms period biased b by 0.65 standard
 #: errors, per 80 ms by 2.6 (even with the cubic boundaries; 6 with straight lines); 20 ms
 #: sub-steps leave no bias at 12.5 Hz (synthetic logs, 100 Hz poses of 1 mm / 2 mrad).
 MAX_SUBSTEP = 0.02
@@ -274,7 +274,7 @@ def _cut(ts: TimeSeries, t_pose: FloatArray, stretches: _Stretches, window: floa
     return _Cut(np.concatenate([empty, *starts]), np.concatenate([empty, *ends]), tails)
 
 
-def _wheel_angles(ts: TimeSeries) -> Callable[[FloatArray], FloatArray]:
+def wheel_angles(ts: TimeSeries) -> Callable[[FloatArray], FloatArray]:
     """The wheels' cumulative angles (rad) at any times (s, encoder clock, within the stream),
     (..., 2) for (phi_L, phi_R): a monotone cubic (PCHIP, Fritsch-Carlson) between the
     samples. On a smoothly accelerating wheel it errs by O(h^3) of the encoder period h, where
@@ -468,7 +468,7 @@ def segment_timeseries(
     t_pose = ts.t_pose + time_offset
     stretches = _stretches(ts.t_enc, t_pose, encoders, poses)
     cut = _cut(ts, t_pose, stretches, window, min_distance, min_angle)
-    wheels = _wheel_angles(ts)
+    wheels = wheel_angles(ts)
     rows = _increments(ts, wheels, t_pose, cut.start, cut.end)
     reasons = _drop_reasons(ts, t_pose, cut, rows, encoders, poses, limits, noise)
     keep = ~np.logical_or.reduce(list(reasons.values()))

@@ -11,12 +11,14 @@ Dead reckoning (one choice, everywhere)
 * Clocks: pose time + ``time_offset`` = encoder time (s), as in :mod:`excite.logs.timeseries`.
   Dead reckoning uses the pose samples inside the encoder time range (a contiguous stretch);
   it starts at the first of them.
-* Between consecutive encoder samples the robot moves on the exact arc of
-  :func:`excite.core.kinematics.predict_increment` (constant wheel-rate ratio). At the pose times
-  the cumulative wheel angles are interpolated linearly (as the segmentation does), which
-  splits an encoder interval into two arcs of the same curvature: the integration grid is the
-  union of the encoder and pose times. Across a gap in the encoder stream the motion is one
-  arc, like any other interval.
+* Between consecutive encoder samples the robot moves on the arc of constant wheel-rate ratio
+  (:class:`excite.core.kinematics.Arc`) with the calibration model's term for the change of
+  curvature from its neighbours (:func:`excite.core.models.curvature_change`: an arc per
+  interval alone drifts by O(h^2) of the encoder period on curving paths). At the pose times
+  the cumulative wheel angles are interpolated by the segmentation's monotone cubic
+  (:func:`excite.logs.segmentation.wheel_angles`): the integration grid is the union of the
+  encoder and pose times. Across a gap in the encoder stream the motion is one arc, like any
+  other interval.
 * Poses are composed in SE(2) (:mod:`excite.core.se2`), vectorised: the heading is the cumulative
   sum of the arcs' dtheta and the position the cumulative sum of their (dx, dy) rotated by the
   heading at each arc's start.
@@ -70,10 +72,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from excite.core import se2
-from excite.core.kinematics import Params, predict_increment, wrap_angle
-from excite.core.models import SensorPose
+from excite.core.kinematics import Arc, Params, wrap_angle
+from excite.core.models import SensorPose, curvature_change
 from excite.errors import DataError
 from excite.logs.continuity import check_continuity
+from excite.logs.segmentation import wheel_angles
 from excite.logs.segments import read_text
 from excite.logs.timeseries import TimeSeries
 from excite.validation.verdict import METRIC, Verdict, judge
@@ -144,9 +147,11 @@ def dead_reckon(series: TimeSeries, time_offset: float, params: Params,
     t_enc = series.t_enc
     inner = t_enc[(t_enc > t_eval[0]) & (t_enc < t_eval[-1])]
     grid = np.union1d(t_eval, inner)
-    phi_L = np.interp(grid, t_enc, series.phi_L)
-    phi_R = np.interp(grid, t_enc, series.phi_R)
-    path = se2.accumulate(*predict_increment(np.diff(phi_L), np.diff(phi_R), params))
+    phi = np.diff(wheel_angles(series)(grid), axis=0)
+    arc = Arc(phi[:, 0], phi[:, 1], params.r_L, params.r_R, params.b, derivatives=False)
+    steps = np.stack([arc.dx, arc.dy, arc.dtheta])
+    curvature_change(arc, params.b, steps, None)
+    path = se2.accumulate(*steps)
     return path[np.searchsorted(grid, t_eval)]
 
 

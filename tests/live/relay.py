@@ -3,7 +3,8 @@ driver that changes its joint names, a clock that jumps, a bad stamp), until SIG
 ``python relay.py FAULT AFTER FILE`` republishes ``/joint_states`` on ``/relay_joints``; from
 AFTER s (the messages' own stamps) past the first one on, each message has FAULT:
 "drop_left" (no left wheel in it), "ahead" (stamped 100 s later) or "negative" (stamped at
--1 s). The stamp of the first spoilt message (s) is written to FILE."""
+-1 s); or, "gripper", each is followed by a message of another joint (an arm's or a gripper's
+publisher on the same topic). The stamp of the first spoilt message (s) is written to FILE."""
 
 import sys
 from pathlib import Path
@@ -12,7 +13,7 @@ from builtin_interfaces.msg import Time
 from companion import node, spin_until_signalled
 from sensor_msgs.msg import JointState
 
-FAULTS = ("drop_left", "ahead", "negative")
+FAULTS = ("drop_left", "ahead", "negative", "gripper")
 
 
 def spoilt(msg: JointState, fault: str) -> JointState:
@@ -43,9 +44,15 @@ def main() -> None:
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         if not first:
             first.append(t)
+        if t - first[0] >= after and not file.exists():
+            file.write_text(f"{t}\n")
+        if t - first[0] >= after and fault == "gripper":
+            out.publish(msg)
+            other = JointState()
+            other.header, other.name, other.position = msg.header, ["gripper_joint"], [0.01]
+            out.publish(other)
+            return
         if t - first[0] >= after:
-            if not file.exists():
-                file.write_text(f"{t}\n")
             msg = spoilt(msg, fault)
         out.publish(msg)
 

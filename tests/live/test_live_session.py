@@ -318,3 +318,19 @@ def test_joint_states_that_cannot_be_used_stop_the_robot_and_say_why(session_dir
     assert s.zero_after(start) - start <= 1.0
     assert s.log[-1, 4] == 0 and s.log[-1, 5] == 0
     assert "Traceback" not in s.err
+
+
+def test_another_publisher_on_the_joint_states_changes_nothing(session_dir):
+    """An arm's or a gripper's joints published on the same topic, without the wheels (found
+    by review: once the wheels were seen, each such message was taken for a spoilt wheel
+    message): they are not the session's, and it reaches the target without a word of them."""
+    from pathlib import Path
+
+    relay = [sys.executable, str(Path(__file__).with_name("relay.py")), "gripper", "0",
+             str(session_dir / "spoilt.txt")]
+    s = rehearse(session_dir, [*LIVE, "--joint-states", "/relay_joints", "--sensor-pose",
+                               "axle", "--max-time", "200"],
+                 ["--seed", "0", "--mount", "0,0,0"], companion=relay, timeout=400)
+    assert s.code == 0, (s.out, s.err)
+    assert s.result["live"]["outcome"] == "done"
+    assert "left out" not in s.err
