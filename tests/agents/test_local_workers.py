@@ -1,5 +1,6 @@
 """A killed or terminated compare leaves no worker processes behind (Linux: /proc)."""
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -77,14 +78,20 @@ def test_an_interrupted_compare_does_not_wait_for_its_running_episodes(tmp_path,
     and on SIGTERM compare waited for them to finish; now it ends at once, with the one line
     of an interrupt."""
     proc, workers = _started_compare(tmp_path / "out", segments=5000)
-    time.sleep(2.0)
-    start = time.monotonic()
-    if to_job:
+    try:
+        time.sleep(2.0)
+        start = time.monotonic()
+        if to_job:
+            for pid in {proc.pid} | workers:
+                os.kill(pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=60)
+    except BaseException:  # a compare that does not end: never leave it behind
         for pid in {proc.pid} | workers:
-            os.kill(pid, signal.SIGINT)
-    else:
-        proc.send_signal(signal.SIGTERM)
-    proc.wait(timeout=300)
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        raise
     assert time.monotonic() - start < 10.0
     assert proc.returncode == 130 and "interrupted" in proc.stderr.read()
     deadline = time.monotonic() + 15
