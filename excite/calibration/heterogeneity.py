@@ -245,14 +245,13 @@ class Comparison:
     residual_dof: float
 
 
-def _relative(result: CalibrationResult, center: CalibrationResult
+def _relative(result: CalibrationResult, middle: FloatArray
               ) -> tuple[FloatArray, FloatArray] | None:
-    """A log's estimate (P,) and covariance (P, P) in the relative units of the pooled fit
-    ``center`` (about its estimate); None when the log does not determine them alone."""
+    """A log's estimate (P,) and covariance (P, P) in relative units about the parameters
+    ``middle`` (P,) (the pooled fit's); None when the log does not determine them alone."""
     if not result.identifiable or not np.all(np.isfinite(result.full_covariance)):
         return None
     theta = _theta(result)
-    middle = _theta(center)
     if theta.size != middle.size:
         return None
     model = SENSOR_POSE if theta.size == 6 else AXLE
@@ -293,23 +292,33 @@ def _shared_mounting(estimates: list[FloatArray], covariances: list[FloatArray]
 
 def across_logs(parts: Sequence[tuple[str, Segments]], pooled: CalibrationResult,
                 fit_alone: Callable[[Segments, SensorPoseOption], CalibrationResult],
-                note: Callable[[str], None]) -> Heterogeneity | None:
+                note: Callable[[str], None], sensor_pose: SensorPoseOption = "auto"
+                ) -> Heterogeneity | None:
     """The test between the inputs ``parts`` (name, segments) of the pooled fit ``pooled``:
     each calibrated alone by ``fit_alone(segments, sensor_pose)`` with the pooled fit's
     model (its sensor pose estimated again, or the given one, or the axle). A log that cannot
     be calibrated alone or does not determine the parameters alone is left out, with a note;
-    None (with a note) when fewer than two logs are left."""
-    if not pooled.identifiable:
+    None (with a note) when fewer than two logs are left. When the pooled fit does not
+    determine the parameters, only the mountings are tested (mountings that differ can be
+    why; each log calibrated alone with its mounting estimated, unless ``sensor_pose``, the
+    pooled fit's option, gave it or the axle): None unless they differ."""
+    if pooled.identifiable:
+        pose: SensorPoseOption = (
+            "axle" if pooled.model == "axle"
+            else "estimate" if len(pooled.parameter_names) == 6
+            else pooled.sensor_pose if pooled.sensor_pose is not None else "axle")
+        middle: FloatArray | None = _theta(pooled)
+    elif sensor_pose in ("auto", "estimate"):
+        pose, middle = "estimate", None  # about the first log that determines them
+    else:
         return None
-    pose: SensorPoseOption = (
-        "axle" if pooled.model == "axle"
-        else "estimate" if len(pooled.parameter_names) == 6
-        else pooled.sensor_pose if pooled.sensor_pose is not None else "axle")
     names, counts, estimates, covariances, fits, dofs = [], [], [], [], [], []
     for name, segments in parts:
         try:
             own = fit_alone(segments, pose)
-            alone = _relative(own, pooled)
+            if middle is None and own.identifiable:
+                middle = _theta(own)
+            alone = None if middle is None else _relative(own, middle)
         except DataError as exc:
             note(f"{name}: left out of the logs' agreement test (cannot be calibrated alone: "
                  f"{exc})")
@@ -329,9 +338,12 @@ def across_logs(parts: Sequence[tuple[str, Segments]], pooled: CalibrationResult
         note("the logs were not tested for agreement: fewer than two of them determine the "
              "parameters alone")
         return None
+    assert middle is not None  # a log determined it
     mounting = None
     if estimates[0].size == 6:
-        mounting = _mounting_test(names, estimates, covariances, _theta(pooled), min(dofs))
+        mounting = _mounting_test(names, estimates, covariances, middle, min(dofs))
+    if not pooled.identifiable and (mounting is None or not mounting.differ):
+        return None  # nothing to compare with; but mountings that differ can be why
     if mounting is not None and not mounting.differ:
         wheels, covariance = _shared_mounting(estimates, covariances)
     else:  # each log's wheels with its own mounting (the axle, or mountings that differ)
@@ -339,7 +351,7 @@ def across_logs(parts: Sequence[tuple[str, Segments]], pooled: CalibrationResult
         covariance = np.zeros((3 * len(names), 3 * len(names)))
         for i, c in enumerate(covariances):
             covariance[3 * i:3 * i + 3, 3 * i:3 * i + 3] = c[:3, :3]
-    center = pooled.params.as_array()
+    center = middle[:3]
     comparison = Comparison("logs", tuple(names), tuple(counts), center,
                              AXLE.column_scale(center), wheels, covariance, min(dofs))
     return replace(assessed(comparison), group_fits=tuple(fits), mounting=mounting)

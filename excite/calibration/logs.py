@@ -204,7 +204,8 @@ def calibrate_logs(
     result = fit(_pooled(parts), sensor_pose, "off" if several else heterogeneity)
     if several and heterogeneity != "off":
         test = across_logs([(part.source.name, part.segments) for part in parts], result,
-                           lambda segments, pose: fit(segments, pose, "off"), note)
+                           lambda segments, pose: fit(segments, pose, "off"), note,
+                           sensor_pose)
         result = applied(result, test, heterogeneity)
     validation = None
     if held:

@@ -408,3 +408,19 @@ def test_logs_of_one_mounting_rarely_differ():
         assert h is not None and h.mounting is not None
         differ += h.mounting.differ
     assert differ <= 1
+
+
+def test_a_mounting_turned_round_in_one_log_is_named_though_the_pooled_fit_is_undetermined(
+        tmp_path):
+    """Three logs of one robot, the sensor turned round (178 deg) in the third: one mounting
+    for all of them determines nothing, and the result said "not determined, no segment
+    translates" (exit 3). Each log alone determines its mounting: they differ, the fit fails
+    naming the odd log."""
+    rng = np.random.default_rng(5)
+    mountings = [(0.10, -0.03, 0.40), (0.10, -0.03, 0.40), (0.07, 0.00, -3.1)]
+    paths = _files(tmp_path, [(f"c{i}.csv", _mounted(rng, m)) for i, m in enumerate(mountings)])
+    result = calibrate_logs(paths).result
+    mounting = result.heterogeneity.mounting
+    assert mounting.differ and mounting.dof == 6 and not result.fit.ok
+    assert f"most different: {paths[2]}" in result.fit.message
+    assert "theta -177." in result.fit.message  # wrapped to [-180, 180)
