@@ -27,12 +27,13 @@ from excite.validation.verdict import MARGIN
 PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg")
 
 #: What ``excite validate --help`` says the command does.
-DESCRIPTION = """Dead-reckon each log's encoders (exact arcs between encoder samples, from the log's
-first external pose) with the nominal and with the calibrated robot, and report per log and
-overall (mean over logs, ratio of the means): end-point position error (m), end-point heading
-error (rad), RMS path error (m) and the ratio calibrated / nominal; UMBmark's E_max,syst (m) when
-a log is a bidirectional square. Validation uses every pose sample (no segmentation). The
-report ends with a verdict per log and overall: better, no better or worse than nominal."""
+DESCRIPTION = """Dead-reckon each log's encoders (the calibration's model: arcs between encoder
+samples with the change of curvature, from the log's first external pose) with the nominal
+and with the calibrated robot, and report per log and overall (mean over logs, ratio of the
+means): end-point position error (m), end-point heading error (rad), RMS path error (m) and the
+ratio calibrated / nominal; UMBmark's E_max,syst (m) when a log is a bidirectional square.
+Validation uses every pose sample (no segmentation). The report ends with a verdict per log
+and overall: better, no better or worse than nominal."""
 
 #: The epilog of ``excite validate --help``: the verdict's rule and the exit statuses.
 EPILOG = f"""Verdict: on the RMS path error, calibrated / nominal at most 1/{MARGIN:g} is better, at

@@ -205,7 +205,7 @@ def _central(a: FloatArray) -> FloatArray:
 
 
 def curvature_change(arc: Arc, b: FloatArray | float, prediction: FloatArray,
-                     jac: FloatArray | None) -> None:
+                     jac: FloatArray | None) -> tuple[FloatArray, FloatArray]:
     """Correct consecutive sub-step arcs (``arc``: (..., K), equal durations h, of wheel
     separation ``b``, m) for the change of speed and turn rate within each, in place:
     ``prediction`` (3, ..., K) and ``jac`` (3, 3, ..., K, by r_L, r_R, b; or None).
@@ -218,12 +218,13 @@ def curvature_change(arc: Arc, b: FloatArray | float, prediction: FloatArray,
     dy_k += ((ds_(k+1) - ds_(k-1)) dtheta_k - ds_k (dtheta_(k+1) - dtheta_(k-1))) / 24 (m).
     A zero beyond a segment's ends (its padding too) halves the term of its first and last
     sub-step, an O(h^3) error of two sub-steps; the O(h^2) error of every sub-step is gone
-    (synthetic smooth driving, 1 s segments: 1.5e-5 m to 2.5e-7 m at h = 20 ms)."""
+    (synthetic smooth driving, 1 s segments: 1.5e-5 m to 2.5e-7 m at h = 20 ms). Returns the
+    central differences of ds and dtheta (m, rad; (..., K)) it used."""
     ds, dth = arc.ds, arc.dtheta
     change_ds, change_th = _central(ds), _central(dth)
     prediction[1] += (change_ds * dth - ds * change_th) / 24.0
     if jac is None:
-        return
+        return change_ds, change_th
     # the parameters move ds and dtheta through 0.5 phi_L, 0.5 phi_R (d_ds) and -phi_L / b,
     # phi_R / b, -dtheta / b (d_dtheta): their central differences from two of the wheels'
     half_L, half_R = _central(arc.d_ds[0]), _central(arc.d_ds[1])
@@ -232,6 +233,7 @@ def curvature_change(arc: Arc, b: FloatArray | float, prediction: FloatArray,
         g_ds, g_th = arc.d_ds[k], arc.d_dtheta[k]
         jac[1, k] += (change_g_ds * dth + change_ds * g_th - g_ds * change_th
                       - ds * change_g_th) / 24.0
+    return change_ds, change_th
 
 
 def _shifted(a: FloatArray, by: int) -> FloatArray:
@@ -244,15 +246,17 @@ def _shifted(a: FloatArray, by: int) -> FloatArray:
     return out
 
 
-def _curvature_change_by_wheels(out: FloatArray, arc: Arc, c: FloatArray, s: FloatArray,
-                                d_ds: tuple, d_dtheta: tuple) -> None:
+def _curvature_change_by_wheels(out: FloatArray, arc: Arc, changes: tuple[FloatArray, FloatArray],
+                                c: FloatArray, s: FloatArray, d_ds: tuple, d_dtheta: tuple
+                                ) -> None:
     """Add to the composition's derivatives by each wheel sub-increment (3, 2, ..., K),
-    in place, what it moves through :func:`curvature_change`: the lateral term of its own
-    sub-step and of its two neighbours (m/rad), each turned by that sub-step's heading
-    (``c``, ``s``: its cosine and sine, (..., K)). ``d_ds``, ``d_dtheta``: ds and dtheta of
-    a sub-step by each wheel's sub-increment (m/rad, rad/rad)."""
+    in place, what it moves through :func:`curvature_change` (``changes``: the central
+    differences of ds and dtheta it returned): the lateral term of its own sub-step and of
+    its two neighbours (m/rad), each turned by that sub-step's heading (``c``, ``s``: its
+    cosine and sine, (..., K)). ``d_ds``, ``d_dtheta``: ds and dtheta of a sub-step by each
+    wheel's sub-increment (m/rad, rad/rad)."""
     ds, dth = arc.ds, arc.dtheta
-    change_ds, change_th = _central(ds), _central(dth)
+    change_ds, change_th = changes
     for w in range(2):
         a, b = d_ds[w], d_dtheta[w]
         own = (change_ds * b - a * change_th) / 24.0  # of this sub-step's term
@@ -374,10 +378,10 @@ class AxleModel(SegmentModel):
         if not substeps:
             return jac
         prediction = np.stack(np.broadcast_arrays(arc.dx, arc.dy, arc.dtheta))
-        curvature_change(arc, b, prediction, None)
+        changes = curvature_change(arc, b, prediction, None)
         world = _world_substeps(prediction)
         out = substep_derivatives(prediction, jac, world)
-        _curvature_change_by_wheels(out, arc, world[0], world[1], d_ds, d_dtheta)
+        _curvature_change_by_wheels(out, arc, changes, world[0], world[1], d_ds, d_dtheta)
         return out
 
     def evaluate_scalar(self, dphi_L, dphi_R, theta):

@@ -236,10 +236,11 @@ class LiveSession:
         silence timeout after their stamps, or poses that repeat one value while the wheels
         turn."""
         timeout = self.settings.silence_timeout
-        frozen = now - self._poses.last <= timeout < self._pose_age(now)
+        pose_age = self._pose_age(now)
+        frozen = now - self._poses.last <= timeout < pose_age
         parts = []
         for name, stream, age in (("the wheel angles", self._wheels, now - self._wheels.last),
-                                  ("the poses", self._poses, self._pose_age(now))):
+                                  ("the poses", self._poses, pose_age)):
             if age <= timeout:
                 continue
             why = stream.left_out

@@ -93,10 +93,11 @@ def note_unused_options(inputs: Sequence[Input], options: LogOptions, note: OnNo
     reads (bag options without a bag, log options with segment files only), by their
     command-line flags: a user who gives them expects them to do something."""
     kinds = {source.kind for source in inputs}
-    for only, wanted, missing in ((BAG_ONLY, "bags", "no input is a bag"),
-                                  (LOG_ONLY, "time-series logs and bags",
-                                   "every input is a segment file")):
-        if kinds & ({"bag"} if only is BAG_ONLY else {"bag", "timeseries"}):
+    for only, readers, wanted, missing in (
+            (BAG_ONLY, {"bag"}, "bags", "no input is a bag"),
+            (LOG_ONLY, {"bag", "timeseries"}, "time-series logs and bags",
+             "every input is a segment file")):
+        if kinds & readers:
             continue
         unused = [name for name in only
                   if getattr(options, name) != getattr(DEFAULT_LOG_OPTIONS, name)]
