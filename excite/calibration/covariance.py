@@ -1,7 +1,8 @@
 """The covariance the result reports, in relative units: the chosen fit's inverse Fisher
-information, under a wandering heading error of the pose samples when the fit test found one
-(:func:`excite.calibration.wander.wander_covariance`), and widened to the Newey-West
-covariance for serially correlated residuals
+information, widened for noise levels estimated from the same data (the Kenward-Roger
+covariance, :func:`_estimated_levels`), or under a wandering heading error of the pose
+samples when the fit test found one (:func:`excite.calibration.wander.wander_covariance`),
+and widened to the Newey-West covariance for serially correlated residuals
 (:func:`excite.stats.autocorrelation.long_run_covariance`); the fit test's message says what
 was done.
 """
@@ -14,8 +15,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from excite.calibration.model_fit import Fitter, ModelFit
-from excite.calibration.noise import ChainWhitener
+from excite.calibration.noise import ChainWhitener, LevelBands, stacked
 from excite.calibration.options import TEST_LEVEL
+from excite.calibration.reml import level_floors
+from excite.calibration.reml_search import RestrictedDeviance
 from excite.calibration.result import FitTest
 from excite.calibration.wander import wander_covariance
 from excite.core.information import inverse_information
@@ -31,12 +34,43 @@ def reported_covariance(chosen: ModelFit, test: FitTest, fitter: Fitter
                         ) -> tuple[FloatArray, FitTest]:
     """The relative covariance (P, P) of the chosen fit's parameters and the fit test with
     the message saying how it was adjusted: the inverse information, under the wandering
-    heading error of ``test.heading_wander`` (:func:`_wandering`), then widened for serial
-    correlation (:func:`_long_run`)."""
+    heading error of ``test.heading_wander`` (:func:`_wandering`) or widened for the
+    estimated noise levels (:func:`_estimated_levels`), then widened for serial correlation
+    (:func:`_long_run`)."""
     data = fitter.data
     inverse = inverse_information(chosen.fit.system.information)
     relative, test = _wandering(chosen, inverse, test, fitter.whitener)
+    if test.heading_wander is None:
+        relative = _estimated_levels(chosen, relative, fitter.whitener)
     return _long_run(chosen, inverse, relative, test, runs_of(data.chained, len(data)))
+
+
+#: A level counts as estimated (not held at its floor) above this multiple of its floor.
+ABOVE_FLOOR = 2.0
+
+
+def _estimated_levels(mf: ModelFit, covariance: FloatArray, whitener: ChainWhitener | None
+                      ) -> FloatArray:
+    """The relative covariance of a fit whose whitener's noise levels were estimated from
+    the same residuals (by restricted maximum likelihood, :mod:`excite.calibration.reml`):
+    Kenward and Roger's Phi + 2 Lambda
+    (:meth:`excite.calibration.reml_search.RestrictedDeviance.estimated_levels_term`), over
+    the levels above their floors. Phi alone treats the levels as known, and in short logs
+    (tens of segments) the truth then falls outside the 95% ellipse about twice as often as
+    it should. Unchanged without estimated levels or when a direction is undetermined."""
+    if whitener is None or whitener.levels is None or whitener.geometry is None:
+        return covariance
+    if not np.all(np.isfinite(covariance)):
+        return covariance
+    levels = whitener.levels.vector(with_wheels=whitener.wheels is not None)
+    free = levels > ABOVE_FLOOR * level_floors(mf.problem.sigma_floor, whitener.wheels)
+    if not free.any():
+        return covariance
+    ev = mf.unwhitened
+    deviance = RestrictedDeviance(LevelBands(whitener.geometry, whitener.wheels, levels.size),
+                                  stacked(ev.raw, ev.jac))
+    term = deviance.estimated_levels_term(np.log(np.maximum(levels, 1e-300)), free)
+    return covariance + 2.0 * term
 
 
 def _wandering(mf: ModelFit, covariance: FloatArray, test: FitTest,

@@ -432,6 +432,8 @@ class ChainWhitener:
 
     Attributes
     ----------
+    levels : NoiseLevels or None
+        The levels C was built at; None when built from a band.
     geometry : Segments or None
         The segments C was linearised at (:func:`chain_band`: their increments give the
         heading's lever arms and the turns between chained segments); None when built from a
@@ -448,6 +450,7 @@ class ChainWhitener:
         self._factor = _rounded_cholesky(chain_band(segments, levels, wheels))
         self.n = len(segments)
         self.wheels = wheels
+        self.levels: NoiseLevels | None = levels
         self.geometry: Segments | None = segments
         self.position_mean = math.exp(-0.5 * float(levels.pose[1]) ** 2)
 
@@ -459,7 +462,7 @@ class ChainWhitener:
         whitener._factor = _banded_cholesky(band)
         whitener.n = band.shape[1] // 3
         whitener.wheels = wheels
-        whitener.geometry, whitener.position_mean = None, 1.0
+        whitener.levels, whitener.geometry, whitener.position_mean = None, None, 1.0
         return whitener
 
     @property

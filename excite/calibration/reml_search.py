@@ -134,6 +134,37 @@ class RestrictedDeviance:
         rest = white - a @ np.linalg.solve(gram, a.T @ white)
         return rest.T @ rest
 
+    def estimated_levels_term(self, u: FloatArray, free: BoolArray) -> FloatArray:
+        """Lambda (P, P), in the rows' units: how much the generalised least-squares
+        estimate's covariance grows because the ``free`` levels (at log-levels u) were
+        estimated from the same residuals (Kackar & Harville, JASA 1984; Kenward & Roger,
+        Biometrics 1997):
+
+            Lambda = Phi (sum_ij W_ij R_i^T R_j) Phi,   R_i = M L^-1 U_i C^-1 J,
+
+        Phi = (J^T C^-1 J)^-1, M = I - a Phi a^T the projection off a = L^-1 J (so that
+        R_i^T R_j = Q_ij - P_i Phi P_j in Kenward and Roger's notation) and W = 2 H^-1 the
+        covariance of the free squared levels (H their average information, :meth:`information`:
+        the restricted log-likelihood's information is H / 2). The estimate's covariance is
+        about Phi + Lambda, and Phi at the estimated levels is low by about Lambda on average,
+        so Kenward and Roger report Phi + 2 Lambda (their R_ij term is 0: C is linear in the
+        squared levels). LinAlgError when C is not positive definite at u."""
+        index = np.flatnonzero(free)
+        whitener, out = self._whitened(u)
+        a = out[:, 1:]
+        gram = a.T @ a
+        phi = np.linalg.inv(gram)
+        c_inv_j = whitener.solve(self.rows[:, 1:])
+        rest = []
+        for i in index:
+            white = whitener.whiten_stacked(band_product(self.bands.units[i], c_inv_j))
+            rest.append(white - a @ (phi @ (a.T @ white)))
+        weights = 2.0 * np.linalg.pinv(self.information(u)[np.ix_(index, index)])
+        middle = sum(weights[i, j] * rest[i].T @ rest[j]
+                     for i in range(index.size) for j in range(index.size))
+        out = phi @ middle @ phi
+        return 0.5 * (out + out.T)
+
 
 def newton_search(deviance: Callable[[FloatArray], float],
                   information: Callable[[FloatArray], FloatArray], u0: FloatArray,

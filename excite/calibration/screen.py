@@ -33,14 +33,15 @@ all the segments so far:
    inflates the restricted-likelihood levels);
 5. each parameter's std: s sqrt(diag((A^T A)^-1)), in its unit.
 
-These are the batch calibration's standard deviations before its widenings (a wandering
-heading error, serially correlated residuals, the spread of kinds of motion that
-disagree: each only widens), at levels that follow the data between looks by a factor per group
-instead of the full REML. The stopping rule (:class:`excite.stopping.StoppingRule`) turns
-them into its statistic, the smallest over the models and hypotheses, and says *not yet*
-without calibrating only when that is clearly above 1; the batch calibration decides
-everything else. Its cost is O(N): about a hundred evaluations of the restricted deviance,
-each a banded Cholesky factorisation, ten-odd ms for 60 segments.
+These are the batch calibration's standard deviations before its widenings (the estimated
+levels' share, a wandering heading error, serially correlated residuals, the spread of kinds
+of motion that disagree: each only widens), at levels that follow the data between looks by
+a factor per group instead of the full REML. The stopping rule
+(:class:`excite.stopping.StoppingRule`) turns them into its statistic, the smallest over the
+models and hypotheses, and says *not yet* without calibrating only when that is clearly above
+1; the batch calibration decides everything else. Its cost is O(N): about a hundred
+evaluations of the restricted deviance, each a banded Cholesky factorisation, ten-odd ms for
+60 segments.
 """
 
 from __future__ import annotations

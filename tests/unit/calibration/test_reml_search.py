@@ -58,6 +58,32 @@ def test_the_average_information_is_y_p_ui_p_uj_p_y():
     np.testing.assert_allclose(got, expected, rtol=1e-6, atol=1e-9 * np.abs(expected).max())
 
 
+def test_the_estimated_levels_term_is_kenward_and_rogers_lambda():
+    """Lambda = Phi (sum_ij W_ij (Q_ij - P_i Phi P_j)) Phi, W = 2 H^-1 over the free levels,
+    written out with dense matrices in Kenward and Roger's notation (P_i = J^T dC^-1/dv_i J,
+    Q_ij = J^T dC^-1/dv_i C dC^-1/dv_j J)."""
+    seg, wheels, residual, jac = _problem(5, LEVELS)
+    bands = LevelBands(seg, wheels, 7)
+    objective = RestrictedDeviance(bands, stacked(residual, jac))
+    u = np.log(np.array([5e-4, 2e-4, 3e-4, 1.5e-3, 2.5e-3, 0.02, 1e-3]))
+    free = np.array([True, False, True, True, True, True, False])
+    c = dense(bands.at(np.exp(u)))
+    ci = np.linalg.inv(c)
+    j = stacked(residual, jac)[:, 1:]
+    phi = np.linalg.inv(j.T @ ci @ j)
+    d_inv = [-ci @ dense(bands.units[i]) @ ci for i in np.flatnonzero(free)]  # dC^-1 / dv_i
+    p = [j.T @ d @ j for d in d_inv]
+    q = [[j.T @ di @ c @ dj @ j for dj in d_inv] for di in d_inv]
+    w = 2.0 * np.linalg.inv(objective.information(u)[np.ix_(free, free)])
+    middle = sum(w[a, b] * (q[a][b] - p[a] @ phi @ p[b])
+                 for a in range(len(p)) for b in range(len(p)))
+    expected = phi @ middle @ phi
+    got = objective.estimated_levels_term(u, free)
+    np.testing.assert_allclose(got, expected, rtol=1e-6, atol=1e-9 * np.abs(expected).max())
+    # positive semi-definite: estimating the levels never makes the estimate more precise
+    assert np.linalg.eigvalsh(got).min() > -1e-12 * np.abs(got).max()
+
+
 @pytest.mark.parametrize("seed, levels", [
     (2, LEVELS),
     (3, NoiseLevels(np.array([1e-6, 1e-6, 1e-6]), np.array([2e-3, 2e-3]), 0.0, 0.0)),
