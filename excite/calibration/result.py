@@ -146,9 +146,10 @@ class CalibrationResult:
     params : Params
         The wheel parameters r_L, r_R, b (m).
     covariance : ndarray, shape (3, 3)
-        Their covariance (m^2): the inverse Fisher information at the estimate (widened as
-        ``fit`` says for a wandering heading error or serially correlated residuals), inf
-        along directions the data do not determine.
+        Their covariance (m^2): the inverse Fisher information at the estimate (for segments
+        that share pose samples, plus the estimated noise levels' share: Kenward and Roger's
+        covariance; widened as ``fit`` says for a wandering heading error or serially
+        correlated residuals), inf along directions the data do not determine.
     std : ndarray, shape (3,)
         sqrt(diag(covariance)) (m).
     model : str
