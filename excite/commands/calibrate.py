@@ -104,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
             report["target"] = {"value": args.target, "confidence": done[0],
                                 "decision": done[1].to_dict()}
         report["inputs"] = [part.describe() for part in calibration.parts]
+        report["notes"] = list(calibration.notes)
         if initial is not None:
             report["nominal"] = dict(zip(("r_L", "r_R", "b"), initial.as_array().tolist(),
                                          strict=True))

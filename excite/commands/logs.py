@@ -88,8 +88,9 @@ _READING: dict[str, dict[str, Any]] = {
                       "rounding (one tick) in the noise of the segments cut from logs (default: "
                       "none; the wheel columns are phi_L,phi_R in rad)"},
     "time_offset": {"type": _offset, "metavar": "S|estimate",
-                    "help": "pose time + S = encoder time (s, default 0; a note tells when the "
-                    "data suggest otherwise), or 'estimate' it from the data"},
+                    "help": "pose time + S = encoder time (s; default: 0 unless the data "
+                    "reject a zero offset, then the offset they show, with a note), or "
+                    "'estimate' it from the data"},
     "max_time_offset": {"type": positive_number, "metavar": "S",
                         "help": "estimated time offsets are searched within +-S s (default "
                         "%(default)g)"},

@@ -248,8 +248,9 @@ def on_track(ts: TimeSeries, limits: Limits | None = None) -> tuple[TimeSeries, 
 
 #: What most often makes each stream jump, for the messages about a jump.
 ENCODER_JUMP_HINT = ("a counter that overflows or resets, a second publisher of the wheel "
-                     "joints, or wheel angles in degrees? (wheel angles must be cumulative, "
-                     "in rad; ticks as counted, with --ticks-per-rev)")
+                     "joints, or wheel angles in degrees or encoder counts? (wheel angles "
+                     "must be cumulative, in rad: a JointState's positions in rad; a CSV's "
+                     "counts as ticks_L,ticks_R columns, with --ticks-per-rev)")
 POSE_JUMP_HINT = "a relocalisation, or headings in degrees? (theta is in rad)"
 
 

@@ -119,12 +119,19 @@ class Input:
         return "+".join(self.paths)
 
 
+#: Where a log's clock offset came from (:class:`Log`).
+OffsetSource = Literal["given", "estimated", "detected", "default"]
+#: How to overrule a detected clock offset.
+OVERRULE = "--time-offset 0 for none, --time-offset S to give one"
+
+
 @dataclass(frozen=True)
 class Log:
     """A time-series log read from an input, with the clock offset used for it (s; pose time
     + offset = encoder time) and where that offset came from: "given" (a number in
-    LogOptions.time_offset), "estimated" ("estimate") or "default" (none given: 0). With the
-    default, hint says what offset the data suggest when it is clearly not zero
+    LogOptions.time_offset), "estimated" ("estimate"), "detected" (none given, and the data
+    reject a zero offset: their estimate, ``hint.offset``) or "default" (none given: 0).
+    Without a given offset, hint says what the data suggest when it is clearly not zero
     (:func:`excite.logs.time_offset.noticeable_time_offset`), else None. skipped: for a bag,
     the messages the reader skipped, in one line (None for a CSV log). notes: what the user
     should hear about the log, one line each, in order (each starts with the log's name)."""
@@ -132,15 +139,19 @@ class Log:
     name: str
     series: TimeSeries
     time_offset: float
-    offset_source: Literal["given", "estimated", "default"]
+    offset_source: OffsetSource
     hint: OffsetHint | None = None
     skipped: str | None = None
     notes: tuple[str, ...] = ()
 
     def offset_text(self) -> str:
-        """The offset and its source, e.g. '+0.0000 s (default; the data suggest -0.1502 s:
-        --time-offset estimate)'."""
-        how = self.offset_source + (f"; {self.hint.text()}" if self.hint is not None else "")
+        """The offset and its source, e.g. '-0.0098 s (detected: the data reject a zero offset;
+        --time-offset 0 for none, --time-offset S to give one)' or '+0.0000 s (default; the
+        data suggest an offset beyond +-1 s: --time-offset estimate --max-time-offset S)'."""
+        if self.offset_source == "detected":
+            how = f"detected: the data reject a zero offset; {OVERRULE}"
+        else:
+            how = self.offset_source + (f"; {self.hint.text()}" if self.hint is not None else "")
         return f"{self.time_offset:+.4f} s ({how})"
 
 
@@ -260,15 +271,20 @@ def _read_series(source: Input, options: LogOptions, note: OnNote
 
 
 def _clock_offset(series: TimeSeries, options: LogOptions
-                  ) -> tuple[float, Literal["given", "estimated", "default"], OffsetHint | None]:
-    """The log's clock offset (s), where it came from, and with the default (0) what the data
-    suggest instead when that is clearly not zero."""
+                  ) -> tuple[float, OffsetSource, OffsetHint | None]:
+    """The log's clock offset (s), where it came from, and without a given one what the data
+    suggest when it is clearly not zero: their estimate is used when it lies within the search
+    range ("detected"; a stamp latency of a few ms shifts a fitted sensor mounting by many of
+    its std), else 0 ("default")."""
     if options.time_offset == "estimate":
         offset = estimate_time_offset(series, max_offset=options.max_time_offset)
         return offset, "estimated", None
     if options.time_offset is not None:
         return float(options.time_offset), "given", None
-    return 0.0, "default", noticeable_time_offset(series, max_offset=options.max_time_offset)
+    hint = noticeable_time_offset(series, max_offset=options.max_time_offset)
+    if hint is not None and hint.offset is not None:
+        return hint.offset, "detected", hint
+    return 0.0, "default", hint
 
 
 def read_log(source: Input, options: LogOptions, *, whole: bool = False,
@@ -290,7 +306,11 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
         if unwrapped:
             note(f"{source.name}: {unwrapped}")
     offset, offset_source, hint = _clock_offset(series, options)
-    if hint is not None:
+    if offset_source == "detected":
+        note(f"{source.name}: the pose stamps are offset from the encoder stamps by "
+             f"{offset:+.4f} s (pose time + offset = encoder time): the data reject a zero "
+             f"offset (a stamp latency), so the calibration uses it; {OVERRULE}")
+    elif hint is not None:
         note(f"{source.name}: the clocks of the encoder and pose streams seem offset (pose "
              "time + offset = encoder time), but none was given and 0 is used; "
              f"{hint.text()}")

@@ -2,6 +2,7 @@
 before any fit; a robot wired as the model assumes never trips it, whatever the noise."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -172,6 +173,10 @@ def test_calibrate_refuses_the_nominal_robots_wheel_odometry(capsys, tmp_path):
     assert err.count("\n") == 1 and err.startswith(f"excite: error: {path}: the pose headings")
     code, out, err = run_cli(capsys, "calibrate", str(path))
     assert f"excite: note: {path}: the pose headings follow the wheel angles exactly" in err
+    code, out, _ = run_cli(capsys, "calibrate", str(path), "--json")
+    notes = json.loads(out)["notes"]  # --json keeps what the note said
+    assert any(note.startswith(f"{path}: the pose headings follow the wheel angles exactly")
+               for note in notes), notes
 
 
 def test_headings_in_degrees_are_named():
