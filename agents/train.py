@@ -7,7 +7,7 @@ Layout of the output folder ``DIR``::
     DIR/best_model.zip (+ best_model.vecnormalize.pkl)  best evaluation on held-out robots
     DIR/final_model.zip (+ final_model.vecnormalize.pkl)
     DIR/eval/evaluations.npz          the evaluations on held-out robots (EvalCallback)
-    DIR/train_summary.json            timesteps, wall time, fps
+    DIR/train_summary.json            timesteps, wall time, fps (of PPO), imitation (if any)
     DIR/tensorboard/                  when tensorboard is installed
 
 DIR must be new or empty unless the run is resumed (``excite train`` refuses a used DIR, so
@@ -54,6 +54,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 from tqdm import tqdm
 
 import excite  # noqa: F401  (registers the environment ids)
+from agents.imitation import IMITATE_KEYS, imitate
 from agents.mixed_env import ConcatVecEnv
 from agents.vec_env import NativeVecEnv
 from excite.errors import ExciteError
@@ -80,12 +81,14 @@ CONFIG_KEYS: dict[str, type] = {
     "algo": str, "seed": int, "env_id": str, "env_kwargs": dict, "robots": list,
     "n_envs": int, "vec_env": str, "torch_threads": int, "normalize": dict, "policy": str,
     "policy_kwargs": dict, "hyperparams": dict, "eval": dict, "checkpoint_freq": int,
+    "imitate": dict,
 }
 #: The keys of the config's sections that train reads itself, with their smallest value
 #: (None: a flag).
 SECTION_KEYS: dict[str, dict[str, int | None]] = {
     "normalize": {"norm_obs": None, "norm_reward": None, "gamma": 0},
     "eval": {"freq": 1, "episodes": 1, "seed_offset": 0},
+    "imitate": {key: value for key, value in IMITATE_KEYS.items() if key != "protocol"},
 }
 _WHOLE_KEYS = {"seed": 0, "n_envs": 1, "torch_threads": 1, "checkpoint_freq": 1}
 _TYPE_NAMES = {str: "a name", dict: "a mapping", list: "a list", int: "a whole number"}
@@ -160,8 +163,12 @@ def check_config(config: Mapping[str, Any], source: Path | str) -> None:
         raise fail("vec_env", f"unknown {config['vec_env']!r}; choose from {', '.join(VEC_ENVS)}")
     if "robots" in config and not config["robots"]:
         raise fail("robots", "must list at least one robot")
+    if "imitate" in config:
+        _check_imitate(config["imitate"], algo, fail)
     for section, keys in SECTION_KEYS.items():
         for key, value in config.get(section, {}).items():
+            if section == "imitate" and key == "protocol":
+                continue  # checked above
             name = f"{section}.{key}"
             if key not in keys:
                 raise fail(name, f"unknown key; the keys are {', '.join(keys)}")
@@ -196,6 +203,24 @@ def check_config(config: Mapping[str, Any], source: Path | str) -> None:
         for key, value in config.get(section, {}).items():
             if not _finite(value):
                 raise fail(f"{section}.{key}", f"must be finite, got {value!r}")
+
+
+def _check_imitate(section: Mapping[str, Any], algo: str, fail) -> None:
+    """The ``imitate`` section's protocol: required, a protocol spec that parses; PPO only
+    (the cloned policy is a Gaussian's mean and std)."""
+    from agents.catalog import parse_protocol
+    from agents.protocols import ProtocolError
+
+    if algo != "ppo":
+        raise fail("imitate", f"imitation starts PPO's policy only (algo: {algo})")
+    protocol = section.get("protocol")
+    if not isinstance(protocol, str):
+        raise fail("imitate.protocol", "required: the protocol to imitate (e.g. slip_aware), "
+                   f"got {protocol!r}")
+    try:
+        parse_protocol(protocol)
+    except (ProtocolError, ValueError) as exc:
+        raise fail("imitate.protocol", str(exc)) from None
 
 
 #: Hyperparameters that count something every update needs at least one of.
@@ -486,17 +511,22 @@ def train(
                          callback_after_eval=after_eval),
     ]
     remaining = max(timesteps - done_steps, 0)
+    started = time.perf_counter()
+    imitation = (imitate(config, model, venv, seed, progress)
+                 if config.get("imitate") and not checkpoint else None)
     if progress:
         callbacks.append(_TqdmProgress(timesteps, done_steps))
-    started = time.perf_counter()
+    learning = time.perf_counter()
     model.learn(total_timesteps=remaining, callback=CallbackList(callbacks),
                 reset_num_timesteps=not checkpoint)
-    wall = time.perf_counter() - started
+    wall, learn_wall = time.perf_counter() - started, time.perf_counter() - learning
     model.save(str(out / "final_model.zip"))
     venv.save(str(normalization_path(out / "final_model.zip")))
     summary = {"algo": algo, "seed": seed, "n_envs": n_envs, "timesteps": int(model.num_timesteps),
                "steps_this_run": remaining, "wall_time_s": wall,
-               "fps": remaining / wall if wall > 0 else None, "resumed_from": done_steps}
+               "fps": remaining / learn_wall if learn_wall > 0 else None,
+               "resumed_from": done_steps,
+               **({"imitation": imitation} if imitation else {})}
     (out / "train_summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     venv.close()
     eval_env.close()

@@ -326,6 +326,11 @@ BAD_CONFIGS = [
     ("robots: []\n", "robots: must list at least one robot"),
     ("policy: NopePolicy\n", "policy/policy_kwargs/hyperparams: Policy NopePolicy unknown"),
     ("policy_kwargs: {net_arch: big}\n", "policy/policy_kwargs/hyperparams: "),
+    ("imitate: {episodes: 10}\n", "imitate.protocol: required: the protocol to imitate"),
+    ("imitate: {protocol: teleport}\n", "imitate.protocol: unknown protocol 'teleport'"),
+    ("imitate: {protocol: slip_aware, epochs: 0}\n",
+     "imitate.epochs: must be a whole number >= 1, got 0"),
+    ("imitate: {protocol: slip_aware, teacher: me}\n", "imitate.teacher: unknown key"),
 ]
 
 
@@ -373,3 +378,49 @@ def test_bad_train_options_are_one_line_errors(tmp_path, capsys):
     assert_one_line_error(code, err, "nothing to resume")
     with pytest.raises(TrainingError, match="seed must be a whole number >= 0"):
         train(tmp_path / "o", seed=-1, progress=False)
+
+
+def test_imitation_clones_the_planner_and_training_starts_from_it(tmp_path, small_config):
+    """Demonstrations of slip_aware in the training env, behaviour cloning into the PPO policy
+    (its cloned actions much closer to the planner's than the untrained policy's), the critic
+    trained with the actor frozen, then PPO; the summary says what imitation did."""
+    from agents.imitation import clone, demonstrations, train_critic
+    from agents.train import build, load_config
+
+    config = load_config(None, small_config)
+    observations, actions = demonstrations(config["env_id"], config["env_kwargs"], [None],
+                                           "slip_aware", 3, seed=5, progress=False)
+    assert observations.shape == (30, 16) and actions.shape == (30, 2)
+    assert np.all(np.abs(actions) <= 1.0) and np.ptp(actions, axis=0).min() > 0.1
+    venv, _, model = build(config, 2, 5, small_config)
+    import torch
+
+    def rms() -> float:
+        inputs = torch.as_tensor(venv.normalize_obs(observations), dtype=torch.float32)
+        with torch.no_grad():
+            mean = model.policy.get_distribution(inputs).distribution.mean.numpy()
+        return float(np.sqrt(np.mean((mean - actions) ** 2)))
+
+    venv.obs_rms.mean, venv.obs_rms.var = observations.mean(0), observations.var(0)
+    before = rms()
+    after = clone(model, venv, observations, actions, 40, -1.0, seed=5, progress=False)
+    assert after == pytest.approx(rms()) and after < 0.5 * before, (before, after)
+    assert np.allclose(model.policy.log_std.detach().numpy(), -1.0)
+    actor = {n: p.detach().clone() for n, p in model.policy.named_parameters()
+             if n.startswith(("mlp_extractor.policy", "action_net", "log_std"))}
+    critic = model.policy.value_net.weight.detach().clone()
+    train_critic(model, 512)
+    for name, p in model.policy.named_parameters():
+        if name in actor:
+            assert torch.equal(p, actor[name]), name
+    assert not torch.equal(model.policy.value_net.weight, critic)
+
+    config["imitate"] = {"protocol": "slip_aware", "episodes": 1, "epochs": 2,
+                         "critic_steps": 256}
+    path = tmp_path / "imitate.yaml"
+    path.write_text(yaml.safe_dump(config))
+    summary = train(tmp_path / "run", "ppo", 512, n_envs=2, seed=3, config_path=path,
+                    progress=False)
+    assert summary["timesteps"] == 512
+    assert summary["imitation"]["protocol"] == "slip_aware"
+    assert summary["imitation"]["pairs"] == 10 and summary["imitation"]["critic_steps"] == 256
