@@ -114,6 +114,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         for part in calibration.parts:
             print(part.describe())
+        if status != EXIT_OK:
+            for line in _clock_doubts(calibration):
+                print(line)
         print(result.summary(initial))
         if estimated_pose is not None and status == EXIT_OK:  # as --ros2-yaml: usable only
             print(f"  sensor transform: {static_transform_command(estimated_pose)}")
@@ -126,6 +129,18 @@ def run(args: argparse.Namespace) -> int:
     if args.ros2_yaml:
         export_yaml(args, result, initial, status)
     return status
+
+
+def _clock_doubts(calibration: LogCalibration) -> list[str]:
+    """For a calibration that failed: each log whose clocks the data say are offset beyond
+    the search range (0 was used), first in the report, since that alone spoils the fit
+    whatever the driving."""
+    return [f"clocks first: {part.log.name}: 0 was used for the clock offset, but "
+            f"{part.log.hint.text()}; an offset alone can make the fit fail or determine "
+            "nothing, whatever the driving"
+            for part in calibration.parts
+            if part.log is not None and part.log.hint is not None
+            and part.log.offset_source == "default"]
 
 
 def _refuse_implausible(files: list[str], result: CalibrationResult) -> None:

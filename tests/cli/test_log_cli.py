@@ -91,6 +91,13 @@ def test_time_offset_estimate_and_its_search_range(capsys, tmp_path):
                            "--max-time-offset", "3", "--json")
     assert code == 0
     assert "time offset +2.500" in json.loads(out)["inputs"][0]
+    # by default 0 is used: the fit fails, and the report puts the clocks first
+    code, out, _ = run_cli(capsys, "calibrate", path)
+    assert code in (3, 4)
+    lines = out.splitlines()
+    assert lines[1].startswith(f"clocks first: {path}: 0 was used for the clock offset, but "
+                               "the data suggest an offset beyond +-1 s")
+    assert "--max-time-offset S" in lines[1]
 
 
 @pytest.mark.slow
