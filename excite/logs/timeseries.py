@@ -198,10 +198,13 @@ def during(series: TimeSeries, start: float | None = None, end: float | None = N
     lo = -math.inf if start is None else start
     hi = math.inf if end is None else end
     keep = [(t >= lo) & (t <= hi) for t in (series.t_enc, series.t_pose)]
+    stamps = (series.t_enc, series.t_pose)
     for k, (name, mask) in enumerate(zip(("encoder", "pose"), keep, strict=True)):
         if mask.sum() < 2:
             raise DataError(f"{series.source[k]}: fewer than 2 {name} samples between "
-                            f"{lo:g} and {hi:g} s")
+                            f"{lo:g} and {hi:g} s (its stamps run from {stamps[k][0]:.9g} to "
+                            f"{stamps[k][-1]:.9g} s; --start and --end are in the log's own "
+                            "stamps)")
     return _subset(series, *keep)
 
 
