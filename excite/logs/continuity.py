@@ -289,8 +289,9 @@ def refuse_long_gaps(gaps: list[Gap], window: float) -> None:
         if gap.duration > window:
             raise DataError(f"{gap.location}: gap of {gap.duration:.3f} s in the {gap.stream} "
                             f"stream ({gap.t_start:.3f}-{gap.t_end:.3f} s), longer than the "
-                            f"window ({window:g} s); --split-at-gaps (on_gap='split') cuts "
-                            "the log there instead")
+                            f"window ({window:g} s, --window, which bounds gaps in keyframe "
+                            "mode too); --split-at-gaps (on_gap='split') cuts the log there "
+                            "instead")
 
 
 def flagged_overlaps(t_enc: FloatArray, flags: BoolArray, start: FloatArray,

@@ -221,7 +221,7 @@ def test_a_gap_longer_than_the_window_is_named(capsys, tmp_path):
     path.write_text("t,phi_L,phi_R,x,y,theta\n" + "\n".join(rows) + "\n")
     code, _, err = run_cli(capsys, "calibrate", path)
     assert code == 2 and err.count("\n") == 1
-    assert f"{path}:23: gap of 2.000 s" in err and "longer than the window (1 s)" in err
+    assert f"{path}:23: gap of 2.000 s" in err and "longer than the window (1 s, --window" in err
     assert err.rstrip().endswith("--split-at-gaps (on_gap='split') cuts the log there instead")
 
 
