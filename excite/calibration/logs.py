@@ -41,6 +41,7 @@ from excite.logs.inputs import (
     read_log,
     segment_inputs,
 )
+from excite.logs.segment_bounds import first_impossible
 from excite.logs.segments import MIN_SEGMENTS, Segments
 from excite.validation.dead_reckoning import Robot, ValidationResult, summarize, validate_log
 
@@ -102,10 +103,31 @@ def _check_part(part: Part, initial: Params | None, note: OnNote) -> None:
     check_wiring(part.segments, part.source.name)
     if part.log is None:
         return
+    _check_plausible(part)
     start = None if initial is None else tuple(initial.as_array().tolist())
     text = check_pose_source(part.segments, part.source.name, start)
     if text is not None:
         note(text)
+
+
+#: The header units of a time-series CSV that convert, as examples in a hint.
+LOG_UNITS = "x (mm) for positions in mm, phi_L [deg] for wheel angles in degrees"
+
+
+def _check_plausible(part: Part) -> None:
+    """DataError naming a log and the time of its first segment that no robot drives (values
+    in other units, :func:`~excite.logs.segment_bounds.first_impossible`), with the log's
+    own columns in the hint."""
+    seg = part.segments
+    if seg.t_start is None or seg.t_end is None:
+        return
+    impossible = first_impossible(seg.dphi_L, seg.dphi_R, seg.dx, seg.dy, seg.dtheta,
+                                  seg.t_end - seg.t_start, units=LOG_UNITS,
+                                  rows="segments")
+    if impossible is not None:
+        k, why = impossible
+        raise DataError(f"{part.source.name}: the segment from t = {seg.t_start[k]:.6g} s: "
+                        f"{why}")
 
 
 def _pooled(parts: Sequence[Part]) -> Segments:

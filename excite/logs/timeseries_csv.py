@@ -71,6 +71,18 @@ ALIASES: dict[str, tuple[str, ...]] = {
 #: when the header has no theta (qx, qy may be left out: a rotation about z alone).
 QUATERNION_COLUMNS = ("qx", "qy", "qz", "qw")
 _NAMES = {alias.lower(): column for column, aliases in ALIASES.items() for alias in aliases}
+#: A motion-capture export's rotation columns (Motive, Vicon: RX, RY, RZ, RW), read as the
+#: quaternion only when RW is there: without it RX, RY, RZ are Euler angles.
+_ROTATION_QUATERNION = {f"r{axis}": f"q{axis}" for axis in "xyzw"}
+
+
+def _names(line: str) -> dict[str, str]:
+    """The header names read as each column for this header line: :data:`ALIASES`, and RX..RW
+    as the quaternion when the line has an RW column."""
+    fields = header_fields(line, delimiter_of(line))
+    if any(label_of(field, {"rw": "rw"})[0] == "rw" for field in fields):
+        return _NAMES | _ROTATION_QUATERNION
+    return _NAMES
 #: The quantity of each column (the units it may be written in: excite.logs.csv_table.UNITS).
 _QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
                **dict.fromkeys(TICK_COLUMNS, "count"), "x": "length", "y": "length",
@@ -137,7 +149,7 @@ def _hint(header: Header) -> str:
 
 def _parse_header(line: str, where: str) -> Header:
     """The layout of a time-series header; DataError for anything else."""
-    header = parse_header(line, _NAMES, _QUANTITIES, where)
+    header = parse_header(line, _names(line), _QUANTITIES, where)
     if "t" not in header.labels:
         raise DataError(f"{where}: no time column t (s); the header names {header.found()} "
                         f"(expected {_EXPECTED}){_hint(header)}")
@@ -290,7 +302,8 @@ def _first_line(path: PathArg) -> str | None:
 
 def _labels(line: str) -> set[str]:
     """The time-series columns (:data:`ALIASES`) a header line names."""
-    labels = (label_of(field, _NAMES)[0] for field in header_fields(line, delimiter_of(line)))
+    names = _names(line)
+    labels = (label_of(field, names)[0] for field in header_fields(line, delimiter_of(line)))
     return {label for label in labels if label is not None}
 
 
@@ -312,7 +325,7 @@ def timeseries_streams(path: PathArg) -> frozenset[str]:
     present = {kind for kind, options in groups.items()
                if any(labels & set(names) for names in options)}
     try:
-        parse_header(line, _NAMES, _QUANTITIES, os.fspath(path))
+        parse_header(line, _names(line), _QUANTITIES, os.fspath(path))
     except DataError:
         return frozenset(groups)
     if "t" in labels and len(complete) == 1 and present == complete:
@@ -326,7 +339,7 @@ def header_hint(path: PathArg) -> str:
     theta; '' when nothing looks so. Starts with '; ' (to end an error message)."""
     line = _first_line(path)
     try:
-        return _hint(parse_header(line, _NAMES, _QUANTITIES, "")) if line else ""
+        return _hint(parse_header(line, _names(line), _QUANTITIES, "")) if line else ""
     except DataError:
         return ""
 

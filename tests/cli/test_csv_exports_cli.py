@@ -89,3 +89,56 @@ def test_a_header_of_neither_format_is_a_one_line_error_naming_both(capsys, tmp_
     code, _, err = run_cli(capsys, "calibrate", path)
     assert code == 2 and err == (f"excite: error: {path}:1: column 'x [ft]': unit 'ft' is not "
                                  "a unit of length (m, cm, mm)\n")
+
+
+def _motion_capture_export(plain, tmp_path, rotation_header):
+    """The plain log as two files: the encoders, and a motion-capture export of the poses
+    (Motive / Vicon style: frame, time, X, Y, Z, a rotation) with the heading as a quaternion
+    about z."""
+    _, *rows = [line.split(",") for line in plain.read_text().splitlines()]
+    encoders = ["t,phi_L,phi_R"] + [",".join(r[:3]) for r in rows if r[1]]
+    poses = [",".join(["Frame", "Time (Seconds)", "X", "Y", "Z", *rotation_header])]
+    for frame, r in enumerate(row for row in rows if row[3]):
+        half = 0.5 * float(r[5])
+        rotation = [0.0, 0.0, math.sin(half), math.cos(half)][:len(rotation_header)]
+        poses.append(",".join([str(frame), r[0], r[3], r[4], "0.0", *map(repr, rotation)]))
+    (tmp_path / "enc.csv").write_text("\n".join(encoders) + "\n")
+    (tmp_path / "mocap.csv").write_text("\n".join(poses) + "\n")
+    return tmp_path / "enc.csv", tmp_path / "mocap.csv"
+
+
+@pytest.mark.slow
+def test_a_motion_capture_export_with_rx_to_rw_reads_its_quaternion(capsys, plain, tmp_path):
+    """RX, RY, RZ, RW (a motion-capture export's rotation) are the quaternion when RW is
+    there: the same calibration as the plain file's to the quaternion's rounding. Without RW
+    they are Euler angles, not read: the error says theta is missing and names them."""
+    _, out, _ = run_cli(capsys, "calibrate", plain, "--json")
+    reference = json.loads(out)
+    enc, mocap = _motion_capture_export(plain, tmp_path, ["RX", "RY", "RZ", "RW"])
+    code, out, err = run_cli(capsys, "calibrate", enc, mocap, "--json")
+    assert code == 0, err
+    assert f"excite: note: {mocap}: theta is the yaw of the quaternion qx, qy, qz, qw" in err
+    report = json.loads(out)
+    for name, value in reference["params"].items():
+        assert report["params"][name] == pytest.approx(value, abs=1e-3 * reference["std"][name])
+    enc, euler = _motion_capture_export(plain, tmp_path, ["RX", "RY", "RZ"])
+    code, _, err = run_cli(capsys, "calibrate", euler)
+    assert code == 2 and "missing column theta" in err and "'RZ'" in err
+
+
+@pytest.mark.slow
+def test_positions_in_mm_without_a_unit_name_the_log_and_the_unit_to_write(capsys, plain,
+                                                                           tmp_path):
+    """A pose file in mm whose header has no unit: the error names the log, the time, and the
+    header unit that converts it (x (mm)), not a segment CSV's column."""
+    _, *rows = [line.split(",") for line in plain.read_text().splitlines()]
+    lines = ["t,phi_L,phi_R,x,y,theta"]
+    for r in rows:
+        x, y = (repr(1000 * float(v)) if v else v for v in r[3:5])
+        lines.append(",".join([*r[:3], x, y, r[5]]))
+    path = tmp_path / "mm.csv"
+    path.write_text("\n".join(lines) + "\n")
+    code, _, err = run_cli(capsys, "calibrate", path)
+    assert code == 2 and err.count("\n") == 1
+    assert err.startswith(f"excite: error: {path}: the segment from t = ")
+    assert "segments are: values in other units?" in err and "x (mm)" in err
