@@ -50,7 +50,7 @@ from excite.live.session import LiveSession
 from excite.live.settings import LiveTopics
 from excite.logs.orientation import headings
 from excite.logs.timeseries import sample_at
-from excite.processes import shut_down_now
+from excite.processes import deaf_to_sigint, shut_down_now, sigint_blocked
 from excite.signals import handled
 
 __all__ = ["INTERRUPTED", "POSE_TYPES", "SessionFailed", "run_live", "stop_on_signals"]
@@ -402,6 +402,8 @@ def run_live(session: LiveSession, topics: LiveTopics, recorder=None,
     # would hold the interpreter while the callbacks fall behind the streams.
     pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_decision_worker)
+    with sigint_blocked():  # the worker starts now, deaf to Ctrl-C from its first instruction
+        pool.submit(os.getpid)
     session.executor = pool
     executor = SingleThreadedExecutor(context=context)
     node: LiveNode | None = None
@@ -450,4 +452,4 @@ def _decision_worker() -> None:
     terminal's Ctrl-C reaches every process of the job, and the node, not the worker, ends
     the session (a worker interrupted mid-decision lost the session's report)."""
     os.nice(DECISION_NICENESS)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    deaf_to_sigint()
