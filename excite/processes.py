@@ -22,7 +22,10 @@ def shut_down_now(pool: ProcessPoolExecutor) -> None:
     """Cancel the pool's pending tasks and terminate its workers (SIGTERM) without waiting for
     the tasks they run; each worker is waited for up to JOIN_SECONDS."""
     processes = list((getattr(pool, "_processes", None) or {}).values())  # CPython's
+    calls = getattr(pool, "_call_queue", None)  # CPython's: the tasks' queue to the workers
     pool.shutdown(wait=False, cancel_futures=True)
+    if calls is not None:  # its feeder thread is not joined at exit: the workers that would
+        calls.cancel_join_thread()  # read what it still holds are terminated below
     for process in processes:
         process.terminate()
     for process in processes:
