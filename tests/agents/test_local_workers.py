@@ -39,11 +39,19 @@ def _alive(pids: set[int]) -> set[int]:
     return alive
 
 
+def _as_from_a_terminal() -> None:
+    """In the child before exec: SIGINT as a shell gives it to a command (default), whatever
+    the test process has (an ignored SIGINT would be inherited, and compare then never sees
+    the Ctrl-C the test sends)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _started_compare(out: Path, segments: int = 30) -> tuple[subprocess.Popen, set[int]]:
     proc = subprocess.Popen([sys.executable, "-m", "excite.cli", "compare", "--protocols",
                              "greedy", "--episodes", "40", "--segments", str(segments),
                              "--workers", "2", "--out", str(out)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_as_from_a_terminal)
     deadline = time.monotonic() + 120
     workers: set[int] = set()
     while time.monotonic() < deadline and len(workers) < 2:
