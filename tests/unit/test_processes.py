@@ -25,11 +25,17 @@ def _run_child(blocked: bool) -> int:
     context = multiprocessing.get_context("spawn")
     ready = context.Event()
     child = context.Process(target=_slow_start, args=(ready,))
-    if blocked:
-        with sigint_blocked():
+    # the parent's SIGINT handled, as in a terminal (a test worker may ignore it, and an
+    # ignored SIGINT is inherited by the child, which then needs no block)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        if blocked:
+            with sigint_blocked():
+                child.start()
+        else:
             child.start()
-    else:
-        child.start()
+    finally:
+        signal.signal(signal.SIGINT, previous)
     time.sleep(0.5 * STARTUP)
     os.kill(child.pid, signal.SIGINT)
     assert ready.wait(10) or not blocked
