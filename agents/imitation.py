@@ -130,15 +130,12 @@ def train_critic(model, steps: int) -> None:
             p.requires_grad_(True)
 
 
-def imitate(config: dict, model, venv, seed: int, progress: bool = True) -> dict:
+def imitate(config: dict, robots: list, model, venv, seed: int, progress: bool = True) -> dict:
     """The three stages (module doc) for a checked training ``config`` with an ``imitate``
-    section, on its new ``model`` and training ``venv``; what was done, for the training
-    summary."""
+    section, on the training envs' ``robots`` (env ``robot`` values), its new ``model`` and
+    training ``venv``; what was done, for the training summary."""
     settings = IMITATE_DEFAULTS | config["imitate"]
-    env_kwargs = dict(config.get("env_kwargs", {}))
-    robots = config.get("robots") or [env_kwargs.pop("robot", None)]
-    env_kwargs.pop("robot", None)
-    observations, actions = demonstrations(config["env_id"], env_kwargs, robots,
+    observations, actions = demonstrations(config["env_id"], config.get("env_kwargs", {}), robots,
                                            settings["protocol"], settings["episodes"], seed,
                                            progress)
     log_std_init = config.get("policy_kwargs", {}).get("log_std_init", 0.0)

@@ -302,7 +302,7 @@ def make_training_env(config: dict, n_envs: int, seed: int, training: bool = Tru
     With config ``robots`` (a list of env ``robot`` values: preset names or override
     mappings) the envs are split evenly over those robots (n_envs a multiple of their number;
     one env per robot when n_envs is 1, as for evaluation), env i seeded seed + i."""
-    robots = config.get("robots") or [config.get("env_kwargs", {}).get("robot")]
+    robots = config_robots(config)
     per_robot = max(n_envs // len(robots), 1)
     if n_envs > 1 and per_robot * len(robots) != n_envs:
         raise TrainingError(f"n_envs {n_envs} must be a multiple of the {len(robots)} robots")
@@ -314,6 +314,12 @@ def make_training_env(config: dict, n_envs: int, seed: int, training: bool = Tru
                         norm_obs=norm.get("norm_obs", True),
                         norm_reward=norm.get("norm_reward", True) and training,
                         gamma=norm.get("gamma", 0.99))
+
+
+def config_robots(config: dict) -> list:
+    """The env ``robot`` values a config's envs are split over: its ``robots``, else its
+    env's own robot (None: the env's default)."""
+    return config.get("robots") or [config.get("env_kwargs", {}).get("robot")]
 
 
 def _robot_env(config: dict, robot: Any, n_envs: int, seed: int) -> VecEnv:
@@ -512,7 +518,7 @@ def train(
     ]
     remaining = max(timesteps - done_steps, 0)
     started = time.perf_counter()
-    imitation = (imitate(config, model, venv, seed, progress)
+    imitation = (imitate(config, config_robots(config), model, venv, seed, progress)
                  if config.get("imitate") and not checkpoint else None)
     if progress:
         callbacks.append(_TqdmProgress(timesteps, done_steps))

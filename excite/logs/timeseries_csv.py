@@ -74,6 +74,14 @@ _NAMES = {alias.lower(): column for column, aliases in ALIASES.items() for alias
 #: A motion-capture export's rotation columns (Motive, Vicon: RX, RY, RZ, RW), read as the
 #: quaternion only when RW is there: without it RX, RY, RZ are Euler angles.
 _ROTATION_QUATERNION = {f"r{axis}": f"q{axis}" for axis in "xyzw"}
+#: The quantity of each column (the units it may be written in: excite.logs.csv_table.UNITS).
+_QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
+               **dict.fromkeys(TICK_COLUMNS, "count"), "x": "length", "y": "length",
+               "theta": "angle", **dict.fromkeys(QUATERNION_COLUMNS, "number")}
+_EXPECTED = "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two"
+# Header names of columns not read that look like a wheel's or an orientation's.
+_WHEEL_LIKE = re.compile(r"left|right|wheel|enc|tick")
+_QUATERNION_LIKE = re.compile(r"^(q|quat|orientation)[_ .]?[xyzw]\b|^q[xyzw]$")
 
 
 def _names(line: str) -> dict[str, str]:
@@ -83,14 +91,6 @@ def _names(line: str) -> dict[str, str]:
     if any(label_of(field, {"rw": "rw"})[0] == "rw" for field in fields):
         return _NAMES | _ROTATION_QUATERNION
     return _NAMES
-#: The quantity of each column (the units it may be written in: excite.logs.csv_table.UNITS).
-_QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
-               **dict.fromkeys(TICK_COLUMNS, "count"), "x": "length", "y": "length",
-               "theta": "angle", **dict.fromkeys(QUATERNION_COLUMNS, "number")}
-_EXPECTED = "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two"
-# Header names of columns not read that look like a wheel's or an orientation's.
-_WHEEL_LIKE = re.compile(r"left|right|wheel|enc|tick")
-_QUATERNION_LIKE = re.compile(r"^(q|quat|orientation)[_ .]?[xyzw]\b|^q[xyzw]$")
 
 
 @dataclass(frozen=True)
