@@ -75,10 +75,11 @@ _SEGMENTATION: dict[str, dict[str, Any]] = {
                   "help": "keyframes instead of fixed windows: a new segment once the sensor has "
                   "turned RAD radians from the last keyframe (or moved --min-distance; default: "
                   "fixed windows)"},
-    "split_at_gaps": {"action": "store_true",
+    "split_at_gaps": {"action": argparse.BooleanOptionalAction,
                       "help": "cut a log at gaps (a stream without samples for longer than the "
-                      "window, in s) instead of refusing it (default: refuse, naming where the "
-                      "stream resumes)"},
+                      "window, in s: a motion-capture body out of view, a driver's pause; no "
+                      "segment spans one, a note names them) or, with --no-split-at-gaps, "
+                      "refuse it, naming where the stream resumes (default: cut)"},
 }
 #: The options that read logs and bags, written as those that cut them.
 _READING: dict[str, dict[str, Any]] = {

@@ -290,8 +290,8 @@ def refuse_long_gaps(gaps: list[Gap], window: float) -> None:
             raise DataError(f"{gap.location}: gap of {gap.duration:.3f} s in the {gap.stream} "
                             f"stream ({gap.t_start:.3f}-{gap.t_end:.3f} s), longer than the "
                             f"window ({window:g} s, --window, which bounds gaps in keyframe "
-                            "mode too); --split-at-gaps (on_gap='split') cuts the log there "
-                            "instead")
+                            "mode too); --split-at-gaps, the command line's default (on_gap="
+                            "'split'), cuts the log there instead")
 
 
 def flagged_overlaps(t_enc: FloatArray, flags: BoolArray, start: FloatArray,

@@ -308,7 +308,7 @@ def _numbers(name: str, numbers: list[int], header: Header, cells: list[str],
              allow_empty: bool) -> tuple[FloatArray, BoolArray]:
     """(values, empty) (n, m) of the columns read from the cells (row after row, width
     fields each); DataError at the first cell read (row after row) that is not a number, or
-    not finite."""
+    not finite (with ``allow_empty``, NaN is read as NaN: only an infinity is an error)."""
     count = len(cells)
     empty = (np.fromiter(map(operator.not_, cells), dtype=bool, count=count) if allow_empty
              else np.zeros(count, dtype=bool))
@@ -319,7 +319,8 @@ def _numbers(name: str, numbers: list[int], header: Header, cells: list[str],
     except ValueError:
         bad, what = next(i for i, text in enumerate(texts) if not _is_number(text)), "a number"
         values = np.fromiter(map(float, texts[:bad]), dtype=float, count=bad)
-    infinite = np.flatnonzero(~np.isfinite(values) & ~empty[: values.size])
+    not_finite = np.isinf(values) if allow_empty else ~np.isfinite(values)
+    infinite = np.flatnonzero(not_finite & ~empty[: values.size])
     if infinite.size:
         bad, what = int(infinite[0]), "finite"
     if what:
@@ -335,11 +336,12 @@ def read_columns(name: str, numbers: list[int], lines: list[str], header: Header
     """The numbers of the columns ``header`` reads from data ``lines`` (stripped, numbered
     ``numbers`` in file ``name``), converted to base units: (values, empty), each (n, m) for
     the m columns in header order; empty cells are NaN in values and True in empty when
-    ``allow_empty`` (otherwise an empty cell is not a number).
+    ``allow_empty`` (otherwise an empty cell is not a number), and NaN cells are then NaN in
+    values and False in empty (the caller decides what a NaN means).
 
     DataError naming the file and line of the first problem, row after row: a row with
     another number of fields than ``header.width``, a cell read that is not a number or not
-    finite, decimal commas and points mixed.
+    finite (only infinite with ``allow_empty``), decimal commas and points mixed.
     """
     cells, wrong = _split(lines, header.delimiter, header.width)
     cells = _points(name, numbers, header, _cells_read(cells, header))

@@ -23,7 +23,7 @@ from typing import Literal
 
 from excite.errors import DataError
 from excite.logs.bag_reader import JOINT_STATES, bag_path_problem, is_bag_path, read_bag_log
-from excite.logs.continuity import check_continuity, on_track
+from excite.logs.continuity import Gap, check_continuity, on_track
 from excite.logs.segmentation import OFF_TRACK, SegmentedLog, segment_timeseries
 from excite.logs.segments import Segments, check_not_utf16, form_problem, load_segments
 from excite.logs.time_offset import (
@@ -51,10 +51,12 @@ class LogOptions:
     window (s): segment duration (fixed windows). min_distance (m), min_angle (rad): keyframes
     instead of windows, a new segment once the sensor has moved min_distance or turned
     min_angle from the last keyframe (either or both; None: not used). split_at_gaps: cut a log
-    at gaps longer than the window instead of refusing it. ticks_per_rev: encoder ticks per
-    wheel revolution, converting ticks_L, ticks_R columns to rad (None: the wheel columns are
-    angles in rad). time_offset: pose time + time_offset = encoder time (s); "estimate" finds
-    it from the data; None uses 0, with a note when the data suggest otherwise.
+    at gaps longer than the window (a motion-capture body out of view, a driver's pause; no
+    segment spans one, and a note names them) instead of refusing it. ticks_per_rev: encoder
+    ticks per wheel revolution, converting ticks_L, ticks_R columns to rad (None: the wheel
+    columns are angles in rad). time_offset: pose time + time_offset = encoder time (s);
+    "estimate" finds it from the data; None uses 0, with a note when the data suggest
+    otherwise.
     max_time_offset (s): estimated offsets are searched within +- this. Bags only:
     joint_states, the topic of the JointState messages; left_wheel, right_wheel, the wheel
     joint names in them (required); the sensor's poses from exactly one of pose_topic (a
@@ -66,7 +68,7 @@ class LogOptions:
     window: float = 1.0
     min_distance: float | None = None
     min_angle: float | None = None
-    split_at_gaps: bool = False
+    split_at_gaps: bool = True
     ticks_per_rev: float | None = None
     time_offset: float | Literal["estimate"] | None = None
     max_time_offset: float = MAX_TIME_OFFSET
@@ -88,6 +90,12 @@ LOG_ONLY = ("window", "min_distance", "min_angle", "split_at_gaps", "ticks_per_r
             "time_offset", "max_time_offset", "start", "end")
 
 
+def _flag(name: str, value: object) -> str:
+    """The command-line flag that sets option ``name`` to ``value`` (--no-X for a switch
+    turned off)."""
+    return ("--no-" if value is False else "--") + name.replace("_", "-")
+
+
 def note_unused_options(inputs: Sequence[Input], options: LogOptions, note: OnNote) -> None:
     """Tell ``note`` of the options set away from their defaults that none of ``inputs``
     reads (bag options without a bag, log options with segment files only), by their
@@ -102,7 +110,7 @@ def note_unused_options(inputs: Sequence[Input], options: LogOptions, note: OnNo
         unused = [name for name in only
                   if getattr(options, name) != getattr(DEFAULT_LOG_OPTIONS, name)]
         if unused:
-            flags = ", ".join("--" + name.replace("_", "-") for name in unused)
+            flags = ", ".join(_flag(name, getattr(options, name)) for name in unused)
             note(f"{flags} ignored: read from {wanted} only, and {missing}")
 
 
@@ -325,6 +333,18 @@ def segment_log(log: Log, options: LogOptions) -> SegmentedLog:
                               on_gap="split" if options.split_at_gaps else "error")
 
 
+def _note_long_gaps(source: Input, gaps: Sequence[Gap], window: float,
+                    on_note: OnNote | None) -> None:
+    """Tell ``on_note`` where a log was cut at gaps longer than the window (s)."""
+    long = [gap for gap in gaps if gap.duration > window]
+    if long and on_note is not None:
+        worst = max(long, key=lambda gap: gap.duration)
+        on_note(f"{source.name}: cut at {len(long)} gap(s) longer than the window ({window:g} "
+                f"s), the longest {worst.duration:.3f} s in the {worst.stream} stream "
+                f"({worst.t_start:.3f}-{worst.t_end:.3f} s): no segment spans one; "
+                "--no-split-at-gaps refuses such a log")
+
+
 def segment_inputs(inputs: Sequence[Input], options: LogOptions, *,
                    on_note: OnNote | None = None) -> list[Part]:
     """Every input as segments, in order: segment files are read, logs read and cut (their
@@ -336,6 +356,7 @@ def segment_inputs(inputs: Sequence[Input], options: LogOptions, *,
         else:
             log = read_log(source, options, on_note=on_note)
             cut = segment_log(log, options)
+            _note_long_gaps(source, cut.report.gaps, options.window, on_note)
             parts.append(Part(source, cut.segments, log, cut))
     return parts
 

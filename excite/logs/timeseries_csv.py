@@ -9,7 +9,7 @@ note naming them. Instead of ``theta``, an orientation quaternion ``qx,qy,qz,qw`
 may be left out: a planar rotation) gives the heading, its yaw
 (:mod:`excite.logs.orientation`: free of the quaternion's length; a z-up world frame).
 Separated by commas, semicolons or tabs (:mod:`excite.logs.csv_table`). In one file, a row
-leaves a stream's cells empty when that stream has no sample at its time. Blank lines and
+leaves a stream's cells empty (or NaN) when that stream has no sample at its time. Blank lines and
 ``#`` comments are ignored. Every error is one line naming the file and line (docs/formats.md,
 "Time-series logs").
 """
@@ -220,8 +220,8 @@ def _checked_cells(table: _Table, note: OnNote) -> _Table:
         if partial.any():
             row = int(np.argmax(partial))
             column = group[int(np.argmax(empty[row]))]
-            raise DataError(f"{table.name}:{table.lines[row]}: {column} is empty but other "
-                            f"{'/'.join(group)} cells are not")
+            raise DataError(f"{table.name}:{table.lines[row]}: {column} is empty (or NaN) "
+                            f"but other {'/'.join(group)} cells are not")
         filled_any |= ~empty[:, 0]
     if filled_any.all():
         return table
@@ -246,12 +246,32 @@ def _read_table(path: PathArg, note: OnNote) -> _Table:
     for line in header.notes(name):
         note(line)
     values, empty = read_columns(name, numbers[1:], lines[1:], header, allow_empty=True)
-    table = _heading_of_quaternion(_Table(name, header, values, empty,
-                                          np.asarray(numbers[1:], dtype=np.int64), numbers[0]))
+    line_numbers = np.asarray(numbers[1:], dtype=np.int64)
+    empty, with_nan, unmeasured = _nan_as_missing(header, values, empty)
+    keep = ~unmeasured
+    table = _heading_of_quaternion(_Table(name, header, values[keep], empty[keep],
+                                          line_numbers[keep], numbers[0]))
     if table.header is not header:
         note(f"{name}: theta is the yaw of the quaternion "
              f"{', '.join(c for c in QUATERNION_COLUMNS if c in header.labels)}")
-    return _checked_cells(table, note)
+    table = _checked_cells(table, note)
+    if with_nan.any():
+        rows = line_numbers[with_nan]
+        note(f"{name}: {rows.size} rows with NaN cells (lines {rows[0]}-{rows[-1]}) read as "
+             "samples not measured, like empty cells (a motion-capture body not tracked?)")
+    return table
+
+
+def _nan_as_missing(header: Header, values: FloatArray, empty: BoolArray
+                    ) -> tuple[BoolArray, BoolArray, BoolArray]:
+    """(empty with NaN cells counted as empty, the rows with a NaN cell, the rows whose every
+    value but t was NaN): a sample written as NaN was not measured (a motion-capture body not
+    tracked, an exporter's missing value), like an empty cell."""
+    nan = np.isnan(values) & ~empty
+    empty = empty | nan
+    others = [j for j, label in enumerate(header.labels) if label != "t"]
+    with_nan = nan.any(axis=1)
+    return empty, with_nan, with_nan & empty[:, others].all(axis=1)
 
 
 def _heading_of_quaternion(table: _Table) -> _Table:
@@ -268,8 +288,8 @@ def _heading_of_quaternion(table: _Table) -> _Table:
     if partial.any():
         row = int(np.argmax(partial))
         column = labels[index[int(np.argmax(empty[row]))]]
-        raise DataError(f"{table.name}:{table.lines[row]}: {column} is empty but other "
-                        "quaternion cells are not")
+        raise DataError(f"{table.name}:{table.lines[row]}: {column} is empty (or NaN) "
+                        "but other quaternion cells are not")
     q = np.zeros((len(table.lines), 4))
     for axis, column in enumerate(QUATERNION_COLUMNS):
         if column in labels:

@@ -201,7 +201,7 @@ GOOD_ROWS = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,5,5,0.25,0,0\n1.0,10,10,0
 @pytest.mark.parametrize("text, extra, fragment", [
     (GOOD_ROWS + "0.9,11,11,0.55,0,0\n", [], "log.csv:5: time does not increase"),
     ("t,phi_L,phi_R,x,theta\n0,0,0,0,0\n", [], "log.csv:1: missing column y"),
-    (GOOD_ROWS + "1.5,nan,15,0.75,0,0\n", [], "log.csv:5: phi_L is not finite"),
+    (GOOD_ROWS + "1.5,nan,15,0.75,0,0\n", [], "log.csv:5: phi_L is empty (or NaN) but other"),
     ("t,ticks_L,ticks_R,x,y,theta\n0,0,0,0,0,0\n", [],
      "log.csv:1: encoder ticks (ticks_L, ticks_R) need the encoder resolution"),
     ("t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.5,1,1,0.1,0,0\n1.0,-2.5,-2.5,0.2,0,0\n", [],
@@ -215,14 +215,23 @@ def test_bad_log_files_through_the_cli(capsys, tmp_path, text, extra, fragment):
     assert fragment in err and "Traceback" not in err
 
 
-def test_a_gap_longer_than_the_window_is_named(capsys, tmp_path):
+def test_a_gap_longer_than_the_window_cuts_the_log_with_a_note_or_is_refused(capsys,
+                                                                            tmp_path):
+    """A motion-capture body out of view for 2 s: by default the log is cut there (no
+    segment spans the gap) and a note says where; --no-split-at-gaps refuses the log, naming
+    the line where the stream resumes."""
     rows = [f"{0.1 * i:.1f},{i},{i},{0.005 * i},0,0" for i in range(60) if not 20 < i < 40]
     path = tmp_path / "log.csv"
     path.write_text("t,phi_L,phi_R,x,y,theta\n" + "\n".join(rows) + "\n")
-    code, _, err = run_cli(capsys, "calibrate", path)
+    _, out, err = run_cli(capsys, "calibrate", path)
+    assert (f"excite: note: {path}: cut at 2 gap(s) longer than the window (1 s), the longest "
+            "2.000 s in the encoder stream (2.000-4.000 s): no segment spans one; "
+            "--no-split-at-gaps refuses such a log") in err
+    code, _, err = run_cli(capsys, "calibrate", path, "--no-split-at-gaps")
     assert code == 2 and err.count("\n") == 1
     assert f"{path}:23: gap of 2.000 s" in err and "longer than the window (1 s, --window" in err
-    assert err.rstrip().endswith("--split-at-gaps (on_gap='split') cuts the log there instead")
+    assert err.rstrip().endswith("--split-at-gaps, the command line's default "
+                                 "(on_gap='split'), cuts the log there instead")
 
 
 def test_too_few_segments_to_estimate_the_noise_levels(capsys, tmp_path):
@@ -301,10 +310,10 @@ def test_a_clock_jump_or_times_in_ns_are_one_line_errors(capsys, tmp_path):
                                                  series.t_pose))
     path = tmp_path / "jump.csv"
     write_timeseries(path, jumped)
-    code, _, err = run_cli(capsys, "calibrate", path)
+    code, _, err = run_cli(capsys, "calibrate", path, "--no-split-at-gaps")
     assert code == 2 and err.count("\n") == 1 and "gap of 31536000" in err
-    code, _, _ = run_cli(capsys, "calibrate", path, "--split-at-gaps")
-    assert code == 0  # each side of the jump calibrates
+    code, _, err = run_cli(capsys, "calibrate", path)
+    assert code == 0 and "the longest 31536000" in err  # each side of the jump calibrates
     code, _, err = run_cli(capsys, "calibrate", path, "--time-offset", "estimate")
     assert code == 2 and err.count("\n") == 1 and "long gaps (or a clock that jumps)" in err
     nanoseconds = dataclasses.replace(series, t_enc=1.763e18 + 1e9 * series.t_enc,
@@ -447,9 +456,9 @@ def test_options_no_input_reads_are_noted(capsys, tmp_path, logs):
     segments = tmp_path / "segments.csv"
     assert run_cli(capsys, "segment", logs[0], "--out", str(segments))[0] == 0
     code, _, err = run_cli(capsys, "calibrate", str(segments), "--window", "2",
-                           "--split-at-gaps")
+                           "--no-split-at-gaps")
     assert code == 0
-    assert ("excite: note: --window, --split-at-gaps ignored: read from time-series logs and "
+    assert ("excite: note: --window, --no-split-at-gaps ignored: read from time-series logs and "
             "bags only, and every input is a segment file") in err
     # a segment file beside a log: the log reads them, no note
     code, _, err = run_cli(capsys, "calibrate", str(segments), logs[1], "--window", "2")

@@ -148,6 +148,26 @@ def test_rows_of_the_columns_not_read_alone_are_left_out_with_a_note(tmp_path, p
                      "merged export's other columns)"]
 
 
+@pytest.mark.parametrize("spelling", ["nan", "NaN"])
+def test_nan_cells_are_samples_not_measured_like_empty_cells(tmp_path, plain, spelling):
+    """A motion-capture body out of view, written as NaN (numpy's savetxt, some bridges):
+    those pose samples are missing, as if their cells were empty; a row left with only a
+    time is dropped; a note counts the rows and names their lines."""
+    path, header, rows = plain
+    pose_rows = [k for k, row in enumerate(rows) if row[3]]
+    lost = set(pose_rows[100:140])  # about 1.6 s of poses
+    with_nan = [row[:3] + [spelling] * 3 if k in lost else row for k, row in enumerate(rows)]
+    without = [row[:3] + [""] * 3 if k in lost else row for k, row in enumerate(rows)]
+    without = [row for row in without if any(row[1:])]
+    series, notes = read(export(tmp_path / "nan.csv", header, with_nan))
+    assert_same(series, read_timeseries(export(tmp_path / "empty.csv", header, without)))
+    lines = sorted(k + 2 for k in lost)
+    assert notes == [f"{tmp_path / 'nan.csv'}: 40 rows with NaN cells (lines {lines[0]}-"
+                     f"{lines[-1]}) read as samples not measured, like empty cells (a "
+                     "motion-capture body not tracked?)"]
+    assert series.t_pose.size == sum(bool(row[3]) for row in rows) - 40
+
+
 @pytest.mark.parametrize("names, planar, length", [
     (("qx", "qy", "qz", "qw"), False, 1.0),
     (("orientation.x", "orientation.y", "orientation.z", "orientation.w"), False, 2.5),
@@ -261,7 +281,8 @@ GOOD_ROWS = "0;0;0;0;0;0\n0.1;1;1;0.05;0;0\n0.2;2;2;0.1;0;0\n"
      "separated by tabs, found 5"),
     ("t;phi_L;phi_R;x;y;theta\n" + GOOD_ROWS + "0.3;3;abc;0.15;0;0\n",
      "log.csv:5: phi_R is not a number: 'abc'"),
-    ("t;phi_L;phi_R;x;y;theta;z\n" + "0.3;3;3;nan;0;0;0\n", "log.csv:2: x is not finite: 'nan'"),
+    ("t;phi_L;phi_R;x;y;theta;z\n" + "0.3;3;3;nan;0;0;0\n",
+     "log.csv:2: x is empty (or NaN) but other x/y/theta cells are not"),
     ("time;left;right;x;y;yaw\n0;0;0;0;0;0\n", "log.csv: only pose columns; give the other "
      "stream too (a second file with t,phi_L,phi_R, or all columns in one file); 'left', "
      "'right' not read: wheel columns are named phi_L, phi_R (rad) or ticks_L, ticks_R"),
@@ -275,7 +296,7 @@ GOOD_ROWS = "0;0;0;0;0;0\n0.1;1;1;0.05;0;0\n0.2;2;2;0.1;0;0\n"
      "heading is the yaw of qx, qy, qz, qw; qx and qy may both be left out)"),
     ("time,phi_L,phi_R,x,y,qx,qz,qw\n", "log.csv:1: the quaternion has no column qy"),
     ("t,phi_L,phi_R,x,y,qz,qw\n0,0,0,0,0,0,1\n0.1,1,1,0.1,0,,1\n", "log.csv:3: qz is empty "
-     "but other quaternion cells are not"),
+     "(or NaN) but other quaternion cells are not"),
     ("t,phi_L,phi_R,x,y,qz,qw\n0,0,0,0,0,0,1\n0.1,1,1,0.1,0,0,0\n", "log.csv:3: the "
      "orientation quaternion (x, y, z, w) = (0.0, 0.0, 0.0, 0.0) is not a rotation"),
     ("t,phi_L,phi_R,x,y,qx,qy,qz,qw\n0,0,0,0,0,0,0,0,1\n0.1,1,1,0.1,0,0.7071,0,0,0.7071\n",
