@@ -15,25 +15,31 @@ the way out (:func:`bag_path_problem`).
   lacking either joint is left out; one naming both with an empty ``position``, as a
   velocity-only publisher sends, is skipped and counted).
 * Poses of the external sensor in the world frame: a ``geometry_msgs/msg/PoseStamped``,
-  ``geometry_msgs/msg/PoseWithCovarianceStamped`` or ``nav_msgs/msg/Odometry`` topic (several of
-  these types on one topic are fine: publishers of different types), or TF:
-  the transforms from ``parent`` to ``child`` in ``tf2_msgs/msg/TFMessage`` messages on
+  ``PoseWithCovarianceStamped``, ``TransformStamped`` (vicon_bridge), ``Pose2D`` (no header:
+  ROS 1's laser_scan_matcher) or ``nav_msgs/msg/Odometry`` topic (several of these types on
+  one topic are fine: publishers of different types), or TF: the transforms from ``parent``
+  to ``child`` in ``tf2_msgs/msg/TFMessage`` (or ROS 1's older ``tf/tfMessage``) messages on
   ``/tf``. Only direct parent -> child transforms are used (no chaining through other frames,
   no inversion, not ``/tf_static``); record the transform you need directly. Leading ``/`` of
   frame ids (ROS 1) are ignored. x, y in m; heading = yaw of the orientation quaternion
   (:mod:`excite.logs.orientation`: free of the quaternion's length; the world frame must be
-  z-up, a tilt beyond 45 degrees is an error, most often a Y-up motion capture stream).
-* Times are the messages' header stamps (s), not receive times; each stream is put in stamp
-  order. Messages stamped zero (not set) before the first stamped message of their topic are
+  z-up, a tilt beyond 45 degrees is an error, most often a Y-up motion capture stream). A
+  pose holding NaN or a quaternion of zeros (a motion-capture body not tracked) is skipped
+  and counted.
+* Times are the messages' header stamps (s), checked against the receive times
+  (:mod:`excite.logs.bag_stamps`): a stream without stamps is timed by its receive times,
+  a clock step is found and corrected, each with a note; each stream is put in stamp order.
+  Messages stamped zero (not set) before the first stamped message of their topic are
   skipped and counted (published before the clock ran), as are exact repeats (same stamp,
   same values); zero stamps after stamped ones, or one stamp with different values, are
-  errors. :func:`read_bag_log` returns the counts beside the log.
+  errors. :func:`read_bag_log` returns the counts and notes beside the log.
 
 Writing bags: :mod:`excite.logs.bag_writer`.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -44,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from excite.errors import DataError
+from excite.logs.bag_stamps import stamped_table
 from excite.logs.orientation import headings
 from excite.logs.timeseries import TimeSeries, sample_at
 
@@ -52,19 +59,36 @@ __all__ = ["POSE_TYPES", "BAG_SUFFIXES", "JOINT_STATES", "MISSING_EXTRA", "BagLo
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
-TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 TF_TOPIC = "/tf"
-#: Supported pose message types, and where each keeps its geometry_msgs/Pose.
-POSE_TYPES: dict[str, Callable[[Any], Any]] = {
-    "geometry_msgs/msg/PoseStamped": lambda msg: msg.pose,
-    "geometry_msgs/msg/PoseWithCovarianceStamped": lambda msg: msg.pose.pose,
-    "nav_msgs/msg/Odometry": lambda msg: msg.pose.pose,
+def _planar(position: Any, q: Any) -> tuple[float, ...]:
+    """What a pose row keeps: x, y (m) and the orientation quaternion's x, y, z, w."""
+    return position.x, position.y, q.x, q.y, q.z, q.w
+
+
+#: Supported pose message types, and how each gives a pose row (:func:`_planar`); a type
+#: without a header (Pose2D, as ROS 1's laser_scan_matcher publishes it) is timed by the
+#: receive times (:mod:`excite.logs.bag_stamps`).
+POSE_TYPES: dict[str, Callable[[Any], tuple[float, ...]]] = {
+    "geometry_msgs/msg/PoseStamped": lambda msg: _planar(msg.pose.position,
+                                                         msg.pose.orientation),
+    "geometry_msgs/msg/PoseWithCovarianceStamped": lambda msg: _planar(
+        msg.pose.pose.position, msg.pose.pose.orientation),
+    "nav_msgs/msg/Odometry": lambda msg: _planar(msg.pose.pose.position,
+                                                 msg.pose.pose.orientation),
+    "geometry_msgs/msg/TransformStamped": lambda msg: _planar(msg.transform.translation,
+                                                              msg.transform.rotation),
+    "geometry_msgs/msg/Pose2D": lambda msg: (msg.x, msg.y, 0.0, 0.0, math.sin(msg.theta / 2),
+                                             math.cos(msg.theta / 2)),
 }
+#: The TF message types read from /tf: ROS 2's and ROS 1's, and ROS 1's before tf2.
+TF_MESSAGES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 #: The topic of the wheels' JointState messages, unless told otherwise (reading and writing).
 JOINT_STATES = "/joint_states"
 #: Why a JointState message naming both wheels is skipped: its position array is empty.
 NO_POSITIONS = "without wheel positions"
+#: Why a pose is skipped: it holds NaN or a quaternion of zeros.
+NOT_TRACKED = "not measured (NaN, or a quaternion of zeros: a body not tracked?)"
 MISSING_EXTRA = "reading bags needs the ros extra: pip install 'excite[ros]'"
 
 
@@ -88,52 +112,34 @@ def _frame(frame_id: str) -> str:
 
 class _Stream:
     """Rows (header stamp in ns first, then the values read) of one topic in receive order,
-    and the messages skipped, per reason."""
+    their receive times (ns), the messages skipped per reason, and notes for the user."""
 
     def __init__(self, where: str) -> None:
         self.where = where
         self.rows: list[tuple[float, ...]] = []
+        self.received: list[int] = []
         self.skipped: dict[str, int] = {}
+        self.notes: list[str] = []
 
     def skip(self, reason: str, count: int = 1) -> None:
         if count:
             self.skipped[reason] = self.skipped.get(reason, 0) + count
 
-    def table(self, width: int) -> np.ndarray:
-        """The rows (n, width) in stamp order, the stamp in s.
+    def append(self, row: tuple[float, ...], received: int) -> None:
+        self.rows.append(row)
+        self.received.append(received)
 
-        Header stamps of zero (not set) are allowed only before the first stamped message in
-        receive order (published before the clock ran, e.g. before /clock in simulation);
-        those messages are skipped. A message repeating the previous one (same stamp, same
-        values) is skipped; two messages with one stamp and different values are an error.
-        """
-        table = np.array(self.rows, dtype=float).reshape(-1, width)
-        if table.size == 0:
-            return table  # TimeSeries names the stream with too few samples
-        unset = table[:, 0] == 0
-        if unset.all():
-            raise DataError(f"{self.where}: header stamps of zero (the publisher does not set "
-                            "them)")
-        first = int(np.argmax(~unset))
-        if unset[first:].any():
-            later = first + int(np.argmax(unset[first:]))
-            raise DataError(f"{self.where}: a header stamp of zero (not set) after stamped "
-                            f"messages (message {later + 1} of {unset.size}, received after "
-                            f"the one stamped {table[later - 1, 0] * 1e-9:.6f} s)")
-        self.skip("stamped 0 before the first stamped message", first)
-        table = table[first:]
-        table = table[np.argsort(table[:, 0], kind="stable")]
-        table[:, 0] *= 1e-9
-        same_stamp = np.flatnonzero(table[1:, 0] == table[:-1, 0])
-        equal = np.all((table[same_stamp] == table[same_stamp + 1])
-                       | (np.isnan(table[same_stamp]) & np.isnan(table[same_stamp + 1])),
-                       axis=1)
-        if not equal.all():
-            stamp = table[same_stamp[np.argmin(equal)], 0]
-            raise DataError(f"{sample_at(self.where, stamp)}: two messages with this header stamp "
-                            "and different values")
-        self.skip("repeated (same stamp, same values)", same_stamp.size)
-        return np.delete(table, same_stamp + 1, axis=0)
+    def table(self, width: int) -> np.ndarray:
+        """The rows (n, width) in stamp order, the stamp in s, as
+        :func:`excite.logs.bag_stamps.stamped_table` makes them (stamps not set, clock
+        steps, repeats)."""
+        rows = np.array(self.rows, dtype=float).reshape(-1, width)
+        rows[:, 0] *= 1e-9
+        stamped = stamped_table(self.where, rows, np.array(self.received, dtype=float) * 1e-9)
+        for reason, count in stamped.skipped.items():
+            self.skip(reason, count)
+        self.notes += stamped.notes
+        return stamped.rows
 
 
 class _Joints(_Stream):
@@ -145,7 +151,7 @@ class _Joints(_Stream):
         self.names: set[str] = set()
         self.alone: set[str] = set()  # the wheels seen in messages without the other one
 
-    def add(self, msg: Any) -> None:
+    def add(self, msg: Any, received: int) -> None:
         names = list(msg.name)
         self.names.update(names)
         if self.left not in names or self.right not in names:
@@ -157,8 +163,8 @@ class _Joints(_Stream):
         if len(msg.position) != len(names):
             raise DataError(f"{sample_at(self.where, _stamp(msg.header) * 1e-9)}: "
                             f"{len(msg.position)} positions for {len(names)} joint names")
-        self.rows.append((_stamp(msg.header), msg.position[names.index(self.left)],
-                          msg.position[names.index(self.right)]))
+        self.append((_stamp(msg.header), msg.position[names.index(self.left)],
+                     msg.position[names.index(self.right)]), received)
 
     def columns(self) -> list[np.ndarray]:
         """[t (s), phi_L, phi_R (rad)]."""
@@ -180,17 +186,16 @@ class _Joints(_Stream):
         return list(self.table(3).T)
 
 
-def _planar(position: Any, q: Any) -> tuple[float, ...]:
-    """What a pose row keeps: x, y (m) and the orientation quaternion's x, y, z, w."""
-    return position.x, position.y, q.x, q.y, q.z, q.w
-
-
 class _PoseStream(_Stream):
     """Rows of (stamp, x, y, quaternion x, y, z, w)."""
 
     def columns(self) -> list[np.ndarray]:
-        """[t (s), x, y (m), theta (rad, wrapped)]."""
-        t, x, y, *q = self.table(7).T
+        """[t (s), x, y (m), theta (rad, wrapped)], without the poses not measured (a NaN,
+        or a quaternion of zeros: a motion-capture body not tracked), skipped and counted."""
+        table = self.table(7)
+        lost = np.isnan(table).any(axis=1) | (table[:, 3:] == 0).all(axis=1)
+        self.skip(NOT_TRACKED, int(lost.sum()))
+        t, x, y, *q = table[~lost].T
         return [t, x, y, headings(np.column_stack(q), lambda i: sample_at(self.where, t[i]))]
 
 
@@ -198,9 +203,9 @@ class _Poses(_PoseStream):
     """Collects the poses of messages of the supported types (one topic may carry several,
     from publishers of different types)."""
 
-    def add(self, msg: Any) -> None:
-        pose = POSE_TYPES[msg.__msgtype__](msg)
-        self.rows.append((_stamp(msg.header), *_planar(pose.position, pose.orientation)))
+    def add(self, msg: Any, received: int) -> None:
+        stamp = _stamp(msg.header) if hasattr(msg, "header") else 0
+        self.append((stamp, *POSE_TYPES[msg.__msgtype__](msg)), received)
 
 
 class _Transforms(_PoseStream):
@@ -211,14 +216,14 @@ class _Transforms(_PoseStream):
         self.pair = (_frame(parent), _frame(child))
         self.pairs: set[tuple[str, str]] = set()
 
-    def add(self, msg: Any) -> None:
+    def add(self, msg: Any, received: int) -> None:
         for transform in msg.transforms:
             pair = (_frame(transform.header.frame_id), _frame(transform.child_frame_id))
             self.pairs.add(pair)
             if pair == self.pair:
-                self.rows.append((_stamp(transform.header),
-                                  *_planar(transform.transform.translation,
-                                           transform.transform.rotation)))
+                self.append((_stamp(transform.header),
+                             *_planar(transform.transform.translation,
+                                      transform.transform.rotation)), received)
 
     def columns(self) -> list[np.ndarray]:
         """[t (s), x, y (m), theta (rad, wrapped)]."""
@@ -283,15 +288,16 @@ class _Bag:
     def close(self) -> None:
         self.reader.close()
 
-    def messages(self, connections: list[Any]) -> Iterator[tuple[Any, Any]]:
-        """(connection, decoded message) of ``connections`` in receive order; DataError naming
-        the topic for a message its recorded definition cannot decode."""
+    def messages(self, connections: list[Any]) -> Iterator[tuple[Any, int, Any]]:
+        """(connection, receive time in ns, decoded message) of ``connections`` in receive
+        order; DataError naming the topic for a message its recorded definition cannot
+        decode."""
         decode = self._decoder(connections)
         where = ""
         try:
-            for connection, _, raw in self.reader.messages(connections=connections):
+            for connection, received, raw in self.reader.messages(connections=connections):
                 where = connection.topic
-                yield connection, decode(raw, connection.msgtype)
+                yield connection, received, decode(raw, connection.msgtype)
         except Exception as exc:  # rosbags' errors while reading or decoding
             hint = ""
             if Path(self.name).is_file() and (Path(self.name).parent / "metadata.yaml").exists():
@@ -375,7 +381,7 @@ def _pose_collector(name: str, topics: dict[str, set[str]], pose_topic: str | No
                     tf: tuple[str, str] | None) -> tuple[str, _Poses | _Transforms, str]:
     """(topic to read, its collector, the pose stream's source label)."""
     if tf is not None:
-        _require(name, topics, TF_TOPIC, (TF_MESSAGE,), "transforms")
+        _require(name, topics, TF_TOPIC, TF_MESSAGES, "transforms")
         transforms = _Transforms(f"{name} {TF_TOPIC}", *tf)
         parent, child = transforms.pair
         return TF_TOPIC, transforms, f"{name} {TF_TOPIC} {parent}->{child}"
@@ -391,11 +397,14 @@ class BagLog:
 
     series: the log (see :func:`read_bag`). skipped: the messages left out and why, as
     {"topic reason": count} in reading order, e.g. {"/joint_states without wheel
-    positions": 12}; empty when every message of the two streams was used.
+    positions": 12}; empty when every message of the two streams was used. notes: what the
+    user should know of the stamps, one line each (receive times used for stamps never set,
+    a clock step corrected: :mod:`excite.logs.bag_stamps`).
     """
 
     series: TimeSeries
     skipped: dict[str, int] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
 
     def skipped_text(self) -> str:
         """The skipped messages in one line, e.g. '12 /joint_states without wheel
@@ -415,23 +424,25 @@ def read_bag_log(
     what was skipped.
 
     left_wheel, right_wheel: joint names in the JointState messages on ``joint_states``.
-    Exactly one pose source: ``pose_topic`` (PoseStamped, PoseWithCovarianceStamped or
-    Odometry) or ``tf=(parent, child)`` (the child frame's pose in the parent, world, frame,
-    from /tf). The series is on the header-stamp clocks (s), theta unwrapped; its source
-    names the bag and topics.
+    Exactly one pose source: ``pose_topic`` (one of :data:`POSE_TYPES`) or ``tf=(parent,
+    child)`` (the child frame's pose in the parent, world, frame, from /tf). The series is
+    on the header-stamp clocks (s; receive times for a stream without stamps, clock steps
+    corrected: :mod:`excite.logs.bag_stamps`), theta unwrapped; its source names the bag and
+    topics.
 
     Skipped, and counted in ``skipped``: JointState messages that name both wheels with an
     empty position array (velocity or effort only); messages stamped zero (not set) before
     the first stamped message of their topic, in receive order (published before the clock
-    ran); a message repeating another (same stamp, same values).
+    ran); a message repeating another (same stamp, same values); poses not measured (NaN, or
+    a quaternion of zeros).
 
     Raises DataError (one line) when rosbags is missing, the path is missing or not a bag, the
     bag is empty, a topic is missing (listing the topics and types present) or of an
     unsupported type (listing the supported ones), a joint is unknown (listing the joints
     present) or never has a position, no transform parent -> child exists (listing the frame
-    pairs present), an orientation is no rotation (zero length, not finite) or tilted over
-    45 degrees (a Y-up frame), or a stream is invalid (no stamps set, a zero stamp after
-    stamped messages, two messages with one stamp and different values, too few samples).
+    pairs present), an orientation is tilted over 45 degrees (a Y-up frame), or a stream is
+    invalid (a zero stamp after stamped messages, two messages with one stamp and different
+    values, too few samples).
     """
     name = os.fspath(path)
     if (pose_topic is None) == (tf is None):
@@ -446,8 +457,8 @@ def read_bag_log(
         collectors: dict[str, _Joints | _Poses | _Transforms] = {joint_states: joints,
                                                                  pose_key: poses}
         wanted = [c for c in bag.connections if c.topic in collectors]
-        for connection, msg in bag.messages(wanted):
-            collectors[connection.topic].add(msg)
+        for connection, received, msg in bag.messages(wanted):
+            collectors[connection.topic].add(msg, received)
     t_enc, phi_L, phi_R = joints.columns()
     t_pose, x, y, theta = poses.columns()
     series = TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,
@@ -455,7 +466,7 @@ def read_bag_log(
     skipped = {f"{topic} {reason}": n for topic, stream in ((joint_states, joints),
                                                              (pose_key, poses))
                for reason, n in stream.skipped.items()}
-    return BagLog(series, skipped)
+    return BagLog(series, skipped, tuple(joints.notes + poses.notes))
 
 
 def read_bag(

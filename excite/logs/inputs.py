@@ -55,8 +55,8 @@ class LogOptions:
     segment spans one, and a note names them) instead of refusing it. ticks_per_rev: encoder
     ticks per wheel revolution, converting ticks_L, ticks_R columns to rad (None: the wheel
     columns are angles in rad). time_offset: pose time + time_offset = encoder time (s);
-    "estimate" finds it from the data; None uses 0, with a note when the data suggest
-    otherwise.
+    "estimate" finds it from the data; None uses 0 unless the data reject a zero offset, and
+    then the offset they show (with a note).
     max_time_offset (s): estimated offsets are searched within +- this. Bags only:
     joint_states, the topic of the JointState messages; left_wheel, right_wheel, the wheel
     joint names in them (required); the sensor's poses from exactly one of pose_topic (a
@@ -259,8 +259,9 @@ def group_inputs(paths: Sequence[str]) -> list[Input]:
 
 def _read_series(source: Input, options: LogOptions, note: OnNote
                  ) -> tuple[TimeSeries, str | None]:
-    """The log of a time-series or bag input, and for a bag the messages skipped; a CSV's
-    notes (columns not read, units converted) told to ``note``."""
+    """The log of a time-series or bag input, and for a bag the messages skipped; the
+    reader's notes (a CSV's columns not read and units converted, a bag's stamps) told to
+    ``note``."""
     if source.kind == "bag":
         if not options.left_wheel or not options.right_wheel:
             raise DataError(f"{source.name}: a bag needs --left-wheel and --right-wheel "
@@ -271,6 +272,8 @@ def _read_series(source: Input, options: LogOptions, note: OnNote
         bag = read_bag_log(source.paths[0], options.left_wheel, options.right_wheel,
                            pose_topic=options.pose_topic, tf=options.tf,
                            joint_states=options.joint_states)
+        for line in bag.notes:
+            note(line)
         return bag.series, bag.skipped_text()
     if source.kind == "timeseries":
         return read_timeseries(source.paths, ticks_per_rev=options.ticks_per_rev,

@@ -298,7 +298,8 @@ def test_stream_errors(tmp_path, log):
         read_bag(make_bag(tmp_path / "b", "mcap", repeated), LEFT, RIGHT,
                  pose_topic="/sensor_pose")
     assert one_line(info).endswith(f"/sensor_pose at t = {log.t_pose[3]:.6f} s: two messages "
-                                   "with this header stamp and different values")
+                                   "with this header stamp and different values (two "
+                                   "publishers, or two bodies, on one topic?)")
 
     def unstamped(bag: BagWriter):
         return log_messages(bag, log, "pose") + [
@@ -311,12 +312,6 @@ def test_stream_errors(tmp_path, log):
         f"/joint_states: a header stamp of zero (not set) after stamped messages (message {n} "
         f"of {n}, received after the one stamped {log.t_enc[-1]:.6f} s)")
 
-    def never_stamped(bag: BagWriter):
-        return [(topic, received, unset(bag, msg)) if topic == "/sensor_pose" else
-                (topic, received, msg) for topic, received, msg in log_messages(bag, log, "pose")]
-    with pytest.raises(DataError, match="/sensor_pose: header stamps of zero"):
-        read_bag(make_bag(tmp_path / "d", "sqlite3", never_stamped), LEFT, RIGHT,
-                 pose_topic="/sensor_pose")
 
 
 def test_without_rosbags_the_error_names_the_extra(monkeypatch, good_bag):
@@ -552,12 +547,10 @@ def test_a_tilted_pose_is_refused_naming_the_largest_tilt(tmp_path, log, pose_ki
 
 
 @pytest.mark.parametrize("bad", [
-    pytest.param((0.0, 0.0, 0.0, 0.0), id="bad0"),
-    pytest.param((1e-4, 0.0, 0.0, 0.0), id="bad1", marks=pytest.mark.slow),
-    pytest.param((np.nan, 0.0, 0.0, 1.0), id="bad2"),
-    pytest.param((0.0, 0.0, np.inf, 1.0), id="bad3", marks=pytest.mark.slow)])
+    pytest.param((1e-4, 0.0, 0.0, 0.0), id="short"),
+    pytest.param((0.0, 0.0, np.inf, 1.0), id="infinite", marks=pytest.mark.slow)])
 def test_an_orientation_that_is_no_rotation_is_named(tmp_path, log, bad):
-    """All zeros (never set), almost zero, or not finite."""
+    """Almost zero, or infinite (NaN and all zeros are poses not measured: skipped)."""
     def broken(j: int, theta: float) -> tuple[float, float, float, float]:
         return bad if j == 7 else zyx(theta)
     path = make_bag(tmp_path, "mcap", lambda bag: log_messages(bag, log, "odom", broken))

@@ -1,0 +1,152 @@
+"""The times of a bag stream: its messages' header stamps, checked against the times the
+recorder received them.
+
+A bag records two times per message: the header stamp (when the publisher measured it, on
+the publisher's clock) and the receive time (when the recorder got it, on the recorder's
+clock). excite uses the stamps; the receive times are what it checks them against:
+
+* **Stamps never set.** A stream whose stamps are all zero (the publisher does not set them,
+  or a type without a header such as ``geometry_msgs/Pose2D``) is timed by its receive times,
+  with a note: they lag the measurement by the transport's latency, a constant part of which
+  the clock-offset test finds (:mod:`excite.logs.time_offset`). Zero stamps before the first
+  stamped message are skipped (published before the clock ran); a zero stamp after stamped
+  ones is an error.
+* **Clock steps.** A publisher's clock set while recording (NTP or chrony stepping it, a
+  clock that starts wrong and is corrected) makes its stamps jump forward or back while the
+  receive times go on as before. An interval between consecutive messages (receive order) is
+  a step when its stamp increment and its receive increment differ by more than
+  :data:`MIN_STEP` (and 8 robust standard deviations of that difference over the stream), the
+  receive increment is an ordinary one (within half that of the stream's median: a recorder
+  that stalled, or whose own clock stepped, changes the receive increment instead), and the
+  offset stamp - receive time stays shifted after it (the medians of :data:`PERSISTENCE`
+  messages each side differ by the step, to half the threshold: one late message is no
+  step). The stamps after a step are shifted back by it, so the stream keeps one clock, and
+  a note says where and by how much. Without receive times (CSV logs) no step is found.
+* **Repeats.** After sorting by stamp, a message repeating the previous one (same stamp, same
+  values: recorded twice) is skipped; one stamp with different values is an error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from excite.errors import DataError
+from excite.logs.timeseries import sample_at
+from excite.stats.robust import MEDIAN_ABS_NORMAL
+
+__all__ = ["MIN_STEP", "PERSISTENCE", "ClockStep", "StampedTable", "clock_steps",
+           "stamped_table"]
+
+FloatArray = NDArray[np.float64]
+
+#: The smallest clock step found (s): smaller ones are within a stamp latency's spread, and
+#: the clock-offset test sees a constant one.
+MIN_STEP = 0.05
+#: Messages on each side of a step whose stamp - receive offsets must differ by the step.
+PERSISTENCE = 25
+#: A step is this many robust standard deviations of the stamp - receive increments at least.
+STEP_SIGMAS = 8.0
+
+
+@dataclass(frozen=True)
+class ClockStep:
+    """A step of a stream's stamps against its receive times: ``step`` (s, positive when the
+    stamps jump forward) between the message stamped ``before`` (s) and the next one."""
+
+    before: float
+    step: float
+
+
+@dataclass
+class StampedTable:
+    """A stream's rows (n, width) in stamp order, the stamp (s) first; the messages skipped
+    per reason; and what the user should know (one line each)."""
+
+    rows: FloatArray
+    skipped: dict[str, int] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def clock_steps(stamps: FloatArray, received: FloatArray) -> list[tuple[int, float]]:
+    """The steps of ``stamps`` against ``received`` (both s, in receive order, the stamps all
+    set): (index of the interval, so between messages i and i + 1; the step, s), in order
+    (see the module docstring)."""
+    n = stamps.size
+    if n < 2 * PERSISTENCE:
+        return []
+    d_stamp, d_received = np.diff(stamps), np.diff(received)
+    change = d_stamp - d_received
+    spread = MEDIAN_ABS_NORMAL * float(np.median(np.abs(change - np.median(change))))
+    threshold = max(MIN_STEP, STEP_SIGMAS * spread)
+    usual = float(np.median(d_received))
+    offset = stamps - received
+    steps = []
+    for i in np.flatnonzero(np.abs(change) > threshold):
+        if abs(d_received[i] - usual) > threshold / 2:
+            continue  # the receive times moved: a stall, or the recorder's clock
+        before = float(np.median(offset[max(0, i + 1 - PERSISTENCE): i + 1]))
+        after = float(np.median(offset[i + 1: i + 1 + PERSISTENCE]))
+        if abs(after - before - change[i]) <= threshold / 2:
+            steps.append((int(i), after - before))
+    return steps
+
+
+def _without_unset(where: str, stamps: FloatArray, received: FloatArray | None
+                   ) -> tuple[FloatArray, int, str | None]:
+    """(the stamps to use, the leading messages to skip, a note): receive times when no stamp
+    is set; DataError for a zero stamp after stamped messages."""
+    unset = stamps == 0
+    if unset.all():
+        if received is None:
+            raise DataError(f"{where}: header stamps of zero (the publisher does not set "
+                            "them)")
+        return received, 0, (f"{where}: no header stamps (zero, or a message type without a "
+                             "header): the times the recorder received the messages are used")
+    first = int(np.argmax(~unset))
+    if unset[first:].any():
+        later = first + int(np.argmax(unset[first:]))
+        raise DataError(f"{where}: a header stamp of zero (not set) after stamped "
+                        f"messages (message {later + 1} of {unset.size}, received after "
+                        f"the one stamped {stamps[later - 1]:.6f} s)")
+    return stamps, first, None
+
+
+def stamped_table(where: str, rows: FloatArray, received: FloatArray | None = None
+                  ) -> StampedTable:
+    """The rows (n, width: the header stamp in s, then the values) of one stream in receive
+    order, with its receive times (s; None when there are none), made a table in stamp order
+    as the module docstring says; ``where`` names the stream in notes and errors."""
+    if rows.size == 0:
+        return StampedTable(rows)  # TimeSeries names the stream with too few samples
+    table = rows.copy()
+    stamps, first, note = _without_unset(where, table[:, 0], received)
+    result = StampedTable(table)
+    if note is not None:
+        result.notes.append(note)
+    if first:
+        result.skipped["stamped 0 before the first stamped message"] = first
+    table = table[first:]
+    table[:, 0] = stamps[first:]
+    if note is None and received is not None:
+        for i, step in clock_steps(table[:, 0], received[first:]):
+            result.notes.append(
+                f"{sample_at(where, table[i, 0])}: the header stamps step by {step:+.3f} s "
+                "against the times the recorder received the messages (a clock set while "
+                "recording, e.g. by NTP): the stamps after it are corrected by "
+                f"{-step:+.3f} s")
+            table[i + 1:, 0] -= step
+    table = table[np.argsort(table[:, 0], kind="stable")]
+    same_stamp = np.flatnonzero(table[1:, 0] == table[:-1, 0])
+    equal = np.all((table[same_stamp] == table[same_stamp + 1])
+                   | (np.isnan(table[same_stamp]) & np.isnan(table[same_stamp + 1])), axis=1)
+    if not equal.all():
+        stamp = table[same_stamp[np.argmin(equal)], 0]
+        raise DataError(f"{sample_at(where, stamp)}: two messages with this header stamp and "
+                        "different values (two publishers, or two bodies, on one topic?)")
+    if same_stamp.size:
+        result.skipped["repeated (same stamp, same values)"] = int(same_stamp.size)
+    result.rows = np.delete(table, same_stamp + 1, axis=0)
+    return result
