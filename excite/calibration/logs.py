@@ -32,6 +32,7 @@ from excite.errors import DataError
 from excite.logs.inputs import (
     DEFAULT_LOG_OPTIONS,
     Input,
+    Log,
     LogOptions,
     OnNote,
     Part,
@@ -40,6 +41,7 @@ from excite.logs.inputs import (
     note_unused_options,
     read_log,
     segment_inputs,
+    segment_log,
 )
 from excite.logs.segment_bounds import first_impossible
 from excite.logs.segments import MIN_SEGMENTS, Segments
@@ -110,8 +112,11 @@ def _check_part(part: Part, initial: Params | None, note: OnNote) -> None:
         note(text)
 
 
-#: The header units of a time-series CSV that convert, as examples in a hint.
-LOG_UNITS = "x (mm) for positions in mm, phi_L [deg] for wheel angles in degrees"
+#: How a log's values in other units are read right, in a hint: a time-series CSV's header
+#: units, and a bag's.
+LOG_UNITS = ("a unit in the header converts, e.g. x (mm) for positions in mm, phi_L [deg] "
+             "for wheel angles in degrees")
+BAG_UNITS = "a bag's poses must be in m, its JointState positions in rad"
 
 
 def _check_plausible(part: Part) -> None:
@@ -122,12 +127,27 @@ def _check_plausible(part: Part) -> None:
     if seg.t_start is None or seg.t_end is None:
         return
     impossible = first_impossible(seg.dphi_L, seg.dphi_R, seg.dx, seg.dy, seg.dtheta,
-                                  seg.t_end - seg.t_start, units=LOG_UNITS,
+                                  seg.t_end - seg.t_start,
+                                  units=BAG_UNITS if part.source.kind == "bag" else LOG_UNITS,
                                   rows="segments")
     if impossible is not None:
         k, why = impossible
         raise DataError(f"{part.source.name}: the segment from t = {seg.t_start[k]:.6g} s: "
                         f"{why}")
+
+
+def _check_wired(source: Input, log: Log, options: LogOptions) -> None:
+    """DataError when a log to dead-reckon breaks the model's conventions as calibration
+    checks them on its segments (a wheel that runs backwards, left and right swapped, values
+    in other units): dead reckoning it would compare two meaningless paths. A log too short
+    to cut into segments is not checked."""
+    try:
+        cut = segment_log(log, options)
+    except DataError:
+        return
+    part = Part(source, cut.segments, log, cut)
+    check_wiring(part.segments, source.name)
+    _check_plausible(part)
 
 
 def _pooled(parts: Sequence[Part]) -> Segments:
@@ -152,6 +172,7 @@ def _validated(inputs: Sequence[Input], options: LogOptions, calibrated: Robot,
     validations = []
     for source in inputs:
         log = read_log(source, options, whole=True, on_note=note)
+        _check_wired(source, log, options)
         validations.append(validate_log(log.series, log.time_offset, calibrated, nominal,
                                         name=log.name))
     return ValidatedLogs(summarize(validations), tuple(notes))
@@ -166,8 +187,9 @@ def validate_logs(paths: Sequence[str], calibrated: Robot, nominal: Robot,
     options: how the logs are read (the segmentation options are not used). on_note: told
     each note as it arises.
 
-    Raises DataError for a segment file, a log that cannot be read or whose streams jump, and
-    as validate_log does.
+    Raises DataError for a segment file, a log that cannot be read or whose streams jump, one
+    that breaks the model's conventions as calibration checks them on its segments (a wheel
+    that runs backwards, values in other units), and as validate_log does.
     """
     return _validated(group_inputs(paths), options, calibrated, nominal, on_note,
                       note_unused=True)

@@ -102,8 +102,8 @@ _READING: dict[str, dict[str, Any]] = {
     "right_wheel": _wheel_joint("right"),
     "pose_topic": {"metavar": "TOPIC",
                    "help": "bag topic of the sensor's pose in the world frame, x, y in m "
-                   "(PoseStamped, PoseWithCovarianceStamped or Odometry); a bag needs this or "
-                   "--tf (no default)"},
+                   "(PoseStamped, PoseWithCovarianceStamped, TransformStamped, Pose2D or "
+                   "Odometry); a bag needs this or --tf (no default)"},
     "start": _time_bound("from S on (s, the log's own stamps; default: from the first)"),
     "end": _time_bound("up to S (s; default: to the last)"),
     "tf": {"type": _frame_pair, "metavar": "PARENT:CHILD",

@@ -251,7 +251,8 @@ ENCODER_JUMP_HINT = ("a counter that overflows or resets, a second publisher of 
                      "joints, or wheel angles in degrees or encoder counts? (wheel angles "
                      "must be cumulative, in rad: a JointState's positions in rad; a CSV's "
                      "counts as ticks_L,ticks_R columns, with --ticks-per-rev)")
-POSE_JUMP_HINT = "a relocalisation, or headings in degrees? (theta is in rad)"
+POSE_JUMP_HINT = ("a relocalisation, positions in mm or headings in degrees? (x, y are in m, "
+                  "theta in rad)")
 
 
 def check_continuity(ts: TimeSeries, limits: Limits | None = None) -> None:

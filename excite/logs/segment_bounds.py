@@ -41,8 +41,8 @@ MAX_WHEEL_TURN = 1e6
 _HINT = "a corrupt row or a missing-value sentinel?"
 
 
-#: Header units that convert, as the hint names them for a segment CSV.
-SEGMENT_UNITS = "dx_gt [mm], dphi_L [deg]"
+#: How values in other units are read right, as the hint says it for a segment CSV.
+SEGMENT_UNITS = "a unit in the header converts, e.g. dx_gt [mm], dphi_L [deg]"
 
 
 def first_impossible(dphi_L: FloatArray, dphi_R: FloatArray, dx: FloatArray, dy: FloatArray,
@@ -51,8 +51,9 @@ def first_impossible(dphi_L: FloatArray, dphi_R: FloatArray, dx: FloatArray, dy:
                      ) -> tuple[int, str] | None:
     """The first segment no robot drives, and why in words; None when every one is plausible.
     Its columns as in a segment CSV (rad, rad, m, m, rad), with each segment's ``duration``
-    (s) when known; ``units``: the header units the hint names as examples (those of the
-    input's own columns); ``rows``: what the hint calls the segments ("rows" of a file).
+    (s) when known; ``units``: how values in other units are read right, in the hint's words
+    (for a CSV, its header units as examples); ``rows``: what the hint calls the segments
+    ("rows" of a file).
     Usually settled by a few reductions (:func:`_within_the_slacks`; 0.1 ms for 100k
     segments); the bounds per segment only when some value is beyond the slacks."""
     if dphi_L.size == 0:
@@ -76,8 +77,8 @@ def first_impossible(dphi_L: FloatArray, dphi_R: FloatArray, dx: FloatArray, dy:
     k = int(np.argmax(bad))
     count = int(bad.sum())
     hint = _HINT if count == 1 else (
-        f"{count} of {bad.size} {rows} are: values in other units? (excite reads m and rad; a "
-        f"unit in the header converts, e.g. {units}), or corrupt rows")
+        f"{count} of {bad.size} {rows} are: values in other units? (excite reads m and rad; "
+        f"{units}), or corrupt rows")
     wheels = f"{dphi_L[k]:.6g} and {dphi_R[k]:.6g} rad"
     bound_k = np.broadcast_to(wheel_bound, most.shape)[k]
     if most[k] > bound_k:  # the left wheel named first when both are beyond

@@ -386,6 +386,20 @@ def test_a_log_that_jumps_is_not_dead_reckoned(capsys, tmp_path, noisy_log, para
     assert_one_line_error(code, err, fragment.format(line=k + 2))
 
 
+def test_a_log_against_the_models_conventions_is_not_dead_reckoned(capsys, tmp_path,
+                                                                   noisy_log, params_file):
+    """A held-out log whose right wheel runs backwards (a motor mounted mirrored): both robots
+    dead-reckoned it into nonsense and validate said "no better x1.01", exit 0. Now the
+    wiring check calibrate makes, as a one-line error."""
+    series = noisy_log.series
+    mirrored = TimeSeries(series.t_enc, series.phi_L, -series.phi_R, series.t_pose, series.x,
+                          series.y, series.theta)
+    files = write_log(tmp_path, "log", mirrored)
+    code, _, err = run_cli(capsys, "validate", *files, "--params", params_file, "--nominal",
+                           "0.05,0.05,0.3")
+    assert_one_line_error(code, err, "log.enc.csv+", "the right wheel's angle runs backwards")
+
+
 def test_pose_samples_off_the_track_are_left_out_of_dead_reckoning(capsys, tmp_path,
                                                                    noisy_log, params_file):
     """A marker swap (two samples 0.5 m off, then back on the track) is no relocalisation:
