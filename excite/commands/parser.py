@@ -70,12 +70,25 @@ class CommandsHelpFormatter(argparse.RawDescriptionHelpFormatter):
 
 
 class Parser(argparse.ArgumentParser):
-    """An ArgumentParser whose errors are one line (UsageError, exit status 2) and whose help
-    is formatted by :class:`HelpFormatter` unless told otherwise."""
+    """An ArgumentParser whose errors are one line (UsageError, exit status 2), whose help
+    is formatted by :class:`HelpFormatter` unless told otherwise, and whose positional
+    arguments may come between options (``excite calibrate a.bag --left-wheel l b.bag``:
+    argparse's intermixed parsing, in a command's parser; the top parser's command comes
+    first)."""
 
     def __init__(self, *args, **kwargs) -> None:
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
+        self._intermixing = False
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        if self._subparsers is not None or self._intermixing:
+            return super().parse_known_args(args, namespace)
+        self._intermixing = True  # parse_known_intermixed_args calls this method back
+        try:
+            return self.parse_known_intermixed_args(args, namespace)
+        finally:
+            self._intermixing = False
 
     def error(self, message: str):  # one line, no usage dump
         raise UsageError(message)

@@ -441,6 +441,15 @@ def test_a_command_that_needs_a_log_names_what_is_wrong_with_another_input(capsy
     assert_one_line_error(code, err, fragment)
 
 
+def test_options_may_come_between_the_logs(capsys, logs):
+    """`excite calibrate a.csv --window 2 b.csv` was refused ("unrecognized arguments:
+    b.csv"): argparse stopped taking logs at the first option."""
+    code, between, _ = run_cli(capsys, "calibrate", logs[0], "--window", "2", logs[1], "--json")
+    assert code == 0
+    _, after, _ = run_cli(capsys, "calibrate", logs[0], logs[1], "--window", "2", "--json")
+    assert json.loads(between) == json.loads(after)
+
+
 def test_options_no_input_reads_are_noted(capsys, tmp_path, logs):
     """Bag options given with CSVs only, and log options with segment files only, did
     nothing without a word; now a note names them, and the result is what it is without
