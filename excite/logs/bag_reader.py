@@ -13,7 +13,10 @@ the way out (:func:`bag_path_problem`).
 * Wheel angles: ``sensor_msgs/msg/JointState`` messages on one topic; ``position`` (rad,
   cumulative) of the two wheel joints, found by name in each message (any order; a message
   lacking either joint is left out; one naming both with an empty ``position``, as a
-  velocity-only publisher sends, is skipped and counted).
+  velocity-only publisher sends, is skipped and counted). When no message names both (a
+  driver per motor), each wheel's messages are put together, the right wheel's angles
+  interpolated to the left wheel's stamps (:func:`excite.logs.bag_stamps.wheels_together`),
+  with a note.
 * Poses of the external sensor in the world frame: a ``geometry_msgs/msg/PoseStamped``,
   ``PoseWithCovarianceStamped``, ``TransformStamped`` (vicon_bridge), ``Pose2D`` (no header:
   ROS 1's laser_scan_matcher) or ``nav_msgs/msg/Odometry`` topic (several of these types on
@@ -50,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from excite.errors import DataError
-from excite.logs.bag_stamps import stamped_table
+from excite.logs.bag_stamps import stamped_table, wheels_together
 from excite.logs.orientation import headings
 from excite.logs.timeseries import TimeSeries, sample_at
 
@@ -143,47 +146,65 @@ class _Stream:
 
 
 class _Joints(_Stream):
-    """Collects (stamp, left angle, right angle) from JointState messages."""
+    """Collects (stamp, left angle, right angle) from JointState messages; each wheel's
+    (stamp, angle) apart from messages that name one wheel only (a driver per motor)."""
 
     def __init__(self, where: str, left: str, right: str) -> None:
         super().__init__(where)
         self.left, self.right = left, right
         self.names: set[str] = set()
-        self.alone: set[str] = set()  # the wheels seen in messages without the other one
+        self.apart = {joint: _Stream(f"{where} {joint}") for joint in (left, right)}
 
     def add(self, msg: Any, received: int) -> None:
         names = list(msg.name)
         self.names.update(names)
-        if self.left not in names or self.right not in names:
-            self.alone.update({self.left, self.right} & set(names))
+        wheels = [joint for joint in (self.left, self.right) if joint in names]
+        if not wheels:
             return
         if len(msg.position) == 0:  # velocity or effort only: allowed by JointState
-            self.skip(NO_POSITIONS)
+            if len(wheels) == 2:
+                self.skip(NO_POSITIONS)
             return
         if len(msg.position) != len(names):
             raise DataError(f"{sample_at(self.where, _stamp(msg.header) * 1e-9)}: "
                             f"{len(msg.position)} positions for {len(names)} joint names")
-        self.append((_stamp(msg.header), msg.position[names.index(self.left)],
-                     msg.position[names.index(self.right)]), received)
+        angles = [msg.position[names.index(joint)] for joint in wheels]
+        if len(wheels) == 2:
+            self.append((_stamp(msg.header), *angles), received)
+        else:
+            self.apart[wheels[0]].append((_stamp(msg.header), angles[0]), received)
 
     def columns(self) -> list[np.ndarray]:
-        """[t (s), phi_L, phi_R (rad)]."""
+        """[t (s), phi_L, phi_R (rad)]: from the messages with both wheels, or when there
+        are none, from the wheels' separate messages put together (a note says so)."""
         for joint in (self.left, self.right):
             if joint not in self.names:
                 present = ", ".join(sorted(self.names)) or "none"
                 raise DataError(f"{self.where}: no joint {joint!r}; joints present: {present}")
-        if not self.rows:
-            if self.skipped.get(NO_POSITIONS):
-                raise DataError(f"{self.where}: no message has positions for the joints "
-                                f"{self.left!r} and {self.right!r} "
-                                f"({self.skipped[NO_POSITIONS]} name them with an empty "
-                                "position array: velocity or effort only)")
-            apart = (" (they come in separate messages; excite needs both wheels' positions in "
-                     "one message, as joint_state_broadcaster publishes them)"
-                     if self.alone == {self.left, self.right} else "")
-            raise DataError(f"{self.where}: no message has both joints {self.left!r} and "
-                            f"{self.right!r}{apart}")
-        return list(self.table(3).T)
+        if self.rows:
+            return list(self.table(3).T)
+        if all(stream.rows for stream in self.apart.values()):
+            return self._together()
+        if self.skipped.get(NO_POSITIONS):
+            raise DataError(f"{self.where}: no message has positions for the joints "
+                            f"{self.left!r} and {self.right!r} "
+                            f"({self.skipped[NO_POSITIONS]} name them with an empty "
+                            "position array: velocity or effort only)")
+        missing = next(joint for joint, stream in self.apart.items() if not stream.rows)
+        raise DataError(f"{self.where}: no message has a position of the joint {missing!r}")
+
+    def _together(self) -> list[np.ndarray]:
+        left, right = (self.apart[joint] for joint in (self.left, self.right))
+        rows, left_out = wheels_together(left.table(2), right.table(2))
+        for stream in (left, right):
+            self.notes += stream.notes
+            for reason, count in stream.skipped.items():
+                self.skip(f"{reason} ({stream.where.rsplit(' ', 1)[1]})", count)
+        self.skip(f"{self.left} outside the {self.right} messages' time range or gaps",
+                  left_out)
+        self.notes.append(f"{self.where}: the wheels come in separate messages: the "
+                          f"{self.right} angles are interpolated to the {self.left} stamps")
+        return list(rows.T)
 
 
 class _PoseStream(_Stream):

@@ -24,6 +24,11 @@ clock). excite uses the stamps; the receive times are what it checks them agains
   a note says where and by how much. Without receive times (CSV logs) no step is found.
 * **Repeats.** After sorting by stamp, a message repeating the previous one (same stamp, same
   values: recorded twice) is skipped; one stamp with different values is an error.
+* **Wheels in separate messages** (a driver per motor): :func:`wheels_together` puts the
+  right wheel's angles at the left wheel's stamps, linearly interpolated (exact when both
+  are stamped alike; an angle's interpolation error is an eighth of its acceleration times
+  the period squared, a thousandth of a radian at 50 Hz), leaving out the stamps where the
+  right wheel's stream has a gap (:data:`~excite.logs.continuity.GAP_RATIO` median periods).
 """
 
 from __future__ import annotations
@@ -34,11 +39,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from excite.errors import DataError
+from excite.logs.continuity import GAP_RATIO
 from excite.logs.timeseries import sample_at
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
-__all__ = ["MIN_STEP", "PERSISTENCE", "ClockStep", "StampedTable", "clock_steps",
-           "stamped_table"]
+__all__ = ["MIN_STEP", "PERSISTENCE", "StampedTable", "clock_steps", "stamped_table",
+           "wheels_together"]
 
 FloatArray = NDArray[np.float64]
 
@@ -49,15 +55,6 @@ MIN_STEP = 0.05
 PERSISTENCE = 25
 #: A step is this many robust standard deviations of the stamp - receive increments at least.
 STEP_SIGMAS = 8.0
-
-
-@dataclass(frozen=True)
-class ClockStep:
-    """A step of a stream's stamps against its receive times: ``step`` (s, positive when the
-    stamps jump forward) between the message stamped ``before`` (s) and the next one."""
-
-    before: float
-    step: float
 
 
 @dataclass
@@ -150,3 +147,20 @@ def stamped_table(where: str, rows: FloatArray, received: FloatArray | None = No
         result.skipped["repeated (same stamp, same values)"] = int(same_stamp.size)
     result.rows = np.delete(table, same_stamp + 1, axis=0)
     return result
+
+
+def wheels_together(left: FloatArray, right: FloatArray) -> tuple[FloatArray, int]:
+    """The rows (t, phi_L, phi_R) of two wheels' streams (rows (t, angle) each, in stamp
+    order) at the left wheel's stamps, the right's angles interpolated (see the module
+    docstring), and how many left stamps were left out (outside the right's stream, or in a
+    gap of it)."""
+    t, t_right = left[:, 0], right[:, 0]
+    if t_right.size < 2:
+        return np.empty((0, 3)), t.size
+    j = np.searchsorted(t_right, t, side="right")
+    inside = (j > 0) & (j < t_right.size) | (t == t_right[-1])
+    j = np.clip(j, 1, t_right.size - 1)
+    period = float(np.median(np.diff(t_right)))
+    inside &= t_right[j] - t_right[j - 1] <= GAP_RATIO * period
+    angle = np.interp(t[inside], t_right, right[:, 1])
+    return np.column_stack([t[inside], left[inside, 1], angle]), int(np.sum(~inside))

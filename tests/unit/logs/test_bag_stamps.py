@@ -11,6 +11,7 @@ pytest.importorskip("rosbags")
 
 from rosbags.typesys import get_types_from_msg  # noqa: E402
 
+from excite import DataError  # noqa: E402
 from excite.logs.bag_reader import read_bag_log  # noqa: E402
 from excite.logs.bag_stamps import MIN_STEP, clock_steps, stamped_table  # noqa: E402
 from excite.logs.bag_writer import BagWriter  # noqa: E402
@@ -200,3 +201,53 @@ def test_a_ros1_tf_topic_of_the_older_tf_type(tmp_path, log):
                 for topic, received, msg in log_messages(bag, log, "tf")]
     bag = read_bag_log(make_bag(tmp_path, "ros1", old_tf), LEFT, RIGHT, tf=("odom", "lidar"))
     assert_same_log(bag.series, log)
+
+
+@pytest.mark.parametrize("lag", [0.0, 0.004])
+def test_wheels_in_separate_messages_are_put_together(tmp_path, log, lag):
+    """A driver per motor: each JointState names one wheel, the right one stamped ``lag``
+    after the left (before, "no message has both joints"). Stamped alike, the log is read
+    exactly; 4 ms apart, the right angles are interpolated to the left stamps."""
+    def apart(bag: BagWriter):
+        out = []
+        for topic, received, msg in log_messages(bag, log, "pose"):
+            if topic == "/joint_states" and LEFT in msg.name and RIGHT in msg.name:
+                t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+                k = list(msg.name)
+                out.append((topic, received, bag.joint_state(
+                    t, [LEFT], [msg.position[k.index(LEFT)]])))
+                out.append((topic, received + lag, bag.joint_state(
+                    t + lag, [RIGHT], [msg.position[k.index(RIGHT)]])))
+            else:
+                out.append((topic, received, msg))
+        return sorted(out, key=lambda item: item[1])
+    path = make_bag(tmp_path, "mcap", apart)
+    bag = read_bag_log(path, LEFT, RIGHT, pose_topic="/sensor_pose")
+    assert bag.notes == (f"{path} /joint_states: the wheels come in separate messages: the "
+                         f"{RIGHT} angles are interpolated to the {LEFT} stamps",)
+    if lag == 0.0:
+        assert_same_log(bag.series, log)
+        assert bag.skipped == {}
+    else:  # the first left stamp precedes every right one
+        expected = part_of(log, encoders=slice(1, None))
+        np.testing.assert_allclose(bag.series.t_enc, expected.t_enc, rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(bag.series.phi_L, expected.phi_L)
+        right = np.interp(bag.series.t_enc, log.t_enc + lag, log.phi_R)
+        np.testing.assert_allclose(bag.series.phi_R, right, rtol=0, atol=1e-9)
+        assert np.max(np.abs(bag.series.phi_R - expected.phi_R)) < 0.05
+        assert bag.skipped == {f"/joint_states {LEFT} outside the {RIGHT} messages' time "
+                               "range or gaps": 1}
+
+
+def test_one_wheel_never_with_a_position(tmp_path, log):
+    def lonely(bag: BagWriter):
+        return [(topic, received, bag.joint_state(msg.header.stamp.sec
+                                                  + 1e-9 * msg.header.stamp.nanosec, [LEFT],
+                                                  [0.0]))
+                if topic == "/joint_states" else (topic, received, msg)
+                for topic, received, msg in log_messages(bag, log, "pose")] + [
+            ("/joint_states", 0.5, bag.joint_state(0.5, [RIGHT], []))]
+    path = make_bag(tmp_path, "mcap", lonely)
+    with pytest.raises(DataError, match=f"/joint_states: no message has a position of the "
+                                        f"joint '{RIGHT}'$"):
+        read_bag_log(path, LEFT, RIGHT, pose_topic="/sensor_pose")

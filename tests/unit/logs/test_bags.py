@@ -231,9 +231,6 @@ def one_line(error: pytest.ExceptionInfo) -> str:
         (dict(tf=("odom", "lidar"), left_wheel="front_left"),
          ["/joint_states: no joint 'front_left'; joints present: arm, caster, "
           "wheel_left_joint, wheel_right_joint"]),
-        (dict(tf=("odom", "lidar"), left_wheel="caster", right_wheel="arm"),
-         ["no message has both joints 'caster' and 'arm' (they come in separate messages; "
-          "excite needs both wheels' positions in one message"]),
         (dict(), ["give exactly one pose source"]),
         (dict(pose_topic="/tf", tf=("odom", "lidar")), ["give exactly one pose source"]),
     ],
