@@ -36,11 +36,12 @@ DEFAULT_PROTOCOL = "slip_aware"
 DESCRIPTION = """Drive a differential-drive robot over ROS 2 with a protocol's maneuvers until the
 stopping rule says its wheel radii and separation (and the pose sensor's mounting) are within the
 target, then calibrate the whole session offline and report it as excite calibrate does. Subscribes
-the wheel joints (JointState) and an external pose (PoseStamped, PoseWithCovarianceStamped or
-Odometry), publishes the command (TwistStamped or Twist) at --rate Hz, keeps the robot inside the
-safe area, and stops it on every way out. Exit status 0 when done, 5 when the time ran out first, 6
-when the session was aborted (a stream silent too long, wheels that do not follow the command), 130
-when interrupted, 2 for bad input. Needs the ros2 extra: pip install 'excite[ros2]'."""
+the wheel joints (JointState) and an external pose (PoseStamped, PoseWithCovarianceStamped,
+TransformStamped or Odometry), publishes the command (TwistStamped or Twist) at --rate Hz, keeps
+the robot inside the safe area, and stops it on every way out. Exit status 0 when done, 5 when the
+time ran out first, 6 when the session was aborted (a stream silent too long, wheels that do not
+follow the command), 130 when interrupted, 2 for bad input. Needs the ros2 extra: pip install
+'excite[ros2]'."""
 
 
 def _default(cls_name: str, name: str):
@@ -95,8 +96,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     topics.add_argument("--joint-states", default=_default("LiveTopics", "joint_states"),
                         metavar="TOPIC", help="the JointState topic (default %(default)s)")
     topics.add_argument("--pose-topic", required=True, metavar="TOPIC",
-                        help="the external pose: PoseStamped, PoseWithCovarianceStamped or "
-                        "Odometry, reliable or best effort")
+                        help="the external pose: PoseStamped, PoseWithCovarianceStamped, "
+                        "TransformStamped or Odometry, reliable or best effort")
     topics.add_argument("--cmd-vel", default=_default("LiveTopics", "cmd_vel"),
                         metavar="TOPIC", help="the command topic (default %(default)s)")
     topics.add_argument("--cmd-type", choices=("twist_stamped", "twist"),

@@ -2,8 +2,8 @@
 :class:`excite.live.session.LiveSession`.
 
 It subscribes the wheel joints' JointState messages and the external pose (PoseStamped,
-PoseWithCovarianceStamped or Odometry; best-effort publishers such as motion capture
-included: the subscriptions are best effort, which matches both kinds), publishes the
+PoseWithCovarianceStamped, TransformStamped or Odometry; best-effort publishers such as motion
+capture included: the subscriptions are best effort, which matches both kinds), publishes the
 session's command on the command topic (``geometry_msgs/TwistStamped``, or ``Twist``) at
 ``rate`` Hz on the node's clock (``/clock`` with ``use_sim_time``), and records every message
 it receives or sends in a bag (rosbags' writer) when asked.
@@ -34,7 +34,13 @@ from typing import Any
 
 import numpy as np
 import rclpy
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, TwistStamped
+from geometry_msgs.msg import (
+    PoseStamped,
+    PoseWithCovarianceStamped,
+    TransformStamped,
+    Twist,
+    TwistStamped,
+)
 from nav_msgs.msg import Odometry
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
@@ -61,12 +67,17 @@ DECISION_NICENESS = 10
 #: The reason of a session ended by SIGINT or SIGTERM.
 INTERRUPTED = "interrupted (SIGINT or SIGTERM)"
 
-#: The pose message types the node reads, by ROS type name, with how to get the pose.
-POSE_TYPES: dict[str, tuple[type, Callable[[Any], Any]]] = {
-    "geometry_msgs/msg/PoseStamped": (PoseStamped, lambda m: m.pose),
-    "geometry_msgs/msg/PoseWithCovarianceStamped": (PoseWithCovarianceStamped,
-                                                    lambda m: m.pose.pose),
-    "nav_msgs/msg/Odometry": (Odometry, lambda m: m.pose.pose),
+#: The pose message types the node reads, by ROS type name, with how to get the position
+#: and the orientation quaternion.
+POSE_TYPES: dict[str, tuple[type, Callable[[Any], tuple[Any, Any]]]] = {
+    "geometry_msgs/msg/PoseStamped": (PoseStamped, lambda m: (m.pose.position,
+                                                              m.pose.orientation)),
+    "geometry_msgs/msg/PoseWithCovarianceStamped": (
+        PoseWithCovarianceStamped, lambda m: (m.pose.pose.position, m.pose.pose.orientation)),
+    "nav_msgs/msg/Odometry": (Odometry, lambda m: (m.pose.pose.position,
+                                                   m.pose.pose.orientation)),
+    "geometry_msgs/msg/TransformStamped": (TransformStamped, lambda m: (
+        m.transform.translation, m.transform.rotation)),
 }
 JOINT_STATE = "sensor_msgs/msg/JointState"
 #: Best effort matches best-effort and reliable publishers alike; deep enough for 1 kHz.
@@ -162,7 +173,8 @@ class LiveNode:
             if time.monotonic() > deadline:
                 missing = [f"{name} ({kind})" for name, kind, ok in (
                     (t.joint_states, "sensor_msgs/msg/JointState", joint_ok),
-                    (t.pose_topic, "PoseStamped, PoseWithCovarianceStamped or Odometry",
+                    (t.pose_topic, "PoseStamped, PoseWithCovarianceStamped, TransformStamped "
+                     "or Odometry",
                      bool(pose_types))) if not ok]
                 raise DataError(f"no {' nor '.join(missing)} after {t.wait:g} s; topics "
                                 f"seen: {self._topic_list(seen)}")
@@ -303,10 +315,9 @@ class LiveNode:
             self._first_pose = time.monotonic()
         now = self._now()
         t = _seconds(msg.header.stamp) or now
-        pose = POSE_TYPES[self._pose_type][1](msg)
-        q = pose.orientation
+        position, q = POSE_TYPES[self._pose_type][1](msg)
         if not self._usable(self.topics.pose_topic, "poses", t, now,
-                            (pose.position.x, pose.position.y, q.x, q.y, q.z, q.w)):
+                            (position.x, position.y, q.x, q.y, q.z, q.w)):
             return
         try:
             theta = float(headings(np.array([[q.x, q.y, q.z, q.w]]),
@@ -314,7 +325,7 @@ class LiveNode:
         except DataError as exc:
             self.session.abort(str(exc))
             return
-        x, y = float(pose.position.x), float(pose.position.y)
+        x, y = float(position.x), float(position.y)
         self.session.add_pose(t, x, y, theta, now)
         if self.recorder is not None:  # as PoseStamped, whatever the topic's type
             self.recorder.write(self.topics.pose_topic, t, self.recorder.pose_stamped(

@@ -97,6 +97,20 @@ def test_a_signal_stops_the_robot_and_keeps_what_was_recorded(session_dir, sig):
     assert (session_dir / "session.mcap" / "metadata.yaml").is_file()
 
 
+def test_a_transform_stamped_pose_topic_drives_the_session(session_dir):
+    """The pose as TransformStamped (vicon_bridge's type), relayed from the robot's
+    PoseStamped: the session subscribes it and drives; stopped by SIGINT after 3 segments."""
+    from pathlib import Path
+
+    relay = [sys.executable, str(Path(__file__).with_name("pose_relay.py"))]
+    s = rehearse(session_dir, [*WHEELS[:4], "--pose-topic", "/relay_pose", "--robot",
+                               "default"], ["--seed", "4"], signal_after=(signal.SIGINT, 3),
+                 companion=relay)
+    assert s.code == 130, (s.out, s.err)
+    assert np.any(s.log[:, 4] != 0)  # it drove, on poses it could only read from the relay
+    assert s.log[-1, 4] == 0 and s.log[-1, 5] == 0
+
+
 FAILING_PROTOCOL = """
 import numpy as np
 from agents.protocols import Protocol
