@@ -11,17 +11,18 @@ clock). excite uses the stamps; the receive times are what it checks them agains
   the clock-offset test finds (:mod:`excite.logs.time_offset`). Zero stamps before the first
   stamped message are skipped (published before the clock ran); a zero stamp after stamped
   ones is an error.
-* **Clock steps.** A publisher's clock set while recording (NTP or chrony stepping it, a
-  clock that starts wrong and is corrected) makes its stamps jump forward or back while the
-  receive times go on as before. An interval between consecutive messages (receive order) is
-  a step when its stamp increment and its receive increment differ by more than
-  :data:`MIN_STEP` (and 8 robust standard deviations of that difference over the stream), the
-  receive increment is an ordinary one (within half that of the stream's median: a recorder
-  that stalled, or whose own clock stepped, changes the receive increment instead), and the
-  offset stamp - receive time stays shifted after it (the medians of :data:`PERSISTENCE`
-  messages each side differ by the step, to half the threshold: one late message is no
-  step). The stamps after a step are shifted back by it, so the stream keeps one clock, and
-  a note says where and by how much. Without receive times (CSV logs) no step is found.
+* **Clock steps.** A publisher's clock set while recording (NTP or chrony stepping it, a clock
+  that starts wrong and is corrected) makes its stamps jump forward or back while the receive
+  times go on as before. An interval between consecutive messages (receive order) is a step when
+  its stamp increment and its receive increment differ by more than
+  :data:`~excite.logs.clock_steps.MIN_STEP` (and 8 robust standard deviations of that difference
+  over the stream), the receive increment is an ordinary one (within half that of the stream's
+  median: a recorder that stalled, or whose own clock stepped, changes the receive increment
+  instead), and the offset stamp - receive time stays shifted after it (the medians of
+  :data:`PERSISTENCE` messages each side differ by the step, to half the threshold: one late
+  message is no step). The stamps after a step are shifted back by it, so the stream keeps one
+  clock, and a note says where and by how much. Without receive times (CSV logs) steps are found
+  from the motion instead (:mod:`excite.logs.clock_steps`).
 * **Repeats.** After sorting by stamp, a message repeating the previous one (same stamp, same
   values: recorded twice) is skipped; one stamp with different values is an error.
 * **Wheels in separate messages** (a driver per motor): :func:`wheels_together` puts the
@@ -39,18 +40,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from excite.errors import DataError
+from excite.logs.clock_steps import MIN_STEP
 from excite.logs.continuity import GAP_RATIO
 from excite.logs.timeseries import sample_at
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
-__all__ = ["MIN_STEP", "PERSISTENCE", "StampedTable", "clock_steps", "stamped_table",
+__all__ = ["PERSISTENCE", "StampedTable", "clock_steps", "stamped_table",
            "wheels_together"]
 
 FloatArray = NDArray[np.float64]
 
-#: The smallest clock step found (s): smaller ones are within a stamp latency's spread, and
-#: the clock-offset test sees a constant one.
-MIN_STEP = 0.05
 #: Messages on each side of a step whose stamp - receive offsets must differ by the step.
 PERSISTENCE = 25
 #: A step is this many robust standard deviations of the stamp - receive increments at least.

@@ -23,6 +23,7 @@ from typing import Literal
 
 from excite.errors import DataError
 from excite.logs.bag_reader import JOINT_STATES, bag_path_problem, is_bag_path, read_bag_log
+from excite.logs.clock_steps import corrected_clock_steps
 from excite.logs.continuity import Gap, check_continuity, on_track
 from excite.logs.segmentation import OFF_TRACK, SegmentedLog, segment_timeseries
 from excite.logs.segments import Segments, check_not_utf16, form_problem, load_segments
@@ -300,7 +301,8 @@ def _clock_offset(series: TimeSeries, options: LogOptions
 
 def read_log(source: Input, options: LogOptions, *, whole: bool = False,
              on_note: OnNote | None = None) -> Log:
-    """Read one time-series or bag input and settle its clock offset. whole: the log will be
+    """Read one time-series or bag input, correct the clock steps at its gaps
+    (:mod:`excite.logs.clock_steps`) and settle its clock offset. whole: the log will be
     followed whole (dead reckoning, not segments): a jump in either stream is an error, before
     anything is said about the clocks, and unwrapped wheel angles are noted (segmentation
     reports them instead). on_note: told each of the log's notes as it arises."""
@@ -308,6 +310,9 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
     note = note_taker(notes, on_note)
     series, skipped = _read_series(source, options, note)
     series = during(series, options.start, options.end)
+    series, steps = corrected_clock_steps(series, options.max_time_offset)
+    for line in steps:
+        note(line)
     if whole:
         series, off = on_track(series)
         if off:

@@ -13,8 +13,9 @@ from rosbags.typesys import get_types_from_msg  # noqa: E402
 
 from excite import DataError  # noqa: E402
 from excite.logs.bag_reader import read_bag_log  # noqa: E402
-from excite.logs.bag_stamps import MIN_STEP, clock_steps, stamped_table  # noqa: E402
+from excite.logs.bag_stamps import clock_steps, stamped_table  # noqa: E402
 from excite.logs.bag_writer import BagWriter  # noqa: E402
+from excite.logs.clock_steps import MIN_STEP  # noqa: E402
 from tests.unit.logs.test_bags import (  # noqa: E402
     LEFT,
     RIGHT,
