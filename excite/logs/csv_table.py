@@ -5,9 +5,11 @@ and units, and the numbers of the columns a format reads (the segment CSV of
 Separator. Found from a table's first line that is neither blank nor a ``#`` comment (nor
 the line ``sep=;`` that spreadsheets may write first: skipped): a semicolon when the line has
 one; else a tab when the line's comma-separated fields still hold tabs (so a comma padded
-with tabs is a comma); else a comma. Every line of the table uses it.
-With semicolons or tabs, numbers may use a decimal comma (``0,25``), decided per table: a
-table whose columns read hold decimal commas and decimal points both is an error.
+with tabs is a comma); else a comma when the line has one; else spaces (runs of them: a
+whitespace-separated table, as a TUM trajectory or a ``printf`` log is) when the line has
+more than one field. Every line of the table uses it.
+With semicolons, tabs or spaces, numbers may use a decimal comma (``0,25``), decided per
+table: a table whose columns read hold decimal commas and decimal points both is an error.
 
 Header fields. A name with an optional unit, ``t [s]``, ``x (m)``, ``theta[rad]``, or a unit
 after an underscore when the name before it is a known column (``t_ms``, ``yaw_deg``). Names
@@ -58,7 +60,7 @@ UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "number": {},  # dimensionless (a quaternion's components): no unit
 }
 _ALL_UNITS = {unit for units in UNITS.values() for unit in units}
-_DELIMITER_NAMES = {",": "commas", ";": "semicolons", "\t": "tabs"}
+_DELIMITER_NAMES = {",": "commas", ";": "semicolons", "\t": "tabs", " ": "spaces"}
 _UNIT = re.compile(r"^(?P<name>.*?)\s*(?:\[(?P<square>[^\]]*)\]|\((?P<round>[^)]*)\))$")
 _INNER = re.compile(r"[\s\-.]+")
 # Whitespace a line may be stripped of: all of it, except tabs in a tab-separated table.
@@ -155,11 +157,14 @@ def content_lines(text: str) -> tuple[list[int], list[str]]:
 
 
 def delimiter_of(line: str) -> str:
-    """The separator of a table whose first line (stripped) is ``line``: ';', '\\t' or ','."""
+    """The separator of a table whose first line (stripped) is ``line``: ';', '\\t', ',' or
+    ' ' (runs of spaces)."""
     if ";" in line:
         return ";"
     if "\t" in line and any("\t" in field.strip() for field in line.split(",")):
         return "\t"
+    if "," not in line and len(line.split()) > 1:
+        return " "
     return ","
 
 
@@ -252,7 +257,10 @@ def plain_header(labels: Sequence[str], delimiter: str) -> Header:
 def _split(lines: list[str], delimiter: str, width: int) -> tuple[list[str], int | None]:
     """The cells of the rows before the first with a wrong number of fields, row after row,
     stripped; and that row's index (None when every row has ``width`` fields). Quoted cells
-    (a text column holding the separator) are read as CSV quoting has them."""
+    (a text column holding the separator) are read as CSV quoting has them; with spaces,
+    each run of them separates two cells."""
+    if delimiter == " ":
+        lines = [" ".join(line.split()) for line in lines]
     joined = delimiter.join(lines)
     if '"' in joined:
         rows = list(csv.reader(lines, delimiter=delimiter, skipinitialspace=True))

@@ -229,6 +229,22 @@ def _lone_stream(path: str, streams: frozenset[str]) -> DataError:
                      f"stream right after it{header_hint(path)}")
 
 
+def _unpaired(first: str, streams: frozenset[str], path: str, kind: str) -> DataError:
+    """The error for a one-stream CSV whose next path is not the other stream's file: when
+    that path is not a time-series CSV at all (a header of neither format, or none, as a
+    motion-capture export's header block reads), its own problem; else
+    :func:`_lone_stream`."""
+    if kind != "segments":
+        return _lone_stream(first, streams)
+    problem = form_problem(path) or DataError(
+        f"{path}: no header of a time-series stream (t with x,y,theta or phi_L,phi_R; names "
+        "and units: docs/formats.md)")
+    (only,) = streams
+    other = "pose" if only == "encoder" else "encoder"
+    return DataError(f"{problem} (given after {first}, which has only the {only} stream: "
+                     f"this file should hold the {other} stream)")
+
+
 def _not_a_log(source: Input) -> DataError:
     """The error for an input that is no log: what keeps it from being a segment file by its
     form (an empty file, a folder, binary data, a header of neither format), or that it is
@@ -246,7 +262,7 @@ def group_inputs(paths: Sequence[str]) -> list[Input]:
         if pending is not None:
             first, first_streams = pending
             if kind != "timeseries" or len(streams) != 1 or streams == first_streams:
-                raise _lone_stream(first, first_streams)
+                raise _unpaired(first, first_streams, path, kind)
             inputs.append(Input("timeseries", (first, path)))
             pending = None
         elif kind == "timeseries" and len(streams) == 1:

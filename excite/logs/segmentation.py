@@ -407,15 +407,23 @@ def _check_settings(ts: TimeSeries, window: float, min_distance: float | None,
                         f"sample period ({period:.3g} s){units}")
 
 
-def _refuse_too_few_segments(ts: TimeSeries, report: SegmentationReport) -> None:
+def _refuse_too_few_segments(ts: TimeSeries, t_pose: FloatArray, report: SegmentationReport
+                             ) -> None:
     """DataError when fewer than MIN_SEGMENTS segments are kept, naming the stream behind most
-    of the drops (encoder jumps and standstills: the wheels) and what may cause them."""
+    of the drops (encoder jumps and standstills: the wheels) and what may cause them, or
+    that the streams' stamps (the poses' ``t_pose`` with the clock offset) do not overlap."""
     if report.n_segments >= MIN_SEGMENTS:
         return
-    worst = max(report.segments_dropped, key=report.segments_dropped.get, default=None)
+    dropped = {reason: n for reason, n in report.segments_dropped.items() if n}
+    worst = max(dropped, key=dropped.get, default=None)
     stream = ts.source[0] if worst in (ENCODER_JUMP, STANDSTILL) else ts.source[1]
     hint = {ENCODER_JUMP: f"; {ENCODER_JUMP_HINT}",
             POSE_JUMP: f"; {POSE_JUMP_HINT}"}.get(worst, "")
+    if t_pose[0] > ts.t_enc[-1] or t_pose[-1] < ts.t_enc[0]:
+        hint = (f"; the streams' stamps do not overlap (encoders {ts.t_enc[0]:.9g} to "
+                f"{ts.t_enc[-1]:.9g} s, poses {t_pose[0]:.9g} to {t_pose[-1]:.9g} s with the "
+                "clock offset): stamps on different clocks, e.g. time since start and epoch "
+                "time? --time-offset S")
     raise DataError(f"{stream}: {report.n_segments} segment(s) after segmentation; "
                     f"at least {MIN_SEGMENTS} are needed (dropped: {report.counts_text()})"
                     f"{hint}")
@@ -474,6 +482,6 @@ def segment_timeseries(
     keep = ~np.logical_or.reduce(list(reasons.values()))
     report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses,
                      ts, off_track)
-    _refuse_too_few_segments(ts, report)
+    _refuse_too_few_segments(ts, t_pose, report)
     return _segmented_log(ts, wheels, t_pose, cut.start[keep], cut.end[keep], rows[keep],
                           report)

@@ -8,7 +8,9 @@ header (``t [ms]``, ``yaw (deg)``: converted to s, m, rad); other columns are no
 note naming them. Instead of ``theta``, an orientation quaternion ``qx,qy,qz,qw`` (``qx,qy``
 may be left out: a planar rotation) gives the heading, its yaw
 (:mod:`excite.logs.orientation`: free of the quaternion's length; a z-up world frame).
-Separated by commas, semicolons or tabs (:mod:`excite.logs.csv_table`). In one file, a row
+Separated by commas, semicolons, tabs or spaces (:mod:`excite.logs.csv_table`). A file
+without a header whose rows are 8 numbers separated by spaces is a TUM trajectory
+(:data:`TUM_HEADER`), the pose stream. In one file, a row
 leaves a stream's cells empty (or NaN) when that stream has no sample at its time. Blank lines and
 ``#`` comments are ignored. Every error is one line naming the file and line (docs/formats.md,
 "Time-series logs").
@@ -79,6 +81,11 @@ _QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
                **dict.fromkeys(TICK_COLUMNS, "count"), "x": "length", "y": "length",
                "theta": "angle", **dict.fromkeys(QUATERNION_COLUMNS, "number")}
 _EXPECTED = "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two"
+#: The columns of a TUM trajectory (evo's and the TUM RGB-D benchmark's format: a pose per
+#: row, timestamp in s, position in m, orientation quaternion; no header, or a ``#``
+#: comment): read as the pose stream of a file whose first row is 8 numbers separated by
+#: spaces.
+TUM_HEADER = "t x y z qx qy qz qw"
 # Header names of columns not read that look like a wheel's or an orientation's.
 _WHEEL_LIKE = re.compile(r"left|right|wheel|enc|tick")
 _QUATERNION_LIKE = re.compile(r"^(q|quat|orientation)[_ .]?[xyzw]\b|^q[xyzw]$")
@@ -242,6 +249,10 @@ def _read_table(path: PathArg, note: OnNote) -> _Table:
     numbers, lines = content_lines(text)
     if not lines:
         raise DataError(f"{name}: empty file (expected a header {_EXPECTED})")
+    if _tum(lines[0]):  # no header: the TUM trajectory's columns
+        note(f"{name}: read as a TUM trajectory ({TUM_HEADER}: s, m, the orientation "
+             "quaternion)")
+        numbers, lines = [numbers[0] - 1, *numbers], [TUM_HEADER, *lines]
     header = _parse_header(lines[0], f"{name}:{numbers[0]}")
     for line in header.notes(name):
         note(line)
@@ -305,16 +316,31 @@ def _heading_of_quaternion(table: _Table) -> _Table:
                    empty=np.column_stack([table.empty[:, keep], empty[:, 0]]))
 
 
+def _tum(line: str) -> bool:
+    """Whether a first content line is a TUM trajectory's row: 8 numbers separated by spaces
+    (:data:`TUM_HEADER`)."""
+    fields = line.split()
+    if len(fields) != 8 or delimiter_of(line) != " ":
+        return False
+    try:
+        [float(field) for field in fields]
+    except ValueError:
+        return False
+    return True
+
+
 def _first_line(path: PathArg) -> str | None:
-    """A text file's first line that is neither blank nor a comment nor a separator line
-    (stripped); None when the file cannot be read as text or has no such line."""
+    """A text file's header line: its first line that is neither blank nor a comment nor a
+    separator line (stripped), or :data:`TUM_HEADER` when that line is a TUM trajectory's
+    row; None when the file cannot be read as text or has no such line."""
     try:
         with open(os.fspath(path), encoding="utf-8-sig") as handle:
             for line in handle:
                 stripped = line.strip()
                 if stripped and not stripped.startswith("#") and not is_separator_line(
                         stripped):
-                    return None if "\x00" in stripped else stripped
+                    return None if "\x00" in stripped else (
+                        TUM_HEADER if _tum(stripped) else stripped)
     except (OSError, UnicodeDecodeError):
         return None
     return None

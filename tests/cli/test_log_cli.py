@@ -3,6 +3,7 @@ disk, synthetic logs with a known robot and an off-axle sensor."""
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -439,6 +440,22 @@ def test_a_command_that_needs_a_log_names_what_is_wrong_with_another_input(capsy
     code, _, err = run_cli(capsys, "validate", path, "--params", params, "--nominal",
                            "0.05,0.05,0.3")
     assert_one_line_error(code, err, fragment)
+
+
+def test_streams_on_different_clocks_are_named(capsys, tmp_path, logs):
+    """Encoders stamped from the start, poses in epoch time (two exports of one run): no
+    segment, and the error says the stamps do not overlap (it read "a relocalisation,
+    positions in mm or headings in degrees?")."""
+    rows = [line.split(",") for line in Path(logs[0]).read_text().splitlines()[1:]]
+    enc, poses = tmp_path / "enc.csv", tmp_path / "poses.csv"
+    enc.write_text("t,phi_L,phi_R\n" + "".join(f"{r[0]},{r[1]},{r[2]}\n" for r in rows if r[1]))
+    poses.write_text("t,x,y,theta\n" + "".join(f"{float(r[0]) + 1.7e9!r},{r[3]},{r[4]},{r[5]}\n"
+                                                for r in rows if r[3]))
+    code, _, err = run_cli(capsys, "calibrate", enc, poses, "--time-offset", "0")
+    assert code == 2 and err.count("\n") == 1
+    assert "the streams' stamps do not overlap (encoders" in err
+    assert err.rstrip().endswith("stamps on different clocks, e.g. time since start and epoch "
+                                 "time? --time-offset S")
 
 
 def test_options_may_come_between_the_logs(capsys, logs):

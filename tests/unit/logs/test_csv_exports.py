@@ -258,6 +258,51 @@ def test_ticks_with_a_count_unit_and_a_pair_of_exported_stream_files(tmp_path, p
                      f"{enc}: units converted: t from ms to s"]
 
 
+@pytest.mark.parametrize("sep", [" ", "   "])
+def test_whitespace_separated_stream_files_and_a_tum_trajectory(tmp_path, plain, sep):
+    """Files separated by spaces (runs of them: a printf log): each stream in a file of its
+    own, since spaces cannot leave a cell empty; and the poses as a TUM trajectory (evo's
+    format: timestamp tx ty tz qx qy qz qw, no header or a comment), read as the pose
+    stream with a note. Each equals the plain file."""
+    _, _, rows = plain
+    enc_rows = [row[:3] for row in rows if row[1]]
+    pose_rows = [[row[0], *row[3:]] for row in rows if row[3]]
+    reference = read_timeseries([export(tmp_path / "enc_ref.csv", ["t", "phi_L", "phi_R"],
+                                        enc_rows),
+                                 export(tmp_path / "pose_ref.csv", ["t", "x", "y", "theta"],
+                                        pose_rows)])
+    enc = export(tmp_path / "enc.txt", ["t", "phi_L", "phi_R"], enc_rows, sep)
+    poses = export(tmp_path / "poses.txt", ["t", "x", "y", "theta"], pose_rows, sep)
+    assert timeseries_streams(enc) == {"encoder"} and timeseries_streams(poses) == {"pose"}
+    assert_same(read_timeseries([enc, poses]), reference)
+    tum = [[t, x, y, "0.1", "0", "0", repr(math.sin(0.5 * float(theta))),
+            repr(math.cos(0.5 * float(theta)))] for t, x, y, theta in pose_rows]
+    for comment in ("", "# timestamp tx ty tz qx qy qz qw\n"):
+        path = tmp_path / "poses.tum"
+        path.write_text(comment + "\n".join(sep.join(row) for row in tum) + "\n")
+        assert timeseries_streams(path) == {"pose"}
+        series, notes = read([enc, path])
+        assert_same(series, reference, rtol=1e-12)
+        assert notes[0] == (f"{path}: read as a TUM trajectory (t x y z qx qy qz qw: s, m, "
+                            "the orientation quaternion)")
+
+
+def test_a_file_after_a_lone_stream_that_is_no_stream_file_is_named(tmp_path, plain):
+    """An encoder file followed by an export excite does not read (here a Motive CSV with
+    its header block): the error is about that export, not "give the file with the other
+    stream" (it was given)."""
+    _, _, rows = plain
+    enc = export(tmp_path / "enc.csv", ["t", "phi_L", "phi_R"], [r[:3] for r in rows if r[1]])
+    motive = tmp_path / "motive.csv"
+    motive.write_text("Format Version,1.23,Take Name,run\n,,Type,Rigid Body\n0,0.0,1,2\n")
+    with pytest.raises(DataError) as info:
+        group_inputs([str(enc), str(motive)])
+    message = str(info.value)
+    assert message.startswith(f"{motive}: no header of a time-series stream")
+    assert message.endswith(f"(given after {enc}, which has only the encoder stream: this "
+                            "file should hold the pose stream)")
+
+
 GOOD_ROWS = "0;0;0;0;0;0\n0.1;1;1;0.05;0;0\n0.2;2;2;0.1;0;0\n"
 
 
