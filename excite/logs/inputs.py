@@ -34,7 +34,8 @@ from excite.logs.time_offset import (
     noticeable_time_offset,
 )
 from excite.logs.timeseries import TimeSeries, during, unwrapped_words
-from excite.logs.timeseries_csv import header_hint, read_timeseries, timeseries_streams
+from excite.logs.timeseries_csv import read_timeseries
+from excite.logs.timeseries_header import header_hint, timeseries_streams
 
 __all__ = ["LogOptions", "DEFAULT_LOG_OPTIONS", "Input", "Log", "Part", "OnNote",
            "note_taker", "note_unused_options", "group_inputs", "read_log", "segment_log",

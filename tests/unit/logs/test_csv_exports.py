@@ -16,12 +16,8 @@ from excite.core.models import SensorPose
 from excite.logs.inputs import LogOptions, group_inputs, segment_inputs
 from excite.logs.segments import load_segment_files
 from excite.logs.synthetic import synthetic_log
-from excite.logs.timeseries_csv import (
-    header_hint,
-    read_timeseries,
-    timeseries_streams,
-    write_timeseries,
-)
+from excite.logs.timeseries_csv import read_timeseries, write_timeseries
+from excite.logs.timeseries_header import header_hint, timeseries_streams
 
 STREAMS = ("t_enc", "phi_L", "phi_R", "t_pose", "x", "y", "theta")
 

@@ -32,7 +32,8 @@ from excite.logs.segmentation import (
 )
 from excite.logs.time_offset import estimate_time_offset, noticeable_time_offset
 from excite.logs.timeseries import TimeSeries
-from excite.logs.timeseries_csv import is_timeseries_csv, read_timeseries, write_timeseries
+from excite.logs.timeseries_csv import read_timeseries, write_timeseries
+from excite.logs.timeseries_header import is_timeseries_csv
 
 TRUTH = Params(0.050, 0.051, 0.300)
 SENSOR = SensorPose(0.12, -0.04, 0.3)

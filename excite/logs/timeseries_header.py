@@ -1,0 +1,234 @@
+"""The header of a time-series CSV: the names and units its columns are read under, the
+streams a file holds (found from its header alone), and what columns not read may have been
+meant as (:mod:`excite.logs.timeseries_csv` reads the rows).
+
+A header names ``t`` (s), the wheel angles ``phi_L,phi_R`` (rad) or encoder ticks
+``ticks_L,ticks_R``, and the pose ``x,y`` (m), ``theta`` (rad) or an orientation quaternion
+``qx,qy,qz,qw`` (``qx,qy`` may be left out), each also under the names of :data:`ALIASES` and
+with a unit (``t [ms]``, ``yaw (deg)``; :mod:`excite.logs.csv_table`). A file without a
+header whose first row is 8 numbers separated by spaces is a TUM trajectory
+(:data:`TUM_HEADER`).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Sequence
+
+from excite.errors import DataError
+from excite.logs.csv_table import (
+    Header,
+    delimiter_of,
+    header_fields,
+    is_separator_line,
+    label_of,
+    parse_header,
+)
+from excite.logs.timeseries import ANGLE_COLUMNS, POSE_COLUMNS, TICK_COLUMNS
+
+__all__ = ["ALIASES", "EXPECTED", "QUATERNION_COLUMNS", "TUM_HEADER", "columns_hint",
+           "header_hint",
+           "is_timeseries_csv", "is_tum_row", "parse_timeseries_header", "pose_labels",
+           "timeseries_streams"]
+
+PathArg = str | os.PathLike[str]
+
+#: The header names read as each column (without case; a unit may follow in brackets, or
+#: after an underscore: ``t [ms]``, ``yaw_deg``). Only names that say what the column holds:
+#: ``left``/``right`` alone could be an angle, ticks, a distance or a speed, and are not read.
+ALIASES: dict[str, tuple[str, ...]] = {
+    "t": ("t", "time", "timestamp", "stamp"),
+    **{f"phi_{s}": (f"phi_{s}", f"phi_{side}", f"angle_{s}", f"angle_{side}", f"{side}_angle",
+                    f"{side}_wheel_angle") for s, side in (("L", "left"), ("R", "right"))},
+    **{f"ticks_{s}": (f"ticks_{s}", f"ticks_{side}", f"{side}_ticks", f"{side}_wheel_ticks")
+       for s, side in (("L", "left"), ("R", "right"))},
+    **{axis: (axis, f"pos_{axis}", f"position_{axis}", f"pose_{axis}") for axis in "xy"},
+    "theta": ("theta", "yaw", "heading"),
+    **{f"q{axis}": (f"q{axis}", f"q_{axis}", f"quat_{axis}", f"quaternion_{axis}",
+                    f"orientation_{axis}") for axis in "xyzw"},
+}
+#: The orientation quaternion's columns (x, y, z, w; dimensionless): the heading is its yaw
+#: when the header has no theta (qx, qy may be left out: a rotation about z alone).
+QUATERNION_COLUMNS = ("qx", "qy", "qz", "qw")
+_NAMES = {alias.lower(): column for column, aliases in ALIASES.items() for alias in aliases}
+#: A motion-capture export's rotation columns (Motive, Vicon: RX, RY, RZ, RW), read as the
+#: quaternion only when RW is there: without it RX, RY, RZ are Euler angles.
+_ROTATION_QUATERNION = {f"r{axis}": f"q{axis}" for axis in "xyzw"}
+#: The quantity of each column (the units it may be written in: excite.logs.csv_table.UNITS).
+_QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
+               **dict.fromkeys(TICK_COLUMNS, "count"), "x": "length", "y": "length",
+               "theta": "angle", **dict.fromkeys(QUATERNION_COLUMNS, "number")}
+EXPECTED = "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two"
+#: The columns of a TUM trajectory (evo's and the TUM RGB-D benchmark's format: a pose per
+#: row, timestamp in s, position in m, orientation quaternion; no header, or a ``#``
+#: comment): read as the pose stream of a file whose first row is 8 numbers separated by
+#: spaces.
+TUM_HEADER = "t x y z qx qy qz qw"
+# Header names of columns not read that look like a wheel's or an orientation's.
+_WHEEL_LIKE = re.compile(r"left|right|wheel|enc|tick")
+_QUATERNION_LIKE = re.compile(r"^(q|quat|orientation)[_ .]?[xyzw]\b|^q[xyzw]$")
+
+
+def _names(line: str) -> dict[str, str]:
+    """The header names read as each column for this header line: :data:`ALIASES`, and RX..RW
+    as the quaternion when the line has an RW column."""
+    fields = header_fields(line, delimiter_of(line))
+    if any(label_of(field, {"rw": "rw"})[0] == "rw" for field in fields):
+        return _NAMES | _ROTATION_QUATERNION
+    return _NAMES
+
+
+def columns_hint(header: Header) -> str:
+    """What the columns not read may have been meant as, when a wheel group or theta is
+    missing ('' when nothing looks so)."""
+    labels = set(header.labels)
+    wheels = [text for text in header.ignored if _WHEEL_LIKE.search(text.lower())
+              and not any(labels >= set(names) for names in (ANGLE_COLUMNS, TICK_COLUMNS))]
+    turns = [text for text in header.ignored if _QUATERNION_LIKE.search(text.lower())]
+    hints = []
+    if wheels:
+        hints.append(f"{', '.join(map(repr, wheels))} not read: wheel columns are named "
+                     "phi_L, phi_R (rad) or ticks_L, ticks_R (see docs/formats.md)")
+    if turns and "theta" not in labels:
+        hints.append(f"{', '.join(map(repr, turns))} not read: give the heading as theta "
+                     "(rad) or as the quaternion qx, qy, qz, qw")
+    return "".join(f"; {hint}" for hint in hints)
+
+
+def parse_timeseries_header(line: str, where: str) -> Header:
+    """The layout of a time-series header; DataError for anything else."""
+    header = parse_header(line, _names(line), _QUANTITIES, where)
+    if "t" not in header.labels:
+        raise DataError(f"{where}: no time column t (s); the header names {header.found()} "
+                        f"(expected {EXPECTED}){columns_hint(header)}")
+    header = _orientation(header, where)
+    _check_column_set(header, where)
+    return header
+
+
+def _orientation(header: Header, where: str) -> Header:
+    """The header with the quaternion columns not read when it has theta; DataError for a
+    quaternion without qz or qw, or with one of qx, qy."""
+    quaternion = [c for c in header.columns if c.label in QUATERNION_COLUMNS]
+    if not quaternion:
+        return header
+    if "theta" in header.labels:
+        return header.without(QUATERNION_COLUMNS)
+    labels = {c.label for c in quaternion}
+    missing = [c for c in ("qz", "qw") if c not in labels]
+    if not missing and len(labels & {"qx", "qy"}) == 1:
+        missing = sorted({"qx", "qy"} - labels)
+    if missing:
+        raise DataError(f"{where}: the quaternion has no column {missing[0]} (the heading is "
+                        "the yaw of qx, qy, qz, qw; qx and qy may both be left out); the "
+                        f"header names {header.found()}")
+    return header
+
+
+def pose_labels(labels: Sequence[str]) -> set[str]:
+    """The pose columns (POSE_COLUMNS) among ``labels``, the quaternion standing for theta."""
+    found = set(POSE_COLUMNS) & set(labels)
+    return found | {"theta"} if {"qz", "qw"} <= set(labels) else found
+
+
+def _check_column_set(header: Header, where: str) -> None:
+    """A complete encoder group (angles or ticks), a complete pose group, or both."""
+    columns = header.labels
+    angles, ticks = set(ANGLE_COLUMNS) & set(columns), set(TICK_COLUMNS) & set(columns)
+    if angles and ticks:
+        raise DataError(f"{where}: both wheel angles (phi_L, phi_R) and ticks "
+                        "(ticks_L, ticks_R); give one kind")
+    groups = [(present, expected) for present, expected in (
+        (angles, ANGLE_COLUMNS), (ticks, TICK_COLUMNS), (pose_labels(columns),
+                                                         POSE_COLUMNS)) if present]
+    if not groups:
+        raise DataError(f"{where}: neither encoder (phi_L, phi_R) nor pose (x, y, theta) "
+                        f"columns (expected {EXPECTED}); the header names {header.found()}"
+                        f"{columns_hint(header)}")
+    for present, expected in groups:
+        missing = [c for c in expected if c not in present]
+        if missing:
+            raise DataError(f"{where}: missing column {missing[0]} (expected {EXPECTED}); "
+                            f"the header names {header.found()}{columns_hint(header)}")
+
+
+def is_tum_row(line: str) -> bool:
+    """Whether a first content line is a TUM trajectory's row: 8 numbers separated by spaces
+    (:data:`TUM_HEADER`)."""
+    fields = line.split()
+    if len(fields) != 8 or delimiter_of(line) != " ":
+        return False
+    try:
+        [float(field) for field in fields]
+    except ValueError:
+        return False
+    return True
+
+
+def _first_line(path: PathArg) -> str | None:
+    """A text file's header line: its first line that is neither blank nor a comment nor a
+    separator line (stripped), or :data:`TUM_HEADER` when that line is a TUM trajectory's
+    row; None when the file cannot be read as text or has no such line."""
+    try:
+        with open(os.fspath(path), encoding="utf-8-sig") as handle:
+            for line in handle:
+                stripped = line.strip()
+                if stripped and not stripped.startswith("#") and not is_separator_line(
+                        stripped):
+                    return None if "\x00" in stripped else (
+                        TUM_HEADER if is_tum_row(stripped) else stripped)
+    except (OSError, UnicodeDecodeError):
+        return None
+    return None
+
+
+def _labels(line: str) -> set[str]:
+    """The time-series columns (:data:`ALIASES`) a header line names."""
+    names = _names(line)
+    labels = (label_of(field, names)[0] for field in header_fields(line, delimiter_of(line)))
+    return {label for label in labels if label is not None}
+
+
+def timeseries_streams(path: PathArg) -> frozenset[str]:
+    """The streams a time-series CSV holds, from its header: {"encoder"} or {"pose"} for a
+    file of one stream (a ``t`` column, one complete group of :data:`ALIASES` columns, none of
+    the other), {"encoder", "pose"} for any other header naming a time-series column (both
+    streams, or a header with a problem: read alone, the error names it); empty for a segment
+    CSV (header ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none) or a file that cannot be read
+    as text. Reads only up to the header."""
+    line = _first_line(path)
+    labels = _labels(line) if line is not None else set()
+    if not labels:
+        return frozenset()
+    labels |= pose_labels(list(labels))
+    groups = {"encoder": (ANGLE_COLUMNS, TICK_COLUMNS), "pose": (POSE_COLUMNS,)}
+    complete = {kind for kind, options in groups.items()
+                if any(labels >= set(names) for names in options)}
+    present = {kind for kind, options in groups.items()
+               if any(labels & set(names) for names in options)}
+    try:
+        parse_header(line, _names(line), _QUANTITIES, os.fspath(path))
+    except DataError:
+        return frozenset(groups)
+    if "t" in labels and len(complete) == 1 and present == complete:
+        return frozenset(complete)
+    return frozenset(groups)
+
+
+def header_hint(path: PathArg) -> str:
+    """What a time-series CSV's columns that are not read may have been meant as: wheel
+    columns under names that are not read (``left``, ``enc_right``), a quaternion instead of
+    theta; '' when nothing looks so. Starts with '; ' (to end an error message)."""
+    line = _first_line(path)
+    try:
+        return columns_hint(parse_header(line, _names(line), _QUANTITIES, "")) if line else ""
+    except DataError:
+        return ""
+
+
+def is_timeseries_csv(path: PathArg) -> bool:
+    """Whether a file's header names a time-series column (:data:`ALIASES`): a time-series
+    CSV, as opposed to a segment CSV (header ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none);
+    False when the file cannot be read as text."""
+    return bool(timeseries_streams(path))
