@@ -144,12 +144,59 @@ def _read_table(path: PathArg, note: OnNote) -> _Table:
     if table.header is not header:
         note(f"{name}: theta is the yaw of the quaternion "
              f"{', '.join(c for c in QUATERNION_COLUMNS if c in header.labels)}")
-    table = _checked_cells(table, note)
+    table = _held_as_missing(_checked_cells(table, note), note)
     if with_nan.any():
         rows = line_numbers[with_nan]
         note(f"{name}: {rows.size} rows with NaN cells (lines {rows[0]}-{rows[-1]}) read as "
              "samples not measured, like empty cells (a motion-capture body not tracked?)")
     return table
+
+
+#: A stream of a one-file table whose value usually changes only every this many rows or
+#: more, repeating in between, was filled with held values (:func:`_held_as_missing`).
+HELD_ROWS = 1.5
+#: A run of repeats up to this many times the stream's usual interval between changes is a
+#: held value; a longer one is the robot standing still (kept: its value is the same).
+HELD_RUN = 3.0
+#: The fewest values a stream must take before its repeats are judged.
+MIN_HELD_VALUES = 10
+
+
+def _held_as_missing(table: _Table, note: OnNote) -> _Table:
+    """The table with a stream's held values as empty cells: an export that writes every row
+    full (PlotJuggler's "fill with previous value") repeats a stream's last sample in the
+    rows of the other stream's samples, so its values change only every few rows. Where a
+    stream's value usually changes only every :data:`HELD_ROWS` rows or more, each repeat
+    of the value before it, in a run of repeats lasting up to :data:`HELD_RUN` times the
+    usual interval between changes, is no sample (read at a later time, it would shift the
+    stream's clock by up to a sample period); longer runs (standing still) are kept. Rows
+    left with no value are dropped; ``note`` is told per stream."""
+    groups = [g for g in (table.encoder_columns, POSE_COLUMNS if table.has_pose else None)
+              if g]
+    if len(groups) < 2:
+        return table
+    empty = table.empty.copy()
+    for group in groups:
+        index = [table.columns.index(c) for c in group]
+        rows = np.flatnonzero(~empty[:, index[0]])
+        t = table.values[rows, table.columns.index("t")]
+        values = table.values[np.ix_(rows, index)]
+        changed = np.concatenate(([True], np.any(values[1:] != values[:-1], axis=1)))
+        starts = np.flatnonzero(changed)
+        if (starts.size < MIN_HELD_VALUES or rows.size < HELD_ROWS * starts.size
+                or np.any(np.diff(t) <= 0)):  # a clock that does not increase: an error later
+            continue
+        usual = float(np.median(np.diff(t[starts])))
+        run = np.diff(np.append(starts, rows.size))  # rows per value
+        ends = t[np.minimum(starts + run, rows.size - 1)]
+        held = np.repeat((ends - t[starts] <= HELD_RUN * usual) & (run > 1), run) & ~changed
+        empty[np.ix_(rows[held], index)] = True
+        note(f"{table.name}: the {'/'.join(group)} cells repeat the row before them in "
+             f"{int(held.sum())} rows (an export that fills every cell with the last value, "
+             "e.g. PlotJuggler's): read as no sample")
+    keep = ~np.all(empty[:, [table.columns.index(c) for g in groups for c in g]], axis=1)
+    return replace(table, values=table.values[keep], empty=empty[keep],
+                   lines=table.lines[keep])
 
 
 def _nan_as_missing(header: Header, values: FloatArray, empty: BoolArray

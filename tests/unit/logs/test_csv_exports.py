@@ -283,6 +283,30 @@ def test_whitespace_separated_stream_files_and_a_tum_trajectory(tmp_path, plain,
                             "the orientation quaternion)")
 
 
+def test_held_values_of_a_filled_export_are_read_as_no_sample(tmp_path, plain):
+    """PlotJuggler's "fill with previous value": every row full, each stream repeating its
+    last sample in the other stream's rows. Read so, a 10 Hz stream's values sat up to a
+    period late (the wheel angles 'jumped'; b 1.9% off); now the repeats are no samples and
+    the log equals the export with empty cells. A full-row log whose streams are sampled
+    together, standing still for a while (its wheels repeat, its noisy poses do not), is read
+    as it is."""
+    path, header, rows = plain
+    filled, last = [], [""] * len(header)
+    for row in rows:
+        last = [new or old for new, old in zip(row, last, strict=True)]
+        filled.append(last)
+    series, notes = read(export(tmp_path / "filled.csv", header, filled))
+    assert_same(series, read_timeseries(path))
+    assert len(notes) == 1 and "the phi_L/phi_R cells repeat the row before them" not in notes[0]
+    assert notes[0].startswith(f"{tmp_path / 'filled.csv'}: the x/y/theta cells repeat the row "
+                               "before them in ")
+    together = [row for row in rows if row[3]]
+    for row in together[100:200]:  # 2 s standing still: the wheels repeat
+        row[1], row[2] = together[99][1], together[99][2]
+    series, notes = read(export(tmp_path / "together.csv", header, together))
+    assert notes == [] and series.t_enc.size == len(together)
+
+
 def test_a_file_after_a_lone_stream_that_is_no_stream_file_is_named(tmp_path, plain):
     """An encoder file followed by an export excite does not read (here a Motive CSV with
     its header block): the error is about that export, not "give the file with the other
