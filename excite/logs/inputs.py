@@ -35,7 +35,7 @@ from excite.logs.time_offset import (
 )
 from excite.logs.timeseries import TimeSeries, during, unwrapped_words
 from excite.logs.timeseries_csv import read_timeseries
-from excite.logs.timeseries_header import header_hint, timeseries_streams
+from excite.logs.timeseries_header import header_hint, header_problem, timeseries_streams
 
 __all__ = ["LogOptions", "DEFAULT_LOG_OPTIONS", "Input", "Log", "Part", "OnNote",
            "note_taker", "note_unused_options", "group_inputs", "read_log", "segment_log",
@@ -230,6 +230,14 @@ def _lone_stream(path: str, streams: frozenset[str]) -> DataError:
                      f"stream right after it{header_hint(path)}")
 
 
+def _before(inputs: list[Input]) -> DataError | None:
+    """The header problem of the input before a lone stream's file, when it is a time-series
+    CSV that cannot be read (most often that stream's partner, under names not read)."""
+    if inputs and inputs[-1].kind == "timeseries" and len(inputs[-1].paths) == 1:
+        return header_problem(inputs[-1].paths[0])
+    return None
+
+
 def _unpaired(first: str, streams: frozenset[str], path: str, kind: str) -> DataError:
     """The error for a one-stream CSV whose next path is not the other stream's file: when
     that path is not a time-series CSV at all (a header of neither format, or none, as a
@@ -263,7 +271,7 @@ def group_inputs(paths: Sequence[str]) -> list[Input]:
         if pending is not None:
             first, first_streams = pending
             if kind != "timeseries" or len(streams) != 1 or streams == first_streams:
-                raise _unpaired(first, first_streams, path, kind)
+                raise _before(inputs) or _unpaired(first, first_streams, path, kind)
             inputs.append(Input("timeseries", (first, path)))
             pending = None
         elif kind == "timeseries" and len(streams) == 1:
@@ -271,7 +279,7 @@ def group_inputs(paths: Sequence[str]) -> list[Input]:
         else:
             inputs.append(Input(kind, (path,)))
     if pending is not None:
-        raise _lone_stream(*pending)
+        raise _before(inputs) or _lone_stream(*pending)
     return inputs
 
 

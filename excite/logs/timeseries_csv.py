@@ -46,6 +46,7 @@ from excite.logs.timeseries_header import (
     columns_hint,
     is_tum_row,
     parse_timeseries_header,
+    ros_header,
 )
 
 __all__ = ["read_timeseries", "write_timeseries"]
@@ -132,6 +133,10 @@ def _read_table(path: PathArg, note: OnNote) -> _Table:
         note(f"{name}: read as a TUM trajectory ({TUM_HEADER}: s, m, the orientation "
              "quaternion)")
         numbers, lines = [numbers[0] - 1, *numbers], [TUM_HEADER, *lines]
+    elif (ros := ros_header(lines[0])) is not None:
+        note(f"{name}: the column names of a ROS export (PlotJuggler, rostopic) read: "
+             f"{', '.join(ros[1])}")
+        lines = [ros[0], *lines[1:]]
     header = parse_timeseries_header(lines[0], f"{name}:{numbers[0]}")
     for line in header.notes(name):
         note(line)

@@ -28,9 +28,8 @@ from excite.logs.csv_table import (
 from excite.logs.timeseries import ANGLE_COLUMNS, POSE_COLUMNS, TICK_COLUMNS
 
 __all__ = ["ALIASES", "EXPECTED", "QUATERNION_COLUMNS", "TUM_HEADER", "columns_hint",
-           "header_hint",
-           "is_timeseries_csv", "is_tum_row", "parse_timeseries_header", "pose_labels",
-           "timeseries_streams"]
+           "header_hint", "header_line", "header_problem", "is_timeseries_csv", "is_tum_row",
+           "parse_timeseries_header", "pose_labels", "ros_header", "timeseries_streams"]
 
 PathArg = str | os.PathLike[str]
 
@@ -93,7 +92,23 @@ def columns_hint(header: Header) -> str:
     if turns and "theta" not in labels:
         hints.append(f"{', '.join(map(repr, turns))} not read: give the heading as theta "
                      "(rad) or as the quaternion qx, qy, qz, qw")
+    if "field.position0" in (text.lower() for text in header.ignored):
+        hints.append("a JointState of rostopic echo -p: name the wheels' field.position<i> "
+                     "columns phi_L and phi_R (their joints are in field.name<i>)")
     return "".join(f"; {hint}" for hint in hints)
+
+
+def header_problem(path: PathArg) -> DataError | None:
+    """What is wrong with a time-series CSV's header (the error reading it would raise); None
+    when it is right, or the file is no time-series CSV."""
+    line = _first_line(path)
+    if line is None or not _labels(line):
+        return None
+    try:
+        parse_timeseries_header(line, f"{os.fspath(path)}")
+    except DataError as exc:
+        return exc
+    return None
 
 
 def parse_timeseries_header(line: str, where: str) -> Header:
@@ -166,18 +181,67 @@ def is_tum_row(line: str) -> bool:
     return True
 
 
+#: Column names of ROS exports read as time-series columns: PlotJuggler's (``__time``,
+#: topic paths such as ``/mocap/pose/pose/position/x``, ``/joint_states/<joint>/position``
+#: with ``left`` or ``right`` in the joint's name) and ``rostopic echo -p``'s
+#: (``field.header.stamp`` in ns, ``field.pose.position.x``).
+_ROS_TIME = {"__time": "t", "field.header.stamp": "t [ns]"}
+_ROS_POSITION = re.compile(r"(?:^|[/.])(?:position|translation)[/.]([xy])$")
+_ROS_ORIENTATION = re.compile(r"(?:^|[/.])(?:orientation|rotation)[/.]([xyzw]|yaw)$")
+_ROS_JOINT = re.compile(r"/([^/]+)/position$")
+
+
+def _ros_name(field: str, fields: Sequence[str]) -> str | None:
+    """The time-series name of a ROS export's column name; None when it names none."""
+    name = field.strip().lower()
+    if name in _ROS_TIME:
+        return _ROS_TIME[name]
+    if name == "%time":  # rostopic's receive time (ns): only without the header stamp
+        return None if "field.header.stamp" in fields else "t [ns]"
+    if match := _ROS_POSITION.search(name):
+        return match[1]
+    if match := _ROS_ORIENTATION.search(name):
+        return "theta" if match[1] == "yaw" else f"q{match[1]}"
+    if (match := _ROS_JOINT.search(name)) and ("left" in match[1]) != ("right" in match[1]):
+        return "phi_L" if "left" in match[1] else "phi_R"
+    return None
+
+
+def ros_header(line: str) -> tuple[str, list[str]] | None:
+    """A header line of a ROS export (PlotJuggler's CSV, ``rostopic echo -p``'s) with its
+    columns renamed to the time-series names they hold (the others kept, so not read), and
+    the renamings in words ('__time as t'); None for any other header."""
+    delimiter = delimiter_of(line)
+    fields = header_fields(line, delimiter)
+    lowered = [field.lower() for field in fields]
+    if not any(name in _ROS_TIME or name == "%time" for name in lowered):
+        return None
+    names = [_ros_name(field, lowered) or field for field in fields]
+    renamed = [f"{field} as {name}" for field, name in zip(fields, names, strict=True)
+               if name != field]
+    return delimiter.join(names), renamed
+
+
+def header_line(line: str) -> str:
+    """The header a file's first content line gives: :data:`TUM_HEADER` for a TUM
+    trajectory's row, a ROS export's renamed (:func:`ros_header`), else the line."""
+    if is_tum_row(line):
+        return TUM_HEADER
+    ros = ros_header(line)
+    return line if ros is None else ros[0]
+
+
 def _first_line(path: PathArg) -> str | None:
-    """A text file's header line: its first line that is neither blank nor a comment nor a
-    separator line (stripped), or :data:`TUM_HEADER` when that line is a TUM trajectory's
-    row; None when the file cannot be read as text or has no such line."""
+    """A text file's header line (:func:`header_line` of its first line that is neither blank
+    nor a comment nor a separator line, stripped); None when the file cannot be read as text
+    or has no such line."""
     try:
         with open(os.fspath(path), encoding="utf-8-sig") as handle:
             for line in handle:
                 stripped = line.strip()
                 if stripped and not stripped.startswith("#") and not is_separator_line(
                         stripped):
-                    return None if "\x00" in stripped else (
-                        TUM_HEADER if is_tum_row(stripped) else stripped)
+                    return None if "\x00" in stripped else header_line(stripped)
     except (OSError, UnicodeDecodeError):
         return None
     return None

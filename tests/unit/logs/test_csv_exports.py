@@ -307,6 +307,55 @@ def test_held_values_of_a_filled_export_are_read_as_no_sample(tmp_path, plain):
     assert notes == [] and series.t_enc.size == len(together)
 
 
+PLOTJUGGLER = ["__time", "/joint_states/wheel_left_joint/position",
+               "/joint_states/wheel_right_joint/position", "/mocap/pose/pose/position/x",
+               "/mocap/pose/pose/position/y", "/mocap/pose/pose/orientation/z",
+               "/mocap/pose/pose/orientation/w", "/battery/voltage"]
+
+
+def _quaternion_rows(rows):
+    """The plain rows with the heading as (qz, qw) and a battery column."""
+    out = []
+    for t, left, right, x, y, theta in rows:
+        q = ([repr(math.sin(0.5 * float(theta))), repr(math.cos(0.5 * float(theta)))]
+             if theta else ["", ""])
+        out.append([t, left, right, x, y, *q, "12.1"])
+    return out
+
+
+def test_ros_exports_are_read_by_their_column_names(tmp_path, plain):
+    """PlotJuggler's CSV export (``__time``, topic paths) and ``rostopic echo -p``'s pose
+    file (``field.header.stamp`` in ns, ``field.pose.position.x``): the columns read as
+    the time-series columns they hold, with a note; the same log as the plain file."""
+    path, _, rows = plain
+    reference = read_timeseries(path)
+    export_path = export(tmp_path / "pj.csv", PLOTJUGGLER, _quaternion_rows(rows))
+    series, notes = read(export_path)
+    assert_same(series, reference, rtol=1e-12)
+    assert notes[0] == (f"{export_path}: the column names of a ROS export (PlotJuggler, "
+                        "rostopic) read: __time as t, /joint_states/wheel_left_joint/position "
+                        "as phi_L, /joint_states/wheel_right_joint/position as phi_R, "
+                        "/mocap/pose/pose/position/x as x, /mocap/pose/pose/position/y as y, "
+                        "/mocap/pose/pose/orientation/z as qz, /mocap/pose/pose/orientation/w "
+                        "as qw")
+    enc = export(tmp_path / "enc.csv", ["t", "phi_L", "phi_R"], [r[:3] for r in rows if r[1]])
+    header = ["%time", "field.header.seq", "field.header.stamp", "field.header.frame_id",
+              "field.pose.position.x", "field.pose.position.y", "field.pose.orientation.z",
+              "field.pose.orientation.w"]
+    poses = [[str(round(float(r[0]) * 1e9) + 1234), "0", str(round(float(r[0]) * 1e9)),
+              "map", r[3], r[4], *r[5:7]] for r in _quaternion_rows(rows) if r[3]]
+    rostopic = export(tmp_path / "pose.csv", header, poses)
+    assert timeseries_streams(rostopic) == {"pose"}
+    series, _ = read([enc, rostopic])
+    assert_same(series, reference, rtol=1e-9)
+    joints = tmp_path / "js.csv"
+    joints.write_text("%time,field.header.stamp,field.name0,field.name1,field.position0,"
+                      "field.position1\n1,1,left_wheel,right_wheel,0.0,0.0\n")
+    with pytest.raises(DataError, match="a JointState of rostopic echo -p: name the wheels' "
+                                        r"field.position<i> columns phi_L and phi_R"):
+        group_inputs([str(joints), str(rostopic)])
+
+
 def test_a_file_after_a_lone_stream_that_is_no_stream_file_is_named(tmp_path, plain):
     """An encoder file followed by an export excite does not read (here a Motive CSV with
     its header block): the error is about that export, not "give the file with the other
