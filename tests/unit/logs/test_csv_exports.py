@@ -300,7 +300,7 @@ def test_held_values_of_a_filled_export_are_read_as_no_sample(tmp_path, plain):
     assert len(notes) == 1 and "the phi_L/phi_R cells repeat the row before them" not in notes[0]
     assert notes[0].startswith(f"{tmp_path / 'filled.csv'}: the x/y/theta cells repeat the row "
                                "before them in ")
-    together = [row for row in rows if row[3]]
+    together = [list(row) for row in rows if row[3]]
     for row in together[100:200]:  # 2 s standing still: the wheels repeat
         row[1], row[2] = together[99][1], together[99][2]
     series, notes = read(export(tmp_path / "together.csv", header, together))
