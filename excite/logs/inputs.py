@@ -21,11 +21,18 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+
 from excite.errors import DataError
 from excite.logs.bag_reader import JOINT_STATES, bag_path_problem, is_bag_path, read_bag_log
 from excite.logs.clock_steps import corrected_clock_steps
 from excite.logs.continuity import Gap, check_continuity, on_track
-from excite.logs.segmentation import OFF_TRACK, SegmentedLog, segment_timeseries
+from excite.logs.segmentation import (
+    OFF_TRACK,
+    SLOWEST_PERIOD,
+    SegmentedLog,
+    segment_timeseries,
+)
 from excite.logs.segments import Segments, check_not_utf16, form_problem, load_segments
 from excite.logs.time_offset import (
     MAX_TIME_OFFSET,
@@ -324,6 +331,19 @@ def _clock_offset(series: TimeSeries, options: LogOptions
     return 0.0, "default", hint
 
 
+def _check_time_unit(source: Input, series: TimeSeries) -> None:
+    """DataError when a stream's samples are more than SLOWEST_PERIOD apart (median): times
+    in ms, us or ns read as s, before anything is said about the clocks."""
+    for name, t, where in (("encoder", series.t_enc, series.source[0]),
+                           ("pose", series.t_pose, series.source[1])):
+        period = float(np.median(np.diff(t)))
+        if period >= SLOWEST_PERIOD:
+            way = ("a unit in the header converts them, e.g. t [ms]" if source.kind ==
+                   "timeseries" else "a bag's stamps are in s")
+            raise DataError(f"{where}: {name} samples every {period:.6g} s (median): times "
+                            f"are in s, are these ms, us or ns? ({way})")
+
+
 def read_log(source: Input, options: LogOptions, *, whole: bool = False,
              on_note: OnNote | None = None) -> Log:
     """Read one time-series or bag input, correct the clock steps at its gaps
@@ -335,6 +355,7 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
     note = note_taker(notes, on_note)
     series, skipped = _read_series(source, options, note)
     series = during(series, options.start, options.end)
+    _check_time_unit(source, series)
     series, steps = corrected_clock_steps(series, options.max_time_offset)
     for line in steps:
         note(line)

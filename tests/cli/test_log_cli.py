@@ -323,7 +323,9 @@ def test_a_clock_jump_or_times_in_ns_are_one_line_errors(capsys, tmp_path):
     write_timeseries(path, nanoseconds)
     code, _, err = run_cli(capsys, "calibrate", path)
     assert code == 2 and err.count("\n") == 1
-    assert err.rstrip().endswith("(times are in s: are these ms, us or ns?)")
+    assert err.rstrip().endswith("samples every 1e+07 s (median): times are in s, are these "
+                                 "ms, us or ns? (a unit in the header converts them, e.g. "
+                                 "t [ms])")
 
 
 @pytest.fixture(scope="module")
