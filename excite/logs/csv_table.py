@@ -63,6 +63,8 @@ _ALL_UNITS = {unit for units in UNITS.values() for unit in units}
 _DELIMITER_NAMES = {",": "commas", ";": "semicolons", "\t": "tabs", " ": "spaces"}
 _UNIT = re.compile(r"^(?P<name>.*?)\s*(?:\[(?P<square>[^\]]*)\]|\((?P<round>[^)]*)\))$")
 _INNER = re.compile(r"[\s\-.]+")
+#: A cell that is a date or a time of day (2024-05-12T13:20:01, 13:20:01.5), not a number.
+_CLOCK_TEXT = re.compile(r"\d:\d\d|\d{4}-\d\d-\d\d")
 # Whitespace a line may be stripped of: all of it, except tabs in a tab-separated table.
 _NOT_TAB = " \r\n\x0b\x0c\xa0"
 
@@ -332,8 +334,12 @@ def _numbers(name: str, numbers: list[int], header: Header, cells: list[str],
     if infinite.size:
         bad, what = int(infinite[0]), "finite"
     if what:
+        column = _column_at(header, bad)
+        clock = (" (a date or a time of day: write times as numbers of s, e.g. seconds since "
+                 "the epoch)" if column.label in ("t", "t_start", "t_end")
+                 and _CLOCK_TEXT.search(cells[bad]) else "")
         raise DataError(f"{name}:{numbers[bad // header.width]}: "
-                        f"{_column_at(header, bad).label} is not {what}: {cells[bad]!r}")
+                        f"{column.label} is not {what}: {cells[bad]!r}{clock}")
     index = [column.index for column in header.columns]
     return (values.reshape(-1, header.width)[:, index],
             empty.reshape(-1, header.width)[:, index])

@@ -388,6 +388,8 @@ GOOD = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.1,1,1,0.05,0,0\n0.2,2,2,0.1,0,0\
         ("t,phi_L,phi_R,ticks_L,ticks_R\n", "log.csv:1: both wheel angles"),
         (GOOD + "0.3,3,3,0.15,0\n", "log.csv:5: expected 6 columns, found 5"),
         (GOOD + "0.3,3,abc,0.15,0,0\n", "log.csv:5: phi_R is not a number: 'abc'"),
+        (GOOD + "13:20:01.5,3,3,0.15,0,0\n", "log.csv:5: t is not a number: '13:20:01.5' (a "
+         "date or a time of day: write times as numbers of s, e.g. seconds since the epoch)"),
         (GOOD + "0.3,3,3,nan,0,0\n", "log.csv:5: x is empty (or NaN) but other"),
         (GOOD + "0.3,inf,3,,,\n", "log.csv:5: phi_L is not finite"),
         (GOOD + "0.2,3,3,,,\n", "log.csv:5: time does not increase (0.2 s after 0.2 s)"),
