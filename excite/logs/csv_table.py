@@ -260,9 +260,13 @@ def _split(lines: list[str], delimiter: str, width: int) -> tuple[list[str], int
     """The cells of the rows before the first with a wrong number of fields, row after row,
     stripped; and that row's index (None when every row has ``width`` fields). Quoted cells
     (a text column holding the separator) are read as CSV quoting has them; with spaces,
-    each run of them separates two cells."""
+    each run of them separates two cells. When the first row has one field too many, the last
+    empty (a separator ending the rows), such rows have no such cell."""
     if delimiter == " ":
         lines = [" ".join(line.split()) for line in lines]
+    if lines and lines[0].endswith(delimiter) and lines[0].count(delimiter) == width:
+        lines = [line[:-1] if line.endswith(delimiter) and line.count(delimiter) == width
+                 else line for line in lines]  # a separator ending the rows: no cell
     joined = delimiter.join(lines)
     if '"' in joined:
         rows = list(csv.reader(lines, delimiter=delimiter, skipinitialspace=True))

@@ -356,6 +356,13 @@ def test_ros_exports_are_read_by_their_column_names(tmp_path, plain):
         group_inputs([str(joints), str(rostopic)])
 
 
+def test_a_separator_ending_every_data_row_but_not_the_header(tmp_path, plain):
+    path, header, rows = plain
+    ended = tmp_path / "ended.csv"
+    ended.write_text(",".join(header) + "\n" + "".join(",".join(row) + ",\n" for row in rows))
+    assert_same(read(ended)[0], read_timeseries(path))
+
+
 def test_a_file_after_a_lone_stream_that_is_no_stream_file_is_named(tmp_path, plain):
     """An encoder file followed by an export excite does not read (here a Motive CSV with
     its header block): the error is about that export, not "give the file with the other
