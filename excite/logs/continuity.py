@@ -35,7 +35,7 @@ from excite.stats.robust import MEDIAN_ABS_NORMAL
 
 __all__ = ["Limits", "Gap", "StreamCheck", "check_continuity", "check_encoders", "check_poses",
            "excursions", "left_on_track", "on_track", "find_gaps", "refuse_long_gaps",
-           "flagged_overlaps", "pose_noise"]
+           "stale_poses", "flagged_overlaps", "pose_noise"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -79,6 +79,11 @@ class Limits:
         difference of two poses and turned likewise: at 5, a still robot's noise passes it in
         about 4 of a million segments (the Rayleigh tail exp(-5^2 / 2)). The pose noise is
         estimated from the pose stream (:func:`pose_noise`).
+    stale_turn (rad): pose samples that repeat the sample before them exactly (x, y and
+        theta to the bit, which a measured pose never does) while the wheels turned more
+        than this in all (|dphi_L| + |dphi_R|; 0.1 rad rolls a 5 cm wheel 5 mm) came from a
+        source that froze or held a placeholder while it lost the body
+        (:func:`stale_poses`); a robot standing still may repeat its pose.
     max_radius_to_track, max_wheel_radius (m), max_sensor_arm (m): the most the wheels' small
         turns dphi_L, dphi_R (within still_wheel) can move a plausible robot's sensor: a turn of
         max_radius_to_track (|dphi_L| + |dphi_R|) (rad; r / b is 0.3 on a Husky, under 1 on any
@@ -100,6 +105,7 @@ class Limits:
     still_distance: float = 0.01
     still_heading: float = 0.01
     carry_sigmas: float = 5.0
+    stale_turn: float = 0.1
     max_radius_to_track: float = MAX_RADIUS_TO_TRACK
     max_wheel_radius: float = 0.5
     max_sensor_arm: float = 1.0
@@ -234,6 +240,33 @@ def left_on_track(ts: TimeSeries, poses: StreamCheck, limits: Limits,
     bridged = gaps[kept[1:]] > gaps[kept[:-1]]
     jump = _jumps(thinned, np.arange(kept.size - 1), np.arange(1, kept.size), limits, noise)
     return thinned, StreamCheck(bridged, jump, poses.dropouts), int(off.size)
+
+
+def stale_poses(ts: TimeSeries, limits: Limits | None = None) -> IntArray:
+    """The pose samples (indices) that repeat the sample before them exactly, in runs over
+    which the wheels turned more than ``limits.stale_turn`` (see :class:`Limits`): every
+    sample of such a run but its first, and the first too when the pose jumped to it (a
+    placeholder, such as the origin, while the body was lost)."""
+    limits = limits or Limits()
+    poses = np.column_stack([ts.x, ts.y, ts.theta])
+    same = np.all(poses[1:] == poses[:-1], axis=1)
+    if not same.any():
+        return np.zeros(0, dtype=np.int64)
+    edges = np.diff(np.concatenate(([0], same.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # runs of repeats
+    turned = sum(np.abs(np.interp(ts.t_pose[ends], ts.t_enc, phi)
+                        - np.interp(ts.t_pose[starts], ts.t_enc, phi))
+                 for phi in (ts.phi_L, ts.phi_R))
+    held = turned > limits.stale_turn
+    if not held.any():
+        return np.zeros(0, dtype=np.int64)
+    starts, ends = starts[held], ends[held]
+    # a run that jumped away from the pose before it is a placeholder from its first sample
+    entered = starts > 0
+    jumped = np.zeros(starts.size, dtype=bool)
+    jumped[entered] = _jumps(ts, starts[entered] - 1, starts[entered], limits, pose_noise(ts))
+    return np.concatenate([np.arange(a + (not j), b + 1)
+                           for a, b, j in zip(starts, ends, jumped, strict=True)]).astype(np.int64)
 
 
 def on_track(ts: TimeSeries, limits: Limits | None = None) -> tuple[TimeSeries, int]:

@@ -26,7 +26,7 @@ import numpy as np
 from excite.errors import DataError
 from excite.logs.bag_reader import JOINT_STATES, bag_path_problem, is_bag_path, read_bag_log
 from excite.logs.clock_steps import corrected_clock_steps
-from excite.logs.continuity import Gap, check_continuity, on_track
+from excite.logs.continuity import Gap, check_continuity, on_track, stale_poses
 from excite.logs.segmentation import (
     OFF_TRACK,
     SLOWEST_PERIOD,
@@ -40,7 +40,7 @@ from excite.logs.time_offset import (
     estimate_time_offset,
     noticeable_time_offset,
 )
-from excite.logs.timeseries import TimeSeries, during, unwrapped_words
+from excite.logs.timeseries import TimeSeries, during, unwrapped_words, without_poses
 from excite.logs.timeseries_csv import read_timeseries
 from excite.logs.timeseries_header import header_hint, header_problem, timeseries_streams
 
@@ -356,6 +356,12 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
     series, skipped = _read_series(source, options, note)
     series = during(series, options.start, options.end)
     _check_time_unit(source, series)
+    stale = stale_poses(series)
+    if stale.size:
+        series = without_poses(series, stale)
+        note(f"{source.name}: {stale.size} pose samples repeat the one before them exactly "
+             "while the wheels turned (a pose source that froze, or held a placeholder while "
+             "it lost the body): left out")
     series, steps = corrected_clock_steps(series, options.max_time_offset)
     for line in steps:
         note(line)
