@@ -196,8 +196,9 @@ def _ros_name(field: str, fields: Sequence[str]) -> str | None:
     name = field.strip().lower()
     if name in _ROS_TIME:
         return _ROS_TIME[name]
-    if name == "%time":  # rostopic's receive time (ns): only without the header stamp
-        return None if "field.header.stamp" in fields else "t [ns]"
+    if name == "%time":  # rostopic's receive time (ns): only without another time column
+        others = (label_of(other, _NAMES)[0] for other in fields if other != "%time")
+        return None if "field.header.stamp" in fields or "t" in others else "t [ns]"
     if match := _ROS_POSITION.search(name):
         return match[1]
     if match := _ROS_ORIENTATION.search(name):

@@ -348,6 +348,9 @@ def test_ros_exports_are_read_by_their_column_names(tmp_path, plain):
     assert timeseries_streams(rostopic) == {"pose"}
     series, _ = read([enc, rostopic])
     assert_same(series, reference, rtol=1e-9)
+    renamed = export(tmp_path / "renamed.csv", [h if h != "field.header.stamp" else "t [ns]"
+                                                for h in header], poses)
+    assert_same(read([enc, renamed])[0], reference, rtol=1e-9)  # %time not read beside t
     joints = tmp_path / "js.csv"
     joints.write_text("%time,field.header.stamp,field.name0,field.name1,field.position0,"
                       "field.position1\n1,1,left_wheel,right_wheel,0.0,0.0\n")
