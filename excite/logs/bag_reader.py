@@ -182,7 +182,12 @@ class _Joints(_Stream):
                 present = ", ".join(sorted(self.names)) or "none"
                 raise DataError(f"{self.where}: no joint {joint!r}; joints present: {present}")
         if self.rows:
-            return list(self.table(3).T)
+            table = self.table(3)
+            if np.isnan(table[:, 1:]).all():
+                raise DataError(f"{self.where}: the positions of {self.left!r} and "
+                                f"{self.right!r} are all NaN (joints with a velocity state "
+                                "interface only?); excite needs the wheels' positions")
+            return list(table.T)
         if all(stream.rows for stream in self.apart.values()):
             return self._together()
         if self.skipped.get(NO_POSITIONS):

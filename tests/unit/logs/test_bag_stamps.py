@@ -252,3 +252,20 @@ def test_one_wheel_never_with_a_position(tmp_path, log):
     with pytest.raises(DataError, match=f"/joint_states: no message has a position of the "
                                         f"joint '{RIGHT}'$"):
         read_bag_log(path, LEFT, RIGHT, pose_topic="/sensor_pose")
+
+
+def test_wheel_positions_all_nan_are_named(tmp_path, log):
+    """joint_state_broadcaster fills the positions of joints that have no position state
+    interface with NaN: the error says so (it read "phi_L is not finite")."""
+    def velocity_interfaces(bag: BagWriter):
+        out = []
+        for topic, received, msg in log_messages(bag, log, "pose"):
+            if topic == "/joint_states":
+                msg.position = np.full(len(msg.name), np.nan)
+            out.append((topic, received, msg))
+        return out
+    path = make_bag(tmp_path, "mcap", velocity_interfaces)
+    with pytest.raises(DataError, match="are all NaN \\(joints with a velocity state "
+                                        "interface only\\?\\); excite needs the wheels' "
+                                        "positions$"):
+        read_bag_log(path, LEFT, RIGHT, pose_topic="/sensor_pose")
