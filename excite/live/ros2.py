@@ -54,7 +54,7 @@ from excite.errors import DataError, ExciteError
 from excite.live.result import STOP, Command, LiveResult
 from excite.live.session import LiveSession
 from excite.live.settings import LiveTopics
-from excite.logs.orientation import headings
+from excite.logs.orientation import headings, z_up
 from excite.logs.timeseries import sample_at
 from excite.processes import deaf_to_sigint, shut_down_now, sigint_blocked
 from excite.signals import handled
@@ -319,17 +319,24 @@ class LiveNode:
         if not self._usable(self.topics.pose_topic, "poses", t, now,
                             (position.x, position.y, q.x, q.y, q.z, q.w)):
             return
+        quaternion, xyz, turned = z_up(np.array([[q.x, q.y, q.z, q.w]]),
+                                       np.array([[position.x, position.y, position.z]]))
+        if turned is not None and (self.topics.pose_topic, "y-up") not in self._noted:
+            self._noted.add((self.topics.pose_topic, "y-up"))
+            print(f"excite: note: {self.topics.pose_topic}: {turned}", file=sys.stderr,
+                  flush=True)
         try:
-            theta = float(headings(np.array([[q.x, q.y, q.z, q.w]]),
+            theta = float(headings(quaternion,
                                    lambda _: sample_at(self.topics.pose_topic, t))[0])
         except DataError as exc:
             self.session.abort(str(exc))
             return
-        x, y = float(position.x), float(position.y)
+        x, y = float(xyz[0, 0]), float(xyz[0, 1])
         self.session.add_pose(t, x, y, theta, now)
-        if self.recorder is not None:  # as PoseStamped, whatever the topic's type
+        if self.recorder is not None:  # as PoseStamped (Z-up), whatever the topic's type
             self.recorder.write(self.topics.pose_topic, t, self.recorder.pose_stamped(
-                t, x, y, theta, msg.header.frame_id or "map", (q.x, q.y, q.z, q.w)))
+                t, x, y, theta, msg.header.frame_id or "map",
+                tuple(float(c) for c in quaternion[0])))
 
     # -- output -------------------------------------------------------------------------------
     def publish(self, command: Command) -> None:

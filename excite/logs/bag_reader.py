@@ -54,7 +54,7 @@ import numpy as np
 
 from excite.errors import DataError
 from excite.logs.bag_stamps import stamped_table, wheels_together
-from excite.logs.orientation import headings
+from excite.logs.orientation import headings, z_up
 from excite.logs.timeseries import TimeSeries, sample_at
 
 __all__ = ["POSE_TYPES", "BAG_SUFFIXES", "JOINT_STATES", "MISSING_EXTRA", "BagLog",
@@ -64,8 +64,8 @@ JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 TF_TOPIC = "/tf"
 def _planar(position: Any, q: Any) -> tuple[float, ...]:
-    """What a pose row keeps: x, y (m) and the orientation quaternion's x, y, z, w."""
-    return position.x, position.y, q.x, q.y, q.z, q.w
+    """What a pose row keeps: x, y, z (m) and the orientation quaternion's x, y, z, w."""
+    return position.x, position.y, position.z, q.x, q.y, q.z, q.w
 
 
 #: Supported pose message types, and how each gives a pose row (:func:`_planar`); a type
@@ -80,7 +80,8 @@ POSE_TYPES: dict[str, Callable[[Any], tuple[float, ...]]] = {
                                                  msg.pose.pose.orientation),
     "geometry_msgs/msg/TransformStamped": lambda msg: _planar(msg.transform.translation,
                                                               msg.transform.rotation),
-    "geometry_msgs/msg/Pose2D": lambda msg: (msg.x, msg.y, 0.0, 0.0, math.sin(msg.theta / 2),
+    "geometry_msgs/msg/Pose2D": lambda msg: (msg.x, msg.y, 0.0, 0.0, 0.0,
+                                             math.sin(msg.theta / 2),
                                              math.cos(msg.theta / 2)),
 }
 #: The TF message types read from /tf: ROS 2's and ROS 1's, and ROS 1's before tf2.
@@ -213,16 +214,21 @@ class _Joints(_Stream):
 
 
 class _PoseStream(_Stream):
-    """Rows of (stamp, x, y, quaternion x, y, z, w)."""
+    """Rows of (stamp, x, y, z, quaternion x, y, z, w)."""
 
     def columns(self) -> list[np.ndarray]:
         """[t (s), x, y (m), theta (rad, wrapped)], without the poses not measured (a NaN,
         or a quaternion of zeros: a motion-capture body not tracked), skipped and counted."""
-        table = self.table(7)
-        lost = np.isnan(table).any(axis=1) | (table[:, 3:] == 0).all(axis=1)
+        table = self.table(8)
+        lost = np.isnan(table).any(axis=1) | (table[:, 4:] == 0).all(axis=1)
         self.skip(NOT_TRACKED, int(lost.sum()))
-        t, x, y, *q = table[~lost].T
-        return [t, x, y, headings(np.column_stack(q), lambda i: sample_at(self.where, t[i]))]
+        table = table[~lost]
+        t = table[:, 0]
+        q, position, turned = z_up(table[:, 4:], table[:, 1:4])
+        if turned is not None:
+            self.notes.append(f"{self.where}: {turned}")
+        return [t, position[:, 0], position[:, 1],
+                headings(q, lambda i: sample_at(self.where, t[i]))]
 
 
 class _Poses(_PoseStream):

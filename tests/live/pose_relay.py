@@ -1,23 +1,50 @@
-"""A node that republishes the simulated robot's ``/pose`` (PoseStamped) as
-``geometry_msgs/TransformStamped`` on ``/relay_pose``, as a motion-capture bridge such as
-vicon_bridge publishes a body's pose, until SIGINT or SIGTERM: ``python pose_relay.py``."""
+"""A node that republishes the simulated robot's ``/pose`` (PoseStamped, Z-up) on
+``/relay_pose`` until SIGINT or SIGTERM, as a motion-capture bridge would:
+``python pose_relay.py MODE`` with MODE "transform" (as ``geometry_msgs/TransformStamped``,
+vicon_bridge's type) or "y_up" (as a PoseStamped in a Y-up world, motion capture's default:
+positions (x, y, z) -> (x, z, -y), the world turned -90 degrees about x)."""
+
+import math
+import sys
 
 from companion import node, spin_until_signalled
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.qos import qos_profile_sensor_data
 
+MODES = ("transform", "y_up")
+#: -90 degrees about x (x, y, z, w): a Z-up world's vectors in the Y-up world.
+BACK = (-math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5))
+
+
+def product(a, b):
+    """The Hamilton product a b of quaternions (x, y, z, w)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+
 
 def main() -> None:
+    mode = sys.argv[1]
+    if mode not in MODES:
+        raise SystemExit(f"MODE must be one of {', '.join(MODES)}, got {mode!r}")
     relay_node = node("pose_relay")
-    out = relay_node.create_publisher(TransformStamped, "/relay_pose", 50)
+    kind = TransformStamped if mode == "transform" else PoseStamped
+    out = relay_node.create_publisher(kind, "/relay_pose", 50)
 
     def relay(msg: PoseStamped) -> None:
-        transform = TransformStamped()
-        transform.header, transform.child_frame_id = msg.header, "robot"
-        p, t = msg.pose.position, transform.transform.translation
-        t.x, t.y, t.z = p.x, p.y, p.z
-        transform.transform.rotation = msg.pose.orientation
-        out.publish(transform)
+        p, q = msg.pose.position, msg.pose.orientation
+        if mode == "transform":
+            transform = TransformStamped()
+            transform.header, transform.child_frame_id = msg.header, "robot"
+            t = transform.transform.translation
+            t.x, t.y, t.z = p.x, p.y, p.z
+            transform.transform.rotation = q
+            out.publish(transform)
+            return
+        p.x, p.y, p.z = p.x, p.z, -p.y
+        q.x, q.y, q.z, q.w = product(BACK, (q.x, q.y, q.z, q.w))
+        out.publish(msg)
 
     relay_node.create_subscription(PoseStamped, "/pose", relay, qos_profile_sensor_data)
     spin_until_signalled(relay_node)

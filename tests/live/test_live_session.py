@@ -97,18 +97,22 @@ def test_a_signal_stops_the_robot_and_keeps_what_was_recorded(session_dir, sig):
     assert (session_dir / "session.mcap" / "metadata.yaml").is_file()
 
 
-def test_a_transform_stamped_pose_topic_drives_the_session(session_dir):
-    """The pose as TransformStamped (vicon_bridge's type), relayed from the robot's
-    PoseStamped: the session subscribes it and drives; stopped by SIGINT after 3 segments."""
+@pytest.mark.parametrize("mode", ["transform", "y_up"])
+def test_a_motion_capture_bridges_pose_drives_the_session(session_dir, mode):
+    """The pose as TransformStamped (vicon_bridge's type), or as a PoseStamped in a Y-up
+    world (motion capture's default; it aborted the session as tilted 90 degrees), relayed
+    from the robot's PoseStamped: the session reads it and drives; stopped by SIGINT after
+    3 segments."""
     from pathlib import Path
 
-    relay = [sys.executable, str(Path(__file__).with_name("pose_relay.py"))]
+    relay = [sys.executable, str(Path(__file__).with_name("pose_relay.py")), mode]
     s = rehearse(session_dir, [*WHEELS[:4], "--pose-topic", "/relay_pose", "--robot",
                                "default"], ["--seed", "4"], signal_after=(signal.SIGINT, 3),
                  companion=relay)
     assert s.code == 130, (s.out, s.err)
     assert np.any(s.log[:, 4] != 0)  # it drove, on poses it could only read from the relay
     assert s.log[-1, 4] == 0 and s.log[-1, 5] == 0
+    assert ("the poses are Y-up" in s.err) == (mode == "y_up")
 
 
 FAILING_PROTOCOL = """

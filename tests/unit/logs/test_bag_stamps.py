@@ -269,3 +269,35 @@ def test_wheel_positions_all_nan_are_named(tmp_path, log):
                                         "interface only\\?\\); excite needs the wheels' "
                                         "positions$"):
         read_bag_log(path, LEFT, RIGHT, pose_topic="/sensor_pose")
+
+
+@pytest.mark.parametrize("body", ["z up", "y up"])
+def test_a_y_up_world_is_turned_z_up(tmp_path, log, body):
+    """Motion capture streaming Y-up (its default): the ground is the world's x-z plane, the
+    heading a turn about y; the body's z axis up, or its y axis (a rigid body defined in
+    that world). Read as the Z-up log, with a note (it was refused: "tilted 90 degrees")."""
+    from excite.logs.orientation import _QUARTER_X, _product
+
+    back = _QUARTER_X * np.array([-1.0, 1.0, 1.0, 1.0])  # -90 degrees about x
+
+    def y_up(bag: BagWriter):
+        out = []
+        for topic, received, msg in log_messages(bag, log, "pose"):
+            if topic == "/sensor_pose":
+                p, q = msg.pose.position, msg.pose.orientation
+                turned = _product(back, np.array([q.x, q.y, q.z, q.w]))
+                if body == "y up":
+                    turned = _product(turned, _QUARTER_X)
+                p.x, p.y, p.z = p.x, 0.25, -p.y  # the height is y
+                q.x, q.y, q.z, q.w = map(float, turned[0])
+            out.append((topic, received, msg))
+        return out
+    path = make_bag(tmp_path, "mcap", y_up)
+    bag = read_bag_log(path, LEFT, RIGHT, pose_topic="/sensor_pose")
+    np.testing.assert_allclose(bag.series.x, log.x, atol=1e-12)
+    np.testing.assert_allclose(bag.series.y, log.y, atol=1e-12)
+    np.testing.assert_allclose(bag.series.theta, log.theta, atol=1e-9)
+    axis = "z axis up" if body == "z up" else "y axis up, turned z-up"
+    assert bag.notes == (f"{path} /sensor_pose: the poses are Y-up (the world's y axis up, as "
+                         "motion capture streams by default; the body its "
+                         f"{axis}): turned Z-up, positions (x, y, z) read as (x, -z, y)",)
