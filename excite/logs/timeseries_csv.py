@@ -29,7 +29,7 @@ from excite.logs.csv_table import (
     content_lines,
     read_columns,
 )
-from excite.logs.orientation import headings
+from excite.logs.orientation import headings, z_up
 from excite.logs.segments import read_text
 from excite.logs.timeseries import (
     ANGLE_COLUMNS,
@@ -145,7 +145,7 @@ def _read_table(path: PathArg, note: OnNote) -> _Table:
     empty, with_nan, unmeasured = _nan_as_missing(header, values, empty)
     keep = ~unmeasured
     table = _heading_of_quaternion(_Table(name, header, values[keep], empty[keep],
-                                          line_numbers[keep], numbers[0]))
+                                          line_numbers[keep], numbers[0]), note)
     if table.header is not header:
         note(f"{name}: theta is the yaw of the quaternion "
              f"{', '.join(c for c in QUATERNION_COLUMNS if c in header.labels)}")
@@ -216,10 +216,11 @@ def _nan_as_missing(header: Header, values: FloatArray, empty: BoolArray
     return empty, with_nan, with_nan & empty[:, others].all(axis=1)
 
 
-def _heading_of_quaternion(table: _Table) -> _Table:
-    """The table with its quaternion columns replaced by theta, their yaw (rad); unchanged
-    without them. DataError naming the line of a row with some of the quaternion's cells
-    empty, or of a quaternion that is no rotation or tilted from z-up
+def _heading_of_quaternion(table: _Table, note: OnNote) -> _Table:
+    """The table with its quaternion columns (and z) replaced by theta, their yaw (rad), a
+    Y-up stream turned Z-up first (:func:`excite.logs.orientation.z_up`, with z; ``note`` is
+    told); unchanged without them. DataError naming the line of a row with some of the
+    quaternion's cells empty, or of a quaternion that is no rotation or tilted from z-up
     (:func:`excite.logs.orientation.headings`)."""
     labels = table.columns
     if "qw" not in labels:
@@ -237,13 +238,26 @@ def _heading_of_quaternion(table: _Table) -> _Table:
         if column in labels:
             q[:, axis] = table.values[:, labels.index(column)]
     filled = np.flatnonzero(~empty[:, 0])
+    values = table.values
+    if "z" in labels:
+        xyz = values[np.ix_(filled, [labels.index(c) for c in ("x", "y", "z")])]
+        q_up, xyz, turned = z_up(q[filled], xyz)
+        if turned is not None:
+            if np.isnan(xyz).any():
+                row = filled[int(np.argmax(np.isnan(xyz).any(axis=1)))]
+                raise DataError(f"{table.name}:{table.lines[row]}: z is empty but the poses "
+                                "are Y-up (their ground coordinates are x and z)")
+            values = values.copy()
+            values[filled, labels.index("x")], values[filled, labels.index("y")] = xyz[:, :2].T
+            q[filled] = q_up
+            note(f"{table.name}: {turned}")
     theta = np.full(len(table.lines), np.nan)
     theta[filled] = headings(q[filled], lambda i: f"{table.name}:{table.lines[filled[i]]}")
-    keep = [i for i, label in enumerate(labels) if label not in QUATERNION_COLUMNS]
+    keep = [i for i, label in enumerate(labels) if label not in (*QUATERNION_COLUMNS, "z")]
     derived = Column("theta", -1, "theta")  # computed, at no position in a row
     columns = (*(table.header.columns[i] for i in keep), derived)
     return replace(table, header=replace(table.header, columns=columns),
-                   values=np.column_stack([table.values[:, keep], theta]),
+                   values=np.column_stack([values[:, keep], theta]),
                    empty=np.column_stack([table.empty[:, keep], empty[:, 0]]))
 
 

@@ -54,10 +54,14 @@ _NAMES = {alias.lower(): column for column, aliases in ALIASES.items() for alias
 #: A motion-capture export's rotation columns (Motive, Vicon: RX, RY, RZ, RW), read as the
 #: quaternion only when RW is there: without it RX, RY, RZ are Euler angles.
 _ROTATION_QUATERNION = {f"r{axis}": f"q{axis}" for axis in "xyzw"}
+#: The position's z (m), read beside a quaternion: a Y-up stream is turned Z-up with it
+#: (:func:`excite.logs.orientation.z_up`).
+_Z_NAMES = {name: "z" for name in ("z", "pos_z", "position_z", "pose_z")}
 #: The quantity of each column (the units it may be written in: excite.logs.csv_table.UNITS).
 _QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
                **dict.fromkeys(TICK_COLUMNS, "count"), "x": "length", "y": "length",
-               "theta": "angle", **dict.fromkeys(QUATERNION_COLUMNS, "number")}
+               "theta": "angle", **dict.fromkeys(QUATERNION_COLUMNS, "number"),
+               "z": "length"}
 EXPECTED = "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two"
 #: The columns of a TUM trajectory (evo's and the TUM RGB-D benchmark's format: a pose per
 #: row, timestamp in s, position in m, orientation quaternion; no header, or a ``#``
@@ -70,12 +74,16 @@ _QUATERNION_LIKE = re.compile(r"^(q|quat|orientation)[_ .]?[xyzw]\b|^q[xyzw]$")
 
 
 def _names(line: str) -> dict[str, str]:
-    """The header names read as each column for this header line: :data:`ALIASES`, and RX..RW
-    as the quaternion when the line has an RW column."""
+    """The header names read as each column for this header line: :data:`ALIASES`, RX..RW
+    as the quaternion when the line has an RW column, and the height z (:data:`_Z_NAMES`)
+    when it has a quaternion (a Y-up world's ground coordinates are x and z)."""
     fields = header_fields(line, delimiter_of(line))
+    names = _NAMES
     if any(label_of(field, {"rw": "rw"})[0] == "rw" for field in fields):
-        return _NAMES | _ROTATION_QUATERNION
-    return _NAMES
+        names = names | _ROTATION_QUATERNION
+    if {"qz", "qw"} <= {label_of(field, names)[0] for field in fields}:
+        names = names | _Z_NAMES
+    return names
 
 
 def columns_hint(header: Header) -> str:
@@ -123,13 +131,13 @@ def parse_timeseries_header(line: str, where: str) -> Header:
 
 
 def _orientation(header: Header, where: str) -> Header:
-    """The header with the quaternion columns not read when it has theta; DataError for a
-    quaternion without qz or qw, or with one of qx, qy."""
+    """The header with the quaternion columns (and z) not read when it has theta; DataError
+    for a quaternion without qz or qw, or with one of qx, qy."""
     quaternion = [c for c in header.columns if c.label in QUATERNION_COLUMNS]
     if not quaternion:
         return header
     if "theta" in header.labels:
-        return header.without(QUATERNION_COLUMNS)
+        return header.without((*QUATERNION_COLUMNS, "z"))
     labels = {c.label for c in quaternion}
     missing = [c for c in ("qz", "qw") if c not in labels]
     if not missing and len(labels & {"qx", "qy"}) == 1:

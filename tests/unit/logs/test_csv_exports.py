@@ -366,6 +366,24 @@ def test_a_separator_ending_every_data_row_but_not_the_header(tmp_path, plain):
     assert_same(read(ended)[0], read_timeseries(path))
 
 
+def test_a_y_up_motion_capture_export_is_turned_z_up(tmp_path, plain):
+    """A motion-capture export in its Y-up world (x, y the height, z; the rigid body's y axis
+    up): read with z as the Z-up log, with a note (it was refused as tilted 90 degrees)."""
+    path, _, rows = plain
+    enc = export(tmp_path / "enc.csv", ["t", "phi_L", "phi_R"], [r[:3] for r in rows if r[1]])
+    poses = []
+    for t, _, _, x, y, theta in (r for r in rows if r[3]):
+        half = 0.5 * float(theta)  # yaw about the world y axis in the Y-up world
+        poses.append([t, x, "0.3", repr(-float(y)), "0", repr(math.sin(half)), "0",
+                      repr(math.cos(half))])
+    mocap = export(tmp_path / "mocap.csv", ["t", "x", "y", "z", "qx", "qy", "qz", "qw"], poses)
+    series, notes = read([enc, mocap])
+    assert_same(series, read_timeseries(path), rtol=1e-9)
+    assert f"{mocap}: the poses are Y-up (the world's y axis up, as motion capture streams by " \
+        "default; the body its y axis up, turned z-up): turned Z-up, positions (x, y, z) read " \
+        "as (x, -z, y)" in notes
+
+
 def test_a_file_after_a_lone_stream_that_is_no_stream_file_is_named(tmp_path, plain):
     """An encoder file followed by an export excite does not read (here a Motive CSV with
     its header block): the error is about that export, not "give the file with the other
