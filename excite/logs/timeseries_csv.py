@@ -29,6 +29,7 @@ from excite.logs.csv_table import (
     content_lines,
     read_columns,
 )
+from excite.logs.export_layouts import HEADER_LINES, layout
 from excite.logs.orientation import headings, z_up
 from excite.logs.segments import read_text
 from excite.logs.timeseries import (
@@ -42,11 +43,9 @@ from excite.logs.timeseries import (
 from excite.logs.timeseries_header import (
     EXPECTED,
     QUATERNION_COLUMNS,
-    TUM_HEADER,
     columns_hint,
-    is_tum_row,
+    is_time_name,
     parse_timeseries_header,
-    ros_header,
 )
 
 __all__ = ["read_timeseries", "write_timeseries"]
@@ -129,14 +128,12 @@ def _read_table(path: PathArg, note: OnNote) -> _Table:
     numbers, lines = content_lines(text)
     if not lines:
         raise DataError(f"{name}: empty file (expected a header {EXPECTED})")
-    if is_tum_row(lines[0]):  # no header: the TUM trajectory's columns
-        note(f"{name}: read as a TUM trajectory ({TUM_HEADER}: s, m, the orientation "
-             "quaternion)")
-        numbers, lines = [numbers[0] - 1, *numbers], [TUM_HEADER, *lines]
-    elif (ros := ros_header(lines[0])) is not None:
-        note(f"{name}: the column names of a ROS export (PlotJuggler, rostopic) read: "
-             f"{', '.join(ros[1])}")
-        lines = [ros[0], *lines[1:]]
+    found = layout(lines[:HEADER_LINES], lambda i: f"{name}:{numbers[i]}", is_time_name)
+    if found.note is not None:
+        note(f"{name}: {found.note}")
+    header_number = numbers[found.data - 1] if found.data else numbers[0] - 1
+    numbers, lines = [header_number, *numbers[found.data:]], [found.header,
+                                                             *lines[found.data:]]
     header = parse_timeseries_header(lines[0], f"{name}:{numbers[0]}")
     for line in header.notes(name):
         note(line)

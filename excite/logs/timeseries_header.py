@@ -5,9 +5,9 @@ meant as (:mod:`excite.logs.timeseries_csv` reads the rows).
 A header names ``t`` (s), the wheel angles ``phi_L,phi_R`` (rad) or encoder ticks
 ``ticks_L,ticks_R``, and the pose ``x,y`` (m), ``theta`` (rad) or an orientation quaternion
 ``qx,qy,qz,qw`` (``qx,qy`` may be left out), each also under the names of :data:`ALIASES` and
-with a unit (``t [ms]``, ``yaw (deg)``; :mod:`excite.logs.csv_table`). A file without a
-header whose first row is 8 numbers separated by spaces is a TUM trajectory
-(:data:`TUM_HEADER`).
+with a unit (``t [ms]``, ``yaw (deg)``; :mod:`excite.logs.csv_table`). The header of a
+tool's export laid out otherwise (a TUM trajectory, PlotJuggler, rostopic, OptiTrack Motive)
+comes from :mod:`excite.logs.export_layouts`.
 """
 
 from __future__ import annotations
@@ -25,11 +25,12 @@ from excite.logs.csv_table import (
     label_of,
     parse_header,
 )
+from excite.logs.export_layouts import HEADER_LINES, layout
 from excite.logs.timeseries import ANGLE_COLUMNS, POSE_COLUMNS, TICK_COLUMNS
 
-__all__ = ["ALIASES", "EXPECTED", "QUATERNION_COLUMNS", "TUM_HEADER", "columns_hint",
-           "header_hint", "header_line", "header_problem", "is_timeseries_csv", "is_tum_row",
-           "parse_timeseries_header", "pose_labels", "ros_header", "timeseries_streams"]
+__all__ = ["ALIASES", "EXPECTED", "QUATERNION_COLUMNS", "columns_hint", "header_hint",
+           "header_problem", "is_time_name", "is_timeseries_csv", "parse_timeseries_header",
+           "pose_labels", "timeseries_streams"]
 
 PathArg = str | os.PathLike[str]
 
@@ -63,11 +64,6 @@ _QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
                "theta": "angle", **dict.fromkeys(QUATERNION_COLUMNS, "number"),
                "z": "length"}
 EXPECTED = "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two"
-#: The columns of a TUM trajectory (evo's and the TUM RGB-D benchmark's format: a pose per
-#: row, timestamp in s, position in m, orientation quaternion; no header, or a ``#``
-#: comment): read as the pose stream of a file whose first row is 8 numbers separated by
-#: spaces.
-TUM_HEADER = "t x y z qx qy qz qw"
 # Header names of columns not read that look like a wheel's or an orientation's.
 _WHEEL_LIKE = re.compile(r"left|right|wheel|enc|tick")
 _QUATERNION_LIKE = re.compile(r"^(q|quat|orientation)[_ .]?[xyzw]\b|^q[xyzw]$")
@@ -84,6 +80,11 @@ def _names(line: str) -> dict[str, str]:
     if {"qz", "qw"} <= {label_of(field, names)[0] for field in fields}:
         names = names | _Z_NAMES
     return names
+
+
+def is_time_name(field: str) -> bool:
+    """Whether a header field names the time column t (under any of its names, any unit)."""
+    return label_of(field, _NAMES)[0] == "t"
 
 
 def columns_hint(header: Header) -> str:
@@ -176,84 +177,31 @@ def _check_column_set(header: Header, where: str) -> None:
                             f"the header names {header.found()}{columns_hint(header)}")
 
 
-def is_tum_row(line: str) -> bool:
-    """Whether a first content line is a TUM trajectory's row: 8 numbers separated by spaces
-    (:data:`TUM_HEADER`)."""
-    fields = line.split()
-    if len(fields) != 8 or delimiter_of(line) != " ":
-        return False
-    try:
-        [float(field) for field in fields]
-    except ValueError:
-        return False
-    return True
-
-
-#: Column names of ROS exports read as time-series columns: PlotJuggler's (``__time``,
-#: topic paths such as ``/mocap/pose/pose/position/x``, ``/joint_states/<joint>/position``
-#: with ``left`` or ``right`` in the joint's name) and ``rostopic echo -p``'s
-#: (``field.header.stamp`` in ns, ``field.pose.position.x``).
-_ROS_TIME = {"__time": "t", "field.header.stamp": "t [ns]"}
-_ROS_POSITION = re.compile(r"(?:^|[/.])(?:position|translation)[/.]([xy])$")
-_ROS_ORIENTATION = re.compile(r"(?:^|[/.])(?:orientation|rotation)[/.]([xyzw]|yaw)$")
-_ROS_JOINT = re.compile(r"/([^/]+)/position$")
-
-
-def _ros_name(field: str, fields: Sequence[str]) -> str | None:
-    """The time-series name of a ROS export's column name; None when it names none."""
-    name = field.strip().lower()
-    if name in _ROS_TIME:
-        return _ROS_TIME[name]
-    if name == "%time":  # rostopic's receive time (ns): only without another time column
-        others = (label_of(other, _NAMES)[0] for other in fields if other != "%time")
-        return None if "field.header.stamp" in fields or "t" in others else "t [ns]"
-    if match := _ROS_POSITION.search(name):
-        return match[1]
-    if match := _ROS_ORIENTATION.search(name):
-        return "theta" if match[1] == "yaw" else f"q{match[1]}"
-    if (match := _ROS_JOINT.search(name)) and ("left" in match[1]) != ("right" in match[1]):
-        return "phi_L" if "left" in match[1] else "phi_R"
-    return None
-
-
-def ros_header(line: str) -> tuple[str, list[str]] | None:
-    """A header line of a ROS export (PlotJuggler's CSV, ``rostopic echo -p``'s) with its
-    columns renamed to the time-series names they hold (the others kept, so not read), and
-    the renamings in words ('__time as t'); None for any other header."""
-    delimiter = delimiter_of(line)
-    fields = header_fields(line, delimiter)
-    lowered = [field.lower() for field in fields]
-    if not any(name in _ROS_TIME or name == "%time" for name in lowered):
-        return None
-    names = [_ros_name(field, lowered) or field for field in fields]
-    renamed = [f"{field} as {name}" for field, name in zip(fields, names, strict=True)
-               if name != field]
-    return delimiter.join(names), renamed
-
-
-def header_line(line: str) -> str:
-    """The header a file's first content line gives: :data:`TUM_HEADER` for a TUM
-    trajectory's row, a ROS export's renamed (:func:`ros_header`), else the line."""
-    if is_tum_row(line):
-        return TUM_HEADER
-    ros = ros_header(line)
-    return line if ros is None else ros[0]
-
-
 def _first_line(path: PathArg) -> str | None:
-    """A text file's header line (:func:`header_line` of its first line that is neither blank
-    nor a comment nor a separator line, stripped); None when the file cannot be read as text
-    or has no such line."""
+    """A text file's header line: the header the layout of its first content lines gives
+    (:func:`excite.logs.export_layouts.layout`: a tool's export, else the first line that is
+    neither blank nor a comment nor a separator line, stripped); None when the file cannot be
+    read as text, has no such line, or its layout is refused."""
+    lines: list[str] = []
     try:
         with open(os.fspath(path), encoding="utf-8-sig") as handle:
             for line in handle:
                 stripped = line.strip()
-                if stripped and not stripped.startswith("#") and not is_separator_line(
-                        stripped):
-                    return None if "\x00" in stripped else header_line(stripped)
+                if "\x00" in stripped:
+                    return None
+                if stripped and not stripped.startswith("#") and not (
+                        not lines and is_separator_line(stripped)):
+                    lines.append(stripped)
+                    if len(lines) == HEADER_LINES:
+                        break
     except (OSError, UnicodeDecodeError):
         return None
-    return None
+    if not lines:
+        return None
+    try:
+        return layout(lines, lambda _: os.fspath(path), is_time_name).header
+    except DataError:
+        return None
 
 
 def _labels(line: str) -> set[str]:

@@ -384,6 +384,46 @@ def test_a_y_up_motion_capture_export_is_turned_z_up(tmp_path, plain):
         "as (x, -z, y)" in notes
 
 
+MOTIVE_BLOCK = "\n".join([
+    "Format Version,1.23,Take Name,run,Capture Frame Rate,50.000000,Rotation Type,Quaternion,"
+    "Length Units,Millimeters,Coordinate Space,Global",
+    "",
+    ",Type" + ",Rigid Body" * 8 + ",Rigid Body Marker",
+    ",Name" + ",{body}" * 8 + ",{body}:Marker1",
+    ",ID" + ",1" * 8 + ",2",
+    ",,Rotation,Rotation,Rotation,Rotation,Position,Position,Position,Mean Marker Error,"
+    "Position",
+    "Frame,Time (Seconds),X,Y,Z,W,X,Y,Z,,X",
+    ""])
+
+
+def test_an_optitrack_motive_export_is_read_by_its_header_block(tmp_path, plain):
+    """Motive's CSV: the take's settings, rows Type, Name, ID and the columns' kinds above
+    Frame,Time (Seconds),X,Y,Z,...; Y-up (its default), lengths in mm. The rigid body's
+    rotation and position are read (a marker's are not), turned Z-up; the same log as the
+    plain file. Two rigid bodies are an error naming them."""
+    path, _, rows = plain
+    enc = export(tmp_path / "enc.csv", ["t", "phi_L", "phi_R"], [r[:3] for r in rows if r[1]])
+    lines = []
+    for frame, (t, _, _, x, y, theta) in enumerate(r for r in rows if r[3]):
+        half = 0.5 * float(theta)
+        lines.append(",".join([str(frame), t, "0", repr(math.sin(half)), "0",
+                               repr(math.cos(half)), repr(1e3 * float(x)), "300.0",
+                               repr(-1e3 * float(y)), "0.0002", "1.0"]))
+    motive = tmp_path / "motive.csv"
+    motive.write_text(MOTIVE_BLOCK.format(body="robot") + "\n".join(lines) + "\n")
+    series, notes = read([enc, motive])
+    assert_same(series, read_timeseries(path), rtol=1e-9)
+    assert notes[0] == (f"{motive}: read as an OptiTrack Motive export (rigid body 'robot', "
+                        "lengths in mm)")
+    two = MOTIVE_BLOCK.format(body="robot").replace(",robot:Marker1", ",box")
+    two = two.replace("Rigid Body Marker", "Rigid Body")
+    motive.write_text(two + "\n".join(lines) + "\n")
+    with pytest.raises(DataError, match="an OptiTrack Motive export of several rigid bodies "
+                                        r"\(box, robot\); export the robot's alone"):
+        read([enc, motive])
+
+
 def test_a_file_after_a_lone_stream_that_is_no_stream_file_is_named(tmp_path, plain):
     """An encoder file followed by an export excite does not read (here a Motive CSV with
     its header block): the error is about that export, not "give the file with the other
