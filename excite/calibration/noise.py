@@ -507,14 +507,15 @@ def _rounded_cholesky(band: FloatArray) -> FloatArray:
     which is positive semi-definite by construction (a sum of squared levels times positive
     semi-definite units): where its factorization fails, it fails by rounding (a level at its
     floor beside a level many decades larger, e.g. pose positions far more precise than the
-    heading's lever arm), and the diagonal raised by ROUNDING_JITTER (relative) in turn
-    factorizes it. LinAlgError when none does."""
+    heading's lever arm, or a variance of exactly zero), and the diagonal raised by
+    ROUNDING_JITTER, relative to each entry and to the largest, in turn factorizes it.
+    LinAlgError when none does."""
     try:
         return _banded_cholesky(band)
     except np.linalg.LinAlgError:
         for jitter in ROUNDING_JITTER:
             raised = band.copy()
-            raised[0] *= 1.0 + jitter
+            raised[0] += jitter * (np.abs(band[0]) + float(np.max(np.abs(band[0]))))
             try:
                 return _banded_cholesky(raised)
             except np.linalg.LinAlgError:

@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
                                  holdout=args.holdout, on_note=print_note,
                                  heterogeneity="common" if args.common_params else "random")
     result, validation = calibration.result, calibration.holdout
-    _refuse_implausible(args.files, result)
+    _refuse_implausible(args.files, result, calibration)
     estimated_pose = result.sensor_pose if result.sensor_pose_std is not None else None
     done = None if args.target is None else _judged(args, calibration)
     status = calibration_status(result)
@@ -143,15 +143,21 @@ def _clock_doubts(calibration: LogCalibration) -> list[str]:
             and part.log.offset_source == "default"]
 
 
-def _refuse_implausible(files: list[str], result: CalibrationResult) -> None:
+def _refuse_implausible(files: list[str], result: CalibrationResult,
+                        calibration: LogCalibration) -> None:
     """UsageError when the data determine wheel parameters no real robot has (a log in other
-    units than excite reads), naming the likely units."""
+    units than excite reads), naming the likely units, or that the robot never turned."""
     from excite.core.plausible import implausible, log_unit_hint
 
     values = result.params.as_array()
     what = implausible(*values) if result.identifiable else None
     if what is None:
         return
+    if not any(any(part.segments.dtheta) for part in calibration.parts):
+        count = sum(len(part.segments) for part in calibration.parts)
+        raise UsageError(f"{', '.join(files)}: the robot never turned (the pose heading never "
+                         f"changes over {count} segments), so nothing determines the wheel "
+                         "separation; drive turns (spins, arcs)")
     hint = log_unit_hint(*values) or ("positions in m, headings and wheel angles in rad? "
                                       "docs/formats.md")
     raise UsageError(f"{', '.join(files)}: the calibration gives {what}, which no real "

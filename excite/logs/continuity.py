@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from excite.core.kinematics import MAX_RADIUS_TO_TRACK
+from excite.core.plausible import RADIUS_RANGE
 from excite.errors import DataError
 from excite.logs.timeseries import Stream, TimeSeries, without_poses
 from excite.stats.robust import MEDIAN_ABS_NORMAL
@@ -79,11 +80,13 @@ class Limits:
         difference of two poses and turned likewise: at 5, a still robot's noise passes it in
         about 4 of a million segments (the Rayleigh tail exp(-5^2 / 2)). The pose noise is
         estimated from the pose stream (:func:`pose_noise`).
-    stale_turn (rad): pose samples that repeat the sample before them exactly (x, y and
-        theta to the bit, which a measured pose never does) while the wheels turned more
-        than this in all (|dphi_L| + |dphi_R|; 0.1 rad rolls a 5 cm wheel 5 mm) came from a
-        source that froze or held a placeholder while it lost the body
-        (:func:`stale_poses`); a robot standing still may repeat its pose.
+    stale_turn (rad), stale_steps: pose samples that repeat the sample before them exactly
+        (x, y and theta) while the wheels turned more than stale_turn in all (|dphi_L| +
+        |dphi_R|; 0.1 rad rolls a 5 cm wheel 5 mm), and by so much that even the smallest
+        plausible wheel (RADIUS_RANGE[0]) rolled stale_steps of the positions' resolution
+        (their smallest change between samples: a source that writes cm repeats its pose
+        while the robot creeps), came from a source that froze or held a placeholder while
+        it lost the body (:func:`stale_poses`); a robot standing still may repeat its pose.
     max_radius_to_track, max_wheel_radius (m), max_sensor_arm (m): the most the wheels' small
         turns dphi_L, dphi_R (within still_wheel) can move a plausible robot's sensor: a turn of
         max_radius_to_track (|dphi_L| + |dphi_R|) (rad; r / b is 0.3 on a Husky, under 1 on any
@@ -106,6 +109,7 @@ class Limits:
     still_heading: float = 0.01
     carry_sigmas: float = 5.0
     stale_turn: float = 0.1
+    stale_steps: float = 3.0
     max_radius_to_track: float = MAX_RADIUS_TO_TRACK
     max_wheel_radius: float = 0.5
     max_sensor_arm: float = 1.0
@@ -242,11 +246,20 @@ def left_on_track(ts: TimeSeries, poses: StreamCheck, limits: Limits,
     return thinned, StreamCheck(bridged, jump, poses.dropouts), int(off.size)
 
 
+def _resolution(ts: TimeSeries) -> float:
+    """The positions' resolution (m): their smallest change between consecutive samples (inf
+    when they never change)."""
+    steps = np.abs(np.concatenate([np.diff(ts.x), np.diff(ts.y)]))
+    steps = steps[steps > 0]
+    return float(steps.min()) if steps.size else math.inf
+
+
 def stale_poses(ts: TimeSeries, limits: Limits | None = None) -> IntArray:
     """The pose samples (indices) that repeat the sample before them exactly, in runs over
-    which the wheels turned more than ``limits.stale_turn`` (see :class:`Limits`): every
-    sample of such a run but its first, and the first too when the pose jumped to it (a
-    placeholder, such as the origin, while the body was lost)."""
+    which the wheels turned more than :class:`Limits` allows (``stale_turn``, and
+    ``stale_steps`` of the positions' resolution): every sample of such a run but its first,
+    and the first too when the pose jumped to it (a placeholder, such as the origin, while
+    the body was lost; the jump judged with the noise of the samples that do not repeat)."""
     limits = limits or Limits()
     poses = np.column_stack([ts.x, ts.y, ts.theta])
     same = np.all(poses[1:] == poses[:-1], axis=1)
@@ -257,14 +270,17 @@ def stale_poses(ts: TimeSeries, limits: Limits | None = None) -> IntArray:
     turned = sum(np.abs(np.interp(ts.t_pose[ends], ts.t_enc, phi)
                         - np.interp(ts.t_pose[starts], ts.t_enc, phi))
                  for phi in (ts.phi_L, ts.phi_R))
-    held = turned > limits.stale_turn
+    least = max(limits.stale_turn,
+                2.0 * limits.stale_steps * _resolution(ts) / RADIUS_RANGE[0])
+    held = turned > least
     if not held.any():
         return np.zeros(0, dtype=np.int64)
     starts, ends = starts[held], ends[held]
     # a run that jumped away from the pose before it is a placeholder from its first sample
     entered = starts > 0
     jumped = np.zeros(starts.size, dtype=bool)
-    jumped[entered] = _jumps(ts, starts[entered] - 1, starts[entered], limits, pose_noise(ts))
+    noise = pose_noise(without_poses(ts, np.flatnonzero(same) + 1))
+    jumped[entered] = _jumps(ts, starts[entered] - 1, starts[entered], limits, noise)
     return np.concatenate([np.arange(a + (not j), b + 1)
                            for a, b, j in zip(starts, ends, jumped, strict=True)]).astype(np.int64)
 

@@ -162,17 +162,24 @@ HELD_ROWS = 1.5
 HELD_RUN = 3.0
 #: The fewest values a stream must take before its repeats are judged.
 MIN_HELD_VALUES = 10
+#: A filled export's stream changes at its own rate: at least this share of the intervals
+#: between its changes lie within HELD_JITTER of their median (a coarse value that holds
+#: while the robot creeps changes at times that follow the motion instead).
+HELD_REGULAR = 0.8
+HELD_JITTER = 0.25
 
 
 def _held_as_missing(table: _Table, note: OnNote) -> _Table:
     """The table with a stream's held values as empty cells: an export that writes every row
     full (PlotJuggler's "fill with previous value") repeats a stream's last sample in the
-    rows of the other stream's samples, so its values change only every few rows. Where a
-    stream's value usually changes only every :data:`HELD_ROWS` rows or more, each repeat
+    rows of the other stream's samples, so its values change only every few rows, at its own
+    rate. Where a stream's value usually changes only every :data:`HELD_ROWS` rows or more,
+    at regular times (:data:`HELD_REGULAR`), each repeat
     of the value before it, in a run of repeats lasting up to :data:`HELD_RUN` times the
     usual interval between changes, is no sample (read at a later time, it would shift the
-    stream's clock by up to a sample period); longer runs (standing still) are kept. Rows
-    left with no value are dropped; ``note`` is told per stream."""
+    stream's clock by up to a sample period); longer runs (standing still) are kept. A stream
+    with an empty cell after its first sample is no filled export's, and is left as it is.
+    Rows left with no value are dropped; ``note`` is told per stream."""
     groups = [g for g in (table.encoder_columns, POSE_COLUMNS if table.has_pose else None)
               if g]
     if len(groups) < 2:
@@ -181,6 +188,8 @@ def _held_as_missing(table: _Table, note: OnNote) -> _Table:
     for group in groups:
         index = [table.columns.index(c) for c in group]
         rows = np.flatnonzero(~empty[:, index[0]])
+        if rows.size and rows[-1] - rows[0] + 1 != rows.size:
+            continue  # empty cells between its samples: not a filled export
         t = table.values[rows, table.columns.index("t")]
         values = table.values[np.ix_(rows, index)]
         changed = np.concatenate(([True], np.any(values[1:] != values[:-1], axis=1)))
@@ -188,14 +197,18 @@ def _held_as_missing(table: _Table, note: OnNote) -> _Table:
         if (starts.size < MIN_HELD_VALUES or rows.size < HELD_ROWS * starts.size
                 or np.any(np.diff(t) <= 0)):  # a clock that does not increase: an error later
             continue
-        usual = float(np.median(np.diff(t[starts])))
+        intervals = np.diff(t[starts])
+        usual = float(np.median(intervals))
+        if np.mean(np.abs(intervals - usual) <= HELD_JITTER * usual) < HELD_REGULAR:
+            continue  # changes at irregular times: a coarse value that holds, not a rate
         run = np.diff(np.append(starts, rows.size))  # rows per value
         ends = t[np.minimum(starts + run, rows.size - 1)]
         held = np.repeat((ends - t[starts] <= HELD_RUN * usual) & (run > 1), run) & ~changed
         empty[np.ix_(rows[held], index)] = True
         note(f"{table.name}: the {'/'.join(group)} cells repeat the row before them in "
              f"{int(held.sum())} rows (an export that fills every cell with the last value, "
-             "e.g. PlotJuggler's): read as no sample")
+             "e.g. PlotJuggler's, or values that change only every few rows): read as no "
+             "sample")
     keep = ~np.all(empty[:, [table.columns.index(c) for g in groups for c in g]], axis=1)
     return replace(table, values=table.values[keep], empty=empty[keep],
                    lines=table.lines[keep])

@@ -460,6 +460,23 @@ def test_streams_on_different_clocks_are_named(capsys, tmp_path, logs):
                                  "time? --time-offset S")
 
 
+def test_a_robot_that_never_turned_is_named(capsys, tmp_path):
+    """Straight driving only, a noise-free heading that never changes: it was an internal
+    error (a covariance band with a variance of zero that rounding jitter relative to each
+    entry could not lift), then a unit hint for a wheel separation of 4e39 m."""
+    series = synthetic_log(np.random.default_rng(5), duration=120, speed=0.05, turn_rate=0.0,
+                           pose_rate=100).series
+    rounded = dataclasses.replace(series, x=np.round(series.x, 4), y=np.round(series.y, 4),
+                                  theta=np.round(series.theta, 4))  # a logger's %.4f
+    path = tmp_path / "straight.csv"
+    write_timeseries(path, rounded)
+    code, _, err = run_cli(capsys, "calibrate", path)
+    assert code == 2 and err.count("\n") == 1
+    assert "the robot never turned (the pose heading never changes over" in err
+    assert err.rstrip().endswith("nothing determines the wheel separation; drive turns "
+                                 "(spins, arcs)")
+
+
 def test_options_may_come_between_the_logs(capsys, logs):
     """`excite calibrate a.csv --window 2 b.csv` was refused ("unrecognized arguments:
     b.csv"): argparse stopped taking logs at the first option."""
