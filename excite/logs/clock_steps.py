@@ -11,12 +11,15 @@ only its stamps, so here the step is found from the motion:
 1. the gaps of each stream (an interval over :data:`~excite.logs.continuity.GAP_RATIO`
    median periods and over :data:`MIN_STEP`) that the other stream does not share;
 2. around each, the stretches of the log between it and the gaps next to it, each at least
-   :data:`STRETCH` long, their clock offsets estimated apart
+   :data:`STRETCH` long, their clock offsets estimated apart within the larger of the given
+   range and the gap's length (:data:`SEARCH_SHARE`)
    (:func:`excite.logs.time_offset.estimate_time_offset`: the lag at which the wheel rates
    explain the heading rate, precise to a few ms);
 3. offsets that differ by more than :data:`MIN_STEP` are a step of the stream that has the
-   gap: its later stamps are moved by the difference (never past the gap's start), and a
-   note says where and by how much.
+   gap when they differ the way a forward step does, by at most the gap less half a
+   period (a step forward opens the gap it is found at): its later stamps are moved back
+   by the difference, and a note says where and by how much. Two clocks that drift apart
+   step so at every such gap, and are corrected alike.
 
 A stretch whose offset cannot be estimated (too little turning, too short) leaves its gap
 unchecked; an offset beyond the search range there is noted, not corrected.
@@ -43,6 +46,9 @@ FloatArray = NDArray[np.float64]
 MIN_STEP = 0.05
 #: The shortest stretch (s) whose clock offset is estimated on its own.
 STRETCH = 20.0
+#: The offsets are searched within the larger of the given range and the gap, at most this
+#: share of the shorter stretch (the estimate needs an overlap of 4 times its range).
+SEARCH_SHARE = 0.22
 
 
 def _gaps(t: FloatArray) -> list[int]:
@@ -66,6 +72,8 @@ def _offset(series: TimeSeries, start: float, end: float, max_offset: float) -> 
     None when they cannot determine it."""
     try:
         return estimate_time_offset(during(series, start, end), max_offset)
+    except OffsetOutOfRange:
+        raise
     except DataError:
         return None
 
@@ -86,14 +94,19 @@ def corrected_clock_steps(series: TimeSeries, max_offset: float = MAX_TIME_OFFSE
     bounds = [series.t_enc[0]] + [t for t, _, _ in candidates] + [series.t_enc[-1]]
     for k, (t_gap, stream, i) in enumerate(candidates):
         before, after = (bounds[k], t_gap), (t_gap, bounds[k + 2])
-        if min(before[1] - before[0], after[1] - after[0]) < STRETCH:
+        shortest = min(before[1] - before[0], after[1] - after[0])
+        if shortest < STRETCH:
             continue
+        t = series.t_enc if stream == "encoder" else series.t_pose
+        # a forward step is at most the gap it opens: search that far, as the stretches allow
+        search = min(max(max_offset, float(t[i + 1] - t[i]) + MIN_STEP),
+                     SEARCH_SHARE * shortest)
         try:
-            first = _offset(series, *before, max_offset)
-            second = _offset(series, *after, max_offset)
+            first = _offset(series, *before, search)
+            second = _offset(series, *after, search)
         except OffsetOutOfRange:
             notes.append(f"{series.location(stream, i + 1)}: the clock offset of the log "
-                         f"before this gap and after it differ beyond +-{max_offset:g} s (a "
+                         f"before this gap and after it differ beyond +-{search:.3g} s (a "
                          "clock set while recording?): calibrate each side alone (--end, "
                          "--start)")
             continue
@@ -113,8 +126,9 @@ def _corrected(series: TimeSeries, stream: str, i: int, change: float
     past the gap's start."""
     t = (series.t_enc if stream == "encoder" else series.t_pose).copy()
     shift = -change if stream == "encoder" else change
-    if t[i + 1] + shift <= t[i]:
-        return series, None
+    period = float(np.median(np.diff(t)))
+    if shift >= 0 or t[i + 1] + shift < t[i] + 0.5 * period:
+        return series, None  # a forward step opens the gap it closes, no more
     where = series.location(stream, i + 1)
     t[i + 1:] += shift
     field = "t_enc" if stream == "encoder" else "t_pose"
@@ -122,5 +136,5 @@ def _corrected(series: TimeSeries, stream: str, i: int, change: float
     object.__setattr__(moved, "unwrapped_wheels", series.unwrapped_wheels)
     return moved, (f"{where}: the {stream} stamps step by {-shift:+.3f} s at this gap (the "
                    "clock offset of the log after it differs from before it: a clock set "
-                   f"while recording, e.g. by NTP): the later {stream} stamps are corrected "
-                   f"by {shift:+.3f} s")
+                   "while recording, e.g. by NTP, or two clocks drifting apart): the later "
+                   f"{stream} stamps are corrected by {shift:+.3f} s")

@@ -31,7 +31,8 @@ def stepped(series, stream: str, at: float, step: float):
     return dataclasses.replace(series, **{field: t})
 
 
-@pytest.mark.parametrize("stream, step", [("encoder", 0.3), ("pose", 0.2), ("encoder", 0.08)])
+@pytest.mark.parametrize("stream, step", [("encoder", 0.3), ("pose", 0.2), ("encoder", 0.08),
+                                          ("encoder", 2.0)])
 def test_a_step_at_a_gap_is_found_and_corrected(series, stream, step):
     """Without the correction every segment after the step paired angles and poses of
     different times (a log with the encoders' clock 0.3 s ahead from half-way on moved the
@@ -59,3 +60,5 @@ def test_what_is_no_clock_step(series):
     assert corrected_clock_steps(paused)[1] == []
     late = stepped(series, "encoder", 90.0 - STRETCH / 2, 0.3)
     assert corrected_clock_steps(late)[1] == []
+    back = stepped(gap, "encoder", 40.5, -0.2)  # would widen the gap: not a forward step
+    assert corrected_clock_steps(back)[1] == []
