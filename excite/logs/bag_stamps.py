@@ -15,10 +15,10 @@ clock). excite uses the stamps; the receive times are what it checks them agains
   that starts wrong and is corrected) makes its stamps jump forward or back while the receive
   times go on as before. An interval between consecutive messages (receive order) is a step when
   its stamp increment and its receive increment differ by more than
-  :data:`~excite.logs.clock_steps.MIN_STEP` (and 8 robust standard deviations of that difference
-  over the stream), the receive increment is an ordinary one (within half that of the stream's
-  median: a recorder that stalled, or whose own clock stepped, changes the receive increment
-  instead), and the offset stamp - receive time stays shifted after it (the medians of
+  :data:`~excite.logs.timeseries.MIN_CLOCK_STEP` (and 8 robust standard deviations of that
+  difference over the stream), the receive increment is an ordinary one (within half that of the
+  stream's median: a recorder that stalled, or whose own clock stepped, changes the receive
+  increment instead), and the offset stamp - receive time stays shifted after it (the medians of
   :data:`PERSISTENCE` messages each side differ by the step, to half the threshold: one late
   message is no step). The stamps after a step are shifted back by it, so the stream keeps one
   clock, and a note says where and by how much. Without receive times (CSV logs) steps are found
@@ -40,18 +40,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 from excite.errors import DataError
-from excite.logs.clock_steps import MIN_STEP
 from excite.logs.continuity import GAP_RATIO
-from excite.logs.timeseries import sample_at
+from excite.logs.timeseries import MIN_CLOCK_STEP, sample_at
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
-__all__ = ["PERSISTENCE", "StampedTable", "clock_steps", "stamped_table",
+__all__ = ["PERSISTENCE", "StampedTable", "receive_time_steps", "stamped_table",
            "wheels_together"]
 
 FloatArray = NDArray[np.float64]
 
 #: Messages on each side of a step whose stamp - receive offsets must differ by the step.
 PERSISTENCE = 25
+#: Messages on each side of a step whose offsets give its size (fewer up to another step).
+SIZE_WINDOW = 200
 #: A step is this many robust standard deviations of the stamp - receive increments at least.
 STEP_SIGMAS = 8.0
 
@@ -66,19 +67,22 @@ class StampedTable:
     notes: list[str] = field(default_factory=list)
 
 
-def clock_steps(stamps: FloatArray, received: FloatArray) -> list[tuple[int, float]]:
+def receive_time_steps(stamps: FloatArray, received: FloatArray) -> list[tuple[int, float]]:
     """The steps of ``stamps`` against ``received`` (both s, in receive order, the stamps all
     set): (index of the interval, so between messages i and i + 1; the step, s), in order
-    (see the module docstring)."""
+    (see the module docstring). Clocks that run at different rates (a simulation's against
+    the recorder's wall clock) drift apart by about the same amount at every interval: that
+    drift, the median change, is taken out before steps are looked for."""
     n = stamps.size
     if n < 2 * PERSISTENCE:
         return []
     d_stamp, d_received = np.diff(stamps), np.diff(received)
-    change = d_stamp - d_received
-    spread = MEDIAN_ABS_NORMAL * float(np.median(np.abs(change - np.median(change))))
-    threshold = max(MIN_STEP, STEP_SIGMAS * spread)
+    drift = float(np.median(d_stamp - d_received))
+    change = d_stamp - d_received - drift
+    spread = MEDIAN_ABS_NORMAL * float(np.median(np.abs(change)))
+    threshold = max(MIN_CLOCK_STEP, STEP_SIGMAS * spread)
     usual = float(np.median(d_received))
-    offset = stamps - received
+    offset = stamps - received - drift * np.arange(n)  # detrended
     steps = []
     for i in np.flatnonzero(np.abs(change) > threshold):
         if abs(d_received[i] - usual) > threshold / 2:
@@ -86,8 +90,19 @@ def clock_steps(stamps: FloatArray, received: FloatArray) -> list[tuple[int, flo
         before = float(np.median(offset[max(0, i + 1 - PERSISTENCE): i + 1]))
         after = float(np.median(offset[i + 1: i + 1 + PERSISTENCE]))
         if abs(after - before - change[i]) <= threshold / 2:
-            steps.append((int(i), after - before))
-    return steps
+            steps.append(int(i))
+    # each step's size: lines through the raw offsets on each side (up to the steps beside
+    # it, at most SIZE_WINDOW messages), met at the step
+    raw = stamps - received
+    bounds = [0, *(i + 1 for i in steps), n]
+    sizes = []
+    for k, i in enumerate(steps):
+        sides = [np.arange(max(bounds[k], i + 1 - SIZE_WINDOW), i + 1),
+                 np.arange(i + 1, min(bounds[k + 2], i + 1 + SIZE_WINDOW))]
+        at = [np.polyval(np.polyfit(side - i, raw[side], 1), 0.5) if side.size > 2
+              else float(np.median(raw[side])) for side in sides]
+        sizes.append((i, float(at[1] - at[0])))
+    return sizes
 
 
 def _without_unset(where: str, stamps: FloatArray, received: FloatArray | None
@@ -127,7 +142,7 @@ def stamped_table(where: str, rows: FloatArray, received: FloatArray | None = No
     table = table[first:]
     table[:, 0] = stamps[first:]
     if note is None and received is not None:
-        for i, step in clock_steps(table[:, 0], received[first:]):
+        for i, step in receive_time_steps(table[:, 0], received[first:]):
             result.notes.append(
                 f"{sample_at(where, table[i, 0])}: the header stamps step by {step:+.3f} s "
                 "against the times the recorder received the messages (a clock set while "

@@ -8,17 +8,18 @@ the encoders' clock half-way through a log moved the wheel radii by 6%, with a c
 A bag's receive times show a step directly (:mod:`excite.logs.bag_stamps`); a CSV log has
 only its stamps, so here the step is found from the motion:
 
-1. the gaps of each stream (an interval over :data:`~excite.logs.continuity.GAP_RATIO`
-   median periods and over :data:`MIN_STEP`) that the other stream does not share;
+1. the gaps of each stream (an interval over :data:`~excite.logs.continuity.GAP_RATIO` median
+   periods and over :data:`~excite.logs.timeseries.MIN_CLOCK_STEP`) that the other stream does
+   not share;
 2. around each, the stretches of the log between it and the gaps next to it, each at least
    :data:`STRETCH` long, their clock offsets estimated apart within the larger of the given
    range and the gap's length (:data:`SEARCH_SHARE`)
    (:func:`excite.logs.time_offset.estimate_time_offset`: the lag at which the wheel rates
    explain the heading rate, precise to a few ms);
-3. offsets that differ by more than :data:`MIN_STEP` are a step of the stream that has the
-   gap when they differ the way a forward step does, by at most the gap less half a
-   period (a step forward opens the gap it is found at): its later stamps are moved back
-   by the difference, and a note says where and by how much. Two clocks that drift apart
+3. offsets that differ by more than :data:`~excite.logs.timeseries.MIN_CLOCK_STEP` are a step of
+   the stream that has the gap when they differ the way a forward step does, by at most the gap
+   less half a period (a step forward opens the gap it is found at): its later stamps are moved
+   back by the difference, and a note says where and by how much. Two clocks that drift apart
    step so at every such gap, and are corrected alike.
 
 A stretch whose offset cannot be estimated (too little turning, too short) leaves its gap
@@ -35,15 +36,12 @@ from numpy.typing import NDArray
 from excite.errors import DataError
 from excite.logs.continuity import GAP_RATIO
 from excite.logs.time_offset import MAX_TIME_OFFSET, OffsetOutOfRange, estimate_time_offset
-from excite.logs.timeseries import TimeSeries, during
+from excite.logs.timeseries import MIN_CLOCK_STEP, TimeSeries, during
 
-__all__ = ["MIN_STEP", "STRETCH", "corrected_clock_steps"]
+__all__ = ["SEARCH_SHARE", "STRETCH", "corrected_clock_steps"]
 
 FloatArray = NDArray[np.float64]
 
-#: The smallest clock step found (s): smaller ones are within a stamp latency's spread, and
-#: the clock-offset test sees a constant one.
-MIN_STEP = 0.05
 #: The shortest stretch (s) whose clock offset is estimated on its own.
 STRETCH = 20.0
 #: The offsets are searched within the larger of the given range and the gap, at most this
@@ -56,7 +54,8 @@ def _gaps(t: FloatArray) -> list[int]:
     if t.size < 3:
         return []
     d = np.diff(t)
-    return [int(i) for i in np.flatnonzero(d > max(MIN_STEP, GAP_RATIO * float(np.median(d))))]
+    limit = max(MIN_CLOCK_STEP, GAP_RATIO * float(np.median(d)))
+    return [int(i) for i in np.flatnonzero(d > limit)]
 
 
 def _shared(t_other: FloatArray, start: float, end: float) -> bool:
@@ -99,7 +98,7 @@ def corrected_clock_steps(series: TimeSeries, max_offset: float = MAX_TIME_OFFSE
             continue
         t = series.t_enc if stream == "encoder" else series.t_pose
         # a forward step is at most the gap it opens: search that far, as the stretches allow
-        search = min(max(max_offset, float(t[i + 1] - t[i]) + MIN_STEP),
+        search = min(max(max_offset, float(t[i + 1] - t[i]) + MIN_CLOCK_STEP),
                      SEARCH_SHARE * shortest)
         try:
             first = _offset(series, *before, search)
@@ -110,7 +109,7 @@ def corrected_clock_steps(series: TimeSeries, max_offset: float = MAX_TIME_OFFSE
                          "clock set while recording?): calibrate each side alone (--end, "
                          "--start)")
             continue
-        if first is None or second is None or abs(second - first) <= MIN_STEP:
+        if first is None or second is None or abs(second - first) <= MIN_CLOCK_STEP:
             continue
         series, note = _corrected(series, stream, i, second - first)
         if note:

@@ -45,9 +45,11 @@ TICK_COLUMNS = ("ticks_L", "ticks_R")
 POSE_COLUMNS = ("x", "y", "theta")
 
 
-#: s: a stream's time stepping back by more than this, and increasing after, is named as a
-#: clock set back while recording (a sample out of order steps back by less).
-CLOCK_SET_BACK = 0.05
+#: The smallest clock step (s) excite finds (:mod:`excite.logs.clock_steps`,
+#: :mod:`excite.logs.bag_stamps`) or names (a stream's time stepping back by more, and
+#: increasing after): smaller ones are within a stamp latency's spread, or a sample out of
+#: order.
+MIN_CLOCK_STEP = 0.05
 
 
 def sample_at(source: str, t: float) -> str:
@@ -89,9 +91,9 @@ def _checked_stream(kind: Stream, source: str, lines: IntArray | None,
     if steps.size:
         i = int(steps[0]) + 1
         back = float(t[i - 1] - t[i])
-        hint = (f"; a clock set back by {back:.3g} s while recording (NTP)? calibrate the "
-                "rows before this line and those from it as two logs"
-                if back > CLOCK_SET_BACK and np.all(np.diff(t[i:]) > 0) else "")
+        hint = (f"; a clock set back by {back:.3g} s while recording (NTP)? split the file "
+                "at this line and calibrate the two parts as two logs"
+                if back > MIN_CLOCK_STEP and np.all(np.diff(t[i:]) > 0) else "")
         raise DataError(f"{_where(source, lines, t, i)}: time does not increase "
                         f"({float(t[i])!r} s after {float(t[i - 1])!r} s){hint}")
     return arrays

@@ -13,9 +13,8 @@ from rosbags.typesys import get_types_from_msg  # noqa: E402
 
 from excite import DataError  # noqa: E402
 from excite.logs.bag_reader import read_bag_log  # noqa: E402
-from excite.logs.bag_stamps import clock_steps, stamped_table  # noqa: E402
+from excite.logs.bag_stamps import receive_time_steps, stamped_table  # noqa: E402
 from excite.logs.bag_writer import BagWriter  # noqa: E402
-from excite.logs.clock_steps import MIN_STEP  # noqa: E402
 from tests.unit.logs.test_bags import (  # noqa: E402
     LEFT,
     RIGHT,
@@ -39,12 +38,15 @@ def receive_times(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.parametrize("step", [0.3, 5.0, -2.0, -2.005, -0.08])
-def test_a_clock_step_is_found_with_its_size(step):
+@pytest.mark.parametrize("rate", [1.0, 0.8])
+def test_a_clock_step_is_found_with_its_size(step, rate):
     """A publisher's clock set while recording (NTP): the stamps after message 300 jump,
-    the receive times do not."""
+    the receive times do not; also when the stamps are a simulation's clock running at 0.8
+    of the recorder's (sim time against wall time: a step was missed or 13 ms off)."""
     stamps, received = receive_times(600)
+    received = 100.0 + (received - 100.0) / rate
     stamps[300:] += step
-    (index, found), = clock_steps(stamps, received)
+    (index, found), = receive_time_steps(stamps, received)
     assert index == 299 and found == pytest.approx(step, abs=0.003)
 
 
@@ -59,10 +61,10 @@ def test_what_is_no_clock_step():
     stalled[300:400] = np.maximum(received[300:400], received[399])  # 2 s stall, then a burst
     recorder = received.copy()
     recorder[300:] -= 3.0
-    for times in (late, stalled, recorder, 100.0 + PERIOD / 0.7 * np.arange(600)):
-        assert clock_steps(stamps, times) == []
-    assert clock_steps(stamps[:40], received[:40] + np.r_[np.zeros(20), np.ones(20)]) == []
-    assert MIN_STEP == 0.05
+    for times in (late, stalled, recorder, 100.0 + PERIOD / 0.7 * np.arange(600),
+                  100.0 + PERIOD / 0.15 * np.arange(600)):
+        assert receive_time_steps(stamps, times) == []
+    assert receive_time_steps(stamps[:40], received[:40] + np.r_[np.zeros(20), np.ones(20)]) == []
 
 
 def test_stamped_table_corrects_a_step_and_uses_receive_times_without_stamps():

@@ -396,7 +396,7 @@ GOOD = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.1,1,1,0.05,0,0\n0.2,2,2,0.1,0,0\
         (GOOD + "0.3,,,0.1,0,0\n0.25,,,0.1,0,0\n", "log.csv:6: time does not increase"),
         (GOOD + "0.3,,,0.1,0,0\n0.1,,,0.1,0,0\n0.15,,,0.1,0,0\n", "log.csv:6: time does not "
          "increase (0.1 s after 0.3 s); a clock set back by 0.2 s while recording (NTP)? "
-         "calibrate the rows before this line and those from it as two logs"),
+         "split the file at this line and calibrate the two parts as two logs"),
         (GOOD + ",3,3,0.1,0,0\n", "log.csv:5: t is empty"),
         (GOOD + "0.3,3,,0.1,0,0\n", "log.csv:5: phi_R is empty (or NaN) but other"),
         (GOOD + "0.3,,,,,\n", "log.csv:5: the row has only a time"),
