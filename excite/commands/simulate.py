@@ -29,7 +29,8 @@ from excite.commands.options import (
     add_tuned_option,
     tuned_specs,
 )
-from excite.logs.bag_reader import BAG_SUFFIXES, JOINT_STATES
+from excite.logs.bag_paths import BAG_SUFFIXES
+from excite.logs.bag_reader import JOINT_STATES
 from excite.logs.bag_writer import LEFT_WHEEL, POSE_TOPIC, RIGHT_WHEEL, STORAGES
 from excite.logs.segments import TUPLE_SUFFIX
 

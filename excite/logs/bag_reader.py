@@ -8,7 +8,7 @@ not define: rosbags' ROS 1 Noetic or latest ROS 2 store); other topics' definiti
 looked at, so a rosserial bridge's empty definition or a stale custom type elsewhere in the bag
 does not matter. Parts of a bag that cannot be opened as given (``.bag.active``, a rosbag2
 directory without ``metadata.yaml``, its ``metadata.yaml`` or a ``.zstd`` file) are named with
-the way out (:func:`bag_path_problem`).
+the way out (:func:`excite.logs.bag_paths.bag_path_problem`).
 
 * Wheel angles: ``sensor_msgs/msg/JointState`` messages on one topic; ``position`` (rad,
   cumulative) of the two wheel joints, found by name in each message (any order; a message
@@ -53,12 +53,13 @@ from typing import Any
 import numpy as np
 
 from excite.errors import DataError
+from excite.logs.bag_paths import bag_path_problem
 from excite.logs.bag_stamps import stamped_table, wheels_together
 from excite.logs.orientation import headings, z_up
 from excite.logs.timeseries import TimeSeries, sample_at
 
-__all__ = ["POSE_TYPES", "BAG_SUFFIXES", "JOINT_STATES", "MISSING_EXTRA", "BagLog",
-           "bag_path_problem", "is_bag_path", "read_bag", "read_bag_log"]
+__all__ = ["POSE_TYPES", "JOINT_STATES", "MISSING_EXTRA", "BagLog", "read_bag",
+           "read_bag_log"]
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
@@ -86,7 +87,6 @@ POSE_TYPES: dict[str, Callable[[Any], tuple[float, ...]]] = {
 }
 #: The TF message types read from /tf: ROS 2's and ROS 1's, and ROS 1's before tf2.
 TF_MESSAGES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
-BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 #: The topic of the wheels' JointState messages, unless told otherwise (reading and writing).
 JOINT_STATES = "/joint_states"
 #: Why a JointState message naming both wheels is skipped: its position array is empty.
@@ -94,15 +94,6 @@ NO_POSITIONS = "without wheel positions"
 #: Why a pose is skipped: it holds NaN or a quaternion of zeros.
 NOT_TRACKED = "not measured (NaN, or a quaternion of zeros: a body not tracked?)"
 MISSING_EXTRA = "reading bags needs the ros extra: pip install 'excite[ros]'"
-
-
-def is_bag_path(path: str | os.PathLike[str]) -> bool:
-    """Whether a path looks like a bag: a .bag, .db3 or .mcap file, a directory holding a
-    rosbag2 metadata.yaml, or a part of a bag that :func:`bag_path_problem` explains (by name
-    only; read_bag checks the content)."""
-    p = Path(path)
-    return (p.suffix.lower() in BAG_SUFFIXES or (p / "metadata.yaml").is_file()
-            or bag_path_problem(p) is not None)
 
 
 def _stamp(header: Any) -> int:
@@ -264,35 +255,6 @@ class _Transforms(_PoseStream):
             raise DataError(f"{self.where}: no transform {self.pair[0]} -> {self.pair[1]}; "
                             f"frame pairs present: {present}")
         return super().columns()
-
-
-def bag_path_problem(path: str | os.PathLike[str]) -> str | None:
-    """What is wrong with a path that is part of a ROS bag but not one excite can open (one
-    line with the way out), or None: an unfinished ROS 1 recording (``.bag.active``), a
-    rosbag2 directory without ``metadata.yaml`` (a recording stopped without closing it), the
-    ``metadata.yaml`` or a compressed file (``.zstd``) of a rosbag2 bag given instead of its
-    directory."""
-    p = Path(path)
-    try:
-        return _bag_part(p)
-    except OSError:  # an unreadable directory: opening it says what is wrong
-        return None
-
-
-def _bag_part(p: Path) -> str | None:
-    if p.name.endswith(".bag.active"):
-        return (f"{p}: an unfinished ROS 1 recording (.bag.active); `rosbag reindex {p}` "
-                "repairs it, then rename it to .bag")
-    if p.is_dir() and not (p / "metadata.yaml").exists() and any(
-            q.name.endswith(suffix) for q in p.iterdir()
-            for suffix in (".db3", ".mcap", ".db3.zstd", ".mcap.zstd")):
-        return (f"{p}: a rosbag2 directory without metadata.yaml (a recording stopped without "
-                f"closing it?); `ros2 bag reindex {p}` writes it")
-    if p.name == "metadata.yaml":
-        return f"{p}: the metadata of a rosbag2 bag; give the bag's directory {p.parent}"
-    if p.suffix == ".zstd" and Path(p.stem).suffix in (".db3", ".mcap"):
-        return f"{p}: a compressed file of a rosbag2 bag; give the bag's directory {p.parent}"
-    return None
 
 
 class _Bag:

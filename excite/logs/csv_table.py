@@ -171,8 +171,17 @@ def delimiter_of(line: str) -> str:
 
 
 def header_fields(line: str, delimiter: str) -> list[str]:
-    """A line's fields, stripped of spaces and double quotes (a quoted header reads so)."""
+    """A line's fields, stripped of spaces and double quotes (a quoted header reads so); with
+    spaces, a unit in brackets or parentheses stays with the name before it (``t [s]``)."""
     (fields,) = csv.reader([line], delimiter=delimiter, skipinitialspace=True)
+    if delimiter == " ":
+        joined: list[str] = []
+        for field in fields:
+            if joined and field[:1] in "[(" and field:
+                joined[-1] += " " + field
+            elif field:
+                joined.append(field)
+        fields = joined
     return [field.strip().strip('"').strip() for field in fields] or [""]
 
 

@@ -75,11 +75,13 @@ def _ros_name(field: str, fields: Sequence[str], is_time: Callable[[str], bool]
     return None
 
 
-def _ros_header(line: str, is_time: Callable[[str], bool]) -> tuple[str, list[str]] | None:
+def _ros_header(line: str, is_time: Callable[[str], bool], where: str
+                ) -> tuple[str, list[str]] | None:
     """A header line of a ROS export (PlotJuggler's CSV, ``rostopic echo -p``'s) with its
     columns renamed to the time-series names they hold (the others kept, so not read), and
     the renamings in words ('__time as t'); None for any other header. ``is_time``: whether
-    a header field names the time column."""
+    a header field names the time column; ``where`` names the line in errors (two columns of
+    one kind: several topics)."""
     delimiter = delimiter_of(line)
     fields = header_fields(line, delimiter)
     lowered = [field.lower() for field in fields]
@@ -88,6 +90,12 @@ def _ros_header(line: str, is_time: Callable[[str], bool]) -> tuple[str, list[st
     names = [_ros_name(field, lowered, is_time) or field for field in fields]
     renamed = [f"{field} as {name}" for field, name in zip(fields, names, strict=True)
                if name != field]
+    for name in dict.fromkeys(names):
+        columns = [field for field, mapped in zip(fields, names, strict=True)
+                   if mapped == name and mapped != field]
+        if len(columns) > 1:
+            raise DataError(f"{where}: columns {', '.join(map(repr, columns))} are all "
+                            f"{name}: an export of several topics of one kind; export one")
     return delimiter.join(names), renamed
 
 
@@ -157,7 +165,7 @@ def layout(lines: Sequence[str], where: Callable[[int], str],
     motive = _motive(lines, where)
     if motive is not None:
         return motive
-    ros = _ros_header(lines[0], is_time)
+    ros = _ros_header(lines[0], is_time, where(0))
     if ros is not None:
         return Layout(ros[0], 1, "the column names of a ROS export (PlotJuggler, rostopic) "
                       f"read: {', '.join(ros[1])}")

@@ -24,7 +24,8 @@ from typing import Literal
 import numpy as np
 
 from excite.errors import DataError
-from excite.logs.bag_reader import JOINT_STATES, bag_path_problem, is_bag_path, read_bag_log
+from excite.logs.bag_paths import bag_path_problem, is_bag_path
+from excite.logs.bag_reader import JOINT_STATES, read_bag_log
 from excite.logs.clock_steps import corrected_clock_steps
 from excite.logs.continuity import Gap, check_continuity, on_track, stale_poses
 from excite.logs.segmentation import (

@@ -27,12 +27,13 @@ dtheta = theta_end - theta_start (rad, continuous).
 
 Detection, never silent averaging (all of it in :class:`SegmentationReport`)
 -----------------------------------------------------------------------------
-* Gaps, dropouts and jumps of either stream (:mod:`excite.logs.continuity`). With
-  ``on_gap="error"`` (the default) a gap longer than the window is an error naming the file
-  and line (or time) where the stream resumes; otherwise every gap splits the log and no
-  segment spans it. Segments containing a jump are dropped; a few pose samples off the
-  track (a jump out and a jump back, the track continuous across them) are left out instead,
-  so that the segments around them stay (:func:`~excite.logs.continuity.excursions`).
+* Gaps, dropouts and jumps of either stream (:mod:`excite.logs.continuity`). Every gap splits
+  the log and no segment spans it (``on_gap="split"``, the default, as the command line's);
+  with ``on_gap="error"`` a gap longer than the window is an error naming the file and line
+  (or time) where the stream resumes. Segments containing a jump are dropped; a few pose
+  samples off the track (a jump out and a jump back, the track continuous across them) are
+  left out instead, so that the segments around them stay
+  (:func:`~excite.logs.continuity.excursions`).
 * Segments in which neither wheel turned more than ``Limits.still_wheel`` are, by how far the
   sensor moved and turned, one of three (see :class:`~excite.logs.continuity.Limits`):
   - standstills: the sensor stayed within the still limits (``Limits.still_distance``,
@@ -450,7 +451,7 @@ def segment_timeseries(
     min_angle: float | None = None,
     time_offset: float = 0.0,
     *,
-    on_gap: Literal["error", "split"] = "error",
+    on_gap: Literal["error", "split"] = "split",
     limits: Limits | None = None,
 ) -> SegmentedLog:
     """Cut a time-series log into segments (see the module docstring for the method).

@@ -110,10 +110,10 @@ def columns_hint(header: Header) -> str:
 def header_problem(path: PathArg) -> DataError | None:
     """What is wrong with a time-series CSV's header (the error reading it would raise); None
     when it is right, or the file is no time-series CSV."""
-    line = _first_line(path)
-    if line is None or not _labels(line):
-        return None
     try:
+        line = _first_line(path)
+        if line is None or not _labels(line):
+            return None
         parse_timeseries_header(line, f"{os.fspath(path)}")
     except DataError as exc:
         return exc
@@ -181,7 +181,7 @@ def _first_line(path: PathArg) -> str | None:
     """A text file's header line: the header the layout of its first content lines gives
     (:func:`excite.logs.export_layouts.layout`: a tool's export, else the first line that is
     neither blank nor a comment nor a separator line, stripped); None when the file cannot be
-    read as text, has no such line, or its layout is refused."""
+    read as text or has no such line; DataError when its layout is refused."""
     lines: list[str] = []
     try:
         with open(os.fspath(path), encoding="utf-8-sig") as handle:
@@ -198,10 +198,7 @@ def _first_line(path: PathArg) -> str | None:
         return None
     if not lines:
         return None
-    try:
-        return layout(lines, lambda _: os.fspath(path), is_time_name).header
-    except DataError:
-        return None
+    return layout(lines, lambda _: os.fspath(path), is_time_name).header
 
 
 def _labels(line: str) -> set[str]:
@@ -218,12 +215,15 @@ def timeseries_streams(path: PathArg) -> frozenset[str]:
     streams, or a header with a problem: read alone, the error names it); empty for a segment
     CSV (header ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none) or a file that cannot be read
     as text. Reads only up to the header."""
-    line = _first_line(path)
+    groups = {"encoder": (ANGLE_COLUMNS, TICK_COLUMNS), "pose": (POSE_COLUMNS,)}
+    try:
+        line = _first_line(path)
+    except DataError:  # a layout refused: read alone, the error names it
+        return frozenset(groups)
     labels = _labels(line) if line is not None else set()
     if not labels:
         return frozenset()
     labels |= pose_labels(list(labels))
-    groups = {"encoder": (ANGLE_COLUMNS, TICK_COLUMNS), "pose": (POSE_COLUMNS,)}
     complete = {kind for kind, options in groups.items()
                 if any(labels >= set(names) for names in options)}
     present = {kind for kind, options in groups.items()
@@ -241,8 +241,8 @@ def header_hint(path: PathArg) -> str:
     """What a time-series CSV's columns that are not read may have been meant as: wheel
     columns under names that are not read (``left``, ``enc_right``), a quaternion instead of
     theta; '' when nothing looks so. Starts with '; ' (to end an error message)."""
-    line = _first_line(path)
     try:
+        line = _first_line(path)
         return columns_hint(parse_header(line, _names(line), _QUANTITIES, "")) if line else ""
     except DataError:
         return ""

@@ -16,7 +16,8 @@ pytest.importorskip("rosbags")
 from rosbags.typesys import get_types_from_msg  # noqa: E402
 
 from excite import DataError  # noqa: E402
-from excite.logs.bag_reader import MISSING_EXTRA, is_bag_path, read_bag, read_bag_log  # noqa: E402
+from excite.logs.bag_paths import is_bag_path  # noqa: E402
+from excite.logs.bag_reader import MISSING_EXTRA, read_bag, read_bag_log  # noqa: E402
 from excite.logs.bag_writer import (  # noqa: E402
     MISSING_WRITE_EXTRA,
     STORAGES,

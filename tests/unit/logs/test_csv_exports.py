@@ -271,6 +271,9 @@ def test_whitespace_separated_stream_files_and_a_tum_trajectory(tmp_path, plain,
     poses = export(tmp_path / "poses.txt", ["t", "x", "y", "theta"], pose_rows, sep)
     assert timeseries_streams(enc) == {"encoder"} and timeseries_streams(poses) == {"pose"}
     assert_same(read_timeseries([enc, poses]), reference)
+    with_units = export(tmp_path / "units.txt", ["t [s]", "phi_L (rad)", "phi_R [rad]"],
+                        enc_rows, sep)  # a unit stays with its name
+    assert_same(read_timeseries([with_units, poses]), reference)
     tum = [[t, x, y, "0.1", "0", "0", repr(math.sin(0.5 * float(theta))),
             repr(math.cos(0.5 * float(theta)))] for t, x, y, theta in pose_rows]
     for comment in ("", "# timestamp tx ty tz qx qy qz qw\n"):
@@ -357,6 +360,12 @@ def test_ros_exports_are_read_by_their_column_names(tmp_path, plain):
     with pytest.raises(DataError, match="a JointState of rostopic echo -p: name the wheels' "
                                         r"field.position<i> columns phi_L and phi_R"):
         group_inputs([str(joints), str(rostopic)])
+    two = [*PLOTJUGGLER, "/vicon/robot/pose/position/x"]
+    path_two = export(tmp_path / "two.csv", two, [r + [r[3]] for r in _quaternion_rows(rows)])
+    with pytest.raises(DataError, match="two.csv:1: columns '/mocap/pose/pose/position/x', "
+                                        "'/vicon/robot/pose/position/x' are all x: an export "
+                                        "of several topics of one kind; export one"):
+        read(path_two)
 
 
 def test_a_separator_ending_every_data_row_but_not_the_header(tmp_path, plain):

@@ -687,7 +687,7 @@ def test_gap_longer_than_window_names_file_and_line(tmp_path, sim, stream):
     k = 0 if stream == "encoder" else 1
     resume = int(np.searchsorted((ts.t_enc, ts.t_pose)[k], T0 + 11.5))
     with pytest.raises(DataError) as info:
-        segment_timeseries(ts, window=1.0)
+        segment_timeseries(ts, window=1.0, on_gap="error")
     message = str(info.value)
     assert message.startswith(f"{path}:{ts.lines[k][resume]}: gap of 1.5")
     assert f"in the {stream} stream" in message
@@ -697,7 +697,7 @@ def test_gap_longer_than_window_names_file_and_line(tmp_path, sim, stream):
 @pytest.mark.parametrize("stream", ["encoder", "pose"])
 def test_split_gaps_are_never_spanned(sim, stream):
     ts = remove(make_log(sim), stream, T0 + 10.0, T0 + 11.5)
-    log = segment_timeseries(ts, window=1.0, on_gap="split")
+    log = segment_timeseries(ts, window=1.0)  # on_gap="split", the default
     assert not np.any((log.t_start < T0 + 11.5) & (log.t_end > T0 + 10.0))
     np.testing.assert_allclose(log.segments.as_array(), exact_rows(sim, log.t_start, log.t_end),
                                rtol=0, atol=1e-12)
