@@ -13,16 +13,19 @@ clock). excite uses the stamps; the receive times are what it checks them agains
   ones is an error.
 * **Clock steps.** A publisher's clock set while recording (NTP or chrony stepping it, a clock
   that starts wrong and is corrected) makes its stamps jump forward or back while the receive
-  times go on as before. An interval between consecutive messages (receive order) is a step when
-  its stamp increment and its receive increment differ by more than
-  :data:`~excite.logs.timeseries.MIN_CLOCK_STEP` (and 8 robust standard deviations of that
-  difference over the stream), the receive increment is an ordinary one (within half that of the
+  times go on as before. The differences of the stamp and receive increments are taken less
+  their median (the drift of two clocks that run at different rates, a simulation's against the
+  recorder's wall clock). An interval between consecutive messages (receive order) is a step
+  when that difference exceeds :data:`~excite.logs.timeseries.MIN_CLOCK_STEP` and 8 robust
+  standard deviations of it, the receive increment is an ordinary one (within half that of the
   stream's median: a recorder that stalled, or whose own clock stepped, changes the receive
-  increment instead), and the offset stamp - receive time stays shifted after it (the medians of
-  :data:`PERSISTENCE` messages each side differ by the step, to half the threshold: one late
-  message is no step). The stamps after a step are shifted back by it, so the stream keeps one
-  clock, and a note says where and by how much. Without receive times (CSV logs) steps are found
-  from the motion instead (:mod:`excite.logs.clock_steps`).
+  increment instead), and the detrended offset stamp - receive time stays shifted after it (the
+  medians of :data:`PERSISTENCE` messages each side differ by the step, to half the threshold:
+  one late message is no step). Its size is where lines through the offsets on each side (up to
+  :data:`SIZE_WINDOW` messages) meet, precise to a fraction of a ms. The stamps after a step are
+  shifted back by it, so the stream keeps one clock, and a note says where and by how much.
+  Without receive times (CSV logs) steps are found from the motion instead
+  (:mod:`excite.logs.clock_steps`).
 * **Repeats.** After sorting by stamp, a message repeating the previous one (same stamp, same
   values: recorded twice) is skipped; one stamp with different values is an error.
 * **Wheels in separate messages** (a driver per motor): :func:`wheels_together` puts the
