@@ -34,7 +34,7 @@ HEADER_LINES = 12
 TUM_HEADER = "t x y z qx qy qz qw"
 
 
-def is_tum_row(line: str) -> bool:
+def _is_tum_row(line: str) -> bool:
     """Whether a first content line is a TUM trajectory's row: 8 numbers separated by spaces
     (:data:`TUM_HEADER`)."""
     fields = line.split()
@@ -159,7 +159,7 @@ def layout(lines: Sequence[str], where: Callable[[int], str],
     :data:`HEADER_LINES`) are ``lines``: a TUM trajectory's, a ROS export's, a Motive
     export's, else the first line as the header. ``where(i)`` names content line i in
     errors; ``is_time``: whether a header field names the time column."""
-    if is_tum_row(lines[0]):
+    if _is_tum_row(lines[0]):
         return Layout(TUM_HEADER, 0, f"read as a TUM trajectory ({TUM_HEADER}: s, m, the "
                       "orientation quaternion)")
     motive = _motive(lines, where)

@@ -30,7 +30,7 @@ from excite.logs.timeseries import ANGLE_COLUMNS, POSE_COLUMNS, TICK_COLUMNS
 
 __all__ = ["ALIASES", "EXPECTED", "QUATERNION_COLUMNS", "columns_hint", "header_hint",
            "header_problem", "is_time_name", "is_timeseries_csv", "parse_timeseries_header",
-           "pose_labels", "timeseries_streams"]
+           "timeseries_streams"]
 
 PathArg = str | os.PathLike[str]
 
@@ -150,7 +150,7 @@ def _orientation(header: Header, where: str) -> Header:
     return header
 
 
-def pose_labels(labels: Sequence[str]) -> set[str]:
+def _pose_labels(labels: Sequence[str]) -> set[str]:
     """The pose columns (POSE_COLUMNS) among ``labels``, the quaternion standing for theta."""
     found = set(POSE_COLUMNS) & set(labels)
     return found | {"theta"} if {"qz", "qw"} <= set(labels) else found
@@ -164,7 +164,7 @@ def _check_column_set(header: Header, where: str) -> None:
         raise DataError(f"{where}: both wheel angles (phi_L, phi_R) and ticks "
                         "(ticks_L, ticks_R); give one kind")
     groups = [(present, expected) for present, expected in (
-        (angles, ANGLE_COLUMNS), (ticks, TICK_COLUMNS), (pose_labels(columns),
+        (angles, ANGLE_COLUMNS), (ticks, TICK_COLUMNS), (_pose_labels(columns),
                                                          POSE_COLUMNS)) if present]
     if not groups:
         raise DataError(f"{where}: neither encoder (phi_L, phi_R) nor pose (x, y, theta) "
@@ -223,7 +223,7 @@ def timeseries_streams(path: PathArg) -> frozenset[str]:
     labels = _labels(line) if line is not None else set()
     if not labels:
         return frozenset()
-    labels |= pose_labels(list(labels))
+    labels |= _pose_labels(list(labels))
     complete = {kind for kind, options in groups.items()
                 if any(labels >= set(names) for names in options)}
     present = {kind for kind, options in groups.items()
