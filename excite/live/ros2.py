@@ -319,6 +319,10 @@ class LiveNode:
         if not self._usable(self.topics.pose_topic, "poses", t, now,
                             (position.x, position.y, q.x, q.y, q.z, q.w)):
             return
+        if q.x == q.y == q.z == q.w == 0.0:  # a bridge's placeholder while the body is lost
+            self._leave_out(self.topics.pose_topic, "poses", "not measured",
+                            "a quaternion of zeros: a body not tracked?")
+            return
         quaternion, xyz, turned = z_up(np.array([[q.x, q.y, q.z, q.w]]),
                                        np.array([[position.x, position.y, position.z]]))
         if turned is not None and (self.topics.pose_topic, "y-up") not in self._noted:

@@ -1,8 +1,10 @@
 """A node that republishes the simulated robot's ``/pose`` (PoseStamped, Z-up) on
 ``/relay_pose`` until SIGINT or SIGTERM, as a motion-capture bridge would:
 ``python pose_relay.py MODE`` with MODE "transform" (as ``geometry_msgs/TransformStamped``,
-vicon_bridge's type) or "y_up" (as a PoseStamped in a Y-up world, motion capture's default:
-positions (x, y, z) -> (x, z, -y), the world turned -90 degrees about x)."""
+vicon_bridge's type), "y_up" (as a PoseStamped in a Y-up world, motion capture's default:
+positions (x, y, z) -> (x, z, -y), the world turned -90 degrees about x) or "untracked" (as it
+is, but from 4 s to 5.5 s after the first message, by its stamps, at the origin with a
+quaternion of zeros: a bridge's placeholder while the body is lost)."""
 
 import math
 import sys
@@ -11,7 +13,7 @@ from companion import node, spin_until_signalled
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.qos import qos_profile_sensor_data
 
-MODES = ("transform", "y_up")
+MODES = ("transform", "y_up", "untracked")
 #: -90 degrees about x (x, y, z, w): a Z-up world's vectors in the Y-up world.
 BACK = (-math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5))
 
@@ -32,8 +34,19 @@ def main() -> None:
     kind = TransformStamped if mode == "transform" else PoseStamped
     out = relay_node.create_publisher(kind, "/relay_pose", 50)
 
+    first: list[float] = []
+
     def relay(msg: PoseStamped) -> None:
         p, q = msg.pose.position, msg.pose.orientation
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if not first:
+            first.append(t)
+        if mode == "untracked":
+            if 4.0 <= t - first[0] <= 5.5:
+                p.x = p.y = p.z = 0.0
+                q.x = q.y = q.z = q.w = 0.0
+            out.publish(msg)
+            return
         if mode == "transform":
             transform = TransformStamped()
             transform.header, transform.child_frame_id = msg.header, "robot"
