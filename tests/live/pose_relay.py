@@ -3,8 +3,8 @@
 ``python pose_relay.py MODE`` with MODE "transform" (as ``geometry_msgs/TransformStamped``,
 vicon_bridge's type), "y_up" (as a PoseStamped in a Y-up world, motion capture's default:
 positions (x, y, z) -> (x, z, -y), the world turned -90 degrees about x) or "untracked" (as it
-is, but from 4 s to 5.5 s after the first message, by its stamps, at the origin with a
-quaternion of zeros: a bridge's placeholder while the body is lost)."""
+is, but for 1.5 s of its stamps from when the robot is first 0.2 m from where it started, at
+the origin with a quaternion of zeros: a bridge's placeholder while the body is lost)."""
 
 import math
 import sys
@@ -34,15 +34,18 @@ def main() -> None:
     kind = TransformStamped if mode == "transform" else PoseStamped
     out = relay_node.create_publisher(kind, "/relay_pose", 50)
 
-    first: list[float] = []
+    start: list[tuple[float, float]] = []  # where the robot started
+    lost: list[float] = []  # when the body was lost (the stamp, s)
 
     def relay(msg: PoseStamped) -> None:
         p, q = msg.pose.position, msg.pose.orientation
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-        if not first:
-            first.append(t)
         if mode == "untracked":
-            if 4.0 <= t - first[0] <= 5.5:
+            if not start:
+                start.append((p.x, p.y))
+            if not lost and math.hypot(p.x - start[0][0], p.y - start[0][1]) > 0.2:
+                lost.append(t)
+            if lost and t - lost[0] <= 1.5:
                 p.x = p.y = p.z = 0.0
                 q.x = q.y = q.z = q.w = 0.0
             out.publish(msg)
