@@ -249,13 +249,16 @@ def _before(inputs: list[Input]) -> DataError | None:
 def _unpaired(first: str, streams: frozenset[str], path: str, kind: str) -> DataError:
     """The error for a one-stream CSV whose next path is not the other stream's file: when
     that path is not a time-series CSV at all (a header of neither format, or none, as a
-    motion-capture export's header block reads), its own problem; else
-    :func:`_lone_stream`."""
-    if kind != "segments":
+    motion-capture export's header block reads), or one whose header cannot be read (a
+    stream without its heading), its own problem; else :func:`_lone_stream`."""
+    if kind == "segments":
+        problem = form_problem(path) or DataError(
+            f"{path}: no header of a time-series stream (t with x,y,theta or phi_L,phi_R; "
+            "names and units: docs/formats.md)")
+    elif kind == "timeseries" and (unread := header_problem(path)) is not None:
+        problem = unread
+    else:
         return _lone_stream(first, streams)
-    problem = form_problem(path) or DataError(
-        f"{path}: no header of a time-series stream (t with x,y,theta or phi_L,phi_R; names "
-        "and units: docs/formats.md)")
     (only,) = streams
     other = "pose" if only == "encoder" else "encoder"
     return DataError(f"{problem} (given after {first}, which has only the {only} stream: "

@@ -66,7 +66,7 @@ _QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
 EXPECTED = "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two"
 # Header names of columns not read that look like a wheel's or an orientation's.
 _WHEEL_LIKE = re.compile(r"left|right|wheel|enc|tick")
-_QUATERNION_LIKE = re.compile(r"^(q|quat|orientation)[_ .]?[xyzw]\b|^q[xyzw]$")
+_QUATERNION_LIKE = re.compile(r"^(q|quat|orientation)[_ .]?[xyzw]\b|^q[xyzw]$|\brotation\b")
 
 
 def _names(line: str) -> dict[str, str]:

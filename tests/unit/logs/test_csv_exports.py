@@ -425,6 +425,11 @@ def test_an_optitrack_motive_export_is_read_by_its_header_block(tmp_path, plain)
     assert_same(series, read_timeseries(path), rtol=1e-9)
     assert notes[0] == (f"{motive}: read as an OptiTrack Motive export (rigid body 'robot', "
                         "lengths in mm)")
+    euler = MOTIVE_BLOCK.format(body="robot").replace("Quaternion", "XYZ")
+    motive.write_text(euler + "\n".join(lines) + "\n")
+    with pytest.raises(DataError, match="missing column theta .* 'Rigid Body robot rotation "
+                                        "X'.* not read: give the heading as theta"):
+        group_inputs([str(enc), str(motive)])
     two = MOTIVE_BLOCK.format(body="robot").replace(",robot:Marker1", ",box")
     two = two.replace("Rigid Body Marker", "Rigid Body")
     motive.write_text(two + "\n".join(lines) + "\n")
