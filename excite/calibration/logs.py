@@ -102,10 +102,9 @@ def _check_part(part: Part, initial: Params | None, note: OnNote) -> None:
     """DataError when a part's heading changes contradict its wheels (wiring), or its poses
     are the nominal robot's own dead reckoning; a note when a log's headings follow its wheel
     angles exactly (a segment file, most often made rather than recorded, is not noted)."""
-    check_wiring(part.segments, part.source.name)
+    _check_conventions(part)
     if part.log is None:
         return
-    _check_plausible(part)
     start = None if initial is None else tuple(initial.as_array().tolist())
     text = check_pose_source(part.segments, part.source.name, start)
     if text is not None:
@@ -145,9 +144,15 @@ def _check_wired(source: Input, log: Log, options: LogOptions) -> None:
         cut = segment_log(log, options)
     except DataError:
         return
-    part = Part(source, cut.segments, log, cut)
-    check_wiring(part.segments, source.name)
-    _check_plausible(part)
+    _check_conventions(Part(source, cut.segments, log, cut))
+
+
+def _check_conventions(part: Part) -> None:
+    """DataError when a part's heading changes contradict its wheels (wiring) or, for a log,
+    a segment no robot drives (values in other units)."""
+    check_wiring(part.segments, part.source.name)
+    if part.log is not None:
+        _check_plausible(part)
 
 
 def _pooled(parts: Sequence[Part]) -> Segments:

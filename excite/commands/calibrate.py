@@ -153,7 +153,7 @@ def _refuse_implausible(files: list[str], result: CalibrationResult,
     what = implausible(*values) if result.identifiable else None
     if what is None:
         return
-    if not any(any(part.segments.dtheta) for part in calibration.parts):
+    if not any(part.segments.dtheta.any() for part in calibration.parts):
         count = sum(len(part.segments) for part in calibration.parts)
         raise UsageError(f"{', '.join(files)}: the robot never turned (the pose heading never "
                          f"changes over {count} segments), so nothing determines the wheel "

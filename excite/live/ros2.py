@@ -54,6 +54,7 @@ from excite.errors import DataError, ExciteError
 from excite.live.result import STOP, Command, LiveResult
 from excite.live.session import LiveSession
 from excite.live.settings import LiveTopics
+from excite.logs.bag_reader import POSE_PARTS
 from excite.logs.orientation import headings, z_up
 from excite.logs.timeseries import sample_at
 from excite.processes import deaf_to_sigint, shut_down_now, sigint_blocked
@@ -68,17 +69,13 @@ DECISION_NICENESS = 10
 INTERRUPTED = "interrupted (SIGINT or SIGTERM)"
 
 #: The pose message types the node reads, by ROS type name, with how to get the position
-#: and the orientation quaternion.
+#: and the orientation quaternion (:data:`excite.logs.bag_reader.POSE_PARTS`).
 POSE_TYPES: dict[str, tuple[type, Callable[[Any], tuple[Any, Any]]]] = {
-    "geometry_msgs/msg/PoseStamped": (PoseStamped, lambda m: (m.pose.position,
-                                                              m.pose.orientation)),
-    "geometry_msgs/msg/PoseWithCovarianceStamped": (
-        PoseWithCovarianceStamped, lambda m: (m.pose.pose.position, m.pose.pose.orientation)),
-    "nav_msgs/msg/Odometry": (Odometry, lambda m: (m.pose.pose.position,
-                                                   m.pose.pose.orientation)),
-    "geometry_msgs/msg/TransformStamped": (TransformStamped, lambda m: (
-        m.transform.translation, m.transform.rotation)),
-}
+    name: (kind, POSE_PARTS[name]) for name, kind in (
+        ("geometry_msgs/msg/PoseStamped", PoseStamped),
+        ("geometry_msgs/msg/PoseWithCovarianceStamped", PoseWithCovarianceStamped),
+        ("nav_msgs/msg/Odometry", Odometry),
+        ("geometry_msgs/msg/TransformStamped", TransformStamped))}
 JOINT_STATE = "sensor_msgs/msg/JointState"
 #: Best effort matches best-effort and reliable publishers alike; deep enough for 1 kHz.
 SENSOR_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT,

@@ -58,33 +58,44 @@ from excite.logs.bag_stamps import stamped_table, wheels_together
 from excite.logs.orientation import headings, z_up
 from excite.logs.timeseries import TimeSeries, sample_at
 
-__all__ = ["POSE_TYPES", "JOINT_STATES", "MISSING_EXTRA", "BagLog", "read_bag",
+__all__ = ["POSE_PARTS", "POSE_TYPES", "JOINT_STATES", "MISSING_EXTRA", "BagLog", "read_bag",
            "read_bag_log"]
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 TF_TOPIC = "/tf"
+#: Where each stamped pose message type keeps its position and orientation quaternion
+#: (geometry_msgs Point or Vector3, and Quaternion): bags' messages and a live node's alike.
+POSE_PARTS: dict[str, Callable[[Any], tuple[Any, Any]]] = {
+    "geometry_msgs/msg/PoseStamped": lambda msg: (msg.pose.position, msg.pose.orientation),
+    "geometry_msgs/msg/PoseWithCovarianceStamped": lambda msg: (msg.pose.pose.position,
+                                                                msg.pose.pose.orientation),
+    "nav_msgs/msg/Odometry": lambda msg: (msg.pose.pose.position, msg.pose.pose.orientation),
+    "geometry_msgs/msg/TransformStamped": lambda msg: (msg.transform.translation,
+                                                       msg.transform.rotation),
+}
+
+
 def _planar(position: Any, q: Any) -> tuple[float, ...]:
     """What a pose row keeps: x, y, z (m) and the orientation quaternion's x, y, z, w."""
     return position.x, position.y, position.z, q.x, q.y, q.z, q.w
 
 
-#: Supported pose message types, and how each gives a pose row (:func:`_planar`); a type
-#: without a header (Pose2D, as ROS 1's laser_scan_matcher publishes it) is timed by the
-#: receive times (:mod:`excite.logs.bag_stamps`).
-POSE_TYPES: dict[str, Callable[[Any], tuple[float, ...]]] = {
-    "geometry_msgs/msg/PoseStamped": lambda msg: _planar(msg.pose.position,
-                                                         msg.pose.orientation),
-    "geometry_msgs/msg/PoseWithCovarianceStamped": lambda msg: _planar(
-        msg.pose.pose.position, msg.pose.pose.orientation),
-    "nav_msgs/msg/Odometry": lambda msg: _planar(msg.pose.pose.position,
-                                                 msg.pose.pose.orientation),
-    "geometry_msgs/msg/TransformStamped": lambda msg: _planar(msg.transform.translation,
-                                                              msg.transform.rotation),
-    "geometry_msgs/msg/Pose2D": lambda msg: (msg.x, msg.y, 0.0, 0.0, 0.0,
-                                             math.sin(msg.theta / 2),
-                                             math.cos(msg.theta / 2)),
-}
+#: A pose message type without a header, as ROS 1's laser_scan_matcher publishes it: timed
+#: by the receive times (:mod:`excite.logs.bag_stamps`).
+POSE_2D = "geometry_msgs/msg/Pose2D"
+#: Supported pose message types (:func:`_pose_row`).
+POSE_TYPES = (*POSE_PARTS, POSE_2D)
+
+
+def _pose_row(msg: Any) -> tuple[float, ...]:
+    """A pose message's row (:func:`_planar`); a Pose2D's heading as a quaternion about z."""
+    if msg.__msgtype__ == POSE_2D:
+        half = msg.theta / 2
+        return msg.x, msg.y, 0.0, 0.0, 0.0, math.sin(half), math.cos(half)
+    return _planar(*POSE_PARTS[msg.__msgtype__](msg))
+
+
 #: The TF message types read from /tf: ROS 2's and ROS 1's, and ROS 1's before tf2.
 TF_MESSAGES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 #: The topic of the wheels' JointState messages, unless told otherwise (reading and writing).
@@ -228,7 +239,7 @@ class _Poses(_PoseStream):
 
     def add(self, msg: Any, received: int) -> None:
         stamp = _stamp(msg.header) if hasattr(msg, "header") else 0
-        self.append((stamp, *POSE_TYPES[msg.__msgtype__](msg)), received)
+        self.append((stamp, *_pose_row(msg)), received)
 
 
 class _Transforms(_PoseStream):
@@ -380,7 +391,7 @@ def _pose_collector(name: str, topics: dict[str, set[str]], pose_topic: str | No
         parent, child = transforms.pair
         return TF_TOPIC, transforms, f"{name} {TF_TOPIC} {parent}->{child}"
     assert pose_topic is not None  # read_bag checked that exactly one source is given
-    _require(name, topics, pose_topic, tuple(POSE_TYPES), "poses")
+    _require(name, topics, pose_topic, POSE_TYPES, "poses")
     poses = _Poses(f"{name} {pose_topic}")
     return pose_topic, poses, poses.where
 

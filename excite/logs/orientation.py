@@ -50,7 +50,7 @@ def headings(q: np.ndarray, where: Callable[[int], str]) -> np.ndarray:
         raise DataError(f"{where(i)}: the orientation quaternion (x, y, z, w) = "
                         f"({x[i]}, {y[i]}, {z[i]}, {w[i]}) is not a rotation (zero length "
                         "or not finite)")
-    tilt = np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y) / norm2, -1.0, 1.0))
+    tilt = np.arccos(np.clip(_cos_tilt(q), -1.0, 1.0))
     if np.any(tilt > MAX_TILT):
         i = int(np.argmax(tilt))
         raise DataError(f"{where(i)}: the pose's z axis is tilted "
@@ -108,11 +108,15 @@ def z_up(q: np.ndarray, position: np.ndarray) -> tuple[np.ndarray, np.ndarray, s
         f"body {body}): turned Z-up, positions (x, y, z) read as (x, -z, y)")
 
 
+def _cos_tilt(q: np.ndarray) -> np.ndarray:
+    """The cosine of each quaternion's body z axis' tilt from the world z axis (free of the
+    quaternion's length; NaN for one that is no rotation)."""
+    x, y, z, w = np.asarray(q, dtype=float).T
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return 1.0 - 2.0 * (x * x + y * y) / (x * x + y * y + z * z + w * w)
+
+
 def _tilted(q: np.ndarray) -> np.ndarray:
     """Whether each quaternion's body z axis is tilted more than MAX_TILT from the world z
-    axis (free of the quaternion's length; False for one that is no rotation)."""
-    x, y, z, w = np.asarray(q, dtype=float).T
-    norm2 = x * x + y * y + z * z + w * w
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = 1.0 - 2.0 * (x * x + y * y) / norm2
-    return np.nan_to_num(cos, nan=1.0) < math.cos(MAX_TILT)
+    axis (False for one that is no rotation)."""
+    return np.nan_to_num(_cos_tilt(q), nan=1.0) < math.cos(MAX_TILT)

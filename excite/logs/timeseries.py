@@ -208,8 +208,8 @@ def during(series: TimeSeries, start: float | None = None, end: float | None = N
         return series
     lo = -math.inf if start is None else start
     hi = math.inf if end is None else end
-    keep = [(t >= lo) & (t <= hi) for t in (series.t_enc, series.t_pose)]
     stamps = (series.t_enc, series.t_pose)
+    keep = [(t >= lo) & (t <= hi) for t in stamps]
     for k, (name, mask) in enumerate(zip(("encoder", "pose"), keep, strict=True)):
         if mask.sum() < 2:
             raise DataError(f"{series.source[k]}: fewer than 2 {name} samples between "

@@ -203,7 +203,7 @@ def _held_as_missing(table: _Table, note: OnNote) -> _Table:
             continue  # changes at irregular times: a coarse value that holds, not a rate
         run = np.diff(np.append(starts, rows.size))  # rows per value
         ends = t[np.minimum(starts + run, rows.size - 1)]
-        held = np.repeat((ends - t[starts] <= HELD_RUN * usual) & (run > 1), run) & ~changed
+        held = np.repeat(ends - t[starts] <= HELD_RUN * usual, run) & ~changed
         empty[np.ix_(rows[held], index)] = True
         note(f"{table.name}: the {'/'.join(group)} cells repeat the row before them in "
              f"{int(held.sum())} rows (an export that fills every cell with the last value, "
