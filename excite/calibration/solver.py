@@ -370,7 +370,9 @@ def levenberg_marquardt(
                 if (system_trial.cost <= system.cost
                         and np.all(np.isfinite(system_trial.information))):
                     break
-            if gauss_newton:  # it does not lower the cost either: at the optimum, to rounding
+            if gauss_newton or np.max(np.abs(step)) < tol:
+                # a step below the tolerance that does not lower the cost: at the optimum, to
+                # rounding (more damping gives only smaller steps)
                 return Fit(ev, system, sigma, iteration, True, "relative step below tolerance")
             lam *= 10.0
             if lam > 1e12:
