@@ -54,9 +54,9 @@ from excite.errors import DataError, ExciteError
 from excite.live.result import STOP, Command, LiveResult
 from excite.live.session import LiveSession
 from excite.live.settings import LiveTopics
-from excite.logs.bag_reader import POSE_PARTS
+from excite.logs.bag_topics import POSE_PARTS
 from excite.logs.orientation import headings, z_up
-from excite.logs.timeseries import sample_at
+from excite.logs.timeseries import SPEED_NOTE, SpeedIntegral, sample_at
 from excite.processes import deaf_to_sigint, shut_down_now, sigint_blocked
 from excite.signals import handled
 
@@ -69,7 +69,7 @@ DECISION_NICENESS = 10
 INTERRUPTED = "interrupted (SIGINT or SIGTERM)"
 
 #: The pose message types the node reads, by ROS type name, with how to get the position
-#: and the orientation quaternion (:data:`excite.logs.bag_reader.POSE_PARTS`).
+#: and the orientation quaternion (:data:`excite.logs.bag_topics.POSE_PARTS`).
 POSE_TYPES: dict[str, tuple[type, Callable[[Any], tuple[Any, Any]]]] = {
     name: (kind, POSE_PARTS[name]) for name, kind in (
         ("geometry_msgs/msg/PoseStamped", PoseStamped),
@@ -132,6 +132,7 @@ class LiveNode:
         self._cmd_class = TwistStamped if stamped else Twist
         self.publisher = self.node.create_publisher(self._cmd_class, topics.cmd_vel, 10)
         self._wheel_index: tuple[int, int] | None = None
+        self._speeds: SpeedIntegral | None = None  # wheels given as velocities: their integral
         self._joints_seen: set[str] = set()
         self._first_joint_state: float | None = None
         self._first_pose: float | None = None  # monotonic s of the first pose message
@@ -291,21 +292,40 @@ class LiveNode:
         missing = [w for w in wheels if w not in names]
         if len(missing) == 2:  # another publisher's joints (an arm, a gripper): not ours
             return
-        if missing or len(msg.position) != len(names):
+        angles = None if missing else self._wheel_angles(msg, names, wheels, t)
+        if angles is None:
             if self._wheel_index is not None:  # a change after the wheels were read
                 self._leave_out(topic, "wheels", "names", (
                     f"no joint {missing[0]!r} in them (joints: {', '.join(names)})"
                     if missing else
                     f"{len(msg.position)} positions for {len(names)} joint names"))
             return
-        i, j = names.index(wheels[0]), names.index(wheels[1])
-        self._wheel_index = (i, j)
-        if not self._usable(topic, "wheels", t, now, (msg.position[i], msg.position[j])):
+        self._wheel_index = (names.index(wheels[0]), names.index(wheels[1]))
+        if not self._usable(topic, "wheels", t, now, angles):
             return
-        self.session.add_wheels(t, float(msg.position[i]), float(msg.position[j]), now)
-        if self.recorder is not None:
+        self.session.add_wheels(t, *angles, now)
+        if self.recorder is not None:  # integrated speeds are recorded as the wheels' angles
             self.recorder.write(topic, t, self.recorder.joint_state(
-                t, names, [float(p) for p in msg.position]))
+                t, *((names, [float(p) for p in msg.position]) if self._speeds is None
+                     else (list(wheels), list(angles)))))
+
+    def _wheel_angles(self, msg: JointState, names: list[str], wheels: tuple[str, str],
+                      t: float) -> tuple[float, float] | None:
+        """The wheels' angles (rad) in a JointState naming both: their positions, or when it
+        has none (empty, or NaN: a velocity interface) but their velocities (rad/s), those
+        integrated (:class:`excite.logs.timeseries.SpeedIntegral`, noted once); None when
+        it has neither (or a message out of order of the integral's)."""
+        index = [names.index(wheel) for wheel in wheels]
+        if len(msg.position) == len(names) and not all(
+                math.isnan(msg.position[k]) for k in index):
+            return float(msg.position[index[0]]), float(msg.position[index[1]])
+        if len(msg.velocity) != len(names):
+            return None
+        if self._speeds is None:
+            self._speeds = SpeedIntegral()
+            print(f"excite: note: {self.topics.joint_states}: {SPEED_NOTE}", file=sys.stderr,
+                  flush=True)
+        return self._speeds.add(t, float(msg.velocity[index[0]]), float(msg.velocity[index[1]]))
 
     def _on_pose(self, msg: Any) -> None:
         if self._first_pose is None:

@@ -13,7 +13,10 @@ the way out (:func:`excite.logs.bag_paths.bag_path_problem`).
 * Wheel angles: ``sensor_msgs/msg/JointState`` messages on one topic; ``position`` (rad,
   cumulative) of the two wheel joints, found by name in each message (any order; a message
   lacking either joint is left out; one naming both with an empty ``position``, as a
-  velocity-only publisher sends, is skipped and counted). When no message names both (a
+  velocity-only publisher sends, is skipped and counted). When no message has the wheels'
+  positions (empty, or NaN as joint_state_broadcaster fills a velocity-only interface's),
+  their ``velocity`` (rad/s) is integrated into angles (the trapezoidal rule,
+  :func:`excite.logs.timeseries.integrated_speed`), with a note. When no message names both (a
   driver per motor), each wheel's messages are put together, the right wheel's angles
   interpolated to the left wheel's stamps (:func:`excite.logs.bag_stamps.wheels_together`),
   with a note.
@@ -42,7 +45,6 @@ Writing bags: :mod:`excite.logs.bag_writer`.
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -50,222 +52,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from excite.errors import DataError
 from excite.logs.bag_paths import bag_path_problem
-from excite.logs.bag_stamps import stamped_table, wheels_together
-from excite.logs.orientation import headings, z_up
-from excite.logs.timeseries import TimeSeries, sample_at
+from excite.logs.bag_topics import POSE_TYPES, JointRows, PoseTopicRows, TransformRows
+from excite.logs.timeseries import TimeSeries
 
-__all__ = ["POSE_PARTS", "POSE_TYPES", "JOINT_STATES", "MISSING_EXTRA", "BagLog", "read_bag",
-           "read_bag_log"]
+__all__ = ["JOINT_STATES", "MISSING_EXTRA", "BagLog", "read_bag", "read_bag_log"]
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 TF_TOPIC = "/tf"
-#: Where each stamped pose message type keeps its position and orientation quaternion
-#: (geometry_msgs Point or Vector3, and Quaternion): bags' messages and a live node's alike.
-POSE_PARTS: dict[str, Callable[[Any], tuple[Any, Any]]] = {
-    "geometry_msgs/msg/PoseStamped": lambda msg: (msg.pose.position, msg.pose.orientation),
-    "geometry_msgs/msg/PoseWithCovarianceStamped": lambda msg: (msg.pose.pose.position,
-                                                                msg.pose.pose.orientation),
-    "nav_msgs/msg/Odometry": lambda msg: (msg.pose.pose.position, msg.pose.pose.orientation),
-    "geometry_msgs/msg/TransformStamped": lambda msg: (msg.transform.translation,
-                                                       msg.transform.rotation),
-}
-
-
-def _planar(position: Any, q: Any) -> tuple[float, ...]:
-    """What a pose row keeps: x, y, z (m) and the orientation quaternion's x, y, z, w."""
-    return position.x, position.y, position.z, q.x, q.y, q.z, q.w
-
-
-#: A pose message type without a header, as ROS 1's laser_scan_matcher publishes it: timed
-#: by the receive times (:mod:`excite.logs.bag_stamps`).
-POSE_2D = "geometry_msgs/msg/Pose2D"
-#: Supported pose message types (:func:`_pose_row`).
-POSE_TYPES = (*POSE_PARTS, POSE_2D)
-
-
-def _pose_row(msg: Any) -> tuple[float, ...]:
-    """A pose message's row (:func:`_planar`); a Pose2D's heading as a quaternion about z."""
-    if msg.__msgtype__ == POSE_2D:
-        half = msg.theta / 2
-        return msg.x, msg.y, 0.0, 0.0, 0.0, math.sin(half), math.cos(half)
-    return _planar(*POSE_PARTS[msg.__msgtype__](msg))
-
-
 #: The TF message types read from /tf: ROS 2's and ROS 1's, and ROS 1's before tf2.
 TF_MESSAGES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 #: The topic of the wheels' JointState messages, unless told otherwise (reading and writing).
 JOINT_STATES = "/joint_states"
-#: Why a JointState message naming both wheels is skipped: its position array is empty.
-NO_POSITIONS = "without wheel positions"
-#: Why a pose is skipped: it holds NaN or a quaternion of zeros.
-NOT_TRACKED = "not measured (NaN, or a quaternion of zeros: a body not tracked?)"
 MISSING_EXTRA = "reading bags needs the ros extra: pip install 'excite[ros]'"
-
-
-def _stamp(header: Any) -> int:
-    """A header stamp in ns."""
-    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
-
-
-def _frame(frame_id: str) -> str:
-    return frame_id.lstrip("/")
-
-
-class _Stream:
-    """Rows (header stamp in ns first, then the values read) of one topic in receive order,
-    their receive times (ns), the messages skipped per reason, and notes for the user."""
-
-    def __init__(self, where: str) -> None:
-        self.where = where
-        self.rows: list[tuple[float, ...]] = []
-        self.received: list[int] = []
-        self.skipped: dict[str, int] = {}
-        self.notes: list[str] = []
-
-    def skip(self, reason: str, count: int = 1) -> None:
-        if count:
-            self.skipped[reason] = self.skipped.get(reason, 0) + count
-
-    def append(self, row: tuple[float, ...], received: int) -> None:
-        self.rows.append(row)
-        self.received.append(received)
-
-    def table(self, width: int) -> np.ndarray:
-        """The rows (n, width) in stamp order, the stamp in s, as
-        :func:`excite.logs.bag_stamps.stamped_table` makes them (stamps not set, clock
-        steps, repeats)."""
-        rows = np.array(self.rows, dtype=float).reshape(-1, width)
-        rows[:, 0] *= 1e-9
-        stamped = stamped_table(self.where, rows, np.array(self.received, dtype=float) * 1e-9)
-        for reason, count in stamped.skipped.items():
-            self.skip(reason, count)
-        self.notes += stamped.notes
-        return stamped.rows
-
-
-class _Joints(_Stream):
-    """Collects (stamp, left angle, right angle) from JointState messages; each wheel's
-    (stamp, angle) apart from messages that name one wheel only (a driver per motor)."""
-
-    def __init__(self, where: str, left: str, right: str) -> None:
-        super().__init__(where)
-        self.left, self.right = left, right
-        self.names: set[str] = set()
-        self.apart = {joint: _Stream(f"{where} {joint}") for joint in (left, right)}
-
-    def add(self, msg: Any, received: int) -> None:
-        names = list(msg.name)
-        self.names.update(names)
-        wheels = [joint for joint in (self.left, self.right) if joint in names]
-        if not wheels:
-            return
-        if len(msg.position) == 0:  # velocity or effort only: allowed by JointState
-            if len(wheels) == 2:
-                self.skip(NO_POSITIONS)
-            return
-        if len(msg.position) != len(names):
-            raise DataError(f"{sample_at(self.where, _stamp(msg.header) * 1e-9)}: "
-                            f"{len(msg.position)} positions for {len(names)} joint names")
-        angles = [msg.position[names.index(joint)] for joint in wheels]
-        if len(wheels) == 2:
-            self.append((_stamp(msg.header), *angles), received)
-        else:
-            self.apart[wheels[0]].append((_stamp(msg.header), angles[0]), received)
-
-    def columns(self) -> list[np.ndarray]:
-        """[t (s), phi_L, phi_R (rad)]: from the messages with both wheels, or when there
-        are none, from the wheels' separate messages put together (a note says so)."""
-        for joint in (self.left, self.right):
-            if joint not in self.names:
-                present = ", ".join(sorted(self.names)) or "none"
-                raise DataError(f"{self.where}: no joint {joint!r}; joints present: {present}")
-        if self.rows:
-            table = self.table(3)
-            if np.isnan(table[:, 1:]).all():
-                raise DataError(f"{self.where}: the positions of {self.left!r} and "
-                                f"{self.right!r} are all NaN (joints with a velocity state "
-                                "interface only?); excite needs the wheels' positions")
-            return list(table.T)
-        if all(stream.rows for stream in self.apart.values()):
-            return self._together()
-        if self.skipped.get(NO_POSITIONS):
-            raise DataError(f"{self.where}: no message has positions for the joints "
-                            f"{self.left!r} and {self.right!r} "
-                            f"({self.skipped[NO_POSITIONS]} name them with an empty "
-                            "position array: velocity or effort only)")
-        missing = next(joint for joint, stream in self.apart.items() if not stream.rows)
-        raise DataError(f"{self.where}: no message has a position of the joint {missing!r}")
-
-    def _together(self) -> list[np.ndarray]:
-        left, right = (self.apart[joint] for joint in (self.left, self.right))
-        rows, left_out = wheels_together(left.table(2), right.table(2))
-        for stream in (left, right):
-            self.notes += stream.notes
-            for reason, count in stream.skipped.items():
-                self.skip(f"{reason} ({stream.where.rsplit(' ', 1)[1]})", count)
-        self.skip(f"{self.left} outside the {self.right} messages' time range or gaps",
-                  left_out)
-        self.notes.append(f"{self.where}: the wheels come in separate messages: the "
-                          f"{self.right} angles are interpolated to the {self.left} stamps")
-        return list(rows.T)
-
-
-class _PoseStream(_Stream):
-    """Rows of (stamp, x, y, z, quaternion x, y, z, w)."""
-
-    def columns(self) -> list[np.ndarray]:
-        """[t (s), x, y (m), theta (rad, wrapped)], without the poses not measured (a NaN,
-        or a quaternion of zeros: a motion-capture body not tracked), skipped and counted."""
-        table = self.table(8)
-        lost = np.isnan(table).any(axis=1) | (table[:, 4:] == 0).all(axis=1)
-        self.skip(NOT_TRACKED, int(lost.sum()))
-        table = table[~lost]
-        t = table[:, 0]
-        q, position, turned = z_up(table[:, 4:], table[:, 1:4])
-        if turned is not None:
-            self.notes.append(f"{self.where}: {turned}")
-        return [t, position[:, 0], position[:, 1],
-                headings(q, lambda i: sample_at(self.where, t[i]))]
-
-
-class _Poses(_PoseStream):
-    """Collects the poses of messages of the supported types (one topic may carry several,
-    from publishers of different types)."""
-
-    def add(self, msg: Any, received: int) -> None:
-        stamp = _stamp(msg.header) if hasattr(msg, "header") else 0
-        self.append((stamp, *_pose_row(msg)), received)
-
-
-class _Transforms(_PoseStream):
-    """Collects the direct parent -> child transforms in TF messages."""
-
-    def __init__(self, where: str, parent: str, child: str) -> None:
-        super().__init__(where)
-        self.pair = (_frame(parent), _frame(child))
-        self.pairs: set[tuple[str, str]] = set()
-
-    def add(self, msg: Any, received: int) -> None:
-        for transform in msg.transforms:
-            pair = (_frame(transform.header.frame_id), _frame(transform.child_frame_id))
-            self.pairs.add(pair)
-            if pair == self.pair:
-                self.append((_stamp(transform.header),
-                             *_planar(transform.transform.translation,
-                                      transform.transform.rotation)), received)
-
-    def columns(self) -> list[np.ndarray]:
-        """[t (s), x, y (m), theta (rad, wrapped)]."""
-        if not self.rows:
-            present = ", ".join(f"{a} -> {b}" for a, b in sorted(self.pairs)) or "none"
-            raise DataError(f"{self.where}: no transform {self.pair[0]} -> {self.pair[1]}; "
-                            f"frame pairs present: {present}")
-        return super().columns()
 
 
 class _Bag:
@@ -383,16 +184,16 @@ def _require(name: str, topics: dict[str, set[str]], topic: str, kinds: tuple[st
 
 
 def _pose_collector(name: str, topics: dict[str, set[str]], pose_topic: str | None,
-                    tf: tuple[str, str] | None) -> tuple[str, _Poses | _Transforms, str]:
+                    tf: tuple[str, str] | None) -> tuple[str, PoseTopicRows | TransformRows, str]:
     """(topic to read, its collector, the pose stream's source label)."""
     if tf is not None:
         _require(name, topics, TF_TOPIC, TF_MESSAGES, "transforms")
-        transforms = _Transforms(f"{name} {TF_TOPIC}", *tf)
+        transforms = TransformRows(f"{name} {TF_TOPIC}", *tf)
         parent, child = transforms.pair
         return TF_TOPIC, transforms, f"{name} {TF_TOPIC} {parent}->{child}"
     assert pose_topic is not None  # read_bag checked that exactly one source is given
     _require(name, topics, pose_topic, POSE_TYPES, "poses")
-    poses = _Poses(f"{name} {pose_topic}")
+    poses = PoseTopicRows(f"{name} {pose_topic}")
     return pose_topic, poses, poses.where
 
 
@@ -457,9 +258,9 @@ def read_bag_log(
         for connection in bag.connections:
             topics.setdefault(connection.topic, set()).add(connection.msgtype)
         _require(name, topics, joint_states, (JOINT_STATE,), "wheel joint states")
-        joints = _Joints(f"{name} {joint_states}", left_wheel, right_wheel)
+        joints = JointRows(f"{name} {joint_states}", left_wheel, right_wheel)
         pose_key, poses, pose_source = _pose_collector(name, topics, pose_topic, tf)
-        collectors: dict[str, _Joints | _Poses | _Transforms] = {joint_states: joints,
+        collectors: dict[str, JointRows | PoseTopicRows | TransformRows] = {joint_states: joints,
                                                                  pose_key: poses}
         wanted = [c for c in bag.connections if c.topic in collectors]
         for connection, received, msg in bag.messages(wanted):

@@ -16,7 +16,7 @@ after an underscore when the name before it is a known column (``t_ms``, ``yaw_d
 are matched without case, surrounding spaces or double quotes; spaces, hyphens and dots inside
 a name count as underscores (``pos x`` is ``pos_x``). A format gives its names (aliases
 included) and each column's quantity; a unit is converted to the quantity's base unit (s, m,
-rad; ticks stay ticks, see :data:`UNITS`), and a unit of another quantity, or one not in the
+rad, rad/s; ticks stay ticks, see :data:`UNITS`), and a unit of another quantity, or one not in the
 table, is an error naming the column. Columns a format does not know are not read (not even
 as numbers) and are reported in a note.
 
@@ -47,7 +47,7 @@ BoolArray = NDArray[np.bool_]
 
 _DEGREE = (math.pi, 180.0)
 #: The units of each quantity a column may carry, as (numerator, denominator) of the factor
-#: to the quantity's base unit, the first one listed (s, m, rad, ticks).
+#: to the quantity's base unit, the first one listed (s, m, rad, ticks, rad/s).
 UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "time": {"s": (1.0, 1.0), "sec": (1.0, 1.0), "secs": (1.0, 1.0), "second": (1.0, 1.0),
              "seconds": (1.0, 1.0), "ms": (1.0, 1e3), "us": (1.0, 1e6), "µs": (1.0, 1e6),
@@ -57,6 +57,8 @@ UNITS: dict[str, dict[str, tuple[float, float]]] = {
               "degree": _DEGREE, "degrees": _DEGREE, "°": _DEGREE},
     "count": {"ticks": (1.0, 1.0), "tick": (1.0, 1.0), "counts": (1.0, 1.0),
               "count": (1.0, 1.0)},
+    "angular speed": {"rad/s": (1.0, 1.0), "rad/sec": (1.0, 1.0), "deg/s": _DEGREE,
+                      "°/s": _DEGREE, "rpm": (2.0 * math.pi, 60.0), "rev/s": (2.0 * math.pi, 1.0)},
     "number": {},  # dimensionless (a quaternion's components): no unit
 }
 _ALL_UNITS = {unit for units in UNITS.values() for unit in units}
@@ -134,7 +136,7 @@ def _unread_name(text: str, index: int) -> str:
 
 
 def _base_unit(unit: str | None) -> str:
-    """The base unit of the quantity ``unit`` measures (s, m, rad, ticks)."""
+    """The base unit of the quantity ``unit`` measures (s, m, rad, ticks, rad/s)."""
     return next(next(iter(units)) for units in UNITS.values() if unit in units)
 
 

@@ -49,12 +49,13 @@ def _is_tum_row(line: str) -> bool:
 
 #: Column names of ROS exports read as time-series columns: PlotJuggler's (``__time``,
 #: topic paths such as ``/mocap/pose/pose/position/x``, ``/joint_states/<joint>/position``
-#: with ``left`` or ``right`` in the joint's name) and ``rostopic echo -p``'s
+#: with ``left`` or ``right`` in the joint's name, or its ``velocity`` when no joint has a
+#: position column) and ``rostopic echo -p``'s
 #: (``field.header.stamp`` in ns, ``field.pose.position.x``).
 _ROS_TIME = {"__time": "t", "field.header.stamp": "t [ns]"}
 _ROS_POSITION = re.compile(r"(?:^|[/.])(?:position|translation)[/.]([xy])$")
 _ROS_ORIENTATION = re.compile(r"(?:^|[/.])(?:orientation|rotation)[/.]([xyzw]|yaw)$")
-_ROS_JOINT = re.compile(r"/([^/]+)/position$")
+_ROS_JOINT = re.compile(r"/([^/]+)/(position|velocity)$")
 
 
 def _ros_name(field: str, fields: Sequence[str], is_time: Callable[[str], bool]
@@ -71,7 +72,12 @@ def _ros_name(field: str, fields: Sequence[str], is_time: Callable[[str], bool]
     if match := _ROS_ORIENTATION.search(name):
         return "theta" if match[1] == "yaw" else f"q{match[1]}"
     if (match := _ROS_JOINT.search(name)) and ("left" in match[1]) != ("right" in match[1]):
-        return "phi_L" if "left" in match[1] else "phi_R"
+        side = "L" if "left" in match[1] else "R"
+        if match[2] == "position":
+            return f"phi_{side}"
+        positions = any(joint[2] == "position" for joint in map(_ROS_JOINT.search, fields)
+                        if joint)
+        return None if positions else f"omega_{side}"
     return None
 
 

@@ -30,8 +30,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from excite.errors import DataError
 
-__all__ = ["TimeSeries", "sample_at", "tick_angle", "unwrapped_counter", "unwrapped_words",
-           "ANGLE_COLUMNS", "TICK_COLUMNS", "POSE_COLUMNS"]
+__all__ = ["SpeedIntegral", "TimeSeries", "integrated_speed", "sample_at", "tick_angle",
+           "unwrapped_counter", "unwrapped_words", "ANGLE_COLUMNS", "POSE_COLUMNS",
+           "SPEED_COLUMNS", "SPEED_NOTE", "TICK_COLUMNS"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -39,9 +40,11 @@ Stream = Literal["encoder", "pose"]
 
 #: Fewest samples a stream may have.
 MIN_SAMPLES = 2
-#: The wheel columns: angles (rad) or encoder ticks; and the pose columns (m, m, rad).
+#: The wheel columns: angles (rad), encoder ticks or angular speeds (rad/s, integrated:
+#: :func:`integrated_speed`); and the pose columns (m, m, rad).
 ANGLE_COLUMNS = ("phi_L", "phi_R")
 TICK_COLUMNS = ("ticks_L", "ticks_R")
+SPEED_COLUMNS = ("omega_L", "omega_R")
 POSE_COLUMNS = ("x", "y", "theta")
 
 
@@ -239,6 +242,44 @@ def _subset(series: TimeSeries, enc: NDArray[np.bool_], pose: NDArray[np.bool_]
                         unwrapped_counters=series.unwrapped_counters)
     object.__setattr__(subset, "unwrapped_wheels", series.unwrapped_wheels)
     return subset
+
+
+#: What a log whose wheels were given as speeds says (after its source's name).
+SPEED_NOTE = ("wheel speeds (rad/s) integrated into angles by the trapezoidal rule; their "
+              "errors add up over time, which the noise model's slip level takes")
+
+
+def integrated_speed(t: FloatArray, omega: FloatArray) -> FloatArray:
+    """The cumulative angle (rad, 0 at the first sample) of a wheel whose angular speed
+    ``omega`` (rad/s) is sampled at the strictly increasing times ``t`` (s): the trapezoidal
+    rule, exact for a speed that changes linearly between samples (for a driver's speed that
+    is the mean over the last sample period, the difference is half a sample's change of
+    speed times its period, which does not add up over a segment)."""
+    steps = 0.5 * (omega[1:] + omega[:-1]) * np.diff(t)
+    return np.concatenate(([0.0], np.cumsum(steps)))
+
+
+class SpeedIntegral:
+    """:func:`integrated_speed` of two wheels one sample at a time, as a live stream gives
+    them: :meth:`add` returns the angles (rad) at the sample (0 at the first)."""
+
+    def __init__(self) -> None:
+        self.t: float | None = None
+        self.omega = (0.0, 0.0)
+        self.angles = (0.0, 0.0)
+
+    def add(self, t: float, omega_L: float, omega_R: float) -> tuple[float, float] | None:
+        """The angles at time ``t`` (s) of wheels turning at ``omega_L``, ``omega_R``
+        (rad/s); None for a sample not after the last one (left out)."""
+        if self.t is not None:
+            if not t > self.t:
+                return None
+            step = t - self.t
+            self.angles = tuple(angle + 0.5 * (before + now) * step for angle, before, now
+                                in zip(self.angles, self.omega, (omega_L, omega_R),
+                                       strict=True))
+        self.t, self.omega = t, (omega_L, omega_R)
+        return self.angles
 
 
 def tick_angle(ticks_per_rev: float) -> float:

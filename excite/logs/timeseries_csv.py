@@ -35,8 +35,11 @@ from excite.logs.segments import read_text
 from excite.logs.timeseries import (
     ANGLE_COLUMNS,
     POSE_COLUMNS,
+    SPEED_COLUMNS,
+    SPEED_NOTE,
     TICK_COLUMNS,
     TimeSeries,
+    integrated_speed,
     tick_angle,
     unwrapped_counter,
 )
@@ -74,7 +77,7 @@ class _Table:
 
     @property
     def encoder_columns(self) -> tuple[str, ...] | None:
-        for names in (ANGLE_COLUMNS, TICK_COLUMNS):
+        for names in (ANGLE_COLUMNS, TICK_COLUMNS, SPEED_COLUMNS):
             if self.has(names):
                 return names
         return None
@@ -301,13 +304,16 @@ def _pick_streams(tables: list[_Table]) -> tuple[_Table, _Table]:
     return encoders[0], poses[0]
 
 
-def _encoder_angles(table: _Table, ticks_per_rev: float | None
+def _encoder_angles(table: _Table, ticks_per_rev: float | None, note: OnNote
                     ) -> tuple[list[FloatArray], IntArray, tuple[str, ...]]:
     """[t, phi_L, phi_R] (s, rad, rad), lines, and the tick columns whose counter wrapped (e.g.
-    'ticks_L (16-bit counter)'); ticks become angles."""
+    'ticks_L (16-bit counter)'); ticks become angles, speeds are integrated (``note`` told)."""
     names = table.encoder_columns
     assert names is not None
     (t, left, right), lines = table.stream(names)
+    if names == SPEED_COLUMNS and ticks_per_rev is None:
+        note(f"{table.name}: {SPEED_NOTE}")
+        return [t, integrated_speed(t, left), integrated_speed(t, right)], lines, ()
     if names == TICK_COLUMNS:
         if ticks_per_rev is None:
             raise DataError(f"{table.name}:{table.header_line}: encoder ticks (ticks_L, "
@@ -320,7 +326,7 @@ def _encoder_angles(table: _Table, ticks_per_rev: float | None
         return [t, left * scale, right * scale], lines, wrapped
     if ticks_per_rev is not None:
         raise DataError(f"{table.name}:{table.header_line}: ticks_per_rev given, but the "
-                        "encoder columns are angles in rad (phi_L, phi_R); ticks are columns "
+                        f"encoder columns are {', '.join(names)}, not ticks; ticks are columns "
                         "ticks_L, ticks_R")
     return [t, left, right], lines, ()
 
@@ -335,7 +341,9 @@ def read_timeseries(paths: PathArg | Sequence[PathArg],
     cells empty when that stream has no sample at its time. Two files, in any order:
     ``t,phi_L,phi_R`` and ``t,x,y,theta`` (recognised by their headers). Wheel columns
     ``ticks_L,ticks_R`` instead of ``phi_L,phi_R`` are encoder ticks: angles = ticks * 2 pi /
-    ticks_per_rev (ticks without ticks_per_rev are an error). Units: t in s, angles in rad,
+    ticks_per_rev (ticks without ticks_per_rev are an error); ``omega_L,omega_R`` are wheel
+    speeds (rad/s, or the unit the header gives: deg/s, rpm), integrated into angles
+    (:func:`excite.logs.timeseries.integrated_speed`, with a note). Units: t in s, angles in rad,
     x, y in m, unless the header gives another unit (``t [ms]``, ``x (mm)``, ``theta [deg]``:
     converted); theta may be wrapped. Other columns are not read. Blank lines and ``#``
     comments are ignored. on_note: told, one line each, the columns not read and the units
@@ -355,7 +363,7 @@ def read_timeseries(paths: PathArg | Sequence[PathArg],
                         f"got {len(files)} files")
     note = on_note if on_note is not None else (lambda text: None)
     encoders, poses = _pick_streams([_read_table(p, note) for p in files])
-    (t_enc, phi_L, phi_R), enc_lines, counters = _encoder_angles(encoders, ticks_per_rev)
+    (t_enc, phi_L, phi_R), enc_lines, counters = _encoder_angles(encoders, ticks_per_rev, note)
     (t_pose, x, y, theta), pose_lines = poses.stream(POSE_COLUMNS)
     return TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,
                       source=(encoders.name, poses.name), lines=(enc_lines, pose_lines),

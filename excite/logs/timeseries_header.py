@@ -2,8 +2,9 @@
 streams a file holds (found from its header alone), and what columns not read may have been
 meant as (:mod:`excite.logs.timeseries_csv` reads the rows).
 
-A header names ``t`` (s), the wheel angles ``phi_L,phi_R`` (rad) or encoder ticks
-``ticks_L,ticks_R``, and the pose ``x,y`` (m), ``theta`` (rad) or an orientation quaternion
+A header names ``t`` (s), the wheel angles ``phi_L,phi_R`` (rad), encoder ticks
+``ticks_L,ticks_R`` or wheel speeds ``omega_L,omega_R`` (rad/s, as a JointState's velocity),
+and the pose ``x,y`` (m), ``theta`` (rad) or an orientation quaternion
 ``qx,qy,qz,qw`` (``qx,qy`` may be left out), each also under the names of :data:`ALIASES` and
 with a unit (``t [ms]``, ``yaw (deg)``; :mod:`excite.logs.csv_table`). The header of a
 tool's export laid out otherwise (a TUM trajectory, PlotJuggler, rostopic, OptiTrack Motive)
@@ -26,7 +27,7 @@ from excite.logs.csv_table import (
     parse_header,
 )
 from excite.logs.export_layouts import HEADER_LINES, layout
-from excite.logs.timeseries import ANGLE_COLUMNS, POSE_COLUMNS, TICK_COLUMNS
+from excite.logs.timeseries import ANGLE_COLUMNS, POSE_COLUMNS, SPEED_COLUMNS, TICK_COLUMNS
 
 __all__ = ["ALIASES", "EXPECTED", "QUATERNION_COLUMNS", "columns_hint", "header_hint",
            "header_problem", "is_time_name", "is_timeseries_csv", "parse_timeseries_header",
@@ -42,6 +43,9 @@ ALIASES: dict[str, tuple[str, ...]] = {
     **{f"phi_{s}": (f"phi_{s}", f"phi_{side}", f"angle_{s}", f"angle_{side}", f"{side}_angle",
                     f"{side}_wheel_angle") for s, side in (("L", "left"), ("R", "right"))},
     **{f"ticks_{s}": (f"ticks_{s}", f"ticks_{side}", f"{side}_ticks", f"{side}_wheel_ticks")
+       for s, side in (("L", "left"), ("R", "right"))},
+    **{f"omega_{s}": (f"omega_{s}", f"omega_{side}", f"{side}_omega", f"{side}_wheel_speed",
+                      f"{side}_wheel_velocity", f"{side}_wheel_omega")
        for s, side in (("L", "left"), ("R", "right"))},
     **{axis: (axis, f"pos_{axis}", f"position_{axis}", f"pose_{axis}") for axis in "xy"},
     "theta": ("theta", "yaw", "heading"),
@@ -60,10 +64,13 @@ _ROTATION_QUATERNION = {f"r{axis}": f"q{axis}" for axis in "xyzw"}
 _Z_NAMES = {name: "z" for name in ("z", "pos_z", "position_z", "pose_z")}
 #: The quantity of each column (the units it may be written in: excite.logs.csv_table.UNITS).
 _QUANTITIES = {"t": "time", **dict.fromkeys(ANGLE_COLUMNS, "angle"),
-               **dict.fromkeys(TICK_COLUMNS, "count"), "x": "length", "y": "length",
+               **dict.fromkeys(TICK_COLUMNS, "count"),
+               **dict.fromkeys(SPEED_COLUMNS, "angular speed"), "x": "length", "y": "length",
                "theta": "angle", **dict.fromkeys(QUATERNION_COLUMNS, "number"),
                "z": "length"}
 EXPECTED = "t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two"
+#: The wheel columns' kinds, one of which a log gives.
+_WHEEL_GROUPS = (ANGLE_COLUMNS, TICK_COLUMNS, SPEED_COLUMNS)
 # Header names of columns not read that look like a wheel's or an orientation's.
 _WHEEL_LIKE = re.compile(r"left|right|wheel|enc|tick")
 _QUATERNION_LIKE = re.compile(r"^(q|quat|orientation)[_ .]?[xyzw]\b|^q[xyzw]$|\brotation\b")
@@ -92,12 +99,13 @@ def columns_hint(header: Header) -> str:
     missing ('' when nothing looks so)."""
     labels = set(header.labels)
     wheels = [text for text in header.ignored if _WHEEL_LIKE.search(text.lower())
-              and not any(labels >= set(names) for names in (ANGLE_COLUMNS, TICK_COLUMNS))]
+              and not any(labels >= set(names) for names in _WHEEL_GROUPS)]
     turns = [text for text in header.ignored if _QUATERNION_LIKE.search(text.lower())]
     hints = []
     if wheels:
         hints.append(f"{', '.join(map(repr, wheels))} not read: wheel columns are named "
-                     "phi_L, phi_R (rad) or ticks_L, ticks_R (see docs/formats.md)")
+                     "phi_L, phi_R (rad), ticks_L, ticks_R or omega_L, omega_R (rad/s; see "
+                     "docs/formats.md)")
     if turns and "theta" not in labels:
         hints.append(f"{', '.join(map(repr, turns))} not read: give the heading as theta "
                      "(rad) or as the quaternion qx, qy, qz, qw")
@@ -157,15 +165,15 @@ def _pose_labels(labels: Sequence[str]) -> set[str]:
 
 
 def _check_column_set(header: Header, where: str) -> None:
-    """A complete encoder group (angles or ticks), a complete pose group, or both."""
+    """A complete encoder group (angles, ticks or speeds), a complete pose group, or both."""
     columns = header.labels
-    angles, ticks = set(ANGLE_COLUMNS) & set(columns), set(TICK_COLUMNS) & set(columns)
-    if angles and ticks:
-        raise DataError(f"{where}: both wheel angles (phi_L, phi_R) and ticks "
-                        "(ticks_L, ticks_R); give one kind")
+    wheels = [(set(names) & set(columns), names) for names in _WHEEL_GROUPS]
+    given = [names for present, names in wheels if present]
+    if len(given) > 1:
+        raise DataError(f"{where}: wheel columns of two kinds ({', '.join(given[0])} and "
+                        f"{', '.join(given[1])}); give one kind")
     groups = [(present, expected) for present, expected in (
-        (angles, ANGLE_COLUMNS), (ticks, TICK_COLUMNS), (_pose_labels(columns),
-                                                         POSE_COLUMNS)) if present]
+        *wheels, (_pose_labels(columns), POSE_COLUMNS)) if present]
     if not groups:
         raise DataError(f"{where}: neither encoder (phi_L, phi_R) nor pose (x, y, theta) "
                         f"columns (expected {EXPECTED}); the header names {header.found()}"
@@ -215,7 +223,7 @@ def timeseries_streams(path: PathArg) -> frozenset[str]:
     streams, or a header with a problem: read alone, the error names it); empty for a segment
     CSV (header ``dphi_L,dphi_R,dx_gt,dy_gt,dtheta_gt`` or none) or a file that cannot be read
     as text. Reads only up to the header."""
-    groups = {"encoder": (ANGLE_COLUMNS, TICK_COLUMNS), "pose": (POSE_COLUMNS,)}
+    groups = {"encoder": _WHEEL_GROUPS, "pose": (POSE_COLUMNS,)}
     try:
         line = _first_line(path)
     except DataError:  # a layout refused: read alone, the error names it

@@ -4,8 +4,12 @@ driver that changes its joint names, a clock that jumps, a bad stamp), until SIG
 AFTER s (the messages' own stamps) past the first one on, each message has FAULT:
 "drop_left" (no left wheel in it), "ahead" (stamped 100 s later) or "negative" (stamped at
 -1 s); or, "gripper", each is followed by a message of another joint (an arm's or a gripper's
-publisher on the same topic). The stamp of the first spoilt message (s) is written to FILE."""
+publisher on the same topic); or, "velocities", each has the wheels' velocities (rad/s, the
+mean over the period since the message before, as a driver measures them) and NaN positions,
+as joint_state_broadcaster publishes joints with a velocity interface only. The stamp of the
+first spoilt message (s) is written to FILE."""
 
+import math
 import sys
 from pathlib import Path
 
@@ -13,7 +17,7 @@ from builtin_interfaces.msg import Time
 from companion import node, spin_until_signalled
 from sensor_msgs.msg import JointState
 
-FAULTS = ("drop_left", "ahead", "negative", "gripper")
+FAULTS = ("drop_left", "ahead", "negative", "gripper", "velocities")
 
 
 def spoilt(msg: JointState, fault: str) -> JointState:
@@ -39,11 +43,21 @@ def main() -> None:
     relay_node = node("relay")
     out = relay_node.create_publisher(JointState, "/relay_joints", 50)
     first: list[float] = []
+    before: list[tuple[float, list[float]]] = []  # the last message's stamp and positions
 
     def relay(msg: JointState) -> None:
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         if not first:
             first.append(t)
+        if fault == "velocities":
+            last = before[-1] if before else (t - 0.01, list(msg.position))
+            before[:] = [(t, list(msg.position))]
+            out.publish(JointState(header=msg.header, name=list(msg.name),
+                                   position=[math.nan] * len(msg.name),
+                                   velocity=[(a - b) / max(t - last[0], 1e-9)
+                                             for a, b in zip(msg.position, last[1],
+                                                             strict=True)]))
+            return
         if t - first[0] >= after and not file.exists():
             file.write_text(f"{t}\n")
         if t - first[0] >= after and fault == "gripper":

@@ -356,6 +356,27 @@ def test_joint_states_that_cannot_be_used_stop_the_robot_and_say_why(session_dir
     assert "Traceback" not in s.err
 
 
+def test_wheels_given_as_velocities_are_integrated_and_the_session_calibrates(session_dir):
+    """A driver with velocity interfaces only (positions NaN, velocities the mean over each
+    period): the session integrates the velocities into angles, says so once, and
+    reaches the target with the truth near the result, as with positions."""
+    from pathlib import Path
+
+    relay = [sys.executable, str(Path(__file__).with_name("relay.py")), "velocities", "0",
+             str(session_dir / "spoilt.txt")]
+    s = rehearse(session_dir, [*LIVE, "--joint-states", "/relay_joints", "--sensor-pose",
+                               "axle", "--max-time", "200"],
+                 ["--seed", "0", "--mount", "0,0,0"], companion=relay, timeout=400)
+    assert s.code == 0, (s.out, s.err)
+    assert s.result["live"]["outcome"] == "done"
+    assert s.err.count("integrated into angles by the trapezoidal rule") == 1
+    bound = NormalDist().inv_cdf(1.0 - FALSE_FAILURE / 6.0)
+    for name in ("r_L", "r_R", "b"):
+        z = (s.result["params"][name] - s.truth[name]) / s.result["std"][name]
+        assert abs(z) < bound, (name, z)
+    assert s.log[-1, 4] == 0 and s.log[-1, 5] == 0
+
+
 def test_another_publisher_on_the_joint_states_changes_nothing(session_dir):
     """An arm's or a gripper's joints published on the same topic, without the wheels (found
     by review: once the wheels were seen, each such message was taken for a spoilt wheel

@@ -573,14 +573,49 @@ def test_joint_states_without_positions_are_skipped_and_counted(tmp_path, log):
     assert bag.skipped_text() == f"{n} /joint_states without wheel positions"
 
 
-def test_joint_states_never_with_positions_or_malformed(tmp_path, log):
+@pytest.mark.parametrize("positions", ["empty", "nan"])
+def test_joint_states_with_velocities_only_are_integrated(tmp_path, log, positions):
+    """A driver with velocity state interfaces only: JointState messages with the wheels'
+    velocities (rad/s) and no positions (an empty array, or NaN as joint_state_broadcaster
+    fills them). Their trapezoidal integral is read as the wheel angles, with a note, and
+    segments like the angles it was differentiated from."""
+    speeds = {"L": np.gradient(log.phi_L, log.t_enc), "R": np.gradient(log.phi_R, log.t_enc)}
+
     def velocities(bag: BagWriter):
-        return [(topic, received, velocity_only(bag, msg.header.stamp.sec
-                                                + 1e-9 * msg.header.stamp.nanosec))
+        out, i = [], 0
+        for topic, received, msg in log_messages(bag, log, "pose"):
+            if topic == "/joint_states" and LEFT in msg.name:
+                order = [msg.name.index(LEFT), msg.name.index(RIGHT)]
+                velocity = np.zeros(len(msg.name))
+                velocity[order] = speeds["L"][i], speeds["R"][i]
+                msg.velocity = velocity
+                msg.position = (np.zeros(0) if positions == "empty"
+                                else np.full(len(msg.name), np.nan))
+                i += 1
+            out.append((topic, received, msg))
+        return out
+    bag = read_bag_log(make_bag(tmp_path, "mcap", velocities), LEFT, RIGHT,
+                       pose_topic="/sensor_pose")
+    assert bag.skipped == {}
+    assert any("wheel speeds (rad/s) integrated into angles by the trapezoidal rule" in note
+               for note in bag.notes)
+    read, angles = segment_timeseries(bag.series).segments, segment_timeseries(log).segments
+    assert len(read) == len(angles)
+    # the integral of central differences: within a small part of each increment
+    np.testing.assert_allclose(read.dphi_L, angles.dphi_L, rtol=0, atol=2e-3)
+    np.testing.assert_allclose(read.dphi_R, angles.dphi_R, rtol=0, atol=2e-3)
+    np.testing.assert_allclose(read.dx, angles.dx, rtol=0, atol=1e-12)
+
+
+def test_joint_states_never_with_positions_or_malformed(tmp_path, log):
+    def no_state(bag: BagWriter):
+        return [(topic, received, bag.joint_state(msg.header.stamp.sec
+                                                  + 1e-9 * msg.header.stamp.nanosec,
+                                                  [LEFT, RIGHT], []))
                 if topic == "/joint_states" and LEFT in msg.name else (topic, received, msg)
                 for topic, received, msg in log_messages(bag, log, "pose")]
     with pytest.raises(DataError) as info:
-        read_bag(make_bag(tmp_path / "a", "mcap", velocities), LEFT, RIGHT,
+        read_bag(make_bag(tmp_path / "a", "mcap", no_state), LEFT, RIGHT,
                  pose_topic="/sensor_pose")
     assert one_line(info).endswith(
         f"/joint_states: no message has positions for the joints {LEFT!r} and {RIGHT!r} "

@@ -368,6 +368,51 @@ def test_ros_exports_are_read_by_their_column_names(tmp_path, plain):
         read(path_two)
 
 
+def test_wheel_speeds_are_integrated_into_angles(tmp_path, plain):
+    """Wheel speeds instead of angles (a driver's velocity state interface, a motor
+    controller's rpm): read under their names and units, integrated by the trapezoidal rule
+    with a note; the same log to the integral's error. A PlotJuggler export of a JointState's
+    velocity is read so when no joint's position is exported, and not beside positions."""
+    path, _, rows = plain
+    reference = read_timeseries(path)
+    enc = [r for r in rows if r[1]]
+    t = np.array([float(r[0]) for r in enc])
+    speeds = [np.gradient(np.array([float(r[k]) for r in enc]), t) for k in (1, 2)]
+    rpm = [[r[0], repr(float(left) * 30 / math.pi), repr(float(right) * 30 / math.pi)]
+           for r, left, right in zip(enc, *speeds, strict=True)]
+    poses = [[r[0], *r[3:6]] for r in rows if r[3]]
+    speeds_path = export(tmp_path / "speeds.csv",
+                         ["time", "left_wheel_speed [rpm]", "right_wheel_speed [rpm]"], rpm)
+    pose_path = export(tmp_path / "poses.csv", ["t", "x", "y", "theta"], poses)
+    assert timeseries_streams(speeds_path) == {"encoder"}
+    series, notes = read([speeds_path, pose_path])
+    assert f"{speeds_path}: wheel speeds (rad/s) integrated into angles by the trapezoidal " \
+           "rule; their errors add up over time, which the noise model's slip level takes" in notes
+    for name in ("t_enc", "t_pose", "x", "y", "theta"):
+        np.testing.assert_allclose(getattr(series, name), getattr(reference, name), rtol=1e-12)
+    for name in ("phi_L", "phi_R"):  # angles from 0: the increments are the log's
+        increments = np.diff(getattr(series, name))
+        np.testing.assert_allclose(increments, np.diff(getattr(reference, name)), atol=2e-3)
+    with pytest.raises(DataError, match="speeds.csv:1: ticks_per_rev given, but the encoder "
+                                        "columns are omega_L, omega_R, not ticks"):
+        read([speeds_path, pose_path], ticks_per_rev=1024)
+    header = ["__time", "/joint_states/wheel_left_joint/velocity",
+              "/joint_states/wheel_right_joint/velocity"]
+    pj = export(tmp_path / "pj.csv", header, [[r[0], repr(float(a)), repr(float(b))]
+                                              for r, a, b in zip(enc, *speeds, strict=True)])
+    assert timeseries_streams(pj) == {"encoder"}
+    series, notes = read([pj, pose_path])
+    np.testing.assert_allclose(np.diff(series.phi_L), np.diff(reference.phi_L), atol=2e-3)
+    assert any("velocity as omega_L" in note for note in notes)
+    both = export(tmp_path / "both.csv", [*header, "/joint_states/wheel_left_joint/position",
+                                          "/joint_states/wheel_right_joint/position"],
+                  [[r[0], repr(float(a)), repr(float(b)), r[1], r[2]]
+                   for r, a, b in zip(enc, *speeds, strict=True)])
+    series, notes = read([both, pose_path])
+    assert_same(series, reference, rtol=1e-12)
+    assert not any("integrated" in note for note in notes)
+
+
 def test_a_separator_ending_every_data_row_but_not_the_header(tmp_path, plain):
     path, header, rows = plain
     ended = tmp_path / "ended.csv"
@@ -481,10 +526,12 @@ GOOD_ROWS = "0;0;0;0;0;0\n0.1;1;1;0.05;0;0\n0.2;2;2;0.1;0;0\n"
      "log.csv:2: x is empty (or NaN) but other x/y/theta cells are not"),
     ("time;left;right;x;y;yaw\n0;0;0;0;0;0\n", "log.csv: only pose columns; give the other "
      "stream too (a second file with t,phi_L,phi_R, or all columns in one file); 'left', "
-     "'right' not read: wheel columns are named phi_L, phi_R (rad) or ticks_L, ticks_R"),
+     "'right' not read: wheel columns are named phi_L, phi_R (rad), ticks_L, ticks_R or "
+     "omega_L, omega_R (rad/s"),
     ("time,enc_left,enc_right,x,y,qz,qw\n", "log.csv: only pose columns; give the other "
      "stream too (a second file with t,phi_L,phi_R, or all columns in one file); 'enc_left', "
-     "'enc_right' not read: wheel columns are named phi_L, phi_R (rad) or ticks_L, ticks_R"),
+     "'enc_right' not read: wheel columns are named phi_L, phi_R (rad), ticks_L, ticks_R or "
+     "omega_L, omega_R (rad/s"),
     ("time,phi_L,phi_R,x,y,rotation_z,rotation_w\n", "log.csv:1: missing column theta "
      "(expected t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta in two); "
      "the header names 'time', 'phi_L', 'phi_R', 'x', 'y', 'rotation_z', 'rotation_w'"),
@@ -501,6 +548,13 @@ GOOD_ROWS = "0;0;0;0;0;0\n0.1;1;1;0.05;0;0\n0.2;2;2;0.1;0;0\n"
      "unit of number (it has none)"),
     ("Zeit;X;Y;Gier\n", "log.csv:1: no time column t (s); the header names 'Zeit', 'X', 'Y', "
      "'Gier' (expected t,phi_L,phi_R,x,y,theta in one file"),
+    ("t,phi_L,phi_R,omega_L,omega_R,x,y,theta\n", "log.csv:1: wheel columns of two kinds "
+     "(phi_L, phi_R and omega_L, omega_R); give one kind"),
+    ("t,left_wheel_speed [m/s],right_wheel_speed [m/s],x,y,theta\n", "log.csv:1: column "
+     "'left_wheel_speed [m/s]': unit 'm/s' is not a unit of angular speed (rad/s, rad/sec, "
+     "deg/s, °/s, rpm, rev/s)"),
+    ("t,omega_L,omega_R,x,y,theta\n0,1,1,0,0,0\n0.1,1,inf,0,0,0\n", "log.csv:3: omega_R is "
+     "not finite"),
     ("time;battery\n", "log.csv:1: neither encoder (phi_L, phi_R) nor pose (x, y, theta) "
      "columns (expected t,phi_L,phi_R,x,y,theta in one file, or t,phi_L,phi_R and t,x,y,theta "
      "in two); the header names 'time', 'battery'"),
@@ -539,7 +593,8 @@ def test_a_lone_pose_file_with_wheel_like_columns_hints_at_their_names(tmp_path)
     path = tmp_path / "log.csv"
     path.write_text("time;left;right;x;y;yaw\n")
     assert header_hint(path) == ("; 'left', 'right' not read: wheel columns are named phi_L, "
-                                 "phi_R (rad) or ticks_L, ticks_R (see docs/formats.md)")
+                                 "phi_R (rad), ticks_L, ticks_R or omega_L, omega_R (rad/s; "
+                                 "see docs/formats.md)")
     with pytest.raises(DataError, match="has only the pose stream; give the file with the other "
                        "stream right after it; 'left', 'right' not read"):
         group_inputs([str(path)])

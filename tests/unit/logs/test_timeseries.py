@@ -31,7 +31,7 @@ from excite.logs.segmentation import (
     segment_timeseries,
 )
 from excite.logs.time_offset import estimate_time_offset, noticeable_time_offset
-from excite.logs.timeseries import TimeSeries
+from excite.logs.timeseries import SpeedIntegral, TimeSeries, integrated_speed
 from excite.logs.timeseries_csv import read_timeseries, write_timeseries
 from excite.logs.timeseries_header import is_timeseries_csv
 
@@ -385,7 +385,7 @@ GOOD = "t,phi_L,phi_R,x,y,theta\n0,0,0,0,0,0\n0.1,1,1,0.05,0,0\n0.2,2,2,0.1,0,0\
         ("t,phi_L,phi_R,x,theta\n", "log.csv:1: missing column y"),
         ("t,phi_L,phi_R,x,y,theta,t [ms]\n", "log.csv:1: column t appears twice"),
         ("t,phi_L,phi_R,phi_L,x,y,theta\n", "log.csv:1: column phi_L appears twice"),
-        ("t,phi_L,phi_R,ticks_L,ticks_R\n", "log.csv:1: both wheel angles"),
+        ("t,phi_L,phi_R,ticks_L,ticks_R\n", "log.csv:1: wheel columns of two kinds"),
         (GOOD + "0.3,3,3,0.15,0\n", "log.csv:5: expected 6 columns, found 5"),
         (GOOD + "0.3,3,abc,0.15,0,0\n", "log.csv:5: phi_R is not a number: 'abc'"),
         (GOOD + "13:20:01.5,3,3,0.15,0,0\n", "log.csv:5: t is not a number: '13:20:01.5' (a "
@@ -1013,3 +1013,18 @@ def test_coarse_encoders_own_lag_is_not_noted_as_an_offset(tmp_path):
                       coarse.x, coarse.y, coarse.theta)
     hint = noticeable_time_offset(late)
     assert hint is not None and abs(hint.offset - 0.1) < 0.02
+
+
+def test_wheel_speeds_integrate_alike_in_a_batch_and_one_sample_at_a_time():
+    """integrated_speed (a log's speeds at once) and SpeedIntegral (a live stream's, one
+    sample at a time) give the same angles; exact for a speed linear in time, and a sample
+    not after the last one is left out."""
+    rng = np.random.default_rng(5)
+    t = np.cumsum(rng.uniform(0.005, 0.02, 300))
+    left, right = rng.normal(0, 3, 300), 2.0 + 0.5 * t  # a ramp: exact by the rule
+    live = SpeedIntegral()
+    angles = np.array([live.add(*sample) for sample in zip(t, left, right, strict=True)])
+    np.testing.assert_allclose(angles[:, 0], integrated_speed(t, left), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(angles[:, 1], 2.0 * (t - t[0]) + 0.25 * (t**2 - t[0] ** 2),
+                               rtol=1e-12)
+    assert live.add(t[-1], 1.0, 1.0) is None and live.add(t[-2], 1.0, 1.0) is None
