@@ -1,8 +1,10 @@
 """The stopping rule's cost and false-stop rate.
 
 Cost: one decision (excite.stopping.StoppingRule.decide) on a 60-segment session, as segments
-of the lesson's kind (independent noise) and as segments cut from a time-series log (shared
-pose samples, the GLS with estimated noise levels), median of repeated calls. Then, on a noisy
+of the lesson's kind (independent noise), as an env episode's segments (the env's target mode
+and excite compare --target: ten encoder readings per segment, driven by slip_aware) and as
+segments cut from a time-series log (shared pose samples, the GLS with estimated noise
+levels: excite live), median of repeated calls. Then, on a noisy
 time-series log, side by side in one run: the 60th look of a growing session by the batch
 calibration alone and with the previous look's decision (the screen, excite.calibration.screen),
 and every look from the 15th to the 60th (and on to the rule's first *done*) both ways: the
@@ -27,6 +29,7 @@ import time
 
 import numpy as np
 
+from agents.metrics import rate_interval
 from excite.core.models import SensorPose
 from excite.logs.segmentation import segment_timeseries
 from excite.logs.synthetic import LESSON_TRUTH, lesson_dataset, synthetic_log
@@ -109,13 +112,33 @@ def _sessions(count: int) -> None:
           f" calibrated {len(calibrated)} (median per session {np.median(looks):.0f})")
 
 
-def _wilson(k: int, n: int) -> tuple[float, float]:
-    if n == 0:
-        return (0.0, 1.0)
-    z, p = 1.959964, k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return (max(0.0, centre - half), min(1.0, centre + half))
+def _env_session_ms(env_id: str, segments: int = 60, seed: int = 3) -> tuple[float, int]:
+    """One decision on the segments of an env episode (each with its ten encoder readings),
+    ``segments`` driven by slip_aware: the median cost (ms) of the rule's decision on them,
+    and how many parameters it estimated."""
+    import gymnasium as gym
+
+    import envs  # noqa: F401  (registers the env ids)
+    from agents.catalog import make_protocol
+    from envs.target import stopping_rule
+
+    env = gym.make(env_id, budget=segments, target=1e-9)  # asked every segment, never done
+    env.reset(seed=seed)
+    protocol = make_protocol("slip_aware")
+    protocol.reset(np.random.default_rng([seed, 1]))
+    base = env.unwrapped
+    for _ in range(segments):
+        env.step(protocol.act(base.knowledge()))
+    rule, data = stopping_rule(base.config, base.model), base.rule_segments
+    decision = rule.decide(data, nominal=base.nominal_theta[:3])
+    times = []
+    for _ in range(15):
+        start = time.perf_counter()
+        rule.decide(data, nominal=base.nominal_theta[:3])
+        times.append(time.perf_counter() - start)
+    env.close()
+    return 1e3 * float(np.median(times)), len(decision.result.parameter_names)
+
 
 
 def main() -> None:
@@ -134,6 +157,10 @@ def main() -> None:
                                  ("time-series segments, auto", cut, "auto")):
         ms = _median_ms(StoppingRule(target=args.target, sensor_pose=pose), segments)
         print(f"one decision, {len(segments)} {name}: {ms:.1f} ms")
+    for env_id in ("excite/DiffDriveCalib-v0", "excite/DiffDriveCalibSensor-v0"):
+        ms, count = _env_session_ms(env_id)
+        print(f"one decision, 60 segments of {env_id} driven by slip_aware ({count} "
+              f"parameters): {ms:.1f} ms")
     noisy = segment_timeseries(synthetic_log(np.random.default_rng(1), 150.0, LESSON_TRUTH,
                                              SESSION_SENSOR, pose_noise=(2e-3, 2e-3)).series
                                ).segments
@@ -162,7 +189,7 @@ def main() -> None:
                 error = np.abs(decision.result.params.as_array() - truth) / truth
                 false += bool(np.max(error) > args.target)
                 break
-    low, high = _wilson(false, stops)
+    low, high = rate_interval(false, stops)[1]
     print(f"false stops at target {args.target:g}, asked after every segment: {false}/{stops} "
           f"= {false / max(stops, 1):.3f} [{low:.3f}, {high:.3f}]; stopped in {stops}/"
           f"{args.runs}, median {np.median(when) if when else float('nan'):.0f} segments")

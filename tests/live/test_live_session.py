@@ -356,19 +356,26 @@ def test_joint_states_that_cannot_be_used_stop_the_robot_and_say_why(session_dir
     assert "Traceback" not in s.err
 
 
-def test_wheels_given_as_velocities_are_integrated_and_the_session_calibrates(session_dir):
-    """A driver with velocity interfaces only (positions NaN, velocities the mean over each
-    period): the session integrates the velocities into angles, says so once, and
-    reaches the target with the truth near the result, as with positions."""
+def _relayed_session(session_dir, fault: str):
+    """A session to the target on the joint states relayed with ``fault`` (tests/live/relay.py)
+    from the start, the body on the axle; asserted done."""
     from pathlib import Path
 
-    relay = [sys.executable, str(Path(__file__).with_name("relay.py")), "velocities", "0",
+    relay = [sys.executable, str(Path(__file__).with_name("relay.py")), fault, "0",
              str(session_dir / "spoilt.txt")]
     s = rehearse(session_dir, [*LIVE, "--joint-states", "/relay_joints", "--sensor-pose",
                                "axle", "--max-time", "200"],
                  ["--seed", "0", "--mount", "0,0,0"], companion=relay, timeout=400)
     assert s.code == 0, (s.out, s.err)
     assert s.result["live"]["outcome"] == "done"
+    return s
+
+
+def test_wheels_given_as_velocities_are_integrated_and_the_session_calibrates(session_dir):
+    """A driver with velocity interfaces only (positions NaN, velocities the mean over each
+    period): the session integrates the velocities into angles, says so once, and
+    reaches the target with the truth near the result, as with positions."""
+    s = _relayed_session(session_dir, "velocities")
     assert s.err.count("integrated into angles by the trapezoidal rule") == 1
     bound = NormalDist().inv_cdf(1.0 - FALSE_FAILURE / 6.0)
     for name in ("r_L", "r_R", "b"):
@@ -381,13 +388,5 @@ def test_another_publisher_on_the_joint_states_changes_nothing(session_dir):
     """An arm's or a gripper's joints published on the same topic, without the wheels (found
     by review: once the wheels were seen, each such message was taken for a spoilt wheel
     message): they are not the session's, and it reaches the target without a word of them."""
-    from pathlib import Path
-
-    relay = [sys.executable, str(Path(__file__).with_name("relay.py")), "gripper", "0",
-             str(session_dir / "spoilt.txt")]
-    s = rehearse(session_dir, [*LIVE, "--joint-states", "/relay_joints", "--sensor-pose",
-                               "axle", "--max-time", "200"],
-                 ["--seed", "0", "--mount", "0,0,0"], companion=relay, timeout=400)
-    assert s.code == 0, (s.out, s.err)
-    assert s.result["live"]["outcome"] == "done"
+    s = _relayed_session(session_dir, "gripper")
     assert "left out" not in s.err
