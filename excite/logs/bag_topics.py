@@ -18,9 +18,9 @@ from excite.logs.bag_stamps import stamped_table, wheels_together
 from excite.logs.orientation import headings, z_up
 from excite.logs.timeseries import SPEED_NOTE, integrated_speed, sample_at
 
-__all__ = ["NOT_TRACKED", "NO_POSITIONS", "POSE_2D", "POSE_PARTS", "POSE_TYPES", "JointRows",
-           "PoseRows", "PoseTopicRows", "TopicRows", "TransformRows", "frame_name",
-           "planar_row", "pose_row", "stamp_ns"]
+__all__ = ["FEWER_POSITIONS", "NOT_FINITE_WHEELS", "NOT_TRACKED", "NO_POSITIONS", "POSE_2D",
+           "POSE_PARTS", "POSE_TYPES", "JointRows", "PoseRows", "PoseTopicRows", "TopicRows",
+           "TransformRows", "frame_name", "planar_row", "pose_row", "stamp_ns"]
 
 #: Where each stamped pose message type keeps its position and orientation quaternion
 #: (geometry_msgs Point or Vector3, and Quaternion): bags' messages and a live node's alike.
@@ -56,6 +56,13 @@ def pose_row(msg: Any) -> tuple[float, ...]:
 
 #: Why a JointState message naming both wheels is skipped: its position array is empty.
 NO_POSITIONS = "without wheel positions"
+#: Why a JointState message is skipped: a wheel's position (or, when read, velocity) is NaN or
+#: infinite, as ros2_control publishes before the hardware's first reading.
+NOT_FINITE_WHEELS = "with a wheel value not finite (NaN before the hardware's first reading?)"
+#: Why a JointState message with the wheels' positions is skipped: most messages have their
+#: velocities only, which are read instead.
+FEWER_POSITIONS = ("with wheel positions, fewer than those with velocities only (a start-up's "
+                   "or another publisher's), which are read")
 #: Why a pose is skipped: it holds NaN or a quaternion of zeros.
 NOT_TRACKED = "not measured (NaN, or a quaternion of zeros: a body not tracked?)"
 
@@ -114,6 +121,7 @@ class JointRows(TopicRows):
         self.names: set[str] = set()
         self.apart = {joint: TopicRows(f"{where} {joint}") for joint in (left, right)}
         self.speeds = TopicRows(where)
+        self.apart_speeds = {joint: TopicRows(f"{where} {joint}") for joint in (left, right)}
 
     def add(self, msg: Any, received: int) -> None:
         names = list(msg.name)
@@ -126,6 +134,11 @@ class JointRows(TopicRows):
                 or any(math.isnan(msg.position[names.index(joint)]) for joint in wheels)):
             self.speeds.append((stamp_ns(msg.header),
                                 *(msg.velocity[names.index(joint)] for joint in wheels)), received)
+        if (len(wheels) == 1 and len(msg.velocity) == len(names)
+                and (len(msg.position) != len(names)
+                     or math.isnan(msg.position[names.index(wheels[0])]))):
+            self.apart_speeds[wheels[0]].append(
+                (stamp_ns(msg.header), msg.velocity[names.index(wheels[0])]), received)
         if len(msg.position) == 0:  # velocity or effort only: allowed by JointState
             if len(wheels) == 2:
                 self.skip(NO_POSITIONS)
@@ -148,16 +161,20 @@ class JointRows(TopicRows):
                 present = ", ".join(sorted(self.names)) or "none"
                 raise DataError(f"{self.where}: no joint {joint!r}; joints present: {present}")
         table = self.table(3) if self.rows else None
-        if self.speeds.rows and (table is None or np.isnan(table[:, 1:]).all()):
-            return self._integrated()
-        if table is not None:
-            if np.isnan(table[:, 1:]).all():
+        measured = None if table is None else table[np.isfinite(table[:, 1:]).all(axis=1)]
+        if self.speeds.rows and (measured is None or len(measured) < len(self.speeds.rows)):
+            return self._integrated(0 if measured is None else len(measured))
+        if table is not None and measured is not None:
+            if not len(measured):
                 raise DataError(f"{self.where}: the positions of {self.left!r} and "
                                 f"{self.right!r} are all NaN (joints with a velocity state "
                                 "interface only?); excite needs the wheels' positions")
-            return list(table.T)
+            self.skip(NOT_FINITE_WHEELS, len(table) - len(measured))
+            return list(measured.T)
         if all(stream.rows for stream in self.apart.values()):
-            return self._together()
+            return self._together(self.apart)
+        if all(stream.rows for stream in self.apart_speeds.values()):
+            return self._together(self.apart_speeds, speeds=True)
         if self.skipped.get(NO_POSITIONS):
             raise DataError(f"{self.where}: no message has positions for the joints "
                             f"{self.left!r} and {self.right!r} "
@@ -166,21 +183,35 @@ class JointRows(TopicRows):
         missing = next(joint for joint, stream in self.apart.items() if not stream.rows)
         raise DataError(f"{self.where}: no message has a position of the joint {missing!r}")
 
-    def _integrated(self) -> list[np.ndarray]:
-        """The wheels' velocities integrated into angles (:func:`integrated_speed`); the
-        messages without positions are then read, not skipped."""
-        t, left, right = self.speeds.table(3).T
-        for name, speed in ((self.left, left), (self.right, right)):
-            if not np.all(np.isfinite(speed)):
-                raise DataError(f"{sample_at(self.where, t[np.argmax(~np.isfinite(speed))])}: "
-                                f"the velocity of {name!r} is not a finite number")
-        self.skipped = self.speeds.skipped
+    def _integrated(self, with_positions: int) -> list[np.ndarray]:
+        """The wheels' velocities integrated into angles (:func:`integrated_speed`), those
+        not finite left out and counted; the messages without positions are then read, not
+        skipped, and the ``with_positions`` messages that had them (fewer: a start-up's, or
+        another publisher's) are counted as left out."""
+        table = self.speeds.table(3)
+        finite = np.isfinite(table[:, 1:]).all(axis=1)
+        self.skipped = dict(self.speeds.skipped)
+        self.skip(NOT_FINITE_WHEELS, int(np.sum(~finite)))
+        self.skip(FEWER_POSITIONS, with_positions)
         self.notes = [*self.speeds.notes, f"{self.where}: {SPEED_NOTE}"]
+        t, left, right = table[finite].T
         return [t, integrated_speed(t, left), integrated_speed(t, right)]
 
-    def _together(self) -> list[np.ndarray]:
-        left, right = (self.apart[joint] for joint in (self.left, self.right))
-        rows, left_out = wheels_together(left.table(2), right.table(2))
+    def _together(self, apart: dict[str, TopicRows], speeds: bool = False
+                  ) -> list[np.ndarray]:
+        """Each wheel's own messages put together (their angles, or with ``speeds`` their
+        velocities integrated, those not finite left out and counted): the right wheel's
+        angles interpolated to the left wheel's stamps."""
+        left, right = (apart[joint] for joint in (self.left, self.right))
+        tables = [left.table(2), right.table(2)]
+        if speeds:
+            for k, (stream, table) in enumerate(zip((left, right), tables, strict=True)):
+                finite = np.isfinite(table[:, 1])
+                stream.skip(NOT_FINITE_WHEELS, int(np.sum(~finite)))
+                t = table[finite, 0]
+                tables[k] = np.column_stack([t, integrated_speed(t, table[finite, 1])])
+            self.notes.append(f"{self.where}: {SPEED_NOTE}")
+        rows, left_out = wheels_together(*tables)
         for stream in (left, right):
             self.notes += stream.notes
             for reason, count in stream.skipped.items():

@@ -99,6 +99,10 @@ def _ros_header(line: str, is_time: Callable[[str], bool], where: str
     for name in dict.fromkeys(names):
         columns = [field for field, mapped in zip(fields, names, strict=True)
                    if mapped == name and mapped != field]
+        if len(columns) > 1 and all(_ROS_JOINT.search(c.lower()) for c in columns):
+            raise DataError(f"{where}: columns {', '.join(map(repr, columns))} are all "
+                            f"{name}: joints of one side (a skid-steer robot's?); export one "
+                            "joint per side, or delete the other joints' columns")
         if len(columns) > 1:
             raise DataError(f"{where}: columns {', '.join(map(repr, columns))} are all "
                             f"{name}: an export of several topics of one kind; export one")

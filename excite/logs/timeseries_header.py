@@ -136,7 +136,20 @@ def parse_timeseries_header(line: str, where: str) -> Header:
                         f"(expected {EXPECTED}){columns_hint(header)}")
     header = _orientation(header, where)
     _check_column_set(header, where)
+    _check_speed_units(header, where)
     return header
+
+
+def _check_speed_units(header: Header, where: str) -> None:
+    """DataError for a wheel speed column named without its unit, unless its name says
+    rad/s (omega): a motor controller's speed is as often in rpm, and read as rad/s it would
+    scale the wheel radii by 2 pi / 60 without a word."""
+    for column in header.columns:
+        unit = label_of(column.text, _NAMES)[1]
+        if column.label in SPEED_COLUMNS and unit is None and "omega" not in column.text.lower():
+            raise DataError(f"{where}: column {column.text!r} has no unit: wheel speeds may be "
+                            "in rad/s, deg/s, rpm or rev/s; say which, e.g. "
+                            f"'{column.text} [rpm]' or '{column.text} [rad/s]'")
 
 
 def _orientation(header: Header, where: str) -> Header:

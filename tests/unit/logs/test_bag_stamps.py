@@ -15,6 +15,7 @@ from excite import DataError  # noqa: E402
 from excite.logs.bag_reader import read_bag_log  # noqa: E402
 from excite.logs.bag_stamps import receive_time_steps, stamped_table  # noqa: E402
 from excite.logs.bag_writer import BagWriter  # noqa: E402
+from excite.logs.segmentation import segment_timeseries  # noqa: E402
 from tests.unit.logs.test_bags import (  # noqa: E402
     LEFT,
     RIGHT,
@@ -240,6 +241,32 @@ def test_wheels_in_separate_messages_are_put_together(tmp_path, log, lag):
         assert np.max(np.abs(bag.series.phi_R - expected.phi_R)) < 0.05
         assert bag.skipped == {f"/joint_states {LEFT} outside the {RIGHT} messages' time "
                                "range or gaps": 1}
+
+
+def test_wheels_in_separate_messages_with_velocities_only(tmp_path, log):
+    """A driver per motor with velocity interfaces only: each wheel's velocities integrated
+    on its own stamps, then put together as the angles of separate messages are."""
+    speeds = {LEFT: np.gradient(log.phi_L, log.t_enc), RIGHT: np.gradient(log.phi_R, log.t_enc)}
+
+    def apart(bag: BagWriter):
+        out, i = [], 0
+        for topic, received, msg in log_messages(bag, log, "pose"):
+            if topic == "/joint_states" and LEFT in msg.name and RIGHT in msg.name:
+                t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+                for wheel in (LEFT, RIGHT):
+                    one = bag.joint_state(t, [wheel], [])
+                    one.velocity = np.array([speeds[wheel][i]])
+                    out.append((topic, received, one))
+                i += 1
+            else:
+                out.append((topic, received, msg))
+        return out
+    path = make_bag(tmp_path, "mcap", apart)
+    bag = read_bag_log(path, LEFT, RIGHT, pose_topic="/sensor_pose")
+    assert len(bag.notes) == 2 and "integrated into angles" in bag.notes[0]
+    read, angles = segment_timeseries(bag.series).segments, segment_timeseries(log).segments
+    np.testing.assert_allclose(read.dphi_L, angles.dphi_L, rtol=0, atol=2e-3)
+    np.testing.assert_allclose(read.dphi_R, angles.dphi_R, rtol=0, atol=2e-3)
 
 
 def test_one_wheel_never_with_a_position(tmp_path, log):

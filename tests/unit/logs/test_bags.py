@@ -607,6 +607,40 @@ def test_joint_states_with_velocities_only_are_integrated(tmp_path, log, positio
     np.testing.assert_allclose(read.dx, angles.dx, rtol=0, atol=1e-12)
 
 
+def test_a_start_up_s_positions_and_values_not_finite_beside_velocities(tmp_path, log):
+    """A velocity-only driver whose first messages carry zero positions (a start-up's, or
+    joint_state_publisher's beside it) and NaN velocities before its first reading, and a
+    NaN now and then: the velocities are read, integrated, and every message left out is
+    counted (both refused the bag, or left no encoder sample)."""
+    speeds = {"L": np.gradient(log.phi_L, log.t_enc), "R": np.gradient(log.phi_R, log.t_enc)}
+
+    def start_up(bag: BagWriter):
+        out, i = [], 0
+        for topic, received, msg in log_messages(bag, log, "pose"):
+            if topic == "/joint_states" and LEFT in msg.name:
+                order = [msg.name.index(LEFT), msg.name.index(RIGHT)]
+                velocity = np.zeros(len(msg.name))
+                velocity[order] = speeds["L"][i], speeds["R"][i]
+                if i < 5 or i % 97 == 50:
+                    velocity[order[0]] = np.nan
+                msg.velocity = velocity
+                msg.position = np.zeros(len(msg.name) if i < 3 else 0)
+                i += 1
+            out.append((topic, received, msg))
+        return out
+    bag = read_bag_log(make_bag(tmp_path, "sqlite3", start_up), LEFT, RIGHT,
+                       pose_topic="/sensor_pose")
+    nan = sum(1 for i in range(3, log.t_enc.size) if i < 5 or i % 97 == 50)  # 0-2: positions
+    assert bag.skipped == {
+        "/joint_states with a wheel value not finite (NaN before the hardware's first "
+        "reading?)": nan,
+        "/joint_states with wheel positions, fewer than those with velocities only (a "
+        "start-up's or another publisher's), which are read": 3}
+    read, angles = segment_timeseries(bag.series).segments, segment_timeseries(log).segments
+    assert abs(len(read) - len(angles)) <= 1  # the first 5 samples are not read
+    assert np.all(np.isfinite(bag.series.phi_L))
+
+
 def test_joint_states_never_with_positions_or_malformed(tmp_path, log):
     def no_state(bag: BagWriter):
         return [(topic, received, bag.joint_state(msg.header.stamp.sec

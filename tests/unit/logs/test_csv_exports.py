@@ -362,6 +362,12 @@ def test_ros_exports_are_read_by_their_column_names(tmp_path, plain):
         group_inputs([str(joints), str(rostopic)])
     two = [*PLOTJUGGLER, "/vicon/robot/pose/position/x"]
     path_two = export(tmp_path / "two.csv", two, [r + [r[3]] for r in _quaternion_rows(rows)])
+    skid = export(tmp_path / "skid.csv", ["__time", "/joint_states/front_left_wheel/position",
+                                          "/joint_states/rear_left_wheel/position"], [])
+    with pytest.raises(DataError, match="skid.csv:1: columns '/joint_states/front_left_wheel/"
+                                        "position', '/joint_states/rear_left_wheel/position' "
+                                        "are all phi_L: joints of one side"):
+        read(skid)
     with pytest.raises(DataError, match="two.csv:1: columns '/mocap/pose/pose/position/x', "
                                         "'/vicon/robot/pose/position/x' are all x: an export "
                                         "of several topics of one kind; export one"):
@@ -553,6 +559,9 @@ GOOD_ROWS = "0;0;0;0;0;0\n0.1;1;1;0.05;0;0\n0.2;2;2;0.1;0;0\n"
     ("t,left_wheel_speed [m/s],right_wheel_speed [m/s],x,y,theta\n", "log.csv:1: column "
      "'left_wheel_speed [m/s]': unit 'm/s' is not a unit of angular speed (rad/s, rad/sec, "
      "deg/s, °/s, rpm, rev/s)"),
+    ("t,left_wheel_speed,right_wheel_speed [rpm],x,y,theta\n", "log.csv:1: column "
+     "'left_wheel_speed' has no unit: wheel speeds may be in rad/s, deg/s, rpm or rev/s; say "
+     "which, e.g. 'left_wheel_speed [rpm]' or 'left_wheel_speed [rad/s]'"),
     ("t,omega_L,omega_R,x,y,theta\n0,1,1,0,0,0\n0.1,1,inf,0,0,0\n", "log.csv:3: omega_R is "
      "not finite"),
     ("time;battery\n", "log.csv:1: neither encoder (phi_L, phi_R) nor pose (x, y, theta) "
