@@ -28,8 +28,30 @@ TARGET_BUDGET = 150
 def _check_budget(value: Any) -> None:
     if value is None:
         return
-    if int(value) < 1:
-        raise ValueError(f"budget must be at least 1 segment, got {value}")
+    if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < 1:
+        raise ValueError(f"budget must be a whole number of segments >= 1 or None, got "
+                         f"{value!r}")
+
+
+def _real(value: Any) -> bool:
+    return (isinstance(value, numbers.Real) and not isinstance(value, bool)
+            and math.isfinite(value))
+
+
+def _finite(name: str) -> Callable[[Any], None]:
+    """The check of a key whose value is any finite number (a reward term's weight)."""
+    def check(value: Any) -> None:
+        if not _real(value):
+            raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return check
+
+
+def _positive(name: str, unit: str) -> Callable[[Any], None]:
+    """The check of a key whose value is a positive finite number (``unit``)."""
+    def check(value: Any) -> None:
+        if not (_real(value) and value > 0):
+            raise ValueError(f"{name} must be a positive number ({unit}), got {value!r}")
+    return check
 
 
 def _check_target(value: Any) -> None:
@@ -91,11 +113,12 @@ CONFIG_KEYS = (
     ConfigKey("physics_hz", 50.0, "float > 0", "Hz", "physics tick rate"),
     ConfigKey("ticks_per_rev", 4096, "int >= 1", "ticks per revolution",
               "wheel encoder resolution"),
-    ConfigKey("sigma_xy", 2e-3, "float >= 0", "m",
+    ConfigKey("sigma_xy", 2e-3, "float > 0", "m",
               "pose sensor noise: standard deviation of x and y of each segment increment "
-              "and of each measured pose"),
-    ConfigKey("sigma_theta", 1e-3, "float >= 0", "rad",
-              "pose sensor noise: standard deviation of the heading"),
+              "and of each measured pose", _positive("sigma_xy", "m")),
+    ConfigKey("sigma_theta", 1e-3, "float > 0", "rad",
+              "pose sensor noise: standard deviation of the heading",
+              _positive("sigma_theta", "rad")),
     ConfigKey("robot", {}, "str, dict or RobotDistribution", "",
               'the hidden robots\' distribution: a preset ("default", "turtlebot3", '
               '"jackal", "husky"), a preset scaled ({"preset": "default", "scale": 1.5}: '
@@ -105,16 +128,18 @@ CONFIG_KEYS = (
     ConfigKey("information_scale", 100.0, "float > 0", "sigma_min per reward unit",
               "the information term's unit", _check_information_scale),
     ConfigKey("collision_penalty", 1.0, "float", "reward",
-              "paid per segment whose chassis touched a wall"),
+              "paid per segment whose chassis touched a wall", _finite("collision_penalty")),
     ConfigKey("effort_cost", 0.0, "float", "reward per mean squared action",
-              "paid per segment on the mean of the squared wheel commands"),
-    ConfigKey("time_cost", 0.0, "float", "reward per segment", "paid per segment"),
+              "paid per segment on the mean of the squared wheel commands",
+              _finite("effort_cost")),
+    ConfigKey("time_cost", 0.0, "float", "reward per segment", "paid per segment",
+              _finite("time_cost")),
     ConfigKey("accuracy_weight", 0.0, "float", "reward per percent of max relative error",
               "weight of the privileged accuracy term (uses the hidden truth; training in "
-              "simulation only)"),
+              "simulation only)", _finite("accuracy_weight")),
     ConfigKey("error_weight", 0.0, "float", "reward per e-fold of max relative error",
               "weight of the privileged error term, the log-error-vs-time area (uses the "
-              "hidden truth; training in simulation only)"),
+              "hidden truth; training in simulation only)", _finite("error_weight")),
     ConfigKey("target_sigma_min", None, "float or None", "sigma_min (dimensionless)",
               "terminate the episode once sigma_min reaches it; None: never"),
     ConfigKey("target", None, "float in (0, 1) or None", "relative error",
@@ -127,7 +152,8 @@ CONFIG_KEYS = (
               "the stopping rule's confidence that every parameter is within the target",
               _check_target_confidence),
     ConfigKey("target_bonus", 0.0, "float", "reward",
-              "paid once, at the segment where the stopping rule says done"),
+              "paid once, at the segment where the stopping rule says done",
+              _finite("target_bonus")),
     ConfigKey("sensor_pose", None, "dict or None", "m, m, rad",
               'None: the pose sensor sits on the axle; else the ranges its hidden mounting is '
               'drawn from, uniformly per episode: {"x": (lo, hi), "y": (lo, hi), '

@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
-from excite.calibration.options import SensorPoseOption
+from excite.calibration.options import MIN_RESIDUAL_DOF, SensorPoseOption
 from excite.core.kinematics import Params
 from excite.errors import ExciteError
 from excite.logs.segments import Segments
@@ -75,10 +75,6 @@ DEFAULT_CONFIDENCE = 0.95
 #: The confidence of the upper bound on the noise scale that widens every half-width: a look
 #: at which the estimated noise happens to be small would otherwise stop early.
 NOISE_BOUND_CONFIDENCE = 0.95
-#: The fewest residual degrees of freedom per noise channel (segments less the estimated
-#: parameters) before the rule may say done: noise levels estimated from fewer residuals can
-#: be near zero by chance (a channel fitted almost exactly), and the std with them.
-MIN_RESIDUAL_DOF = 10
 #: The level at which a *done* needs the driving tests passed (the three tests one family,
 #: :func:`excite.calibration.slip_tests.fails_at`), stricter than the calibration's 99%: asked
 #: after every segment, a test that fails at most looks still passes at some look (optional

@@ -19,8 +19,8 @@ from excite.errors import DataError
 from excite.logs.segment_bounds import first_impossible
 from excite.logs.segments import Segments
 
-__all__ = ["DEFAULT_MAX_RELATIVE_STD", "TEST_LEVEL", "CalibrationLoss", "FitOptions",
-           "SensorPoseOption", "checked_inputs", "solver_loss"]
+__all__ = ["DEFAULT_MAX_RELATIVE_STD", "MIN_RESIDUAL_DOF", "TEST_LEVEL", "CalibrationLoss",
+           "FitOptions", "SensorPoseOption", "checked_inputs", "solver_loss"]
 
 #: How the sensor pose is treated: "auto" (estimated when the data determine it and it fits
 #: significantly better than the axle model), "axle", "estimate", or a known SensorPose.
@@ -33,6 +33,11 @@ CalibrationLoss = Literal["auto", "linear", "huber"]
 #: Data determine the parameters when the worst-direction relative std 1/sigma_min is at most
 #: this.
 DEFAULT_MAX_RELATIVE_STD = 0.1
+#: The fewest residual degrees of freedom per noise channel (segments less the estimated
+#: parameters) on which estimated noise levels, and the std with them, are to be trusted:
+#: from fewer residuals a level can be near zero by chance (a channel fitted almost exactly).
+#: Below it the report says so, and the stopping rule (:mod:`excite.stopping`) never says done.
+MIN_RESIDUAL_DOF = 10
 #: Level of the likelihood-ratio test of the axle model against the sensor-pose model, of the
 #: score test of an imposed model, of the goodness-of-fit test against given noise levels and
 #: of the test of serial correlation.

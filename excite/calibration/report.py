@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from excite.calibration.options import MIN_RESIDUAL_DOF
 from excite.core.kinematics import Params
 from excite.core.models import AXLE
 
@@ -51,7 +52,8 @@ def unsafe_reason(result: CalibrationResult) -> str | None:
 
 def verdict(result: CalibrationResult, nominal: Params | None = None) -> str:
     """What to do with the result, in one sentence: the model does not fit (exit status 4),
-    not determined (exit status 3), or calibrated."""
+    not determined (exit status 3), or calibrated (from too few segments to trust the
+    estimated noise levels: MIN_RESIDUAL_DOF)."""
     if not result.fit.ok:
         return (f"the model does not fit the data, do not use these values: "
                 f"{result.fit.message}")
@@ -62,6 +64,12 @@ def verdict(result: CalibrationResult, nominal: Params | None = None) -> str:
     if not result.converged:
         return (f"calibrated, but the solver did not converge ({result.message}): check the "
                 "values before setting them")
+    dof = result.n_segments - len(result.parameter_names)
+    if result.sigma_estimated and dof < MIN_RESIDUAL_DOF:
+        return (f"calibrated from few segments: the noise levels, and the std with them, rest "
+                f"on {dof} residual degree{'s' if dof != 1 else ''} of freedom per channel "
+                f"(at least {MIN_RESIDUAL_DOF} are needed to trust them): drive more before "
+                "setting these values, or give the sensor's noise (--sigma)")
     if nominal is None:
         return ("calibrated: use these values (with the robot's nominal values, --init "
                 "RL,RR,B, the report gives the diff_drive_controller multipliers to set)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING, get_args
 
 from excite.calibration.options import CalibrationLoss
@@ -14,6 +15,7 @@ from excite.commands.args import (
     SIGMA_VALUES,
     UsageError,
     check_not_an_input,
+    check_output_file,
     fraction_arg,
     params_arg,
     sensor_pose_arg,
@@ -57,11 +59,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      "determine it and it fits significantly better), axle, estimate, or a "
                      "known pose in the body frame (m, m, rad)")
     cal.add_argument("--trim", type=fraction_arg, default=0.0, metavar="FRACTION",
-                     help="drop this fraction (0 to 0.5) of segments with the largest "
+                     help="drop this fraction (below 0.5) of segments with the largest "
                      "residuals, 1%% per pass with a refit after each (default %(default)g)")
     add_result_options(cal, "--init")
     cal.add_argument("--holdout", type=fraction_arg, default=0.0, metavar="FRACTION",
-                     help="keep back this fraction (0 to 0.5) of the logs (whole logs, the "
+                     help="keep back this fraction (below 0.5) of the logs (whole logs, the "
                      "last ones; at least one) and validate the calibration on them against "
                      "the nominal robot (--init) as excite validate does (default %(default)g: "
                      "none)")
@@ -83,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
     if args.force_yaml and not args.ros2_yaml:
         raise UsageError("--force-yaml needs --ros2-yaml OUT.yaml")
     if args.ros2_yaml:
+        check_output_file(Path(args.ros2_yaml))
         check_not_an_input(args.ros2_yaml, args.files, "--ros2-yaml")
     if args.target_confidence is not None and args.target is None:
         raise UsageError("--target-confidence needs --target")

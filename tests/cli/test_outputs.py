@@ -43,6 +43,20 @@ def test_calibrate_never_writes_its_controller_file_over_an_input(capsys, tmp_pa
     assert path.read_bytes() == before
 
 
+@pytest.mark.parametrize("where, words", [("folder", "it is a folder; give a file name"),
+                                           ("missing", "no such directory")])
+def test_calibrate_checks_its_controller_file_before_calibrating(capsys, tmp_path, rng, where,
+                                                                 words):
+    """A --ros2-yaml that is a folder or in no folder: refused before the calibration (it
+    printed the whole report, then the error)."""
+    path = tmp_path / "seg.csv"
+    save_segments(path, lesson_dataset(rng, 60))
+    out = tmp_path if where == "folder" else tmp_path / "none" / "ddc.yaml"
+    code, stdout, err = run_cli(capsys, "calibrate", path, "--ros2-yaml", out)
+    assert stdout == ""
+    assert_one_line_error(code, err, f"cannot write {out}: {words}")
+
+
 def test_simulate_checks_the_truth_file_before_writing_the_log(capsys, tmp_path):
     (tmp_path / "run.truth.json").mkdir()
     code, _, err = run_cli(capsys, "simulate", "--protocol", "arcs", "--segments", "3",

@@ -186,11 +186,18 @@ def test_observation_never_contains_the_truth():
     np.testing.assert_allclose(obs[:3], 0.0, atol=1e-6)  # before any segment: the nominal
 
 
-def test_unknown_config_key_and_bad_budget():
+def test_unknown_config_keys_and_bad_values_are_refused():
     with pytest.raises(ValueError, match="unknown config key 'buget'"):
         DiffDriveCalibEnv(buget=3)
-    with pytest.raises(ValueError, match="budget"):
-        DiffDriveCalibEnv(budget=0)
+    for budget in (0, 2.7, True):  # 2.7 was cut to 2 without a word
+        with pytest.raises(ValueError, match="budget must be a whole number of segments"):
+            DiffDriveCalibEnv(budget=budget)
+    for key in ("sigma_xy", "sigma_theta"):  # 0 was taken, and reset failed
+        with pytest.raises(ValueError, match=f"{key} must be a positive number"):
+            DiffDriveCalibEnv(**{key: 0.0})
+    for key in ("collision_penalty", "time_cost", "target_bonus"):  # NaN rewards
+        with pytest.raises(ValueError, match=f"{key} must be a finite number"):
+            DiffDriveCalibEnv(**{key: float("nan")})
     for scale in (0.0, -100.0, float("nan"), "2.0e2", None, True):
         with pytest.raises(ValueError, match="information_scale must be a positive number"):
             DiffDriveCalibEnv(information_scale=scale)

@@ -12,6 +12,7 @@ import pytest
 from excite import Params, calibrate
 from excite.calibration.report import WITHIN_STD, report, unsafe_reason, verdict
 from excite.calibration.result import FitTest
+from excite.core.information import DEFAULT_SIGMA
 from excite.core.models import SensorPose
 from excite.logs.synthetic import lesson_dataset
 from tests.conftest import TRUTH, exact_segments
@@ -110,3 +111,20 @@ def test_found_and_given_noise_levels_print_as_numbers(result):
     assert given.levels_at_floor == ()
     assert "noise sigma     = x 2.000e-03 m, y 2.000e-03 m, theta 1.000e-03 rad (given)" in (
         given.summary())
+
+
+@pytest.mark.parametrize("n, words", [(4, "1 residual degree of freedom"),
+                                      (12, "9 residual degrees of freedom")])
+def test_a_calibration_from_few_segments_says_its_std_are_not_to_be_trusted(n, words):
+    """With its noise levels estimated from fewer than 10 residual degrees of freedom per
+    channel the std are themselves uncertain (4 segments: b 3.7 of its std off, reported as
+    "calibrated"); given noise levels, or enough segments, the verdict is plain."""
+    segments = lesson_dataset(np.random.default_rng(8), n, TRUTH, dphi_std=2.0)
+    assert verdict(calibrate(segments, sensor_pose="axle")).startswith(
+        f"calibrated from few segments: the noise levels, and the std with them, rest on "
+        f"{words} per channel (at least 10 are needed")
+    assert verdict(calibrate(segments, sigma=DEFAULT_SIGMA, sensor_pose="axle")) == (
+        "calibrated: use these values (with the robot's nominal values, --init RL,RR,B, the "
+        "report gives the diff_drive_controller multipliers to set)")
+    enough = lesson_dataset(np.random.default_rng(8), 13, TRUTH, dphi_std=2.0)
+    assert verdict(calibrate(enough, sensor_pose="axle")).startswith("calibrated: use")
