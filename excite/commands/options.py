@@ -267,11 +267,17 @@ def tuned_specs(specs: list[ProtocolSpec], tuned: str, settings: CompareSettings
                              "or give --tuned none")
         return defaults(f"the shipped settings were {reason}")
     check_disjoint(document, settings, episodes)
-    specs, untuned = apply_tuned(specs, document, str(path))
-    note = (f"tuned by excite tune on {len(document['tuning_seeds'])} tuning episodes"
-            + (" (seeds disjoint from these)" if episodes else "") + f": {path}")
+    written = {spec.label for spec in specs if spec.settings}
+    specs, missing = apply_tuned(specs, document, str(path))
+    untuned = [label for label in missing if label not in written]
+    written_only = [label for label in missing if label in written]
+    parts = [f"as written ({', '.join(written_only)})"] if written_only else []
+    if len(missing) < len(specs):
+        parts.append(f"tuned by excite tune on {len(document['tuning_seeds'])} tuning episodes"
+                     + (" (seeds disjoint from these)" if episodes else "") + f": {path}")
     if untuned:
-        note += f"; not tuned there, at their defaults: {', '.join(untuned)}"
+        parts.append(f"not tuned there, at their defaults: {', '.join(untuned)}")
+    note = "; ".join(parts)
     return check_distinct(specs), {"file": str(path), "note": note, "untuned": untuned}
 
 

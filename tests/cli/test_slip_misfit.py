@@ -66,7 +66,7 @@ def test_simulate_drives_with_the_tuned_settings_and_says_so(tmp_path, capsys):
     (["--protocol", "umbmark", "--segments", 30, "--tuned", "none"], "umbmark",
      "declared defaults (--tuned none)"),
     (["--protocol", "umbmark:speed=0.3", "--segments", 30], "umbmark:speed=0.3",
-     "not tuned there, at their defaults: umbmark:speed=0.3"),
+     "as written (umbmark:speed=0.3)"),
 ])
 def test_simulate_says_when_the_settings_are_not_tuned(tmp_path, capsys, argv, label, why):
     """Other segment counts than the tuned ones, --tuned none, and settings written
