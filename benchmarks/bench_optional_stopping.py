@@ -3,14 +3,14 @@ keeps the false-stop rate within the bound when the rule is asked after every se
 what each costs in time to target.
 
 The rule (``excite.stopping.StoppingRule``) says *done* when q x std_i <= tolerance_i for
-every parameter. Its q is the Bonferroni normal quantile over the P parameters times an upper
-95% bound on the noise scale from the residual degrees of freedom (``shipped``). The
-alternatives, on the same calibrations (paired: one batch calibration per look serves every
-variant and target, since the statistic scales as q / target once the rule's other conditions
-hold):
+every parameter. The quantiles q compared, on the same calibrations (paired: one batch
+calibration per look serves every variant and target, since the statistic scales as
+q / target once the rule's other conditions hold), with P parameters and dof = segments - P:
 
-- ``t``: the Bonferroni quantile of Student's t with the residual degrees of freedom (exact
-  coverage at one fixed look for a linear model with an estimated noise scale);
+- ``bound``: the Bonferroni normal quantile over the P parameters times an upper 95% bound on
+  the noise scale, sqrt(dof / chi2_dof^-1(0.05));
+- ``t``: the Bonferroni quantile of Student's t with dof degrees of freedom (exact coverage at
+  one fixed look for a linear model with an estimated noise scale);
 - ``normal``: the Bonferroni normal quantile alone (no allowance for the estimated scale).
 
 Each robot drives the protocol for the whole budget in the env's target mode with a target
@@ -39,17 +39,18 @@ from agents.metrics import rate_interval
 
 #: The target the episodes run with: no robot reaches it, so the rule is asked every segment.
 UNREACHABLE = 1e-9
-VARIANTS = ("shipped", "t", "normal")
+VARIANTS = ("bound", "t", "normal")
 
 
-def _quantiles(q_shipped: float, n: int, count: int, confidence: float) -> dict[str, float]:
+def _quantiles(n: int, count: int, confidence: float) -> dict[str, float]:
     """Each variant's quantile at a look with ``n`` segments and ``count`` parameters."""
-    from scipy.stats import norm, t
+    from scipy.stats import chi2, norm, t
 
     dof = max(n - count, 1)
     alpha = (1.0 - confidence) / (2 * count)
-    return {"shipped": q_shipped, "t": float(t.ppf(1.0 - alpha, dof)),
-            "normal": float(norm.ppf(1.0 - alpha))}
+    z = float(norm.ppf(1.0 - alpha))
+    return {"bound": z * math.sqrt(dof / chi2.ppf(0.05, dof)),
+            "t": float(t.ppf(1.0 - alpha, dof)), "normal": z}
 
 
 def _episode(job: tuple[str, str, int, int, float]) -> dict:
@@ -72,7 +73,7 @@ def _episode(job: tuple[str, str, int, int, float]) -> dict:
         n = len(log)
         if math.isfinite(decision.quantile) and math.isfinite(decision.statistic):
             count = len(decision.result.parameter_names)
-            q = _quantiles(decision.quantile, n, count, confidence)
+            q = _quantiles(n, count, confidence)
             at_one = decision.statistic * UNREACHABLE  # the statistic at target 1
             stats = {v: at_one * q[v] / decision.quantile for v in VARIANTS}
         else:

@@ -15,15 +15,17 @@ The target (docs/conventions.md for the relative scales):
 
     q * std_i <= tolerance_i    for every parameter i,
 
-with q a simultaneous (Bonferroni) normal quantile over the P parameters,
-Phi^{-1}(1 - (1 - confidence) / (2 P)), times an upper 95% confidence bound on the noise scale
-from the residual degrees of freedom (sqrt(dof / chi2_dof^{-1}(0.05)), dof = segments - P).
-With known noise levels, at any one look the chance that some parameter lies outside its
-tolerance while the rule says done is at most 1 - confidence. Asking after every segment is
-optional stopping: the half-widths depend on the driving and on the estimated noise levels,
-and a look at which the noise happens to look small would stop early; the bound on the noise
-scale is the margin against that. The false-stop rate is measured by Monte Carlo (tests and
-benchmarks).
+with q a simultaneous (Bonferroni) quantile over the P parameters of Student's t with the
+residual degrees of freedom of one noise channel, t_dof^{-1}(1 - (1 - confidence) / (2 P)),
+dof = segments - P: the noise levels are estimated. At any one look the chance that some
+parameter lies outside its tolerance while the rule says done is then at most
+1 - confidence. Asking after every segment is optional stopping: the half-widths depend on
+the driving and on the estimated noise levels, and a look at which the noise happens to look
+small would stop early. The Bonferroni union over the parameters (conservative for correlated
+estimates) and the residual degrees of freedom the rule waits for are the margin against
+that; the false-stop rate with a look after every segment is measured by Monte Carlo (tests,
+``benchmarks/bench_optional_stopping.py``, which compares this quantile with an upper bound
+on the noise scale and with the normal quantile alone).
 
 The rule also says *not yet* whenever the batch result cannot be trusted: parameters not
 determined (exit 3 of ``excite calibrate``), a model that does not fit (exit 4), a driving
@@ -72,9 +74,6 @@ __all__ = ["DEFAULT_CONFIDENCE", "DEFAULT_TARGET", "MAX_GROSS_SHARE", "REFERENCE
 DEFAULT_TARGET = 0.002
 #: The default confidence that every parameter is within the target when the rule stops.
 DEFAULT_CONFIDENCE = 0.95
-#: The confidence of the upper bound on the noise scale that widens every half-width: a look
-#: at which the estimated noise happens to be small would otherwise stop early.
-NOISE_BOUND_CONFIDENCE = 0.95
 #: The level at which a *done* needs the driving tests passed (the three tests one family,
 #: :func:`excite.calibration.slip_tests.fails_at`), stricter than the calibration's 99%: asked
 #: after every segment, a test that fails at most looks still passes at some look (optional
@@ -319,15 +318,13 @@ class StoppingRule:
         return self._quantile_of(result.n_segments, len(result.parameter_names))
 
     def _quantile_of(self, n_segments: int, count: int) -> float:
-        """The simultaneous two-sided normal quantile over the ``count`` estimated
-        parameters, times an upper confidence bound (NOISE_BOUND_CONFIDENCE) on the noise
-        scale from the residual degrees of freedom of one noise channel (segments less the
-        parameters): sqrt(dof / chi2_dof^{-1}(1 - NOISE_BOUND_CONFIDENCE))."""
-        dof = max(n_segments - count, 1)
-        from scipy.stats import chi2, norm
+        """The simultaneous (Bonferroni) two-sided quantile over the ``count`` estimated
+        parameters of Student's t with the residual degrees of freedom of one noise channel
+        (segments less the parameters)."""
+        from scipy.stats import t
 
-        scale = math.sqrt(dof / chi2.ppf(1.0 - NOISE_BOUND_CONFIDENCE, dof))
-        return float(norm.ppf(1.0 - (1.0 - self.confidence) / (2 * count)) * scale)
+        dof = max(n_segments - count, 1)
+        return float(t.ppf(1.0 - (1.0 - self.confidence) / (2 * count), dof))
 
     def _not_yet(self, n: int, reason: str, tolerances: dict[str, float] | None = None,
                  result: CalibrationResult | None = None) -> StopDecision:

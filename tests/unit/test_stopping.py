@@ -154,7 +154,7 @@ def test_a_session_stops_at_the_same_look_as_the_rule_alone():
     statistic is above its margin); the first done is at the same look; most looks before it
     are screened."""
     seg = _log_segments(0, 60.0)
-    rule = StoppingRule(target=0.01)
+    rule = StoppingRule(target=0.008)
     session = rule.session()
     screened = 0
     for n in range(15, len(seg) + 1):
