@@ -313,19 +313,23 @@ class LiveNode:
                       t: float) -> tuple[float, float] | None:
         """The wheels' angles (rad) in a JointState naming both: their positions, or when it
         has none (empty, or NaN: a velocity interface) but their velocities (rad/s), those
-        integrated (:class:`excite.logs.timeseries.SpeedIntegral`, noted once); None when
-        it has neither (or a message out of order of the integral's)."""
+        integrated (:class:`excite.logs.timeseries.SpeedIntegral`, noted once; NaN for
+        velocities not finite, which the integral leaves out); None when it has neither (or
+        a message out of order of the integral's)."""
         index = [names.index(wheel) for wheel in wheels]
         if len(msg.position) == len(names) and not all(
                 math.isnan(msg.position[k]) for k in index):
             return float(msg.position[index[0]]), float(msg.position[index[1]])
         if len(msg.velocity) != len(names):
             return None
+        speeds = (float(msg.velocity[index[0]]), float(msg.velocity[index[1]]))
+        if not all(map(math.isfinite, speeds)):  # left out (not finite), the integral kept
+            return math.nan, math.nan
         if self._speeds is None:
             self._speeds = SpeedIntegral()
             print(f"excite: note: {self.topics.joint_states}: {SPEED_NOTE}", file=sys.stderr,
                   flush=True)
-        return self._speeds.add(t, float(msg.velocity[index[0]]), float(msg.velocity[index[1]]))
+        return self._speeds.add(t, *speeds)
 
     def _on_pose(self, msg: Any) -> None:
         if self._first_pose is None:

@@ -6,8 +6,9 @@ AFTER s (the messages' own stamps) past the first one on, each message has FAULT
 -1 s); or, "gripper", each is followed by a message of another joint (an arm's or a gripper's
 publisher on the same topic); or, "velocities", each has the wheels' velocities (rad/s, the
 mean over the period since the message before, as a driver measures them) and NaN positions,
-as joint_state_broadcaster publishes joints with a velocity interface only. The stamp of the
-first spoilt message (s) is written to FILE."""
+as joint_state_broadcaster publishes joints with a velocity interface only (the first five
+velocities NaN, as before the hardware's first reading). The stamp of the first spoilt message
+(s) is written to FILE."""
 
 import math
 import sys
@@ -44,6 +45,7 @@ def main() -> None:
     out = relay_node.create_publisher(JointState, "/relay_joints", 50)
     first: list[float] = []
     before: list[tuple[float, list[float]]] = []  # the last message's stamp and positions
+    relayed: list[float] = []  # the stamps relayed as velocities
 
     def relay(msg: JointState) -> None:
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
@@ -52,11 +54,13 @@ def main() -> None:
         if fault == "velocities":
             last = before[-1] if before else (t - 0.01, list(msg.position))
             before[:] = [(t, list(msg.position))]
+            relayed.append(t)
+            velocity = [(a - b) / max(t - last[0], 1e-9)
+                        for a, b in zip(msg.position, last[1], strict=True)]
+            if len(relayed) <= 5:  # NaN before the hardware's first reading (ros2_control)
+                velocity = [math.nan] * len(velocity)
             out.publish(JointState(header=msg.header, name=list(msg.name),
-                                   position=[math.nan] * len(msg.name),
-                                   velocity=[(a - b) / max(t - last[0], 1e-9)
-                                             for a, b in zip(msg.position, last[1],
-                                                             strict=True)]))
+                                   position=[math.nan] * len(msg.name), velocity=velocity))
             return
         if t - first[0] >= after and not file.exists():
             file.write_text(f"{t}\n")

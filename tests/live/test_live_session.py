@@ -373,7 +373,8 @@ def _relayed_session(session_dir, fault: str):
 
 def test_wheels_given_as_velocities_are_integrated_and_the_session_calibrates(session_dir):
     """A driver with velocity interfaces only (positions NaN, velocities the mean over each
-    period): the session integrates the velocities into angles, says so once, and
+    period, NaN in its first five messages): the session integrates the velocities into
+    angles (the NaN ones left out, not carried into every later angle), says so once, and
     reaches the target with the truth near the result, as with positions."""
     s = _relayed_session(session_dir, "velocities")
     assert s.err.count("integrated into angles by the trapezoidal rule") == 1
