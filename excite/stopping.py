@@ -112,7 +112,7 @@ class StopDecision:
     n_segments : int
         Segments the decision saw.
     quantile : float
-        The simultaneous quantile q used, noise bound included (nan when no calibration).
+        The simultaneous quantile q used (Student's t, Bonferroni; nan when no calibration).
     half_widths : dict of str to float
         Each parameter's half-width q * std, in its unit (m or rad); empty without a
         calibration.
