@@ -573,29 +573,37 @@ def test_joint_states_without_positions_are_skipped_and_counted(tmp_path, log):
     assert bag.skipped_text() == f"{n} /joint_states without wheel positions"
 
 
+def with_velocities(bag: BagWriter, log: TimeSeries, change) -> list:
+    """The log's messages, each JointState of the wheels carrying the log's wheel speeds
+    (central differences of its angles, rad/s) as its velocity; ``change(i, msg, order)``
+    then sets the i-th one's positions (and may spoil its velocity; order: the wheels'
+    indices in it)."""
+    speeds = (np.gradient(log.phi_L, log.t_enc), np.gradient(log.phi_R, log.t_enc))
+    out, i = [], 0
+    for topic, received, msg in log_messages(bag, log, "pose"):
+        if topic == "/joint_states" and LEFT in msg.name:
+            order = [msg.name.index(LEFT), msg.name.index(RIGHT)]
+            msg.velocity = np.zeros(len(msg.name))
+            msg.velocity[order] = speeds[0][i], speeds[1][i]
+            change(i, msg, order)
+            i += 1
+        out.append((topic, received, msg))
+    return out
+
+
 @pytest.mark.parametrize("positions", ["empty", "nan"])
 def test_joint_states_with_velocities_only_are_integrated(tmp_path, log, positions):
     """A driver with velocity state interfaces only: JointState messages with the wheels'
     velocities (rad/s) and no positions (an empty array, or NaN as joint_state_broadcaster
     fills them). Their trapezoidal integral is read as the wheel angles, with a note, and
     segments like the angles it was differentiated from."""
-    speeds = {"L": np.gradient(log.phi_L, log.t_enc), "R": np.gradient(log.phi_R, log.t_enc)}
+    def no_positions(i, msg, order):
+        msg.position = (np.zeros(0) if positions == "empty"
+                        else np.full(len(msg.name), np.nan))
 
-    def velocities(bag: BagWriter):
-        out, i = [], 0
-        for topic, received, msg in log_messages(bag, log, "pose"):
-            if topic == "/joint_states" and LEFT in msg.name:
-                order = [msg.name.index(LEFT), msg.name.index(RIGHT)]
-                velocity = np.zeros(len(msg.name))
-                velocity[order] = speeds["L"][i], speeds["R"][i]
-                msg.velocity = velocity
-                msg.position = (np.zeros(0) if positions == "empty"
-                                else np.full(len(msg.name), np.nan))
-                i += 1
-            out.append((topic, received, msg))
-        return out
-    bag = read_bag_log(make_bag(tmp_path, "mcap", velocities), LEFT, RIGHT,
-                       pose_topic="/sensor_pose")
+    bag = read_bag_log(make_bag(tmp_path, "mcap",
+                                lambda bag: with_velocities(bag, log, no_positions)),
+                       LEFT, RIGHT, pose_topic="/sensor_pose")
     assert bag.skipped == {}
     assert any("wheel speeds (rad/s) integrated into angles by the trapezoidal rule" in note
                for note in bag.notes)
@@ -612,24 +620,14 @@ def test_a_start_up_s_positions_and_values_not_finite_beside_velocities(tmp_path
     joint_state_publisher's beside it) and NaN velocities before its first reading, and a
     NaN now and then: the velocities are read, integrated, and every message left out is
     counted (both refused the bag, or left no encoder sample)."""
-    speeds = {"L": np.gradient(log.phi_L, log.t_enc), "R": np.gradient(log.phi_R, log.t_enc)}
+    def start_up(i, msg, order):
+        if i < 5 or i % 97 == 50:
+            msg.velocity[order[0]] = np.nan
+        msg.position = np.zeros(len(msg.name) if i < 3 else 0)
 
-    def start_up(bag: BagWriter):
-        out, i = [], 0
-        for topic, received, msg in log_messages(bag, log, "pose"):
-            if topic == "/joint_states" and LEFT in msg.name:
-                order = [msg.name.index(LEFT), msg.name.index(RIGHT)]
-                velocity = np.zeros(len(msg.name))
-                velocity[order] = speeds["L"][i], speeds["R"][i]
-                if i < 5 or i % 97 == 50:
-                    velocity[order[0]] = np.nan
-                msg.velocity = velocity
-                msg.position = np.zeros(len(msg.name) if i < 3 else 0)
-                i += 1
-            out.append((topic, received, msg))
-        return out
-    bag = read_bag_log(make_bag(tmp_path, "sqlite3", start_up), LEFT, RIGHT,
-                       pose_topic="/sensor_pose")
+    bag = read_bag_log(make_bag(tmp_path, "sqlite3",
+                                lambda bag: with_velocities(bag, log, start_up)),
+                       LEFT, RIGHT, pose_topic="/sensor_pose")
     nan = sum(1 for i in range(3, log.t_enc.size) if i < 5 or i % 97 == 50)  # 0-2: positions
     assert bag.skipped == {
         "/joint_states with a wheel value not finite (NaN before the hardware's first "
