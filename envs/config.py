@@ -57,23 +57,14 @@ def _positive(name: str, unit: str) -> Callable[[Any], None]:
 def _check_target(value: Any) -> None:
     if value is None:
         return
-    if (not isinstance(value, numbers.Real) or isinstance(value, bool)
-            or not 0.0 < value < 1.0):
+    if not (_real(value) and 0.0 < value < 1.0):
         raise ValueError("target must be a relative error in (0, 1) (0.002 = 0.2%) or None, "
                          f"got {value!r}")
 
 
 def _check_target_confidence(value: Any) -> None:
-    if (not isinstance(value, numbers.Real) or isinstance(value, bool)
-            or not 0.0 < value < 1.0):
+    if not (_real(value) and 0.0 < value < 1.0):
         raise ValueError(f"target_confidence must be in (0, 1), got {value!r}")
-
-
-def _check_information_scale(value: Any) -> None:
-    if (not isinstance(value, numbers.Real) or isinstance(value, bool)
-            or not (math.isfinite(value) and value > 0)):
-        raise ValueError("information_scale must be a positive number (sigma_min per reward "
-                         f"unit), got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -126,7 +117,8 @@ CONFIG_KEYS = (
               'RobotDistribution overrides ({"preset": "jackal", "radius_rel": 0.03}); the '
               'chassis, inertia and arena scale with the robot'),
     ConfigKey("information_scale", 100.0, "float > 0", "sigma_min per reward unit",
-              "the information term's unit", _check_information_scale),
+              "the information term's unit", _positive("information_scale",
+                                                       "sigma_min per reward unit")),
     ConfigKey("collision_penalty", 1.0, "float", "reward",
               "paid per segment whose chassis touched a wall", _finite("collision_penalty")),
     ConfigKey("effort_cost", 0.0, "float", "reward per mean squared action",

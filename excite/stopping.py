@@ -246,7 +246,7 @@ class StoppingRule:
         doubt = _doubt(result)
         if doubt:
             return self._not_yet(n, doubt, tolerances, result)
-        dof = result.n_segments - len(result.parameter_names)
+        dof = result.residual_dof
         if dof < MIN_RESIDUAL_DOF:
             return self._not_yet(n, f"{dof} residual degrees of freedom per noise channel; the "
                                  f"noise levels need at least {MIN_RESIDUAL_DOF}", tolerances,

@@ -64,7 +64,7 @@ def verdict(result: CalibrationResult, nominal: Params | None = None) -> str:
     if not result.converged:
         return (f"calibrated, but the solver did not converge ({result.message}): check the "
                 "values before setting them")
-    dof = result.n_segments - len(result.parameter_names)
+    dof = result.residual_dof
     if result.sigma_estimated and dof < MIN_RESIDUAL_DOF:
         return (f"calibrated from few segments: the noise levels, and the std with them, rest "
                 f"on {dof} residual degree{'s' if dof != 1 else ''} of freedom per channel "

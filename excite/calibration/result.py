@@ -292,6 +292,13 @@ class CalibrationResult:
     heterogeneity: Heterogeneity | None = None
 
     @property
+    def residual_dof(self) -> int:
+        """The residual degrees of freedom of one noise channel: the segments fitted less
+        the estimated parameters (what estimated noise levels rest on:
+        :data:`excite.calibration.options.MIN_RESIDUAL_DOF`)."""
+        return self.n_segments - len(self.parameter_names)
+
+    @property
     def sigma_min(self) -> float:
         """The smallest singular value (dimensionless): 1/sigma_min is the worst-direction
         relative std."""

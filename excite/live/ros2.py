@@ -131,7 +131,7 @@ class LiveNode:
         stamped = topics.cmd_type == "twist_stamped"
         self._cmd_class = TwistStamped if stamped else Twist
         self.publisher = self.node.create_publisher(self._cmd_class, topics.cmd_vel, 10)
-        self._wheel_index: tuple[int, int] | None = None
+        self._wheels_read = False  # a JointState of both wheels was read
         self._speeds: SpeedIntegral | None = None  # wheels given as velocities: their integral
         self._joints_seen: set[str] = set()
         self._first_joint_state: float | None = None
@@ -294,13 +294,13 @@ class LiveNode:
             return
         angles = None if missing else self._wheel_angles(msg, names, wheels, t)
         if angles is None:
-            if self._wheel_index is not None:  # a change after the wheels were read
+            if self._wheels_read:  # a change after the wheels were read
                 self._leave_out(topic, "wheels", "names", (
                     f"no joint {missing[0]!r} in them (joints: {', '.join(names)})"
                     if missing else
                     f"{len(msg.position)} positions for {len(names)} joint names"))
             return
-        self._wheel_index = (names.index(wheels[0]), names.index(wheels[1]))
+        self._wheels_read = True
         if not self._usable(topic, "wheels", t, now, angles):
             return
         self.session.add_wheels(t, *angles, now)
@@ -396,7 +396,7 @@ class LiveNode:
     def _check_wheel_names(self) -> None:
         """JointState messages for 2 s, none of them naming both wheels: a wrong name
         (DataError before the session started)."""
-        if self._wheel_index is not None or self._first_joint_state is None:
+        if self._wheels_read or self._first_joint_state is None:
             return
         if time.monotonic() - self._first_joint_state > 2.0:
             missing = [w for w in (self.topics.left_wheel, self.topics.right_wheel)

@@ -129,28 +129,29 @@ class JointRows(TopicRows):
         wheels = [joint for joint in (self.left, self.right) if joint in names]
         if not wheels:
             return
-        if len(wheels) == 2 and len(msg.velocity) == len(names) and (
+        index = [names.index(joint) for joint in wheels]
+        stamp = stamp_ns(msg.header)
+        if len(msg.velocity) == len(names) and (
                 len(msg.position) != len(names)
-                or any(math.isnan(msg.position[names.index(joint)]) for joint in wheels)):
-            self.speeds.append((stamp_ns(msg.header),
-                                *(msg.velocity[names.index(joint)] for joint in wheels)), received)
-        if (len(wheels) == 1 and len(msg.velocity) == len(names)
-                and (len(msg.position) != len(names)
-                     or math.isnan(msg.position[names.index(wheels[0])]))):
-            self.apart_speeds[wheels[0]].append(
-                (stamp_ns(msg.header), msg.velocity[names.index(wheels[0])]), received)
+                or any(math.isnan(msg.position[k]) for k in index)):
+            self._rows_of(wheels, self.speeds, self.apart_speeds).append(
+                (stamp, *(msg.velocity[k] for k in index)), received)
         if len(msg.position) == 0:  # velocity or effort only: allowed by JointState
             if len(wheels) == 2:
                 self.skip(NO_POSITIONS)
             return
         if len(msg.position) != len(names):
-            raise DataError(f"{sample_at(self.where, stamp_ns(msg.header) * 1e-9)}: "
+            raise DataError(f"{sample_at(self.where, stamp * 1e-9)}: "
                             f"{len(msg.position)} positions for {len(names)} joint names")
-        angles = [msg.position[names.index(joint)] for joint in wheels]
-        if len(wheels) == 2:
-            self.append((stamp_ns(msg.header), *angles), received)
-        else:
-            self.apart[wheels[0]].append((stamp_ns(msg.header), angles[0]), received)
+        self._rows_of(wheels, self, self.apart).append(
+            (stamp, *(msg.position[k] for k in index)), received)
+
+    @staticmethod
+    def _rows_of(wheels: list[str], both: TopicRows, apart: dict[str, TopicRows]
+                 ) -> TopicRows:
+        """Where a message's row goes: ``both`` when it names both wheels, else its wheel's
+        own rows in ``apart``."""
+        return both if len(wheels) == 2 else apart[wheels[0]]
 
     def columns(self) -> list[np.ndarray]:
         """[t (s), phi_L, phi_R (rad)]: from the messages with both wheels, or when there
@@ -163,7 +164,7 @@ class JointRows(TopicRows):
         table = self.table(3) if self.rows else None
         measured = None if table is None else table[np.isfinite(table[:, 1:]).all(axis=1)]
         if self.speeds.rows and (measured is None or len(measured) < len(self.speeds.rows)):
-            return self._integrated(0 if measured is None else len(measured))
+            return self._from_speeds(0 if measured is None else len(measured))
         if table is not None and measured is not None:
             if not len(measured):
                 raise DataError(f"{self.where}: the positions of {self.left!r} and "
@@ -183,19 +184,16 @@ class JointRows(TopicRows):
         missing = next(joint for joint, stream in self.apart.items() if not stream.rows)
         raise DataError(f"{self.where}: no message has a position of the joint {missing!r}")
 
-    def _integrated(self, with_positions: int) -> list[np.ndarray]:
+    def _from_speeds(self, with_positions: int) -> list[np.ndarray]:
         """The wheels' velocities integrated into angles (:func:`integrated_speed`), those
         not finite left out and counted; the messages without positions are then read, not
         skipped, and the ``with_positions`` messages that had them (fewer: a start-up's, or
         another publisher's) are counted as left out."""
-        table = self.speeds.table(3)
-        finite = np.isfinite(table[:, 1:]).all(axis=1)
+        angles = _integrated(self.speeds, self.speeds.table(3))
         self.skipped = dict(self.speeds.skipped)
-        self.skip(NOT_FINITE_WHEELS, int(np.sum(~finite)))
         self.skip(FEWER_POSITIONS, with_positions)
         self.notes = [*self.speeds.notes, f"{self.where}: {SPEED_NOTE}"]
-        t, left, right = table[finite].T
-        return [t, integrated_speed(t, left), integrated_speed(t, right)]
+        return list(angles.T)
 
     def _together(self, apart: dict[str, TopicRows], speeds: bool = False
                   ) -> list[np.ndarray]:
@@ -203,13 +201,10 @@ class JointRows(TopicRows):
         velocities integrated, those not finite left out and counted): the right wheel's
         angles interpolated to the left wheel's stamps."""
         left, right = (apart[joint] for joint in (self.left, self.right))
-        tables = [left.table(2), right.table(2)]
+        tables = [stream.table(2) for stream in (left, right)]
         if speeds:
-            for k, (stream, table) in enumerate(zip((left, right), tables, strict=True)):
-                finite = np.isfinite(table[:, 1])
-                stream.skip(NOT_FINITE_WHEELS, int(np.sum(~finite)))
-                t = table[finite, 0]
-                tables[k] = np.column_stack([t, integrated_speed(t, table[finite, 1])])
+            tables = [_integrated(stream, table)
+                      for stream, table in zip((left, right), tables, strict=True)]
             self.notes.append(f"{self.where}: {SPEED_NOTE}")
         rows, left_out = wheels_together(*tables)
         for stream in (left, right):
@@ -221,6 +216,16 @@ class JointRows(TopicRows):
         self.notes.append(f"{self.where}: the wheels come in separate messages: the "
                           f"{self.right} angles are interpolated to the {self.left} stamps")
         return list(rows.T)
+
+
+def _integrated(rows: TopicRows, table: np.ndarray) -> np.ndarray:
+    """A table of (t, wheel speeds...) (s, rad/s) as (t, angles...) (rad, from 0): each
+    speed integrated (:func:`integrated_speed`) over the rows whose speeds are all finite,
+    the others left out and counted in ``rows``."""
+    finite = np.isfinite(table[:, 1:]).all(axis=1)
+    rows.skip(NOT_FINITE_WHEELS, int(np.sum(~finite)))
+    t = table[finite, 0]
+    return np.column_stack([t, *(integrated_speed(t, speed) for speed in table[finite, 1:].T)])
 
 
 class PoseRows(TopicRows):

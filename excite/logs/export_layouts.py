@@ -109,8 +109,6 @@ def _ros_header(line: str, is_time: Callable[[str], bool], where: str
     return delimiter.join(names), renamed
 
 
-
-
 @dataclass(frozen=True)
 class Layout:
     """How a time-series CSV is read: ``header``, the header line (excite's names); ``data``,
