@@ -45,7 +45,8 @@ class LiveStatus:
     Attributes
     ----------
     state : str
-        "waiting" (no data yet), "running", "paused" (a stream is silent), or the outcome
+        "waiting" (no data yet), "running", "paused" (a stream is silent), "confirming"
+        (stopped while the stopping rule decides again on the whole log), or the outcome
         ("done", "out_of_time", "aborted").
     elapsed : float
         Seconds since the session started driving.

@@ -36,7 +36,10 @@ Each call of :meth:`LiveSession.command` is one pass of a pipeline of named stag
 3. **ramp**: the commanded wheel speeds approach the protocol's at most at
    ``max_wheel_acceleration``.
 
-A session ends *done* (the rule said so), *out_of_time* (``max_time``) or *aborted* (a
+A decision computed on the executor saw the log up to an earlier segment's end: when it
+says done, the session is *confirming*: the robot stops, and the rule decides again on the
+whole log (done ends the session; otherwise it drives on). A session ends *done* (the rule
+said so on everything it recorded), *out_of_time* (``max_time``) or *aborted* (a
 silence too long, wheels that do not follow, or :meth:`LiveSession.abort`); from then on the
 command is zero. :meth:`LiveSession.finish` runs the full offline calibration of the whole
 session since its last slowdown (:func:`excite.calibrate` on the session's log cut as
@@ -135,6 +138,8 @@ class LiveSession:
         self._epoch: float | None = None
         self._pending_epoch: float | None = None
         self._slowdowns: list[tuple[float, float]] = []
+        self._confirm_at = math.inf
+        self._confirming: StopDecision | None = None
 
     # -- input --------------------------------------------------------------------------------
     def add_wheels(self, t: float, phi_L: float, phi_R: float,
@@ -172,10 +177,11 @@ class LiveSession:
         if self._state == "running" and now >= self._segment_end:
             self._end_segment(now)
         elif self._state == "running" and self._pending is not None and self._pending.done():
-            self._take_decision()  # a decision that says done ends the session now
+            self._take_decision()  # a decision that says done stops the robot now
             if self._decision is not None and self._decision.done:
-                self._statuses.append(self.status)
-                self._end("done", self._decision.reason)
+                self._done(now)
+        elif self._state == "confirming":
+            self._confirm(now)
         if self._state != "running":
             self._target[:] = 0.0
         return self._ramp(now)
@@ -273,10 +279,48 @@ class LiveSession:
         if self._decision is not None:
             self._reason = self._decision.reason
         self._slow_down(now)
-        self._statuses.append(self.status)
         if self._decision is not None and self._decision.done:
+            self._done(now)
+            return
+        self._statuses.append(self.status)
+        self._next_action(now)
+
+    def _done(self, now: float) -> None:
+        """The rule said done. On the data up to now (no executor) the session ends; a
+        decision from the executor saw the log up to an earlier segment's end, so the robot
+        stops and the rule decides again on all of it (:meth:`_confirm`): the session's
+        answer is the batch calibration of everything it recorded, which the rule must
+        have judged."""
+        self._statuses.append(self.status)
+        if self.executor is None:
             self._end("done", self._decision.reason)
             return
+        self._state = "confirming"
+        self._reason = (f"{self._decision.reason}, decided on {self._decision.n_segments} "
+                        "segments: robot stopped, deciding again on the whole log")
+        self._confirm_at, self._confirming = now + self.settings.response_time, None
+
+    def _confirm(self, now: float) -> None:
+        """Stage 2 while confirming: once the robot has had ``response_time`` to stop and no
+        other decision is pending, the rule decides on the whole log (the batch calibration,
+        without the screen). *Done* ends the session; anything else drives on (slower when
+        the model does not fit the data)."""
+        self._take_decision()
+        if self.ended or self._pending is not None or now < self._confirm_at:
+            return
+        if self._confirming is None:
+            self._confirming = self._decision
+            self._start_decision(screen=False)
+            if self._pending is not None:
+                return
+        d, stale, self._confirming = self._decision, self._confirming, None
+        if d is not stale and d is not None and d.done:
+            self._end("done", d.reason)
+            return
+        self._state = "running"
+        self._reason = d.reason if d is not stale and d is not None else "driving"
+        self._slow_down(now)
+        self._statuses.append(self.status)
         self._next_action(now)
 
     def _row(self, start: float, end: float) -> np.ndarray | None:
@@ -349,16 +393,17 @@ class LiveSession:
             raise ExciteError("no wheel angles and poses yet")
         return cut(series, self.settings.segment_duration)
 
-    def _start_decision(self) -> None:
-        """The stopping rule on the log so far (:func:`decide_log`), in the caller's thread
-        or on the executor (one at a time: this segment's data wait for the next end)."""
+    def _start_decision(self, screen: bool = True) -> None:
+        """The stopping rule on the log so far (:func:`decide_log`; ``screen``: passing the
+        last decision, so most looks skip the batch calibration), in the caller's thread or
+        on the executor (one at a time: this segment's data wait for the next end)."""
         if self._pending is not None:
             return
         series = self._series(self._epoch)
         if series is None:
             return
         args = (self.rule, series, self.settings.segment_duration, self.settings.nominal,
-                self._decision)
+                self._decision if screen else None)
         self._pending_epoch = self._epoch
         if self.executor is None:
             self._accept(decide_log(*args))

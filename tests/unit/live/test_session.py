@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+from concurrent.futures import Executor, Future
 from pathlib import Path
 
 import numpy as np
@@ -97,6 +98,79 @@ def test_the_final_calibration_is_excite_calibrate_of_the_recorded_log(tmp_path,
     assert code == 0
     np.testing.assert_allclose([out["params"][k] for k in ("r_L", "r_R", "b")],
                                result.calibration.params.as_array(), rtol=1e-9)
+
+
+class LaggingExecutor(Executor):
+    """Runs each decision when it is submitted but hands it back only at :meth:`release`:
+    an executor whose decisions lag, as a busy computer's do, deterministically."""
+
+    def __init__(self) -> None:
+        self.held: list[tuple[Future, object]] = []
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        future = Future()
+        self.held.append((future, fn(*args, **kwargs)))
+        return future
+
+    def release(self) -> None:
+        for future, result in self.held:
+            future.set_result(result)
+        self.held = []
+
+
+def _drive_lagging(session, robot, lag, change=None, dt=0.02):
+    """Drive with the decisions released every ``lag`` s; ``change`` = (t, Params): the
+    robot's wheels become those at t (s). The (t, state, command) of every tick."""
+    ticks, release = [], lag
+    while not session.ended and robot.t < session.settings.max_time:
+        robot.step(dt)
+        if change is not None and robot.t >= change[0]:
+            robot.truth = change[1]
+        if robot.t >= release:
+            session.executor.release()
+            release += lag
+        session.add_wheels(*robot.wheel_angles())
+        session.add_pose(*robot.measured_pose())
+        command = session.command(robot.t)
+        robot.speeds = np.array([command.left, command.right])
+        ticks.append((robot.t, session.state, command))
+    return ticks
+
+
+def test_a_lagging_done_stops_the_robot_and_is_decided_again_on_the_whole_log():
+    """A decision from the executor saw the log up to an earlier segment: its *done* stops
+    the robot at once, and the session ends done only when the rule, deciding again on the
+    whole log, says so; the session's answer is then the calibration the rule judged."""
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=0)
+    session = LiveSession(_settings(), make_protocol("slip_aware"), seed=0,
+                          executor=LaggingExecutor())
+    ticks = _drive_lagging(session, robot, lag=6.0)
+    confirming = [t for t in ticks if t[1] == "confirming"]
+    assert confirming and all(t[2].is_zero for t in confirming)
+    result = session.finish()
+    assert result.outcome == "done", result.reason
+    assert result.decision.n_segments == result.calibration.n_segments
+    np.testing.assert_allclose(result.decision.result.params.as_array(),
+                               result.calibration.params.as_array(), rtol=1e-6)
+
+
+def test_a_lagging_done_that_the_whole_log_refutes_drives_on():
+    """The robot's wheels change after the data of a lagging *done* (a tyre swapped, in
+    effect): deciding again on the whole log says not yet, the robot drives on, and the
+    session ends done on the robot it has become."""
+    changed = Params(TRUTH.r_L * 1.03, TRUTH.r_R, TRUTH.b)
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=0)
+    session = LiveSession(_settings(), make_protocol("slip_aware"), seed=0,
+                          executor=LaggingExecutor())
+    ticks = _drive_lagging(session, robot, lag=6.0, change=(19.0, changed))
+    states = [t[1] for t in ticks]
+    first = states.index("confirming")
+    resumed = states.index("running", first)
+    assert any(not t[2].is_zero for t in ticks[resumed:])
+    result = session.finish()
+    assert result.outcome == "done", result.reason
+    z = (result.calibration.params.as_array() - changed.as_array()) / result.calibration.std
+    assert np.all(np.abs(z) < 3), z
 
 
 def test_silent_streams_stop_the_robot_then_it_resumes_or_aborts():
