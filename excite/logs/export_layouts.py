@@ -50,17 +50,20 @@ def _is_tum_row(line: str) -> bool:
 #: Column names of ROS exports read as time-series columns: PlotJuggler's (``__time``,
 #: topic paths such as ``/mocap/pose/pose/position/x``, ``/joint_states/<joint>/position``
 #: with ``left`` or ``right`` in the joint's name, or its ``velocity`` when no joint has a
-#: position column) and ``rostopic echo -p``'s
+#: position column or no position is filled) and ``rostopic echo -p``'s
 #: (``field.header.stamp`` in ns, ``field.pose.position.x``).
 _ROS_TIME = {"__time": "t", "field.header.stamp": "t [ns]"}
 _ROS_POSITION = re.compile(r"(?:^|[/.])(?:position|translation)[/.]([xy])$")
 _ROS_ORIENTATION = re.compile(r"(?:^|[/.])(?:orientation|rotation)[/.]([xyzw]|yaw)$")
 _ROS_JOINT = re.compile(r"/([^/]+)/(position|velocity)$")
+_ROS_NOTE = "the column names of a ROS export (PlotJuggler, rostopic) read: "
 
 
-def _ros_name(field: str, fields: Sequence[str], is_time: Callable[[str], bool]
-              ) -> str | None:
-    """The time-series name of a ROS export's column name; None when it names none."""
+def _ros_name(field: str, fields: Sequence[str], is_time: Callable[[str], bool],
+              speeds: bool = False) -> str | None:
+    """The time-series name of a ROS export's column name; None when it names none.
+    ``speeds``: the joints' velocities are read even where they have position columns
+    (which are then not read)."""
     name = field.strip().lower()
     if name in _ROS_TIME:
         return _ROS_TIME[name]
@@ -74,26 +77,31 @@ def _ros_name(field: str, fields: Sequence[str], is_time: Callable[[str], bool]
     if (match := _ROS_JOINT.search(name)) and ("left" in match[1]) != ("right" in match[1]):
         side = "L" if "left" in match[1] else "R"
         if match[2] == "position":
-            return f"phi_{side}"
-        positions = any(joint[2] == "position" for joint in map(_ROS_JOINT.search, fields)
-                        if joint)
-        return None if positions else f"omega_{side}"
+            return None if speeds else f"phi_{side}"
+        return f"omega_{side}" if speeds or not _joint_kinds(fields) & {"position"} else None
     return None
 
 
-def _ros_header(line: str, is_time: Callable[[str], bool], where: str
+def _joint_kinds(fields: Sequence[str]) -> set[str]:
+    """Which of a wheel joint's columns (position, velocity) a ROS export's header has."""
+    return {joint[2] for joint in map(_ROS_JOINT.search, fields)
+            if joint and ("left" in joint[1]) != ("right" in joint[1])}
+
+
+def _ros_header(line: str, is_time: Callable[[str], bool], where: str, speeds: bool = False
                 ) -> tuple[str, list[str]] | None:
     """A header line of a ROS export (PlotJuggler's CSV, ``rostopic echo -p``'s) with its
     columns renamed to the time-series names they hold (the others kept, so not read), and
     the renamings in words ('__time as t'); None for any other header. ``is_time``: whether
-    a header field names the time column; ``where`` names the line in errors (two columns of
-    one kind: several topics)."""
+    a header field names the time column; ``speeds``: the joints' velocities are read, not
+    their positions; ``where`` names the line in errors (two columns of one kind: several
+    topics)."""
     delimiter = delimiter_of(line)
     fields = header_fields(line, delimiter)
     lowered = [field.lower() for field in fields]
     if not any(name in _ROS_TIME or name == "%time" for name in lowered):
         return None
-    names = [_ros_name(field, lowered, is_time) or field for field in fields]
+    names = [_ros_name(field, lowered, is_time, speeds) or field for field in fields]
     renamed = [f"{field} as {name}" for field, name in zip(fields, names, strict=True)
                if name != field]
     for name in dict.fromkeys(names):
@@ -113,11 +121,14 @@ def _ros_header(line: str, is_time: Callable[[str], bool], where: str
 class Layout:
     """How a time-series CSV is read: ``header``, the header line (excite's names); ``data``,
     the index of its first data line among the file's content lines; ``note``, what was read
-    so in words (None for a plain header)."""
+    so in words (None for a plain header); ``speeds``, for a ROS export with both position
+    and velocity columns of the wheel joints (read as positions), the layout that reads the
+    velocities instead (for a driver whose positions are NaN or never filled), else None."""
 
     header: str
     data: int
     note: str | None = None
+    speeds: Layout | None = None
 
 
 #: Motive's length units, by the take's ``Length Units``.
@@ -174,7 +185,11 @@ def layout(lines: Sequence[str], where: Callable[[int], str],
     if motive is not None:
         return motive
     ros = _ros_header(lines[0], is_time, where(0))
-    if ros is not None:
-        return Layout(ros[0], 1, "the column names of a ROS export (PlotJuggler, rostopic) "
-                      f"read: {', '.join(ros[1])}")
-    return Layout(lines[0], 1)
+    if ros is None:
+        return Layout(lines[0], 1)
+    speeds = None
+    fields = header_fields(lines[0].lower(), delimiter_of(lines[0]))
+    if _joint_kinds(fields) == {"position", "velocity"}:
+        header, renamed = _ros_header(lines[0], is_time, where(0), speeds=True)
+        speeds = Layout(header, 1, f"{_ROS_NOTE}{', '.join(renamed)}")
+    return Layout(ros[0], 1, f"{_ROS_NOTE}{', '.join(ros[1])}", speeds)

@@ -29,7 +29,7 @@ from excite.logs.csv_table import (
     content_lines,
     read_columns,
 )
-from excite.logs.export_layouts import HEADER_LINES, layout
+from excite.logs.export_layouts import HEADER_LINES, Layout, layout
 from excite.logs.orientation import headings, z_up
 from excite.logs.segments import read_text
 from excite.logs.timeseries import (
@@ -132,6 +132,29 @@ def _read_table(path: PathArg, note: OnNote) -> _Table:
     if not lines:
         raise DataError(f"{name}: empty file (expected a header {EXPECTED})")
     found = layout(lines[:HEADER_LINES], lambda i: f"{name}:{numbers[i]}", is_time_name)
+    if found.speeds is None:
+        return _table_of(name, numbers, lines, found, note)
+    notes: list[str] = []
+    table = _table_of(name, numbers, lines, found, notes.append)
+    if table.encoder_columns == ANGLE_COLUMNS and not _changing(table, ANGLE_COLUMNS):
+        note(f"{name}: the wheel joints' position columns are never filled or never change "
+             "(a driver that reports velocities only): their velocity columns read instead")
+        return _table_of(name, numbers, lines, found.speeds, note)
+    for line in notes:
+        note(line)
+    return table
+
+
+def _changing(table: _Table, names: Sequence[str]) -> bool:
+    """Whether the columns ``names`` are filled in some row and take more than one value."""
+    _, *columns = table.stream(names)[0]
+    return any(np.ptp(column) > 0 for column in columns if column.size)
+
+
+def _table_of(name: str, numbers: list[int], lines: list[str], found: Layout, note: OnNote
+              ) -> _Table:
+    """The table of a file's content ``lines`` (their line ``numbers``) read with the layout
+    ``found``."""
     if found.note is not None:
         note(f"{name}: {found.note}")
     header_number = numbers[found.data - 1] if found.data else numbers[0] - 1

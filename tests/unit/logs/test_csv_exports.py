@@ -417,6 +417,20 @@ def test_wheel_speeds_are_integrated_into_angles(tmp_path, plain):
     series, notes = read([both, pose_path])
     assert_same(series, reference, rtol=1e-12)
     assert not any("integrated" in note for note in notes)
+    # positions beside the velocities that a velocity-only driver never fills (NaN, as
+    # joint_state_broadcaster writes them; empty), or fills with one value: velocities read
+    for position in ("nan", "", "0"):
+        unfilled = export(tmp_path / "unfilled.csv",
+                          [*header, "/joint_states/wheel_left_joint/position",
+                           "/joint_states/wheel_right_joint/position"],
+                          [[r[0], repr(float(a)), repr(float(b)), position, position]
+                           for r, a, b in zip(enc, *speeds, strict=True)])
+        series, notes = read([unfilled, pose_path])
+        np.testing.assert_allclose(np.diff(series.phi_R), np.diff(reference.phi_R), atol=2e-3)
+        assert f"{unfilled}: the wheel joints' position columns are never filled or never " \
+               "change (a driver that reports velocities only): their velocity columns " \
+               "read instead" in notes
+        assert not any("velocity" in note and "not read" in note for note in notes)
 
 
 def test_a_separator_ending_every_data_row_but_not_the_header(tmp_path, plain):
