@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
                                  holdout=args.holdout, on_note=print_note,
                                  heterogeneity="common" if args.common_params else "random")
     result, validation = calibration.result, calibration.holdout
-    _refuse_implausible(args.files, result, calibration)
+    _refuse_implausible(args.files, result, calibration, initial)
     estimated_pose = result.sensor_pose if result.sensor_pose_std is not None else None
     done = None if args.target is None else _judged(args, calibration)
     status = calibration_status(result)
@@ -147,13 +147,19 @@ def _clock_doubts(calibration: LogCalibration) -> list[str]:
 
 
 def _refuse_implausible(files: list[str], result: CalibrationResult,
-                        calibration: LogCalibration) -> None:
+                        calibration: LogCalibration, initial: Params | None) -> None:
     """UsageError when the data determine wheel parameters no real robot has (a log in other
-    units than excite reads), naming the likely units, or that the robot never turned."""
-    from excite.core.plausible import implausible, log_unit_hint
+    units than excite reads), or wheel radii far from the nominal ones (``initial``; wheel
+    angles in other units or behind a gearbox), naming the likely units, or that the robot
+    never turned."""
+    from excite.core.plausible import far_from_nominal, implausible, log_unit_hint
 
     values = result.params.as_array()
     what = implausible(*values) if result.identifiable else None
+    if what is None and initial is not None and result.identifiable:
+        far = far_from_nominal((values[0], values[1]), (initial.r_L, initial.r_R))
+        if far is not None:
+            raise UsageError(f"{', '.join(files)}: the calibration gives {far}")
     if what is None:
         return
     if not any(part.segments.dtheta.any() for part in calibration.parts):

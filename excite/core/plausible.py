@@ -2,6 +2,12 @@
 them most likely means: nominal values typed in the wrong unit (``--init``), or a calibration
 of a log recorded in other units than excite reads (positions in mm, wheel angles in degrees).
 
+A calibrated wheel radius more than :data:`NOMINAL_FACTOR` times larger or smaller than the
+robot's nominal one is no calibration either (tyres and wear move it by a few percent): the
+wheel angles are in other units, or behind a gearbox (:func:`far_from_nominal`); the wheel
+separation is left out (a skid-steer robot's effective track is up to twice its geometric
+one).
+
 Bounds (m): each wheel radius in :data:`RADIUS_RANGE`, the two radii within a factor
 :data:`MAX_RADIUS_RATIO` of each other, the wheel separation longer than the larger radius and
 at most :data:`MAX_SEPARATION`; a sensor's offset from the axle midpoint at most
@@ -16,7 +22,7 @@ from dataclasses import dataclass
 
 __all__ = ["RADIUS_RANGE", "MAX_RADIUS_RATIO", "MAX_SEPARATION", "MAX_SENSOR_OFFSET",
            "TYPICAL_RADIUS", "TYPICAL_SEPARATION", "Violation", "implausible",
-           "implausible_mounting", "violation",
+           "implausible_mounting", "violation", "NOMINAL_FACTOR", "far_from_nominal",
            "typical", "log_unit_hint"]
 
 RADIUS_RANGE = (0.005, 2.0)
@@ -24,6 +30,10 @@ MAX_RADIUS_RATIO = 2.0
 MAX_SEPARATION = 20.0
 #: m: no sensor is mounted farther from the axle midpoint (in x or y).
 MAX_SENSOR_OFFSET = MAX_SEPARATION
+#: A calibrated wheel radius farther than this factor from the nominal one is no calibration
+#: (``--init`` is also a rough first guess, so a guess twice the truth is no error; wheel
+#: angles in other units are 2 pi, 9.5 or 57 times off, a gearbox usually 3 times or more).
+NOMINAL_FACTOR = 2.5
 TYPICAL_RADIUS = (0.01, 1.0)
 TYPICAL_SEPARATION = (0.05, 5.0)
 
@@ -117,3 +127,38 @@ def log_unit_hint(r_L: float, r_R: float, b: float) -> str:
             return (f"{words} read as {unit}? (a robot with r_L {values[0]:.3g} m, r_R "
                     f"{values[1]:.3g} m, b {values[2]:.3g} m would give these values)")
     return ""
+
+
+#: The wheel angles' units that scale a calibrated radius by a known factor (calibrated /
+#: true): angles in degrees, speeds in rpm, revolutions, speeds in rad/s labelled rpm.
+_RADIUS_SCALES = (("wheel angles (or speeds) in degrees read as radians", math.pi / 180.0),
+                  ("wheel speeds in rpm read as rad/s", math.pi / 30.0),
+                  ("wheel angles in revolutions read as radians", 2.0 * math.pi),
+                  ("wheel speeds in rad/s read as rpm", 30.0 / math.pi))
+
+
+def far_from_nominal(radii: tuple[float, float], nominal: tuple[float, float]) -> str | None:
+    """What is wrong when a calibrated wheel radius (m) is more than :data:`NOMINAL_FACTOR`
+    times larger or smaller than its nominal one (m), in words with the likely cause (e.g.
+    'wheel radii of 1 m and 1 m, 3.33 and 3.33 times the nominal 0.3 m and 0.3 m: wheel
+    travel in metres ... read as radians?'); None when both are within the factor."""
+    ratios = [value / given for value, given in zip(radii, nominal, strict=True)]
+    if all(1.0 / NOMINAL_FACTOR <= ratio <= NOMINAL_FACTOR for ratio in ratios):
+        return None
+    what = (f"wheel radii of {radii[0]:.4g} m and {radii[1]:.4g} m, {ratios[0]:.3g} and "
+            f"{ratios[1]:.3g} times the nominal {nominal[0]:.4g} m and {nominal[1]:.4g} m "
+            "(no calibration moves a radius so far)")
+    mean = math.sqrt(ratios[0] * ratios[1])
+    if all(abs(value - 1.0) <= 0.02 for value in radii):
+        cause = ("wheel travel in metres (or surface speeds in m/s) read as radians (rad/s), "
+                 "which gives radii of 1 m")
+    else:
+        cause = next((words for words, scale in _RADIUS_SCALES
+                      if abs(mean / scale - 1.0) <= 0.05), None)
+        if cause is None and mean < 1.0:
+            cause = (f"motor angles before a gearbox read as wheel angles (a gear ratio of "
+                     f"about {1.0 / mean:.3g})")
+        elif cause is None:
+            cause = (f"wheel angles that turn {mean:.3g} times slower than the wheels, or "
+                     "nominal values in other units")
+    return f"{what}: {cause}? check the wheel columns and --init"

@@ -179,6 +179,46 @@ def test_a_log_in_other_units_is_a_one_line_error_naming_them(capsys, tmp_path, 
     assert_one_line_error(code, err, str(path), *fragments)
 
 
+@pytest.mark.parametrize("scale, fragment", [
+    (30 / math.pi, "0.105 and 0.107 times the nominal 0.05 m and 0.05 m (no calibration "
+                   "moves a radius so far): wheel speeds in rpm read as rad/s? check the "
+                   "wheel columns and --init"),
+    (4.0, ": motor angles before a gearbox read as wheel angles (a gear ratio of about "
+          "3.94)? check the wheel columns and --init"),
+])
+def test_wheel_radii_far_from_the_nominal_ones_are_a_one_line_error_naming_the_cause(
+        capsys, tmp_path, scale, fragment):
+    """Wheel angles in other units than rad (or a motor's, before its gearbox) calibrate to
+    radii no calibration moves so far from the nominal ones (--init): refused with the likely
+    cause, never 'set these multipliers' (nor a controller file); within the factor they
+    are a calibration."""
+    seg = lesson_dataset(np.random.default_rng(4), 100, sigma=(1e-3, 1e-3, 1e-3))
+    path = tmp_path / "wheels.csv"
+    save_segments(path, type(seg)(*(seg.as_array() * np.array([scale, scale, 1, 1, 1])).T))
+    code, out, err = run_cli(capsys, "calibrate", path, "--init", "0.05,0.05,0.3",
+                             "--ros2-yaml", tmp_path / "c.yaml")
+    assert out == "" and not (tmp_path / "c.yaml").exists()
+    assert_one_line_error(code, err, f"{path}: the calibration gives ", fragment)
+    save_segments(path, type(seg)(*(seg.as_array() * np.array([2.2, 2.2, 1, 1, 1])).T))
+    code, out, err = run_cli(capsys, "calibrate", path, "--init", "0.05,0.05,0.3")
+    assert code == 0 and "set these diff_drive_controller multipliers" in out, err
+
+
+def test_radii_of_one_metre_far_from_the_nominal_ones_name_wheel_travel_in_metres():
+    """Wheel travel in m (or surface speeds in m/s) read as rad calibrates to radii of 1 m
+    whatever the robot (a time-series log of speeds: the segment files' row checks refuse
+    it sooner); a radius within the factor is no error."""
+    from excite.core.plausible import NOMINAL_FACTOR, far_from_nominal
+
+    assert far_from_nominal((1.0004, 0.9991), (0.3, 0.3)) == (
+        "wheel radii of 1 m and 0.9991 m, 3.33 and 3.33 times the nominal 0.3 m and 0.3 m "
+        "(no calibration moves a radius so far): wheel travel in metres (or surface speeds "
+        "in m/s) read as radians (rad/s), which gives radii of 1 m? check the wheel columns "
+        "and --init")
+    assert far_from_nominal((0.3 * NOMINAL_FACTOR, 0.3 / NOMINAL_FACTOR), (0.3, 0.3)) is None
+    assert "3 times slower than the wheels" in far_from_nominal((0.9, 0.9), (0.3, 0.3))
+
+
 @pytest.mark.parametrize("row, fragment", [
     ((6.0, 5.7, 0.27, -0.1, -9999.0), ":5: dtheta_gt -9999 rad, more than any robot turns on "
                                       "wheel increments of 6 and 5.7 rad (at most 24.3 rad): "
