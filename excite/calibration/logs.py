@@ -28,6 +28,7 @@ from excite.calibration.result import CalibrationResult
 from excite.calibration.solver import Loss
 from excite.calibration.wiring import check_pose_source, check_wiring
 from excite.core.kinematics import Params
+from excite.core.plausible import METRE_RADII, metre_radii
 from excite.errors import DataError
 from excite.logs.inputs import (
     DEFAULT_LOG_OPTIONS,
@@ -256,6 +257,11 @@ def calibrate_logs(
                            lambda segments, pose: fit(segments, pose, "off"), note,
                            sensor_pose)
         result = applied(result, test, heterogeneity)
+    if initial is None and metre_radii(result.params.r_L, result.params.r_R):
+        note(f"{', '.join(paths)}: both wheel radii come out 1 m ({result.params.r_L:.4g} and "
+             f"{result.params.r_R:.4g} m), what {METRE_RADII}: if the wheel columns hold "
+             "those, these radii scale them (give the robot's nominal values, --init, to "
+             "check)")
     validation = None
     if held:
         assert initial is not None  # checked above

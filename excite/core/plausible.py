@@ -22,7 +22,8 @@ from dataclasses import dataclass
 
 __all__ = ["RADIUS_RANGE", "MAX_RADIUS_RATIO", "MAX_SEPARATION", "MAX_SENSOR_OFFSET",
            "TYPICAL_RADIUS", "TYPICAL_SEPARATION", "Violation", "implausible",
-           "implausible_mounting", "violation", "NOMINAL_FACTOR", "far_from_nominal",
+           "implausible_mounting", "violation", "NOMINAL_FACTOR", "METRE_RADII",
+           "far_from_nominal", "metre_radii",
            "typical", "log_unit_hint"]
 
 RADIUS_RANGE = (0.005, 2.0)
@@ -137,6 +138,16 @@ _RADIUS_SCALES = (("wheel angles (or speeds) in degrees read as radians", math.p
                   ("wheel speeds in rad/s read as rpm", 30.0 / math.pi))
 
 
+#: What calibrated wheel radii of 1 m most likely mean.
+METRE_RADII = ("wheel travel in metres (or surface speeds in m/s) read as radians (rad/s), "
+               "which gives radii of 1 m")
+
+
+def metre_radii(r_L: float, r_R: float) -> bool:
+    """Whether both calibrated wheel radii (m) are within 2% of 1 m (:data:`METRE_RADII`)."""
+    return abs(r_L - 1.0) <= 0.02 and abs(r_R - 1.0) <= 0.02
+
+
 def far_from_nominal(radii: tuple[float, float], nominal: tuple[float, float]) -> str | None:
     """What is wrong when a calibrated wheel radius (m) is more than :data:`NOMINAL_FACTOR`
     times larger or smaller than its nominal one (m), in words with the likely cause (e.g.
@@ -149,9 +160,8 @@ def far_from_nominal(radii: tuple[float, float], nominal: tuple[float, float]) -
             f"{ratios[1]:.3g} times the nominal {nominal[0]:.4g} m and {nominal[1]:.4g} m "
             "(no calibration moves a radius so far)")
     mean = math.sqrt(ratios[0] * ratios[1])
-    if all(abs(value - 1.0) <= 0.02 for value in radii):
-        cause = ("wheel travel in metres (or surface speeds in m/s) read as radians (rad/s), "
-                 "which gives radii of 1 m")
+    if metre_radii(*radii):
+        cause = METRE_RADII
     else:
         cause = next((words for words, scale in _RADIUS_SCALES
                       if abs(mean / scale - 1.0) <= 0.05), None)

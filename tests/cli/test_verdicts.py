@@ -204,12 +204,31 @@ def test_wheel_radii_far_from_the_nominal_ones_are_a_one_line_error_naming_the_c
     assert code == 0 and "set these diff_drive_controller multipliers" in out, err
 
 
-def test_radii_of_one_metre_far_from_the_nominal_ones_name_wheel_travel_in_metres():
+def test_radii_of_one_metre_name_wheel_travel_in_metres(capsys, tmp_path):
     """Wheel travel in m (or surface speeds in m/s) read as rad calibrates to radii of 1 m
-    whatever the robot (a time-series log of speeds: the segment files' row checks refuse
-    it sooner); a radius within the factor is no error."""
+    whatever the robot: with --init, the one-line error names it; without, a note; a radius
+    within the factor is no error."""
+    from excite import Params
     from excite.core.plausible import NOMINAL_FACTOR, far_from_nominal
+    from excite.logs.timeseries import TimeSeries
+    from excite.logs.timeseries_csv import write_timeseries
 
+    s = synthetic_log(np.random.default_rng(3), 60.0, Params(0.3, 0.302, 1.2),
+                      pose_noise=(1e-3, 1e-3)).series
+    path = tmp_path / "metres.csv"
+    write_timeseries(path, TimeSeries(s.t_enc, s.phi_L * 0.3, s.phi_R * 0.302, s.t_pose, s.x,
+                                      s.y, s.theta))
+    code, out, err = run_cli(capsys, "calibrate", path, "--init", "0.3,0.3,1.2")
+    assert_one_line_error(code, err, "wheel radii of 1 m and 1 m, 3.33 and 3.33 times the "
+                          "nominal 0.3 m and 0.3 m", "wheel travel in metres (or surface "
+                          "speeds in m/s) read as radians (rad/s), which gives radii of 1 m? "
+                          "check the wheel columns and --init")
+    code, out, err = run_cli(capsys, "calibrate", path)
+    assert code == 0
+    assert (f"excite: note: {path}: both wheel radii come out 1 m (1 and 1 m), what wheel "
+            "travel in metres (or surface speeds in m/s) read as radians (rad/s), which gives "
+            "radii of 1 m: if the wheel columns hold those, these radii scale them (give the "
+            "robot's nominal values, --init, to check)") in err
     assert far_from_nominal((1.0004, 0.9991), (0.3, 0.3)) == (
         "wheel radii of 1 m and 0.9991 m, 3.33 and 3.33 times the nominal 0.3 m and 0.3 m "
         "(no calibration moves a radius so far): wheel travel in metres (or surface speeds "
