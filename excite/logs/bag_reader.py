@@ -268,7 +268,7 @@ def read_bag_log(
     t_enc, phi_L, phi_R = joints.columns()
     t_pose, x, y, theta = poses.columns()
     series = TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,
-                        source=(joints.where, pose_source))
+                        source=(joints.where, pose_source), speeds=joints.integrated)
     skipped = {f"{topic} {reason}": n for topic, stream in ((joint_states, joints),
                                                              (pose_key, poses))
                for reason, n in stream.skipped.items()}

@@ -121,6 +121,8 @@ class JointRows(TopicRows):
         self.names: set[str] = set()
         self.apart = {joint: TopicRows(f"{where} {joint}") for joint in (left, right)}
         self.speeds = TopicRows(where)
+        #: Whether :meth:`columns` integrated the wheels' velocities.
+        self.integrated = False
         self.apart_speeds = {joint: TopicRows(f"{where} {joint}") for joint in (left, right)}
 
     def add(self, msg: Any, received: int) -> None:
@@ -190,6 +192,7 @@ class JointRows(TopicRows):
         skipped, and the ``with_positions`` messages that had them (fewer: a start-up's, or
         another publisher's) are counted as left out."""
         angles = _integrated(self.speeds, self.speeds.table(3))
+        self.integrated = True
         self.skipped = dict(self.speeds.skipped)
         self.skip(FEWER_POSITIONS, with_positions)
         self.notes = [*self.speeds.notes, f"{self.where}: {SPEED_NOTE}"]
@@ -205,6 +208,7 @@ class JointRows(TopicRows):
         if speeds:
             tables = [_integrated(stream, table)
                       for stream, table in zip((left, right), tables, strict=True)]
+            self.integrated = True
             self.notes.append(f"{self.where}: {SPEED_NOTE}")
         rows, left_out = wheels_together(*tables)
         for stream in (left, right):

@@ -35,6 +35,7 @@ from excite.logs.segmentation import (
     segment_timeseries,
 )
 from excite.logs.segments import Segments, check_not_utf16, form_problem, load_segments
+from excite.logs.speed_lag import lag_corrected, speed_lag
 from excite.logs.time_offset import (
     MAX_TIME_OFFSET,
     OffsetHint,
@@ -152,7 +153,9 @@ class Log:
     Without a given offset, hint says what the data suggest when it is clearly not zero
     (:func:`excite.logs.time_offset.noticeable_time_offset`), else None. skipped: for a bag,
     the messages the reader skipped, in one line (None for a CSV log). notes: what the user
-    should hear about the log, one line each, in order (each starts with the log's name)."""
+    should hear about the log, one line each, in order (each starts with the log's name).
+    speed_lag: the time constant (s) of the wheel speeds' lag the series was corrected for
+    (:mod:`excite.logs.speed_lag`), None when it was not."""
 
     name: str
     series: TimeSeries
@@ -161,6 +164,7 @@ class Log:
     hint: OffsetHint | None = None
     skipped: str | None = None
     notes: tuple[str, ...] = ()
+    speed_lag: float | None = None
 
     def offset_text(self) -> str:
         """The offset and its source, e.g. '-0.0098 s (detected: the data reject a zero offset;
@@ -195,6 +199,8 @@ class Part:
             return f"{self.source.name}: {len(self.segments)} segments"
         report = self.cut.report
         offset = f"; time offset {self.log.offset_text()}"
+        if self.log.speed_lag is not None:
+            offset += f"; wheel speeds' lag {self.log.speed_lag:.4f} s (corrected)"
         unwrapped = f"; {report.unwrapped_text()}" if report.unwrapped_text() else ""
         skipped = "" if self.log.skipped is None else f"; messages skipped: {self.log.skipped}"
         return (f"{self.source.name}: {report.n_segments} segments; dropped: "
@@ -378,6 +384,17 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
         if unwrapped:
             note(f"{source.name}: {unwrapped}")
     offset, offset_source, hint = _clock_offset(series, options)
+    lag = None
+    if series.speeds and offset_source == "detected" and offset > 0:
+        lag = speed_lag(series, options.max_time_offset)
+        if lag is not None:
+            note(f"{source.name}: the wheel speeds lag the motion as a low-pass filter of "
+                 f"time constant {lag:.4f} s would (a driver's filtered velocity), which "
+                 f"explains the poses better than a clock offset of {offset:+.4f} s: the "
+                 f"wheel angles are corrected for it (phi + {lag:.4g} s x omega); "
+                 "--time-offset 0 for neither, --time-offset S for an offset instead")
+            series = lag_corrected(series, lag)
+            offset, offset_source, hint = _clock_offset(series, options)
     if offset_source == "detected":
         note(f"{source.name}: the pose stamps are offset from the encoder stamps by "
              f"{offset:+.4f} s (pose time + offset = encoder time): the data reject a zero "
@@ -386,7 +403,7 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
         note(f"{source.name}: the clocks of the encoder and pose streams seem offset (pose "
              "time + offset = encoder time), but none was given and 0 is used; "
              f"{hint.text()}")
-    return Log(source.name, series, offset, offset_source, hint, skipped, tuple(notes))
+    return Log(source.name, series, offset, offset_source, hint, skipped, tuple(notes), lag)
 
 
 def segment_log(log: Log, options: LogOptions) -> SegmentedLog:

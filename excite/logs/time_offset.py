@@ -18,8 +18,9 @@ from numpy.typing import NDArray
 from excite.errors import DataError
 from excite.logs.timeseries import TimeSeries
 
-__all__ = ["MAX_TIME_OFFSET", "OffsetHint", "OffsetOutOfRange", "estimate_time_offset",
-           "noticeable_time_offset"]
+__all__ = ["MAX_TIME_OFFSET", "OffsetFit", "OffsetHint", "OffsetOutOfRange",
+           "estimate_time_offset", "explained", "noticeable_time_offset", "offset_fit",
+           "refined_lag"]
 
 FloatArray = NDArray[np.float64]
 
@@ -47,7 +48,7 @@ def _sliding_sum(x: FloatArray, width: int) -> FloatArray:
     return total[width:] - total[:-width]
 
 
-def _explained(turn: FloatArray, left: FloatArray, right: FloatArray, max_lag: int) -> FloatArray:
+def explained(turn: FloatArray, left: FloatArray, right: FloatArray, max_lag: int) -> FloatArray:
     """For each lag m = -max_lag..max_lag, the fraction R^2 of the heading rate's variance
     (over the central samples max_lag..n - max_lag) that a linear fit
     a phi_L'(t + m) + c phi_R'(t + m) (plus a constant) explains."""
@@ -100,7 +101,7 @@ def _refuse_better_fit_outside(signals: tuple[FloatArray, FloatArray, FloatArray
     wide_lag = int(overlap / 4.0 / step)
     if wide_lag <= max_lag:
         return
-    unexplained = 1.0 - _explained(*signals, wide_lag)
+    unexplained = 1.0 - explained(*signals, wide_lag)
     outside = np.ones(unexplained.size, dtype=bool)
     outside[wide_lag - max_lag: wide_lag + max_lag + 1] = False
     best_inside, best_outside = unexplained[~outside].min(), unexplained[outside].min()
@@ -119,7 +120,7 @@ def _refuse_better_fit_outside(signals: tuple[FloatArray, FloatArray, FloatArray
                            "search range: --max-time-offset)", lags)
 
 
-def _refined_lag(r2: FloatArray, max_lag: int, step: float) -> float:
+def refined_lag(r2: FloatArray, max_lag: int, step: float) -> float:
     """The lag (s) of the largest R^2 (index k of lags -max_lag..max_lag, spacing ``step``),
     refined by a parabola through the three values around it; NaN at the edge."""
     k = int(np.argmax(r2))
@@ -171,13 +172,14 @@ def estimate_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET,
     fit's correlation sqrt(R^2) is below ``min_correlation`` (no clear agreement), when the
     best lag is at the edge of the search range, or when a lag outside it fits clearly better.
     """
-    return _estimate(ts, max_offset, min_correlation).offset
+    return offset_fit(ts, max_offset, min_correlation).offset
 
 
 @dataclass(frozen=True)
-class _OffsetFit:
-    """An estimated offset (s) and what it came from: the rate signals on their grid of
-    spacing ``step`` (s) and the search range in grid steps."""
+class OffsetFit:
+    """An estimated offset (s) and what it came from: the rate signals (the heading's, the
+    left and right wheels', rad/s) on their grid of spacing ``step`` (s) and the search
+    range in grid steps."""
 
     offset: float
     signals: tuple[FloatArray, FloatArray, FloatArray]
@@ -185,8 +187,8 @@ class _OffsetFit:
     max_lag: int
 
 
-def _estimate(ts: TimeSeries, max_offset: float, min_correlation: float) -> _OffsetFit:
-    """estimate_time_offset, keeping the signals it fitted."""
+def offset_fit(ts: TimeSeries, max_offset: float, min_correlation: float) -> OffsetFit:
+    """:func:`estimate_time_offset`, keeping the signals it fitted (same errors)."""
     if not 0 < max_offset < math.inf:
         raise DataError(f"max_offset must be positive and finite (s), got {max_offset}")
     step = float(min(np.median(np.diff(ts.t_enc)), np.median(np.diff(ts.t_pose))))
@@ -202,19 +204,19 @@ def _estimate(ts: TimeSeries, max_offset: float, min_correlation: float) -> _Off
                         "--time-offset, or estimate it on each part of the log")
     max_lag = max(1, int(math.ceil(max_offset / step)))
     signals = _rate_signals(ts, step)
-    r2 = _explained(*signals, max_lag)
+    r2 = explained(*signals, max_lag)
     _refuse_better_fit_outside(signals, step, max_lag, max_offset, overlap)
     k = int(np.argmax(r2))
     correlation = math.sqrt(max(float(r2[k]), 0.0))
     if correlation < min_correlation:
         raise DataError(f"cannot estimate the time offset: heading rate and wheel speeds "
                         f"agree poorly (correlation {correlation:.2f} < {min_correlation})")
-    offset = _refined_lag(r2, max_lag, step)
+    offset = refined_lag(r2, max_lag, step)
     if math.isnan(offset):
         raise OffsetOutOfRange(f"cannot estimate the time offset: it is not within "
                                f"+-{max_offset} s (the best fit is at the edge of the search "
                                "range: --max-time-offset)")
-    return _OffsetFit(offset, signals, step, max_lag)
+    return OffsetFit(offset, signals, step, max_lag)
 
 
 #: s, the blocks of the heading rate whose sums make the batch-means standard error of the lag
@@ -237,7 +239,7 @@ NOTICEABLE_OFFSET_LEVEL = 1e-3
 NOTICEABLE_OFFSET_PERIODS = 0.1
 
 
-def _lag_zero_score(fit: _OffsetFit) -> tuple[float, int]:
+def _lag_zero_score(fit: OffsetFit) -> tuple[float, int]:
     """A score test that the clock offset is zero: (t statistic, number of blocks).
 
     At lag zero the heading rate is fitted by the wheel rates (a phi_L' + c phi_R' + const,
@@ -310,7 +312,7 @@ def noticeable_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET
     from scipy.special import stdtrit
 
     try:
-        fit = _estimate(ts, max_offset, MIN_CORRELATION)
+        fit = offset_fit(ts, max_offset, MIN_CORRELATION)
     except OffsetOutOfRange as exc:
         return OffsetHint(None, max_offset, exc.candidates)
     except DataError:

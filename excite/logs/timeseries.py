@@ -160,7 +160,9 @@ class TimeSeries:
     (continuous joints reported modulo 2 pi) and are unwrapped here; DataError when such a
     stream is sampled too slowly to unwrap (see MAX_UNWRAPPED_STEP). unwrapped_counters: the
     tick columns whose fixed-width counter overflowed and was unwrapped when they were read
-    (e.g. 'ticks_L (16-bit counter)', :func:`unwrapped_counter`), for the reports.
+    (e.g. 'ticks_L (16-bit counter)', :func:`unwrapped_counter`), for the reports. speeds:
+    the wheel angles are wheel speeds integrated (:func:`integrated_speed`), which may lag
+    the motion (:mod:`excite.logs.speed_lag`).
     """
 
     t_enc: FloatArray
@@ -173,6 +175,7 @@ class TimeSeries:
     source: tuple[str, str] = ("encoders", "poses")
     lines: tuple[IntArray | None, IntArray | None] = (None, None)
     unwrapped_counters: tuple[str, ...] = ()
+    speeds: bool = False
     unwrapped_wheels: tuple[str, ...] = field(default=(), init=False)
 
     def __post_init__(self) -> None:
@@ -239,7 +242,7 @@ def _subset(series: TimeSeries, enc: NDArray[np.bool_], pose: NDArray[np.bool_]
     subset = TimeSeries(series.t_enc[enc], series.phi_L[enc], series.phi_R[enc],
                         series.t_pose[pose], series.x[pose], series.y[pose],
                         series.theta[pose], source=series.source, lines=lines,
-                        unwrapped_counters=series.unwrapped_counters)
+                        unwrapped_counters=series.unwrapped_counters, speeds=series.speeds)
     object.__setattr__(subset, "unwrapped_wheels", series.unwrapped_wheels)
     return subset
 

@@ -390,7 +390,8 @@ def read_timeseries(paths: PathArg | Sequence[PathArg],
     (t_pose, x, y, theta), pose_lines = poses.stream(POSE_COLUMNS)
     return TimeSeries(t_enc, phi_L, phi_R, t_pose, x, y, theta,
                       source=(encoders.name, poses.name), lines=(enc_lines, pose_lines),
-                      unwrapped_counters=counters)
+                      unwrapped_counters=counters,
+                      speeds=encoders.encoder_columns == SPEED_COLUMNS)
 
 
 # --------------------------------------------------------------------------- CSV writing

@@ -607,6 +607,7 @@ def test_joint_states_with_velocities_only_are_integrated(tmp_path, log, positio
     assert bag.skipped == {}
     assert any("wheel speeds (rad/s) integrated into angles by the trapezoidal rule" in note
                for note in bag.notes)
+    assert bag.series.speeds  # integrated speeds (excite.logs.speed_lag)
     read, angles = segment_timeseries(bag.series).segments, segment_timeseries(log).segments
     assert len(read) == len(angles)
     # the integral of central differences: within a small part of each increment
