@@ -12,6 +12,7 @@ excite's core (environment ids, estimators) are named directly in the help texts
 from __future__ import annotations
 
 import argparse
+import re
 import textwrap
 from collections.abc import Callable
 
@@ -69,6 +70,13 @@ class CommandsHelpFormatter(argparse.RawDescriptionHelpFormatter):
                                           max(map(len, names)) + self._current_indent + 2)
 
 
+#: A value of numbers that starts with a minus sign (``--area -2,-2,2,2``, ``--sensor-pose
+#: -0.1,0,0``, ``--time-offset -1e-3``): argparse takes it for an unknown option unless it is
+#: one plain number.
+_NEGATIVE_NUMBERS = re.compile(
+    r"^-(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?(?:,\s*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)*$")
+
+
 class Parser(argparse.ArgumentParser):
     """An ArgumentParser whose errors are one line (UsageError, exit status 2), whose help
     is formatted by :class:`HelpFormatter` unless told otherwise, and whose positional
@@ -89,6 +97,12 @@ class Parser(argparse.ArgumentParser):
             return self.parse_known_intermixed_args(args, namespace)
         finally:
             self._intermixing = False
+
+    def _parse_optional(self, arg_string):  # type: ignore[override]
+        """A value of numbers with a leading minus sign is a value, not an option."""
+        if _NEGATIVE_NUMBERS.match(arg_string):
+            return None
+        return super()._parse_optional(arg_string)
 
     def error(self, message: str):  # one line, no usage dump
         raise UsageError(message)

@@ -106,7 +106,7 @@ def test_bad_files_are_one_line_errors(capsys, tmp_path, name):
         (["--sigma", "a,b,c"], "SX is not a number"),
         (["--sigma", "1e-3,1e-3,nan"], "STH must be positive"),
         (["--init=-0.05,0.05,0.3"], "RL must be positive"),
-        (["--init", "-0.05,0.05,0.3"], "argument --init: expected one argument"),
+        (["--init", "-0.05,0.05,0.3"], "--init: RL must be positive and finite, got '-0.05'"),
         (["--init", "0.05,0.05,0"], "B must be positive"),
         (["--init", "0.05,0.05,inf"], "B must be positive"),
         (["--loss", "cauchy"], "invalid choice: 'cauchy'"),
@@ -280,3 +280,17 @@ def test_utf16_files_are_named(capsys, tmp_path):
     assert_one_line_error(*run_cli(capsys, "calibrate", path)[::2], message)
     assert_one_line_error(*run_cli(capsys, "segment", path, "--out", tmp_path / "s.csv")[::2],
                           message)
+
+
+@pytest.mark.parametrize("argv, name, value", [
+    (["calibrate", "x.csv", "--sensor-pose", "-0.05,0.01,0"], "sensor_pose", "-0.05,0.01,0"),
+    (["calibrate", "x.csv", "--time-offset", "-1e-3"], "time_offset", "-0.001"),
+    (["live", "--left-wheel", "l", "--right-wheel", "r", "--pose-topic", "/p", "--area",
+      "-2,-2.5,2,2.5"], "area", "-2,-2.5,2,2.5"),
+])
+def test_values_of_numbers_with_a_leading_minus_are_values(argv, name, value):
+    """A sensor behind the axle, an area around the origin: a value that starts with a minus
+    sign is read as the option's value (argparse took it for an unknown option)."""
+    from excite.cli import build_parser
+
+    assert str(getattr(build_parser().parse_args(argv), name)) == value
