@@ -254,6 +254,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"cannot record to {args.record}: it exists")
     if args.force_yaml and not args.ros2_yaml:
         raise UsageError("--force-yaml needs --ros2-yaml OUT.yaml")
+    _check_names(args)
     from excite.live.ros2 import INTERRUPTED, SessionFailed, run_live
     from excite.live.settings import LiveTopics
 
@@ -276,9 +277,8 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if recorder is not None:
             recorder.__exit__(None, None, None)
-            streams = (topics.joint_states, topics.pose_topic)
-            if not any(recorder.written.get(topic) for topic in streams):
-                _remove(args.record)  # nothing received: no bag to refuse the next --record
+            if not session.started:  # nothing of a drive: no bag to refuse the next --record
+                _remove(args.record)
     with _signals_held():  # the robot is stopped; the report and files take a moment
         unwritten = _report(args, result, settings)
     if failure is not None:
@@ -287,6 +287,31 @@ def run(args: argparse.Namespace) -> int:
         raise unwritten
     return {"done": EXIT_OK, "out_of_time": EXIT_OUT_OF_TIME}.get(
         result.outcome, EXIT_INTERRUPTED if result.reason == INTERRUPTED else EXIT_ABORTED)
+
+
+def _check_names(args: argparse.Namespace) -> None:
+    """UsageError before anything connects: the wheels name one joint; a topic name ROS 2
+    refuses; --out, --record and --ros2-yaml naming one file."""
+    from rclpy.exceptions import InvalidTopicNameException
+    from rclpy.validate_topic_name import validate_topic_name
+
+    if args.left_wheel == args.right_wheel:
+        raise UsageError(f"--left-wheel and --right-wheel name the same joint "
+                         f"{args.left_wheel!r}")
+    for option, name in (("--joint-states", args.joint_states),
+                         ("--pose-topic", args.pose_topic), ("--cmd-vel", args.cmd_vel)):
+        try:
+            validate_topic_name(name)
+        except InvalidTopicNameException as exc:
+            reason = str(exc).splitlines()[0].removeprefix("Invalid topic name: ").rstrip(":")
+            raise UsageError(f"{option} {name!r}: not a ROS 2 topic name ({reason})") from None
+    files = {"--out": args.out, "--record": args.record,
+             "--ros2-yaml": Path(args.ros2_yaml) if args.ros2_yaml else None}
+    given = [(option, path.resolve()) for option, path in files.items() if path is not None]
+    for k, (option, path) in enumerate(given):
+        for other, same in given[k + 1:]:
+            if path == same:
+                raise UsageError(f"{option} and {other} name the same file {path}")
 
 
 def _report(args: argparse.Namespace, result, settings) -> UsageError | None:
@@ -312,9 +337,15 @@ def _report(args: argparse.Namespace, result, settings) -> UsageError | None:
         if result.calibration is not None:
             print(result.calibration.summary(settings.nominal))
         if args.record is not None:
+            joint_states = ("" if args.joint_states == _default("LiveTopics", "joint_states")
+                            else f" --joint-states {args.joint_states}")
+            pose = ("" if args.sensor_pose == _default("LiveSettings", "sensor_pose")
+                    else f" --sensor-pose={args.sensor_pose}")
+            nominal = ",".join(f"{value:.9g}" for value in settings.nominal.as_array())
             print_note(f"session recorded in {args.record}: excite calibrate {args.record} "
-                       f"--left-wheel {args.left_wheel} --right-wheel {args.right_wheel} "
-                       f"--pose-topic {args.pose_topic} --split-at-gaps"
+                       f"--left-wheel {args.left_wheel} --right-wheel {args.right_wheel}"
+                       f"{joint_states} --pose-topic {args.pose_topic}{pose} --init {nominal} "
+                       "--split-at-gaps"
                        + (f" --window {args.segment_duration:g}"
                           if args.segment_duration != 1.0 else "")
                        + (f" --start {result.calibrated_from!r}"

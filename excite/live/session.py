@@ -494,6 +494,11 @@ class LiveSession:
         return self._state in OUTCOMES
 
     @property
+    def started(self) -> bool:
+        """Whether the session has started driving (both streams came)."""
+        return self._start is not None
+
+    @property
     def state(self) -> str:
         return self._state
 

@@ -61,13 +61,14 @@ def test_a_session_reaches_the_target_and_stops(session_dir):
     # the last command the robot received is zero
     assert s.log[-1, 4] == 0 and s.log[-1, 5] == 0
     # the recorded bag calibrates offline to the same numbers, from the last slowdown on
-    # when the wheels slipped at full speed (the command the session's note prints)
-    start = ([] if live["calibrated_from"] is None
-             else ["--start", repr(live["calibrated_from"])])
-    offline = subprocess.run([*EXCITE, "calibrate", str(session_dir / "session.mcap"),
-                              *WHEELS[:4], "--pose-topic", "/pose", "--split-at-gaps", *start,
-                              "--init", "0.05,0.05,0.3", "--sensor-pose", "axle", "--json"],
-                             capture_output=True, text=True, timeout=120)
+    # when the wheels slipped at full speed, by the command the session's note prints
+    note = next(line for line in s.err.splitlines()
+                if line.startswith("excite: note: session recorded in "))
+    command = note.split(": excite ", 1)[1].split()
+    assert "--sensor-pose=axle" in command and "--init" in command
+    assert ("--start" in command) == (live["calibrated_from"] is not None)
+    offline = subprocess.run([*EXCITE, *command, "--json"], capture_output=True, text=True,
+                             timeout=120)
     assert offline.returncode == 0, offline.stderr
     import json
 
@@ -201,6 +202,34 @@ def test_a_wrong_wheel_name_is_bad_input_and_the_robot_never_moves(session_dir):
     assert len(lines) == 1 and "no joint 'left_wheel'" in lines[0], s.err
     assert "left_wheel_joint" in lines[0]  # the joints seen
     assert np.all(s.log[:, 4] == 0) and np.all(s.log[:, 5] == 0)
+    # the session never started: its bag, which holds the streams seen while checking, is
+    # removed, so that the corrected command may record to the same name
+    assert not (session_dir / "session.mcap").exists()
+
+
+@pytest.mark.parametrize("change, words", [
+    (["--right-wheel", "left_wheel_joint"],
+     "--left-wheel and --right-wheel name the same joint 'left_wheel_joint'"),
+    (["--cmd-vel", "/cmd vel"], "--cmd-vel '/cmd vel': not a ROS 2 topic name (topic name "
+                                "must not contain characters other than alphanumerics"),
+    (["--pose-topic", "/1bad"], "--pose-topic '/1bad': not a ROS 2 topic name (topic name "
+                                "token must not start with a number)"),
+    (["--out", "{dir}/same", "--record", "{dir}/same"], "--out and --record name the same "
+                                                        "file"),
+    (["--out", "{dir}/r.json", "--ros2-yaml", "{dir}/r.json"], "--out and --ros2-yaml name "
+                                                               "the same file"),
+])
+def test_names_that_cannot_work_are_refused_before_anything_connects(session_dir, change,
+                                                                      words):
+    from envs.rehearsal import ros_env
+
+    change = [arg.replace("{dir}", str(session_dir)) for arg in change]
+    done = subprocess.run([*EXCITE, "live", *LIVE, *change], capture_output=True, text=True,
+                          env=ros_env(), timeout=60)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert done.stderr.startswith("excite: error: ") and len(done.stderr.splitlines()) == 1
+    assert words in done.stderr, done.stderr
+    assert list(session_dir.iterdir()) == []
 
 
 @pytest.mark.parametrize("fault, words", [
