@@ -93,6 +93,18 @@ class SessionFailed(Exception):
         self.result = result
 
 
+#: s of wall time between two checks for other nodes publishing on the command topic.
+COMMANDERS_CHECK = 0.5
+
+
+def _node_name(namespace: str, name: str) -> str:
+    """A node's full name, or words for one whose name is not discovered yet (DDS finds a
+    publisher before its node's name)."""
+    if name.startswith("_NODE_NAME_UNKNOWN"):
+        return "a node whose name is not known yet"
+    return f"{namespace.rstrip('/')}/{name}"
+
+
 def _failure_reason(exc: Exception) -> str:
     """An exception as a session's reason to end."""
     if isinstance(exc, ExciteError):
@@ -143,6 +155,7 @@ class LiveNode:
         self._pose_type: str | None = None
         self._statuses = 0
         self._last_clock = (None, time.monotonic())
+        self._commanders_checked = -math.inf  # monotonic s of the last check
         self.error: str | None = None
 
     # -- start --------------------------------------------------------------------------------
@@ -384,6 +397,7 @@ class LiveNode:
         """One command: the session's at the node's time."""
         now = self._now()
         self._check_wheel_names()
+        self._check_commanders()
         self._check_clock(now)
         try:
             self.publish(self.session.command(now))
@@ -409,6 +423,27 @@ class LiveNode:
             if self.session.state == "waiting":
                 raise DataError(text)  # never started: bad input
             self.session.abort(text)
+
+    def _check_commanders(self) -> None:
+        """Another node publishing on the command topic (a teleop or a navigation stack left
+        running), checked every COMMANDERS_CHECK s: the robot would follow both. DataError
+        before the session started (the robot never commanded); the session aborted after."""
+        wall = time.monotonic()
+        if self.session.ended or wall - self._commanders_checked < COMMANDERS_CHECK:
+            return
+        self._commanders_checked = wall
+        own = (self.node.get_namespace(), self.node.get_name())
+        others = sorted({_node_name(info.node_namespace, info.node_name)
+                         for info in self.node.get_publishers_info_by_topic(self.topics.cmd_vel)
+                         if (info.node_namespace, info.node_name) != own})
+        if not others:
+            return
+        text = (f"another node publishes on {self.topics.cmd_vel} ({', '.join(others)}): the "
+                "robot would follow both (a teleop or navigation left running?); stop it, or "
+                "give excite a command topic of its own (--cmd-vel)")
+        if self.session.state == "waiting":
+            raise DataError(text)  # never started: bad input
+        self.session.abort(text)
 
     def _check_clock(self, now: float) -> None:
         """The node's clock stopped (no /clock with use_sim_time) for abort_timeout s."""

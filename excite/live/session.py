@@ -33,8 +33,9 @@ Each call of :meth:`LiveSession.command` is one pass of a pipeline of named stag
    batch calibration finds that the model does not fit (the wheels slip, most often), the
    session slows down to half its speed (at most twice, to ``MIN_SPEED_SCALE``) and
    calibrates on the data from then on only;
-3. **ramp**: the commanded wheel speeds approach the protocol's at most at
-   ``max_wheel_acceleration``.
+3. **ramp**: the protocol's wheel speeds, scaled down to what the robot can stop from
+   before its footprint leaves the area (the stopping guard, whatever the protocol), are
+   approached at most at ``max_wheel_acceleration``.
 
 A decision computed on the executor saw the log up to an earlier segment's end: when it
 says done, the session is *confirming*: the robot stops, and the rule decides again on the
@@ -77,11 +78,16 @@ from excite.logs.segments import Segments
 from excite.logs.timeseries import TimeSeries, during
 from excite.stopping import StopDecision, StoppingRule
 
-__all__ = ["MIN_SPEED_SCALE", "LiveSession"]
+__all__ = ["MIN_SPEED_SCALE", "STOP_MARGIN", "LiveSession"]
 
 #: The lowest share of the speed limit a session slows down to when the model does not fit.
 MIN_SPEED_SCALE = 0.25
 
+
+#: m: the stopping guard (:meth:`LiveSession._within_reach`) stops the footprint this far
+#: inside the area's edge, so that the pose noise of a robot standing there does not read as
+#: the footprint outside (which aborts the session).
+STOP_MARGIN = 0.02
 
 #: rad: wheels that turned this much while the poses repeated one value: the pose source is
 #: frozen (any robot moves its sensor by a millimetre or more on it, and a real source's noise
@@ -352,19 +358,58 @@ class LiveSession:
         self._segments += 1
 
     def _ramp(self, now: float) -> Command:
-        """Stage 3: the wheel speeds sent: zero at once unless running, else at most
-        max_wheel_acceleration from the last."""
+        """Stage 3: the wheel speeds sent: zero at once unless running, else the protocol's
+        scaled down to what the robot can stop from inside the area (:meth:`_within_reach`),
+        at most max_wheel_acceleration from the last."""
         if self._state != "running":
             sent = np.zeros(2)
-        elif self._sent_at is None or not math.isfinite(self.settings.max_wheel_acceleration):
-            sent = self._target.copy()
         else:
-            step = self.settings.max_wheel_acceleration * max(now - self._sent_at, 0.0)
-            sent = self._sent + np.clip(self._target - self._sent, -step, step)
+            target = self._target * self._within_reach(self._target)
+            if self._sent_at is None or not math.isfinite(self.settings.max_wheel_acceleration):
+                sent = target
+            else:
+                step = self.settings.max_wheel_acceleration * max(now - self._sent_at, 0.0)
+                sent = self._sent + np.clip(target - self._sent, -step, step)
         self._sent, self._sent_at = sent, now
         self._watch.commanded(now, float(sent[0]), float(sent[1]))
         v, omega = self.settings.twist(float(sent[0]), float(sent[1]))
         return Command(float(sent[0]), float(sent[1]), v, omega)
+
+    def _reach(self, wheels: np.ndarray) -> tuple[float, float]:
+        """(a, c) of how far (m) a point of the footprint may still travel when the wheels
+        turn at ``wheels`` x f (rad/s) and the command goes to zero now: a f + c f^2. Every
+        point moves at most s = |v| + |omega| R (R the footprint's corner from the axle
+        midpoint) through the response time and the motors' lag (response_time + motor_tau),
+        then while the wheels stop, which takes their surface speed over the deceleration
+        max_wheel_acceleration allows, or the floor's grip, whichever is less (s over half
+        that time)."""
+        s = self.settings
+        v, omega = s.twist(float(wheels[0]), float(wheels[1]))
+        speed = abs(v) + abs(omega) * 0.5 * math.hypot(*s.chassis)
+        delay = s.response_time + (s.traction.motor_tau if s.traction is not None else 0.0)
+        radius = float(max(s.nominal.r_L, s.nominal.r_R))
+        deceleration = min(s.max_wheel_acceleration * radius,
+                           s.traction.grip if s.traction is not None else math.inf)
+        stopping = float(np.max(np.abs(wheels))) * radius / deceleration
+        return speed * delay, 0.5 * speed * stopping
+
+    def _within_reach(self, wheels: np.ndarray) -> float:
+        """The stopping guard, whatever the protocol: the largest share (at most 1) of the
+        wheel speeds ``wheels`` (rad/s) from which the robot stops before its footprint
+        leaves the area, from its clearance at the latest pose (:meth:`_reach`); 0 at or
+        beyond the edge. It holds a protocol's wall guard to the robot's response and
+        deceleration (slower than a planner's model, e.g. under max_wheel_acceleration), and
+        a protocol that has none (a user's) to the area; it stops STOP_MARGIN inside it."""
+        clearance = (self._area.clearance(self._body_pose(), self.settings.chassis)
+                     - STOP_MARGIN)
+        if clearance <= 0:
+            return 0.0
+        a, c = self._reach(wheels)
+        if a + c <= clearance:
+            return 1.0
+        if c <= 0:
+            return clearance / a
+        return (math.sqrt(a * a + 4.0 * c * clearance) - a) / (2.0 * c)
 
     def _end(self, outcome: str, reason: str) -> None:
         self._state, self._reason = outcome, reason

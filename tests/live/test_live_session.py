@@ -316,6 +316,29 @@ def test_an_advertised_topic_that_never_publishes_is_bad_input(session_dir):
     assert not np.any(s.log[:, 4] != 0)  # never moved
 
 
+def test_another_node_publishing_commands_stops_the_session(session_dir):
+    """A teleop left running on the command topic (found by fuzzing: the robot followed both,
+    and the session ended done with radii 13-21 std off): refused before the robot moves,
+    or, when the other node is discovered only after the start, the session aborted with the
+    robot stopped within a second."""
+    from pathlib import Path
+
+    teleop = [sys.executable, str(Path(__file__).with_name("silent_topic.py")),
+              "/cmd_vel:twist"]
+    s = rehearse(session_dir, LIVE, ["--seed", "9"], companion=teleop, timeout=90)
+    words = "): the robot would follow both (a teleop or navigation left running?)"
+    assert s.code in (2, 6), (s.out, s.err)
+    if s.code == 2:
+        lines = _error_lines(s)
+        assert len(lines) == 1 and words in lines[0], s.err
+        assert "another node publishes on /cmd_vel (" in lines[0]
+        assert not np.any(s.log[:, 4] != 0)  # never moved
+    else:
+        assert words in s.result["live"]["reason"]
+        first = _first_command(s)
+        assert s.zero_after(first) - first <= 1.0
+
+
 def test_streams_stamped_on_another_clock_are_bad_input(session_dir):
     """Streams stamped on the simulator's clock, the node on the system's (no
     --use-sim-time; a robot or motion-capture computer whose clock is off the same way): it

@@ -391,6 +391,38 @@ def test_sessions_stop_with_the_truth_in_the_95_percent_ellipse():
     assert within >= binom.ppf(0.01, runs, 0.95), within
 
 
+class _Straight:
+    """A protocol without a wall guard (a user's): full speed ahead, always."""
+
+    def reset(self, rng) -> None:
+        pass
+
+    def act(self, knowledge) -> np.ndarray:
+        return np.array([1.0, 1.0])
+
+
+@pytest.mark.parametrize("acceleration", [math.inf, 20.0, 2.0])
+def test_the_stopping_guard_keeps_any_protocol_inside_the_area(acceleration):
+    """Full speed at the edge, whatever the command's ramp: the session slows the robot so
+    that it stops before its footprint leaves the area (the robot's true pose), and it
+    drove there."""
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=11)
+    session = LiveSession(_settings(radius=1.5, max_wheel_acceleration=acceleration),
+                          _Straight(), seed=11)
+    clearance = []
+    while not session.ended and robot.t < 20.0:
+        robot.step(0.02)
+        session.add_wheels(*robot.wheel_angles())
+        session.add_pose(*robot.measured_pose())
+        command = session.command(robot.t)
+        robot.speeds = np.array([command.left, command.right])
+        if session.area is not None:
+            clearance.append(session.area.clearance(robot.pose, session.settings.chassis))
+    assert min(clearance) >= 0.0, min(clearance)
+    assert min(clearance) < 0.1  # it drove up to the edge
+    assert session.state != "aborted", session.reason
+
+
 def test_a_robot_outside_the_area_is_stopped():
     robot = EXAMPLE.ToyRobot(TRUTH, seed=8)
     session = LiveSession(_settings(area=Area(1.0, 1.0, 3.0, 3.0)), make_protocol("arcs"))
