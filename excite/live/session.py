@@ -176,7 +176,8 @@ class LiveSession:
 
     # -- the loop -----------------------------------------------------------------------------
     def command(self, now: float) -> Command:
-        """The command to send at time ``now`` (s, the streams' clock)."""
+        """The command to send at time ``now`` (s, the streams' clock). DataError, before
+        the session starts, when the robot's footprint is outside the area."""
         self._now = now
         if not self.ended:
             self._watch_streams(now)
@@ -265,10 +266,17 @@ class LiveSession:
         return f"{' and '.join(parts)}; robot stopped"
 
     def _begin(self, now: float) -> None:
-        """Start (or resume after a silence): a new segment from now."""
+        """Start (or resume after a silence): a new segment from now. DataError when the
+        robot's footprint is outside the area at the start (an area or radius that does not
+        hold the robot: bad input, never a command)."""
         if self._start is None:
-            self._start = now
-            self._area = self.settings.area_at(self._body_pose())
+            area = self.settings.area_at(self._body_pose())
+            clearance = area.clearance(self._body_pose(), self.settings.chassis)
+            if clearance < 0:
+                raise DataError(f"the robot's footprint reaches {-clearance:.2f} m outside the "
+                                f"safe area {area.to_text()} (m, pose frame) at the start: "
+                                "give an area that holds it (--area, --radius)")
+            self._start, self._area = now, area
         self._state, self._reason = "running", "driving"
         self._check_area()
         if self._state == "running":

@@ -424,9 +424,25 @@ def test_the_stopping_guard_keeps_any_protocol_inside_the_area(acceleration):
 
 
 def test_a_robot_outside_the_area_is_stopped():
+    """At the start: bad input (an area or radius that does not hold the robot), never a
+    command; later (a pose that jumps out of the area): the session aborted, the command
+    zero."""
+    from excite.errors import DataError
+
     robot = EXAMPLE.ToyRobot(TRUTH, seed=8)
-    session = LiveSession(_settings(area=Area(1.0, 1.0, 3.0, 3.0)), make_protocol("arcs"))
-    sent = _drive(session, robot, until=2.0)
+    for area in (Area(1.0, 1.0, 3.0, 3.0), None):
+        session = LiveSession(_settings(area=area, radius=0.1 if area is None else None),
+                              make_protocol("arcs"))
+        with pytest.raises(DataError, match=r"the robot.s footprint reaches [\d.]+ m outside the "
+                           r"safe area .* at the start: give an area that holds it \(--area, "
+                           "--radius\\)"):
+            _drive(session, robot, until=2.0)
+        assert session.state == "waiting"
+    session = LiveSession(_settings(), make_protocol("arcs"))
+    _drive(session, robot, until=robot.t + 2.0)
+    assert session.state == "running"
+    robot.pose = robot.pose + np.array([10.0, 0.0, 0.0])
+    sent = _drive(session, robot, until=robot.t + 1.0)
     assert session.state == "aborted" and "outside the safe area" in session.reason
     assert np.all(sent[:, 1:] == 0.0)
 
