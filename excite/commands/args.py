@@ -149,9 +149,13 @@ def sensor_pose_arg(text: str, option: str = "--sensor-pose"):
     if len(parts) != 3:
         raise UsageError(f"{option} must be {expected} (m, m, rad), got {text!r}")
     try:
-        pose = SensorPose(*map(float, parts))
+        values = [float(part) for part in parts]
+        pose = SensorPose(*values)
     except ValueError:
         raise UsageError(f"{option}: {POSE_VALUES} must be finite numbers, got {text!r}") from None
+    if abs(values[2]) > math.pi:
+        raise UsageError(f"{option} {text}: the angle {values[2]:g} rad is beyond pi (degrees? "
+                         f"{values[2]:g} deg = {math.radians(values[2]):.4g} rad)")
     what = implausible_mounting(pose.x, pose.y)
     if what is not None:
         raise UsageError(f"{option} {text}: {what} is implausible ({POSE_VALUES} are in m, m, "

@@ -44,6 +44,11 @@ follow the command), 130 when interrupted, 2 for bad input. Needs the ros2 extra
 'excite[ros2]'."""
 
 
+#: Hz, the command rates a session runs at: a controller's command timeout is often 0.5 s, and
+#: a timer faster than a kilohertz only loads the computer.
+MIN_RATE, MAX_RATE = 20.0, 1000.0
+
+
 def _default(cls_name: str, name: str):
     """A field's default of LiveSettings or LiveTopics (each default defined once)."""
     from dataclasses import fields
@@ -106,7 +111,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "since Jazzy) or Twist")
     topics.add_argument("--rate", type=positive_number, metavar="HZ",
                         default=_default("LiveTopics", "rate"),
-                        help="command rate, at least 20 (default %(default)g)")
+                        help=f"command rate, {MIN_RATE:g} to {MAX_RATE:g} (default "
+                        "%(default)g)")
     topics.add_argument("--use-sim-time", action="store_true",
                         help="follow /clock (a simulator's time) instead of the wall clock")
     topics.add_argument("--wait", type=positive_number, metavar="S",
@@ -202,8 +208,8 @@ def settings_from(args: argparse.Namespace):
         raise UsageError("give --area or --radius, not both")
     if args.area is not None:
         area = floats(args.area, "X0,Y0,X1,Y1", "--area", positive=False)
-    if args.rate < 20:
-        raise UsageError(f"--rate must be at least 20 Hz, got {args.rate:g}")
+    if not MIN_RATE <= args.rate <= MAX_RATE:
+        raise UsageError(f"--rate must be {MIN_RATE:g} to {MAX_RATE:g} Hz, got {args.rate:g}")
     try:
         if area is not None:
             area = Area(*area)
@@ -252,6 +258,9 @@ def run(args: argparse.Namespace) -> int:
             check_writable(path)
     if args.record is not None and args.record.exists():
         raise UsageError(f"cannot record to {args.record}: it exists")
+    if args.record is not None and not args.record.parent.is_dir():
+        raise UsageError(f"cannot record to {args.record}: no such directory "
+                         f"{args.record.parent}")
     if args.force_yaml and not args.ros2_yaml:
         raise UsageError("--force-yaml needs --ros2-yaml OUT.yaml")
     _check_names(args)

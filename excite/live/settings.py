@@ -22,6 +22,8 @@ __all__ = ["DEFAULT_SIGMA", "LiveSettings", "LiveTopics"]
 
 #: The pose noise (m, m, rad) the planner assumes until the calibration has estimated it.
 DEFAULT_SIGMA = (2e-3, 2e-3, 1e-3)
+#: s, the shortest maneuver: a robot follows a command within a tenth of a second or more.
+MIN_SEGMENT_DURATION = 0.1
 
 
 def _positive(name: str, value: float, allow_inf: bool = False) -> None:
@@ -133,6 +135,13 @@ class LiveSettings:
                              f"{self.sigma!r}")
         if self.abort_timeout < self.silence_timeout:
             raise ValueError("abort_timeout must be at least silence_timeout")
+        if self.response_time >= self.abort_timeout:
+            raise ValueError(f"response_time ({self.response_time:g} s) must be shorter than "
+                             f"abort_timeout ({self.abort_timeout:g} s): a controller that "
+                             "slow cannot be watched")
+        if self.segment_duration < MIN_SEGMENT_DURATION:
+            raise ValueError(f"segment_duration must be at least {MIN_SEGMENT_DURATION:g} s "
+                             f"(a maneuver the robot can follow), got {self.segment_duration:g}")
 
     @property
     def command_speed(self) -> float:

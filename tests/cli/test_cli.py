@@ -107,6 +107,8 @@ def test_bad_files_are_one_line_errors(capsys, tmp_path, name):
         (["--sigma", "1e-3,1e-3,nan"], "STH must be positive"),
         (["--init=-0.05,0.05,0.3"], "RL must be positive"),
         (["--init", "-0.05,0.05,0.3"], "--init: RL must be positive and finite, got '-0.05'"),
+        (["--sensor-pose", "0,0.1,90"], "--sensor-pose 0,0.1,90: the angle 90 rad is beyond pi "
+                                        "(degrees? 90 deg = 1.571 rad)"),
         (["--init", "0.05,0.05,0"], "B must be positive"),
         (["--init", "0.05,0.05,inf"], "B must be positive"),
         (["--loss", "cauchy"], "invalid choice: 'cauchy'"),

@@ -16,7 +16,15 @@ TOPICS = ["--left-wheel", "l", "--right-wheel", "r", "--pose-topic", "/pose"]
     (["--robot", "default", "--area", "0,0,1"], "--area"),
     (["--robot", "default", "--area", "1,0,0,1"], "X0 < X1"),
     (["--robot", "default", "--area", "0,0,1,1", "--radius", "1"], "--area or --radius"),
-    (["--robot", "default", "--rate", "10"], "at least 20 Hz"),
+    (["--robot", "default", "--rate", "10"], "--rate must be 20 to 1000 Hz, got 10"),
+    (["--robot", "default", "--rate", "1e9"], "--rate must be 20 to 1000 Hz, got 1e+09"),
+    (["--robot", "default", "--sensor-pose", "0.05,0.02,100"],
+     "--sensor-pose 0.05,0.02,100: the angle 100 rad is beyond pi (degrees? 100 deg = "
+     "1.745 rad)"),
+    (["--robot", "default", "--response-time", "100"],
+     "--response-time (100 s) must be shorter than --abort-timeout (10 s)"),
+    (["--robot", "default", "--segment-duration", "0.001"],
+     "--segment-duration must be at least 0.1 s (a maneuver the robot can follow)"),
     (["--robot", "default", "--speed-fraction", "1.5"], "--speed-fraction must be in (0, 1]"),
     (["--robot", "default", "--target", "2"], "target"),
     (["--robot", "default", "--target", "0"], "--target"),
@@ -45,10 +53,12 @@ def test_live_refuses_to_record_over_a_bag(capsys, tmp_path):
     assert_one_line_error(code, err, "exists")
 
 
-def test_live_refuses_an_output_in_a_missing_folder(capsys, tmp_path):
-    code, _, err = run_cli(capsys, "live", *TOPICS, "--robot", "default", "--out",
+@pytest.mark.parametrize("option", ["--out", "--record"])
+def test_live_refuses_an_output_in_a_missing_folder(capsys, tmp_path, option):
+    code, _, err = run_cli(capsys, "live", *TOPICS, "--robot", "default", option,
                            tmp_path / "no" / "r.json")
     assert_one_line_error(code, err, "no such directory")
+    assert not (tmp_path / "no").exists()
 
 
 def test_live_refuses_an_output_it_cannot_write_before_the_robot_moves(capsys, tmp_path):
