@@ -10,6 +10,9 @@ command has been held for a while (the motors' lag and the controller's ramps se
 ``response_time`` plus a ``window`` over which the wheels' mean speed is measured):
 
 - *not turning*: both wheels turn at less than 20% of the command;
+- *faster than the command*: the wheels turn more than FASTER times the commanded speed (a
+  controller whose wheel radii or separation differ from the nominal ones, or that scales the
+  commands: the robot would drive faster than the planner and the stopping guard believe);
 - *against the command*: the measured speeds fit a swapped, mirrored or swapped-and-mirrored
   command far better (half the residual or less) than the command itself, which they miss
   by more than half its size.
@@ -35,6 +38,9 @@ MIN_COMMAND = 0.1
 STEADY = 0.1
 #: Below this share of the command the wheels count as not turning.
 STALLED = 0.2
+#: Above this multiple of the command the wheels turn too fast (a calibration moves the wheel
+#: geometry by a few percent; a controller of another robot's by far more).
+FASTER = 1.25
 #: The wirings the measured speeds are compared with, as (name, matrix on (left, right)).
 WIRINGS = (
     ("the left and right wheels are swapped", np.array([[0.0, 1.0], [1.0, 0.0]])),
@@ -109,6 +115,13 @@ def judge(command: np.ndarray, measured: np.ndarray) -> MotionFault | None:
             f"the wheels do not turn (commanded {command[0]:.2f}, {command[1]:.2f} rad/s, "
             f"measured {measured[0]:.2f}, {measured[1]:.2f}): is the controller running and "
             "listening on the command topic?")
+    ratio = float(np.linalg.norm(measured)) / size
+    if ratio > FASTER:
+        return MotionFault(
+            f"the wheels turn {ratio:.2f} times the commanded speed (commanded {command[0]:.2f}, "
+            f"{command[1]:.2f} rad/s, measured {measured[0]:.2f}, {measured[1]:.2f}): the "
+            "controller's wheel radii or separation are not the nominal ones (--robot, "
+            "--nominal), or it scales the commands; the robot would drive faster than planned")
     miss = float(np.linalg.norm(measured - command))
     if miss <= 0.5 * size:
         return None

@@ -304,6 +304,12 @@ def test_judge():
     assert "both wheels" in judge(np.array([10.0, 5.0]), np.array([-10.0, -5.0]))
     # a straight command cannot tell swapped wheels, and need not
     assert judge(np.array([10.0, 10.0]), np.array([10.0, 10.0])) is None
+    # a controller of another geometry: the wheels turn faster than commanded
+    assert judge(np.array([10.0, 5.0]), np.array([16.8, 8.4])).startswith(
+        "the wheels turn 1.68 times the commanded speed (commanded 10.00, 5.00 rad/s, "
+        "measured 16.80, 8.40): the controller's wheel radii or separation are not the "
+        "nominal ones")
+    assert judge(np.array([10.0, 5.0]), np.array([12.0, 6.0])) is None
 
 
 def test_area():
