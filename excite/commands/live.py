@@ -364,6 +364,9 @@ def _report(args: argparse.Namespace, result, settings) -> UsageError | None:
 
         export_yaml(args, result.calibration, settings.nominal,
                     calibration_status(result.calibration))
+    elif args.ros2_yaml:
+        print_note(f"{args.ros2_yaml} not written: the session has no calibration "
+                   f"({result.calibration_error or result.reason})")
     return unwritten
 
 

@@ -97,6 +97,11 @@ class SessionFailed(Exception):
 COMMANDERS_CHECK = 0.5
 
 
+def _typed_as(types: list[str] | None) -> str:
+    """Words for a topic that exists with other types than the one expected; '' for none."""
+    return f"; it is there as {', '.join(types)}" if types else ""
+
+
 def _node_name(namespace: str, name: str) -> str:
     """A node's full name, or words for one whose name is not discovered yet (DDS finds a
     publisher before its node's name)."""
@@ -182,7 +187,7 @@ class LiveNode:
             if joint_ok and pose_types:
                 break
             if time.monotonic() > deadline:
-                missing = [f"{name} ({kind})" for name, kind, ok in (
+                missing = [f"{name} ({kind}{_typed_as(seen.get(name))})" for name, kind, ok in (
                     (t.joint_states, "sensor_msgs/msg/JointState", joint_ok),
                     (t.pose_topic, "PoseStamped, PoseWithCovarianceStamped, TransformStamped "
                      "or Odometry",

@@ -89,13 +89,20 @@ def test_a_session_reaches_the_target_and_stops(session_dir):
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_stops_the_robot_and_keeps_what_was_recorded(session_dir, sig):
-    s = rehearse(session_dir, LIVE, ["--seed", "4"], signal_after=(sig, 3))
+    yaml_path = session_dir / "ddc.yaml"
+    s = rehearse(session_dir, [*LIVE, "--ros2-yaml", str(yaml_path)], ["--seed", "4"],
+                 signal_after=(sig, 3))
     assert s.code == 130, (s.out, s.err)
     assert s.zero_after(s.signalled, wall=True) - s.signalled <= 1.0
     assert s.log[-1, 4] == 0 and s.log[-1, 5] == 0
     assert s.result["live"]["outcome"] == "aborted"
     assert "interrupted" in s.result["live"]["reason"]
     assert (session_dir / "session.mcap" / "metadata.yaml").is_file()
+    # three segments are too few to calibrate: no controller file, and a note says so
+    if s.result.get("params") is None:
+        assert not yaml_path.exists()
+        assert f"excite: note: {yaml_path} not written: the session has no calibration (" \
+            in s.err
 
 
 @pytest.mark.parametrize("mode", ["transform", "y_up"])
@@ -256,6 +263,17 @@ def test_a_missing_topic_names_the_topics_seen(session_dir):
         in lines[0], s.err
     # nothing recorded: no empty bag left to refuse the next --record
     assert not (session_dir / "session.mcap").exists()
+
+
+def test_a_topic_of_another_type_says_which_type_it_has(session_dir):
+    s = rehearse(session_dir, [*WHEELS[:4], "--pose-topic", "/joint_states", "--robot",
+                               "default", "--wait", "4"], ["--seed", "9"])
+    assert s.code == 2
+    lines = _error_lines(s)
+    assert len(lines) == 1 and "no /joint_states (PoseStamped, PoseWithCovarianceStamped, " \
+        "TransformStamped or Odometry; it is there as sensor_msgs/msg/JointState) after 4 s" \
+        in lines[0], s.err
+    assert not np.any(s.log[:, 4] != 0)
 
 
 def _last_recorded_command(session_dir):
