@@ -41,9 +41,10 @@ def _settings(**changes) -> LiveSettings:
     return LiveSettings(**{**base, **changes})
 
 
-def _drive(session, robot, dt=0.02, until=math.inf, poses=True, wheels=True, follow=True):
+def _drive(session, robot, dt=0.02, until=math.inf, poses=True, wheels=True, follow=True,
+           on_tick=None):
     """Run the made-up transport until the session ends or time ``until``; the commands
-    sent (t, left, right)."""
+    sent (t, left, right). on_tick(): called after each command."""
     sent = []
     while not session.ended and robot.t < until:
         robot.step(dt)
@@ -55,6 +56,8 @@ def _drive(session, robot, dt=0.02, until=math.inf, poses=True, wheels=True, fol
         if follow:
             robot.speeds = np.array([command.left, command.right])
         sent.append((robot.t, command.left, command.right))
+        if on_tick is not None:
+            on_tick()
     return np.array(sent)
 
 
@@ -416,14 +419,12 @@ def test_the_stopping_guard_keeps_any_protocol_inside_the_area(acceleration):
     session = LiveSession(_settings(radius=1.5, max_wheel_acceleration=acceleration),
                           _Straight(), seed=11)
     clearance = []
-    while not session.ended and robot.t < 20.0:
-        robot.step(0.02)
-        session.add_wheels(*robot.wheel_angles())
-        session.add_pose(*robot.measured_pose())
-        command = session.command(robot.t)
-        robot.speeds = np.array([command.left, command.right])
+
+    def watch() -> None:
         if session.area is not None:
             clearance.append(session.area.clearance(robot.pose, session.settings.chassis))
+
+    _drive(session, robot, until=20.0, on_tick=watch)
     assert min(clearance) >= 0.0, min(clearance)
     assert min(clearance) < 0.1  # it drove up to the edge
     assert session.state != "aborted", session.reason
