@@ -72,7 +72,8 @@ def live_sessions(args: argparse.Namespace, work: Path) -> list[dict]:
                "max_abs_z": max(map(abs, z)) if z else None, "error": error,
                "wall": time.monotonic() - start}
         rows.append(row)
-        print(f"session seed {seed}: {row['outcome']} after {row['seconds']} s "
+        why = "" if row["outcome"] == "done" else f" ({live.get('reason')})"
+        print(f"session seed {seed}: {row['outcome']}{why} after {row['seconds']} s "
               f"({row['segments']} segments, {row['slowdowns']} slowdowns), max |z| "
               f"{row['max_abs_z']}, error {100 * error:.3f}%, {row['wall']:.0f} s wall",
               flush=True)
