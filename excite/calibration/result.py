@@ -151,14 +151,17 @@ class CalibrationResult:
         covariance; widened as ``fit`` says for a wandering heading error or serially
         correlated residuals), inf along directions the data do not determine.
     std : ndarray, shape (3,)
-        sqrt(diag(covariance)) (m).
+        sqrt(diag(covariance)) (m); inf for a parameter the data do not determine (not
+        ``identifiable``: one with a share above UNDETERMINED_SHARE of the undetermined
+        directions, whose covariance entries are its spread given the others).
     model : str
         "axle" or "sensor_pose".
     sensor_pose : SensorPose or None
         The sensor's pose in the body frame (x, y in m, theta in rad), estimated or given;
         None for the axle model.
     sensor_pose_std : ndarray, shape (3,), or None
-        Its std (m, m, rad) when estimated; else None.
+        Its std (m, m, rad) when estimated (inf where not determined, as ``std``); else
+        None.
     parameter_names : tuple of str
         Every estimated parameter, in the order of ``full_covariance``.
     full_covariance : ndarray, shape (P, P)
@@ -402,6 +405,12 @@ def _slip_share(seg: Segments, slip: float) -> float | None:
     return float(np.median(slip * np.sqrt(duration) / turn[moving]))
 
 
+#: A parameter whose share of the directions the data do not determine (the norm of its row
+#: of them, in relative units) is above this is not determined either: its std is inf (the
+#: covariance's is the std given the others, honest only were they known).
+UNDETERMINED_SHARE = 0.05
+
+
 def build_result(data: Segments, choice: ModelChoice, test: FitTest, relative: FloatArray,
                  sigma_estimated: bool, n_trimmed: int, noise: EstimatedNoise | None,
                  options: FitOptions, loss: str | None = None,
@@ -428,7 +437,10 @@ def build_result(data: Segments, choice: ModelChoice, test: FitTest, relative: F
         vector = vec[:, 0]
         direction = describe_weak(weak, theta, data, mf.channel_std)
     params, pose = mf.model.split(theta)
-    pose_std = np.sqrt(np.diag(full)[3:6]) if mf.model is SENSOR_POSE else None
+    std = np.sqrt(np.diag(full))
+    if not identifiable:  # moving along a direction the data do not determine: not determined
+        std[np.linalg.norm(weak, axis=1) > UNDETERMINED_SHARE] = np.inf
+    pose_std = std[3:6] if mf.model is SENSOR_POSE else None
     levels = None if noise is None else noise.levels
     wheels = None if noise is None else noise.whitener.wheels
     # the levels through the wheels (None where the segments carry no wheel-space noise)
@@ -441,7 +453,7 @@ def build_result(data: Segments, choice: ModelChoice, test: FitTest, relative: F
     return CalibrationResult(
         params=params,
         covariance=full[:3, :3],
-        std=np.sqrt(np.diag(full)[:3]),
+        std=std[:3],
         model="axle" if mf.model is AXLE else "sensor_pose",
         sensor_pose=pose,
         sensor_pose_std=pose_std,

@@ -89,6 +89,19 @@ def test_straight_only_names_b(rng):
     assert 0.1 < result.params.b < 1.0  # held at the start, not driven away by noise
 
 
+def test_a_parameter_the_data_barely_determine_has_an_infinite_std(rng):
+    """Turns of a few milliradians: b's relative std is 40%, beyond what the identifiability
+    rule calls determined. Its std is inf, not the finite spread given the others (which a
+    user would take for an estimate's); the radii, determined, keep theirs."""
+    phi_L = rng.uniform(5, 20, 30)
+    phi_R = phi_L * TRUTH.r_L / TRUTH.r_R * (1 + rng.normal(0, 2e-4, 30))
+    result = calibrate(exact_segments(phi_L, phi_R, TRUTH, (2e-3, 2e-3, 1e-3), rng))
+    assert not result.identifiable
+    assert np.isinf(result.std[2]) and np.isfinite(result.covariance[2, 2])
+    np.testing.assert_allclose(result.std[:2], np.sqrt(np.diag(result.covariance)[:2]))
+    assert np.all(result.std[:2] < 1e-4)
+
+
 def test_spin_only_names_common_scale(rng):
     result = calibrate(spin_segments(rng))
     assert not result.identifiable
