@@ -10,9 +10,12 @@ command has been held for a while (the motors' lag and the controller's ramps se
 ``response_time`` plus a ``window`` over which the wheels' mean speed is measured):
 
 - *not turning*: both wheels turn at less than 20% of the command;
-- *faster than the command*: the wheels turn more than FASTER times the commanded speed (a
-  controller whose wheel radii or separation differ from the nominal ones, or that scales the
-  commands: the robot would drive faster than the planner and the stopping guard believe);
+- *faster than the command*: the wheels turn more than FASTER times the commanded speed,
+  at a settled speed (the window's two halves within STEADY of the limit of each other: a
+  robot still slowing down after a lower command turns faster than it for a while), which is
+  a controller whose wheel radii or separation differ from the nominal ones, or that scales
+  the commands: the robot would drive faster than the planner and the stopping guard
+  believe;
 - *against the command*: the measured speeds fit a swapped, mirrored or swapped-and-mirrored
   command far better (half the residual or less) than the command itself, which they miss
   by more than half its size.
@@ -39,8 +42,9 @@ STEADY = 0.1
 #: Below this share of the command the wheels count as not turning.
 STALLED = 0.2
 #: Above this multiple of the command the wheels turn too fast (a calibration moves the wheel
-#: geometry by a few percent; a controller of another robot's by far more).
-FASTER = 1.25
+#: geometry by a few percent; a controller of another robot's by far more: the Husky's radius
+#: is 1.68 times the Jackal's, the default robot's 1.5 times the TurtleBot3's).
+FASTER = 1.4
 #: The wirings the measured speeds are compared with, as (name, matrix on (left, right)).
 WIRINGS = (
     ("the left and right wheels are swapped", np.array([[0.0, 1.0], [1.0, 0.0]])),
@@ -100,15 +104,20 @@ class MotionWatch:
         command = self._steady_command(t - window - lag, t)
         if command is None or float(np.abs(command).max()) < MIN_COMMAND * self.command_speed:
             return None
-        start, end = wheel_angles(t - window), wheel_angles(t)
+        start, middle, end = (wheel_angles(t - window), wheel_angles(t - 0.5 * window),
+                              wheel_angles(t))
         if start is None or end is None:
             return None
-        return judge(command, (end - start) / window)
+        settled = middle is not None and float(np.max(np.abs(
+            (end - middle) - (middle - start)))) / (0.5 * window) <= STEADY * self.command_speed
+        return judge(command, (end - start) / window, settled)
 
 
-def judge(command: np.ndarray, measured: np.ndarray) -> MotionFault | None:
+def judge(command: np.ndarray, measured: np.ndarray, settled: bool = True
+          ) -> MotionFault | None:
     """The fault of wheels turning at ``measured`` (rad/s, left and right) under
-    ``command`` (rad/s), or None when they follow it."""
+    ``command`` (rad/s), or None when they follow it; ``settled``: the wheels' speed held
+    over the window (only then is a speed above the command a fault)."""
     size = float(np.linalg.norm(command))
     if np.linalg.norm(measured) < STALLED * size:
         return MotionFault(
@@ -116,7 +125,7 @@ def judge(command: np.ndarray, measured: np.ndarray) -> MotionFault | None:
             f"measured {measured[0]:.2f}, {measured[1]:.2f}): is the controller running and "
             "listening on the command topic?")
     ratio = float(np.linalg.norm(measured)) / size
-    if ratio > FASTER:
+    if settled and ratio > FASTER:
         return MotionFault(
             f"the wheels turn {ratio:.2f} times the commanded speed (commanded {command[0]:.2f}, "
             f"{command[1]:.2f} rad/s, measured {measured[0]:.2f}, {measured[1]:.2f}): the "

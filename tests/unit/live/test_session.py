@@ -312,7 +312,28 @@ def test_judge():
         "the wheels turn 1.68 times the commanded speed (commanded 10.00, 5.00 rad/s, "
         "measured 16.80, 8.40): the controller's wheel radii or separation are not the "
         "nominal ones")
-    assert judge(np.array([10.0, 5.0]), np.array([12.0, 6.0])) is None
+    assert judge(np.array([10.0, 5.0]), np.array([13.5, 6.75])) is None
+    # still slowing down from a faster command (a slowdown): no fault until settled
+    assert judge(np.array([10.0, 5.0]), np.array([16.8, 8.4]), settled=False) is None
+
+
+def test_wheels_faster_than_the_command_are_judged_once_settled():
+    """A command held for the response time and the window: wheels still slowing down from
+    a faster one (after a slowdown) are no fault; wheels that hold 1.68 times it are."""
+    from excite.live.watch import MotionWatch
+
+    watch = MotionWatch(window=0.5, response_time=0.2, command_speed=20.0)
+    watch.commanded(-0.1, 10.0, 5.0)
+    command = np.array([10.0, 5.0])
+
+    def slowing(t: float) -> np.ndarray:  # the angles of speeds from 3 times the command
+        if t < 0.6:                        # down to it at 0.6 s: 1.53 times it on average
+            return command * (3.0 * t - t * t / 0.6)
+        return command * (1.2 + (t - 0.6))
+
+    assert watch.check(0.7, slowing) is None
+    fault = watch.check(0.7, lambda t: 1.68 * command * t)
+    assert fault is not None and "1.68 times the commanded speed" in fault
 
 
 def test_area():
