@@ -1,6 +1,7 @@
-"""The log of a live session: its streams as they arrive, cut into segments as ``excite
-calibrate`` cuts a log, the stopping rule's decision on them (run wherever the session says,
-e.g. in a process of its own), and the noise a planner weighs a segment with.
+"""The log of a live session: its streams as they arrive (and, when they go silent, for how
+long and why), cut into segments as ``excite calibrate`` cuts a log, the stopping rule's
+decision on them (run wherever the session says, e.g. in a process of its own), and the noise
+a planner weighs a segment with.
 
 Units: s, rad, m.
 """
@@ -19,7 +20,13 @@ from excite.logs.segments import Segments
 from excite.logs.timeseries import TimeSeries
 from excite.stopping import StopDecision, StoppingRule
 
-__all__ = ["Stream", "cut", "decide_log", "increment_noise"]
+__all__ = ["FROZEN_WHEEL_TURN", "Stream", "cut", "decide_log", "increment_noise", "pose_age",
+           "silence_text"]
+
+#: rad: wheels that turned this much while the poses repeated one value: the pose source is
+#: frozen (any robot moves its sensor by a millimetre or more on it, and a real source's noise
+#: changes its values even when standing still).
+FROZEN_WHEEL_TURN = 0.2
 
 
 def increment_noise(result: CalibrationResult, duration: float) -> np.ndarray:
@@ -115,3 +122,41 @@ class Stream:
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         return np.array(self.t), np.array(self.values).reshape(-1, self.width)
+
+
+def pose_age(poses: Stream, wheels: Stream, now: float) -> float:
+    """How long the poses have said nothing new at ``now`` (s): since their last sample, or,
+    while the wheels turned more than FROZEN_WHEEL_TURN since the poses last changed, since
+    that change (a source that repeats its last pose, a motion-capture body lost, is as blind
+    as a silent one, and the safe area is watched on the poses)."""
+    age = now - poses.last
+    changed = poses.last_change
+    if changed is None or now - changed <= age:
+        return age
+    then, latest = wheels.at(changed), wheels.at(wheels.last)
+    if then is None or latest is None or np.max(np.abs(latest - then)) <= FROZEN_WHEEL_TURN:
+        return age
+    return now - changed
+
+
+def silence_text(wheels: Stream, poses: Stream, now: float, timeout: float,
+                 lasting: str = "") -> str:
+    """Which streams are silent at ``now`` (for longer than ``timeout`` s; ``lasting``: for
+    how long, in words), each with why when it is known: messages left out (and why),
+    messages that arrive later than the timeout after their stamps, or poses that repeat one
+    value while the wheels turn."""
+    age_of_poses = pose_age(poses, wheels, now)
+    frozen = now - poses.last <= timeout < age_of_poses
+    parts = []
+    for name, stream, age in (("the wheel angles", wheels, now - wheels.last),
+                              ("the poses", poses, age_of_poses)):
+        if age <= timeout:
+            continue
+        why = stream.left_out
+        if why is None and stream.lag is not None and stream.lag > timeout:
+            why = (f"they arrive {stream.lag:.3g} s after their stamps: stamped on "
+                   "another clock, or held up on the way")
+        if why is None and stream is poses and frozen:
+            why = "they repeat one pose while the wheels turn"
+        parts.append(f"{name} silent{lasting}" + (f" ({why})" if why else ""))
+    return f"{' and '.join(parts)}; robot stopped"

@@ -21,8 +21,9 @@ session's reason says so.
 Each call of :meth:`LiveSession.command` is one pass of a pipeline of named stages:
 
 1. **watch**: the streams' silence (stop the robot after ``silence_timeout``, resume when
-   they return, abort after ``abort_timeout``), the time limit, and whether the wheels follow
-   the command (:mod:`excite.live.watch`);
+   they return, abort after ``abort_timeout``: :func:`excite.live.log.silence_text` says
+   why), the time limit, and whether the wheels follow the command
+   (:mod:`excite.live.watch`);
 2. **segment end**, once per ``segment_duration``: the data so far are cut into segments
    with the offline code (:func:`excite.logs.segmentation.segment_timeseries`, fixed windows
    of ``segment_duration``), the stopping rule decides on them
@@ -34,8 +35,8 @@ Each call of :meth:`LiveSession.command` is one pass of a pipeline of named stag
    session slows down to half its speed (at most twice, to ``MIN_SPEED_SCALE``) and
    calibrates on the data from then on only;
 3. **ramp**: the protocol's wheel speeds, scaled down to what the robot can stop from
-   before its footprint leaves the area (the stopping guard, whatever the protocol), are
-   approached at most at ``max_wheel_acceleration``.
+   before its footprint leaves the area (the stopping guard, whatever the protocol:
+   :mod:`excite.live.braking`), are approached at most at ``max_wheel_acceleration``.
 
 A decision computed on the executor saw the log up to an earlier segment's end: when it
 says done, the session is *confirming*: the robot stops, and the rule decides again on the
@@ -70,7 +71,8 @@ from excite.core.information import information_matrix
 from excite.core.models import SensorPose
 from excite.errors import DataError, ExciteError
 from excite.live.area import Area
-from excite.live.log import Stream, cut, decide_log, increment_noise
+from excite.live.braking import within_reach
+from excite.live.log import Stream, cut, decide_log, increment_noise, pose_age, silence_text
 from excite.live.result import OUTCOMES, Command, LiveResult, LiveStatus
 from excite.live.settings import LiveSettings
 from excite.live.watch import MotionWatch
@@ -78,21 +80,12 @@ from excite.logs.segments import Segments
 from excite.logs.timeseries import TimeSeries, during
 from excite.stopping import StopDecision, StoppingRule
 
-__all__ = ["MIN_SPEED_SCALE", "STOP_MARGIN", "LiveSession"]
+__all__ = ["MIN_SPEED_SCALE", "LiveSession"]
 
 #: The lowest share of the speed limit a session slows down to when the model does not fit.
 MIN_SPEED_SCALE = 0.25
 
 
-#: m: the stopping guard (:meth:`LiveSession._within_reach`) stops the footprint this far
-#: inside the area's edge, so that the pose noise of a robot standing there does not read as
-#: the footprint outside (which aborts the session).
-STOP_MARGIN = 0.02
-
-#: rad: wheels that turned this much while the poses repeated one value: the pose source is
-#: frozen (any robot moves its sensor by a millimetre or more on it, and a real source's noise
-#: changes its values even when standing still).
-FROZEN_WHEEL_TURN = 0.2
 
 
 class LiveSession:
@@ -197,14 +190,16 @@ class LiveSession:
         """Stage 1: start, silence, time limit, and the wheels against the command."""
         if self._wheels.last is None or self._poses.last is None:
             return
-        age = max(now - self._wheels.last, self._pose_age(now))
+        age = max(now - self._wheels.last, pose_age(self._poses, self._wheels, now))
         if age > self.settings.silence_timeout:
             self._silent_since = self._silent_since or now - age
             if now - self._silent_since > self.settings.abort_timeout:
-                self._end("aborted", self._silence_text(
-                    now, f" for longer than {self.settings.abort_timeout:g} s"))
+                self._end("aborted", silence_text(
+                    self._wheels, self._poses, now, self.settings.silence_timeout,
+                    f" for longer than {self.settings.abort_timeout:g} s"))
             elif self._state == "running":
-                self._state, self._reason = "paused", self._silence_text(now)
+                self._state, self._reason = "paused", silence_text(
+                    self._wheels, self._poses, now, self.settings.silence_timeout)
             return
         self._silent_since = None
         if self._state in ("waiting", "paused"):
@@ -229,49 +224,14 @@ class LiveSession:
             self._end("aborted", f"the robot's footprint is {-clearance:.2f} m outside the "
                       f"safe area {self._area.to_text()} (m, pose frame): stopped")
 
-    def _pose_age(self, now: float) -> float:
-        """How long the poses have said nothing new (s): since the last sample, or, while
-        the wheels turned more than FROZEN_WHEEL_TURN since the poses last changed, since
-        that change (a source that repeats its last pose, a motion-capture body lost, is as
-        blind as a silent one, and the safe area is watched on the poses)."""
-        age = now - self._poses.last
-        changed = self._poses.last_change
-        if changed is None or now - changed <= age:
-            return age
-        then, latest = self._wheels.at(changed), self._wheels.at(self._wheels.last)
-        if then is None or latest is None or np.max(np.abs(latest - then)) <= FROZEN_WHEEL_TURN:
-            return age
-        return now - changed
-
-    def _silence_text(self, now: float, lasting: str = "") -> str:
-        """Which streams are silent (``lasting``: for how long, in words), each with why when
-        it is known: messages left out (and why), messages that arrive later than the
-        silence timeout after their stamps, or poses that repeat one value while the wheels
-        turn."""
-        timeout = self.settings.silence_timeout
-        pose_age = self._pose_age(now)
-        frozen = now - self._poses.last <= timeout < pose_age
-        parts = []
-        for name, stream, age in (("the wheel angles", self._wheels, now - self._wheels.last),
-                                  ("the poses", self._poses, pose_age)):
-            if age <= timeout:
-                continue
-            why = stream.left_out
-            if why is None and stream.lag is not None and stream.lag > timeout:
-                why = (f"they arrive {stream.lag:.3g} s after their stamps: stamped on "
-                       "another clock, or held up on the way")
-            if why is None and stream is self._poses and frozen:
-                why = "they repeat one pose while the wheels turn"
-            parts.append(f"{name} silent{lasting}" + (f" ({why})" if why else ""))
-        return f"{' and '.join(parts)}; robot stopped"
-
     def _begin(self, now: float) -> None:
         """Start (or resume after a silence): a new segment from now. DataError when the
         robot's footprint is outside the area at the start (an area or radius that does not
         hold the robot: bad input, never a command)."""
         if self._start is None:
-            area = self.settings.area_at(self._body_pose())
-            clearance = area.clearance(self._body_pose(), self.settings.chassis)
+            body = self._body_pose()
+            area = self.settings.area_at(body)
+            clearance = area.clearance(body, self.settings.chassis)
             if clearance < 0:
                 raise DataError(f"the robot's footprint reaches {-clearance:.2f} m outside the "
                                 f"safe area {area.to_text()} (m, pose frame) at the start: "
@@ -367,12 +327,14 @@ class LiveSession:
 
     def _ramp(self, now: float) -> Command:
         """Stage 3: the wheel speeds sent: zero at once unless running, else the protocol's
-        scaled down to what the robot can stop from inside the area (:meth:`_within_reach`),
+        scaled down to what the robot can stop from inside the area
+        (:func:`excite.live.braking.within_reach`),
         at most max_wheel_acceleration from the last."""
         if self._state != "running":
             sent = np.zeros(2)
         else:
-            target = self._target * self._within_reach(self._target)
+            clearance = self._area.clearance(self._body_pose(), self.settings.chassis)
+            target = self._target * within_reach(self.settings, self._target, clearance)
             if self._sent_at is None or not math.isfinite(self.settings.max_wheel_acceleration):
                 sent = target
             else:
@@ -382,42 +344,6 @@ class LiveSession:
         self._watch.commanded(now, float(sent[0]), float(sent[1]))
         v, omega = self.settings.twist(float(sent[0]), float(sent[1]))
         return Command(float(sent[0]), float(sent[1]), v, omega)
-
-    def _reach(self, wheels: np.ndarray) -> tuple[float, float]:
-        """(a, c) of how far (m) a point of the footprint may still travel when the wheels
-        turn at ``wheels`` x f (rad/s) and the command goes to zero now: a f + c f^2. Every
-        point moves at most s = |v| + |omega| R (R the footprint's corner from the axle
-        midpoint) through the response time and the motors' lag (response_time + motor_tau),
-        then while the wheels stop, which takes their surface speed over the deceleration
-        max_wheel_acceleration allows, or the floor's grip, whichever is less (s over half
-        that time)."""
-        s = self.settings
-        v, omega = s.twist(float(wheels[0]), float(wheels[1]))
-        speed = abs(v) + abs(omega) * 0.5 * math.hypot(*s.chassis)
-        delay = s.response_time + (s.traction.motor_tau if s.traction is not None else 0.0)
-        radius = float(max(s.nominal.r_L, s.nominal.r_R))
-        deceleration = min(s.max_wheel_acceleration * radius,
-                           s.traction.grip if s.traction is not None else math.inf)
-        stopping = float(np.max(np.abs(wheels))) * radius / deceleration
-        return speed * delay, 0.5 * speed * stopping
-
-    def _within_reach(self, wheels: np.ndarray) -> float:
-        """The stopping guard, whatever the protocol: the largest share (at most 1) of the
-        wheel speeds ``wheels`` (rad/s) from which the robot stops before its footprint
-        leaves the area, from its clearance at the latest pose (:meth:`_reach`); 0 at or
-        beyond the edge. It holds a protocol's wall guard to the robot's response and
-        deceleration (slower than a planner's model, e.g. under max_wheel_acceleration), and
-        a protocol that has none (a user's) to the area; it stops STOP_MARGIN inside it."""
-        clearance = (self._area.clearance(self._body_pose(), self.settings.chassis)
-                     - STOP_MARGIN)
-        if clearance <= 0:
-            return 0.0
-        a, c = self._reach(wheels)
-        if a + c <= clearance:
-            return 1.0
-        if c <= 0:
-            return clearance / a
-        return (math.sqrt(a * a + 4.0 * c * clearance) - a) / (2.0 * c)
 
     def _end(self, outcome: str, reason: str) -> None:
         self._state, self._reason = outcome, reason
