@@ -16,7 +16,7 @@ two minutes of smooth random driving through a 0.2 s filter, with the offset fou
 
 :func:`speed_lag` tells the two apart on the rate signals the offset was found on: the share
 of the heading rate's variance (R^2) that the wheel rates explain at the best delay, and with
-the lag undone (w + tau w', w' smoothed over the offset test's LAG_DIRECTION_SMOOTHING) at the
+the lag undone (w + tau w', w' by :func:`excite.logs.time_offset.smoothed_change`) at the
 best tau in [0, max_offset], over the same samples; the lag is taken when it explains more.
 """
 
@@ -27,12 +27,12 @@ from numpy.typing import NDArray
 
 from excite.errors import DataError
 from excite.logs.time_offset import (
-    LAG_DIRECTION_SMOOTHING,
     MAX_TIME_OFFSET,
     MIN_CORRELATION,
     explained,
     offset_fit,
     refined_lag,
+    smoothed_change,
 )
 from excite.logs.timeseries import TimeSeries
 
@@ -68,11 +68,8 @@ def _lag_r2(turn: FloatArray, left: FloatArray, right: FloatArray, step: float,
             taus: FloatArray) -> FloatArray:
     """R^2 of the heading rate ``turn`` fitted by a (w_L + tau w_L') + c (w_R + tau w_R')
     plus a constant, for each tau (s), the rates on a grid of spacing ``step`` (s)."""
-    width = max(1, round(LAG_DIRECTION_SMOOTHING / step))
-    kernel = np.full(width, 1.0 / width)
     rates = np.column_stack([left, right])
-    changes = np.column_stack([np.convolve(np.gradient(w, step), kernel, "same")
-                               for w in (left, right)])
+    changes = np.column_stack([smoothed_change(w, step) for w in (left, right)])
     y = turn - turn.mean()
     a, d = rates - rates.mean(axis=0), changes - changes.mean(axis=0)
     aa, ad, dd = a.T @ a, a.T @ d, d.T @ d

@@ -20,7 +20,7 @@ from excite.logs.timeseries import TimeSeries
 
 __all__ = ["MAX_TIME_OFFSET", "OffsetFit", "OffsetHint", "OffsetOutOfRange",
            "estimate_time_offset", "explained", "noticeable_time_offset", "offset_fit",
-           "refined_lag"]
+           "refined_lag", "smoothed_change"]
 
 FloatArray = NDArray[np.float64]
 
@@ -239,6 +239,14 @@ NOTICEABLE_OFFSET_LEVEL = 1e-3
 NOTICEABLE_OFFSET_PERIODS = 0.1
 
 
+def smoothed_change(signal: FloatArray, step: float) -> FloatArray:
+    """The rate of change of a rate signal on a grid of spacing ``step`` (s), smoothed over
+    LAG_DIRECTION_SMOOTHING (differentiating the wheel rates again amplifies the encoder
+    noise)."""
+    width = max(1, round(LAG_DIRECTION_SMOOTHING / step))
+    return np.convolve(np.gradient(signal, step), np.full(width, 1.0 / width), "same")
+
+
 def _lag_zero_score(fit: OffsetFit) -> tuple[float, int]:
     """A score test that the clock offset is zero: (t statistic, number of blocks).
 
@@ -260,9 +268,7 @@ def _lag_zero_score(fit: OffsetFit) -> tuple[float, int]:
     regressors = np.column_stack([left, right, np.ones(turn.size)])
     coefficients = np.linalg.lstsq(regressors, turn, rcond=None)[0]
     residual = turn - regressors @ coefficients
-    width = max(1, round(LAG_DIRECTION_SMOOTHING / step))
-    direction = np.convolve(np.gradient(regressors[:, :2] @ coefficients[:2], step),
-                            np.full(width, 1.0 / width), "same")
+    direction = smoothed_change(regressors[:, :2] @ coefficients[:2], step)
     direction -= regressors @ np.linalg.lstsq(regressors, direction, rcond=None)[0]
     size = turn.size // blocks
     sums = (residual * direction)[: size * blocks].reshape(blocks, size).sum(axis=1)
