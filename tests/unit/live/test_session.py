@@ -123,7 +123,7 @@ class LaggingExecutor(Executor):
 
 def _drive_lagging(session, robot, lag, change=None, dt=0.02):
     """Drive with the decisions released every ``lag`` s; ``change`` = (t, Params): the
-    robot's wheels become those at t (s). The (t, state, command) of every tick."""
+    robot's wheels become those at t (s). The (t, state, command, reason) of every tick."""
     ticks, release = [], lag
     while not session.ended and robot.t < session.settings.max_time:
         robot.step(dt)
@@ -136,7 +136,7 @@ def _drive_lagging(session, robot, lag, change=None, dt=0.02):
         session.add_pose(*robot.measured_pose())
         command = session.command(robot.t)
         robot.speeds = np.array([command.left, command.right])
-        ticks.append((robot.t, session.state, command))
+        ticks.append((robot.t, session.state, command, session.reason))
     return ticks
 
 
@@ -174,6 +174,28 @@ def test_a_lagging_done_that_the_whole_log_refutes_drives_on():
     assert result.outcome == "done", result.reason
     z = (result.calibration.params.as_array() - changed.as_array()) / result.calibration.std
     assert np.all(np.abs(z) < 3), z
+
+
+class _FailingOnce(LaggingExecutor):
+    """Hands back the first decision as a numerical failure (a singular matrix), the others
+    as they came."""
+
+    def release(self) -> None:
+        if self.held and not getattr(self, "failed", False):
+            self.failed = True
+            future, _ = self.held.pop(0)
+            future.set_exception(np.linalg.LinAlgError("Singular matrix"))
+        super().release()
+
+
+def test_a_look_that_fails_numerically_is_skipped_and_the_session_goes_on():
+    robot = EXAMPLE.ToyRobot(TRUTH, seed=0)
+    session = LiveSession(_settings(), make_protocol("slip_aware"), seed=0,
+                          executor=_FailingOnce())
+    reasons = [tick[3] for tick in _drive_lagging(session, robot, lag=2.0)]
+    assert any(r.startswith("the stopping rule's calibration failed on the log so far "
+                            "(LinAlgError: Singular matrix)") for r in reasons), reasons
+    assert session.finish().outcome == "done"
 
 
 def test_silent_streams_stop_the_robot_then_it_resumes_or_aborts():
