@@ -10,8 +10,9 @@ command has been held for a while (the motors' lag and the controller's ramps se
 ``response_time`` plus a ``window`` over which the wheels' mean speed is measured):
 
 - *not turning*: both wheels turn at less than 20% of the command;
-- *faster than the command*: the wheels turn more than FASTER times the commanded speed,
-  at a settled speed (the window's two halves within STEADY of the limit of each other: a
+- *faster than the command*: the wheels turn more than FASTER times the fastest command
+  held over the window (a ramp of commands within STEADY may end above their mean), at a
+  settled speed (the window's two halves within STEADY of the limit of each other: a
   robot still slowing down after a lower command turns faster than it for a while), which is
   a controller whose wheel radii or separation differ from the nominal ones, or that scales
   the commands: the robot would drive faster than the planner and the stopping guard
@@ -82,10 +83,10 @@ class MotionWatch:
         self._t.append(t)
         self._commands.append((left, right))
 
-    def _steady_command(self, start: float, end: float) -> np.ndarray | None:
-        """The command (rad/s) held over [start, end], when every command in force over it
-        is within STEADY of the limit of the others; None before the first command or
-        while it changes (the wheels' response is then not known well enough to judge)."""
+    def _steady_commands(self, start: float, end: float) -> np.ndarray | None:
+        """The commands (k, 2) (rad/s) in force over [start, end], when each is within
+        STEADY of the limit of the others; None before the first command or while it
+        changes (the wheels' response is then not known well enough to judge)."""
         if not self._t or start < self._t[0]:
             return None
         first = bisect.bisect_right(self._t, start) - 1
@@ -93,7 +94,7 @@ class MotionWatch:
         held = np.array(self._commands[first:last])
         if np.ptp(held, axis=0).max() > STEADY * self.command_speed:
             return None
-        return held.mean(axis=0)
+        return held
 
     def check(self, t: float, wheel_angles: Callable[[float], np.ndarray | None]
               ) -> MotionFault | None:
@@ -101,8 +102,11 @@ class MotionWatch:
         as the readings arrive later than they are stamped). wheel_angles(t): the wheels'
         angles (rad) at a time, or None where not measured."""
         lag, window = self.response_time, self.window
-        command = self._steady_command(t - window - lag, t)
-        if command is None or float(np.abs(command).max()) < MIN_COMMAND * self.command_speed:
+        held = self._steady_commands(t - window - lag, t)
+        if held is None:
+            return None
+        command = held.mean(axis=0)
+        if float(np.abs(command).max()) < MIN_COMMAND * self.command_speed:
             return None
         start, middle, end = (wheel_angles(t - window), wheel_angles(t - 0.5 * window),
                               wheel_angles(t))
@@ -110,25 +114,29 @@ class MotionWatch:
             return None
         settled = middle is not None and float(np.max(np.abs(
             (end - middle) - (middle - start)))) / (0.5 * window) <= STEADY * self.command_speed
-        return judge(command, (end - start) / window, settled)
+        fastest = held[int(np.argmax(np.linalg.norm(held, axis=1)))]
+        return judge(command, (end - start) / window, settled, fastest)
 
 
-def judge(command: np.ndarray, measured: np.ndarray, settled: bool = True
-          ) -> MotionFault | None:
+def judge(command: np.ndarray, measured: np.ndarray, settled: bool = True,
+          fastest: np.ndarray | None = None) -> MotionFault | None:
     """The fault of wheels turning at ``measured`` (rad/s, left and right) under
-    ``command`` (rad/s), or None when they follow it; ``settled``: the wheels' speed held
-    over the window (only then is a speed above the command a fault)."""
+    ``command`` (rad/s, the mean of the commands held over the window), or None when they
+    follow it; ``settled``: the wheels' speed held over the window (only then is a speed
+    above the command a fault); ``fastest``: the fastest of the commands held (rad/s; by
+    default ``command``), the speed the wheels may have reached."""
     size = float(np.linalg.norm(command))
     if np.linalg.norm(measured) < STALLED * size:
         return MotionFault(
             f"the wheels do not turn (commanded {command[0]:.2f}, {command[1]:.2f} rad/s, "
             f"measured {measured[0]:.2f}, {measured[1]:.2f}): is the controller running and "
             "listening on the command topic?")
-    ratio = float(np.linalg.norm(measured)) / size
+    top = command if fastest is None else fastest
+    ratio = float(np.linalg.norm(measured)) / float(np.linalg.norm(top))
     if settled and ratio > FASTER:
         return MotionFault(
-            f"the wheels turn {ratio:.2f} times the commanded speed (commanded {command[0]:.2f}, "
-            f"{command[1]:.2f} rad/s, measured {measured[0]:.2f}, {measured[1]:.2f}): the "
+            f"the wheels turn {ratio:.2f} times the commanded speed (commanded {top[0]:.2f}, "
+            f"{top[1]:.2f} rad/s, measured {measured[0]:.2f}, {measured[1]:.2f}): the "
             "controller's wheel radii or separation are not the nominal ones (--robot, "
             "--nominal), or it scales the commands; the robot would drive faster than planned")
     miss = float(np.linalg.norm(measured - command))

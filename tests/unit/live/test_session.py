@@ -358,6 +358,21 @@ def test_wheels_faster_than_the_command_are_judged_once_settled():
     assert fault is not None and "1.68 times the commanded speed" in fault
 
 
+def test_wheels_that_follow_a_ramp_of_commands_are_no_fault():
+    """Commands ramping up within STEADY of the limit count as one held command; wheels that
+    reach the last (fastest) of them are no fault, though they turn 1.41 times the ramp's
+    mean (a live session against the simulated robot aborted so); 1.68 times the fastest
+    still is a fault."""
+    from excite.live.watch import MotionWatch
+
+    watch = MotionWatch(window=0.5, response_time=0.2, command_speed=20.0)
+    ramp = np.array([[2.0, 0.5], [3.0, 1.5], [4.0, 2.5]])
+    for t, (left, right) in zip((-0.3, 0.0, 0.3), ramp, strict=True):
+        watch.commanded(t, left, right)
+    assert watch.check(0.7, lambda t: ramp[-1] * t) is None
+    fault = watch.check(0.7, lambda t: 1.68 * ramp[-1] * t)
+    assert fault is not None and "1.68 times the commanded speed (commanded 4.00, 2.50" in fault
+
 def test_area():
     area = Area.square((1.0, 2.0), 4.0)
     assert (area.x0, area.y0, area.x1, area.y1) == (-1.0, 0.0, 3.0, 4.0)
