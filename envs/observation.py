@@ -151,3 +151,34 @@ def observation_of(knowledge, last_action) -> np.ndarray:
                        knowledge.pose.tolist(), [float(a) for a in last_action],
                        min(knowledge.n_segments / knowledge.budget, 1.0), knowledge.arena_size,
                        observation_space(knowledge.model))
+
+
+def on_axle(knowledge):
+    """The same knowledge on the axle model (the wheels' three parameters, the information
+    of the log on them): what a policy trained on the wheels-only env reads while a live
+    session plans for the sensor-pose model."""
+    from dataclasses import replace
+
+    from excite.core.information import information_matrix
+
+    log = knowledge.log
+    information = (information_matrix(log[:, 0], log[:, 1], knowledge.estimate,
+                                      knowledge.sigma, scale=knowledge.nominal)
+                   if len(log) else np.zeros((3, 3)))
+    return replace(knowledge, model=AXLE, theta=knowledge.estimate.as_array(),
+                   nominal_theta=knowledge.nominal.as_array(), information=information)
+
+
+def observer_for(shape: tuple[int, ...]):
+    """The observation a policy trained for observations of ``shape`` reads from a live
+    session's knowledge: :func:`observation_of` the knowledge's own model, or of
+    :func:`on_axle` when only that has the policy's shape (the policy refuses any other)."""
+    axle = observation_space(AXLE).shape
+
+    def observe(knowledge, last_action) -> np.ndarray:
+        if (knowledge.model is not AXLE and tuple(shape) == axle
+                and observation_space(knowledge.model).shape != axle):
+            knowledge = on_axle(knowledge)
+        return observation_of(knowledge, last_action)
+
+    return observe

@@ -241,10 +241,12 @@ def _protocol(text: str, settings):
     if spec.name == "slip_aware" and settings.traction is None:
         raise UsageError("slip_aware needs the motors' lag and the grip: --motor-tau S and "
                          "--grip M/S2, or --robot PRESET (or another --protocol)")
-    observe = None
+    protocol, observe = make_protocol(spec), None
     if spec.name == "learned":
-        from envs.observation import observation_of as observe
-    return Checked(make_protocol(spec), spec.label), observe
+        from envs.observation import observer_for
+
+        observe = observer_for(protocol.observation_shape)
+    return Checked(protocol, spec.label), observe
 
 
 def run(args: argparse.Namespace) -> int:

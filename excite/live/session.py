@@ -68,7 +68,7 @@ from excite.calibration.result import CalibrationResult
 from excite.contracts import RobotKnowledge
 from excite.core import se2
 from excite.core.information import information_matrix
-from excite.core.models import SensorPose
+from excite.core.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose
 from excite.errors import DataError, ExciteError
 from excite.live.area import Area
 from excite.live.braking import within_reach
@@ -458,6 +458,20 @@ class LiveSession:
         sensor = np.array(self._poses.values[-1])
         return se2.compose(sensor, se2.inverse(self._mount()))
 
+    def _planned(self, estimate) -> tuple[SegmentModel, np.ndarray, np.ndarray]:
+        """The model a planner plans for, its current and its nominal parameters: the
+        sensor-pose model while the mounting is estimated (the stopping rule's target then
+        covers it: ``--sensor-pose estimate``, or ``auto`` until its calibration chooses the
+        axle model; the mounting's nominal is the axle), else the axle model."""
+        s = self.settings
+        wheels, nominal = estimate.as_array(), s.nominal.as_array()
+        result = self._calibration()
+        if (isinstance(s.sensor_pose, SensorPose) or s.sensor_pose == "axle"
+                or (s.sensor_pose == "auto" and result is not None
+                    and result.sensor_pose_std is None)):
+            return AXLE, wheels, nominal
+        return SENSOR_POSE, np.append(wheels, self._mount()), np.append(nominal, np.zeros(3))
+
     def knowledge(self) -> RobotKnowledge:
         """What a planner may use now (the simulator's contract, from live data)."""
         s = self.settings
@@ -467,8 +481,10 @@ class LiveSession:
                  else increment_noise(result, s.segment_duration))
         sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, s.sigma)
         rows = self._rows
-        information = (information_matrix(rows[:, 0], rows[:, 1], estimate, sigma,
-                                          scale=s.nominal) if len(rows) else np.zeros((3, 3)))
+        model, theta, nominal_theta = self._planned(estimate)
+        information = (information_matrix(rows[:, 0], rows[:, 1], theta, sigma,
+                                          scale=nominal_theta, model=model) if len(rows)
+                       else np.zeros((model.size, model.size)))
         extent = self._area.extent
         budget = max(int(s.max_time / s.segment_duration), 1)
         knowledge = RobotKnowledge(
@@ -478,7 +494,7 @@ class LiveSession:
             max_wheel_speed=s.command_speed * self._speed_scale,
             segment_duration=s.segment_duration,
             arena_size=min(extent), budget=budget, chassis=s.chassis, traction=s.traction,
-            arena_extent=extent)
+            arena_extent=extent, model=model, theta=theta, nominal_theta=nominal_theta)
         if self._observe is not None:
             knowledge = replace(knowledge, observation=self._observe(knowledge, self._action))
         return knowledge

@@ -512,19 +512,51 @@ def test_a_robot_outside_the_area_is_stopped():
     assert np.all(sent[:, 1:] == 0.0)
 
 
-def test_the_learned_policy_drives_a_session_through_the_observation():
-    """The shipped policy reads the observation built from live data (envs.observation)
-    and its commands stay in the area."""
+@pytest.mark.parametrize("sensor_pose", ["axle", "estimate"])
+def test_the_learned_policy_drives_a_session_through_the_observation(sensor_pose):
+    """The shipped policy (trained on the wheels-only env) reads the observation built from
+    live data (envs.observation), on the axle model's view while the session plans for the
+    mounting too, and its commands stay in the area."""
     pytest.importorskip("stable_baselines3")
-    from envs.observation import observation_of
+    from envs.observation import observer_for
 
     robot = EXAMPLE.ToyRobot(TRUTH, seed=9)
-    session = LiveSession(_settings(max_time=20.0), make_protocol("learned"), seed=9,
-                          observe=observation_of)
+    protocol = make_protocol("learned")
+    session = LiveSession(_settings(max_time=20.0, sensor_pose=sensor_pose), protocol,
+                          seed=9, observe=observer_for(protocol.observation_shape))
     sent = _drive(session, robot)
     assert session.state in ("done", "out_of_time"), session.reason
     assert np.any(sent[:, 1:] != 0)
     assert min(s.clearance for s in session.statuses) > 0
+
+
+def test_the_planner_plans_for_the_mounting_while_it_is_estimated():
+    """While the stopping rule's target covers the sensor's mounting (estimated), the
+    planners get the sensor-pose model (its six parameters, the log's information on them);
+    with the mounting given or on the axle, or once auto's calibration chooses the axle
+    model, the axle model. A live session on the default robot planned for the wheels
+    alone and drove until out of time while the mounting's std stood still."""
+    from excite.core.models import AXLE, SENSOR_POSE, SensorPose
+
+    def planned(sensor_pose, seconds):
+        robot = EXAMPLE.ToyRobot(TRUTH, seed=12)
+        session = LiveSession(_settings(sensor_pose=sensor_pose, max_time=seconds),
+                              make_protocol("slip_aware"), seed=12)
+        _drive(session, robot)
+        return session, session.knowledge()
+
+    for sensor_pose in ("estimate", "auto"):
+        _, knowledge = planned(sensor_pose, 3.0)
+        assert knowledge.model is SENSOR_POSE and knowledge.theta.shape == (6,)
+        assert knowledge.information.shape == (6, 6)
+        assert np.linalg.eigvalsh(knowledge.information)[-1] > 0
+    for sensor_pose in ("axle", SensorPose(0.05, 0.0, 0.0)):
+        _, knowledge = planned(sensor_pose, 3.0)
+        assert knowledge.model is AXLE and knowledge.information.shape == (3, 3)
+    # the toy's sensor is on the axle: auto's calibration chooses the axle model
+    session, knowledge = planned("auto", 40.0)
+    assert session.decision.result.model == "axle", session.decision.result.model
+    assert knowledge.model is AXLE
 
 
 def test_the_planner_weighs_segments_with_their_increment_noise():
