@@ -25,6 +25,14 @@ Each segment this planner scores candidate commands near the previous one (at mo
    variance 1 / lambda_min(F) (the Cramer-Rao bound, as greedy maximises lambda_min) plus
    ``bias_weight`` times the largest squared relative bias; the cheapest safe one is chosen.
 
+A candidate is a maneuver to aim at, anywhere in the command box (a ``grid`` x ``grid`` grid
+over it, and the same grid within ``max_step`` of the last command), valued over
+``lookahead`` segments: ramping towards it by at most ``max_step`` per wheel and segment, then
+holding it; the first step of the ramp is the command. Valued over the next segment alone
+(``lookahead=1``), a planner whose neighbourhood holds no information in the weakest
+direction (a spin's, on the overall scale of the wheels and the track) holds its command for
+ever: the maneuver that would inform that direction is several steps away.
+
 Safe means: the candidate clears the walls (the guard's check, so the guard never has to undo
 a plan), and so does a continuation from its end pose that honours the smoothness limit for up
 to ``horizon`` more segments (ramping down to a stop, or into a spin either way): the robot is
@@ -67,8 +75,10 @@ BIAS_WEIGHT = Parameter("bias_weight", float, 1.0, "weight of the predicted squa
                         "bias against the variance (1: mean squared error)", 0.1, 10.0)
 HORIZON = Parameter("horizon", int, 6, "segments of smooth continuation (stop, or spin) that "
                     "must stay clear of the walls after a candidate", 1, 20)
-GRID = Parameter("grid", int, 9, "candidate commands per wheel (grid x grid within max_step "
-                 "of the previous command)", 3, 41)
+GRID = Parameter("grid", int, 9, "candidate commands per wheel (grid x grid over the command "
+                 "box, and as many within max_step of the previous command)", 3, 41)
+LOOKAHEAD = Parameter("lookahead", int, 6, "segments over which a candidate is valued: ramping "
+                      "towards it by max_step per segment, then holding it", 1, 20)
 
 
 def nominal_segment(previous: np.ndarray, actions: np.ndarray, knowledge: RobotKnowledge,
@@ -162,17 +172,19 @@ class SlipAwarePlanner(Protocol):
 
     parameters = (
         replace(MAX_SPEED, grid=2),  # 0.1 or 1 (2 x 3 candidates: a few minutes to tune)
-        MAX_STEP, BIAS_WEIGHT, HORIZON, GRID, WALL_MARGIN,
+        MAX_STEP, BIAS_WEIGHT, HORIZON, GRID, LOOKAHEAD, WALL_MARGIN,
     )
     max_speed: float
     max_step: float
     bias_weight: float
     horizon: int
     grid: int
+    lookahead: int
 
     def __init__(self, **settings: Value) -> None:
         super().__init__(**settings)
         self.offsets = square_grid(self.grid, self.max_step)
+        self.box = square_grid(self.grid, self.max_speed)
 
     def reset(self, rng: np.random.Generator) -> None:
         super().reset(rng)
@@ -192,30 +204,47 @@ class SlipAwarePlanner(Protocol):
         return self.bias_gradient
 
     def candidates(self) -> np.ndarray:
-        """Commands within ``max_step`` of the previous one (per wheel) and within
-        ``max_speed``, each once."""
+        """The maneuvers aimed at: the grid over the command box and the grid within
+        ``max_step`` of the previous command (per wheel), within ``max_speed``, each once."""
         moved = np.clip(self.previous + self.offsets, -self.max_speed, self.max_speed)
-        return np.unique(moved, axis=0)
+        return np.unique(np.concatenate([moved, self.box]), axis=0)
+
+    def ramps(self, targets: np.ndarray) -> np.ndarray:
+        """The commands (n, lookahead, 2) of the next ``lookahead`` segments towards each
+        target (n, 2): each at most ``max_step`` per wheel from the one before, the first
+        from the previous command, then the target held."""
+        paths = np.empty((len(targets), self.lookahead, 2))
+        command = np.broadcast_to(self.previous, targets.shape)
+        for k in range(self.lookahead):
+            command = command + np.clip(targets - command, -self.max_step, self.max_step)
+            paths[:, k] = command
+        return paths
 
     def plan(self, knowledge: RobotKnowledge) -> np.ndarray:
-        candidates = self.candidates()
-        clear = safe_actions(candidates, knowledge, self.speed_margin)
-        safe = clear & self.escapes(candidates, knowledge)
+        paths = self.ramps(self.candidates())
+        first = paths[:, 0]
+        clear = safe_actions(first, knowledge, self.speed_margin)
+        safe = clear & self.escapes(first, knowledge)
         if not safe.any():  # cornered: any candidate clear now, else slow down (the guard
             safe = clear    # does the rest)
         if not safe.any():
             return self.previous - np.clip(self.previous, -self.max_step, self.max_step)
-        candidates = candidates[safe]
-        score = -self.cost(candidates, knowledge)
-        return candidates[best_index(score, candidates, knowledge)]
+        score = -self.cost(paths[safe], knowledge)
+        return first[safe][best_index(score, first[safe], knowledge)]
 
-    def cost(self, candidates: np.ndarray, knowledge: RobotKnowledge) -> np.ndarray:
-        """Predicted squared worst relative error after each candidate (n,): worst-direction
-        variance plus ``bias_weight`` x the largest squared relative bias."""
-        jac, error = predicted_bias(self.previous, candidates, knowledge)
-        information = (knowledge.information + prior_information(knowledge)
-                       + np.einsum("nrp,nrq->npq", jac, jac))
-        gradient = self._gradient(knowledge) + np.einsum("nrp,nr->np", jac, error)
+    def cost(self, paths: np.ndarray, knowledge: RobotKnowledge) -> np.ndarray:
+        """Predicted squared worst relative error after each path of commands (n, k, 2), or
+        after each candidate command (n, 2): worst-direction variance plus ``bias_weight`` x
+        the largest squared relative bias."""
+        paths = paths[:, None] if paths.ndim == 2 else paths
+        information = knowledge.information + prior_information(knowledge)
+        gradient = self._gradient(knowledge)
+        previous = np.broadcast_to(self.previous, paths[:, 0].shape)
+        for k in range(paths.shape[1]):
+            jac, error = predicted_bias(previous, paths[:, k], knowledge)
+            information = information + np.einsum("nrp,nrq->npq", jac, jac)
+            gradient = gradient + np.einsum("nrp,nr->np", jac, error)
+            previous = paths[:, k]
         bias = np.linalg.solve(information, gradient[..., None])[..., 0]
         variance = 1.0 / np.linalg.eigvalsh(information)[:, 0]
         return variance + self.bias_weight * np.max(bias**2, axis=1)

@@ -138,6 +138,26 @@ def test_deterministic_given_its_rng_and_the_episode():
     assert np.abs(np.diff(runs[0], axis=0)).max() > 0  # it does change its commands
 
 
+def test_keeps_informing_its_weakest_direction_on_the_sensor_env():
+    """Valued over the next segment alone, the planner holds a spin for ever on the sensor
+    env once no command within max_step informs its weakest direction (the overall scale of
+    the wheels and the track): sigma_min stands still from segment 60 to 120. Valued over
+    ``lookahead`` segments (the default) it ramps to maneuvers that inform it."""
+    env = make_env("excite/DiffDriveCalibSensor-v0", 120)
+
+    def sigma_min_growth(**settings) -> float:
+        env.reset(seed=7)
+        planner = SlipAwarePlanner(**settings)
+        planner.reset(np.random.default_rng(7))
+        found = {}
+        for n in range(1, 121):
+            *_, info = env.step(planner.act(env.unwrapped.knowledge()))
+            found[n] = info["sigma_min"]
+        return found[120] / found[60]
+
+    assert sigma_min_growth(lookahead=1) < 1.01  # the planner this replaced: stuck
+    assert sigma_min_growth() > 1.2
+
 def test_parameters_are_declared_checked_and_tunable():
     assert [s.label for s in parse_protocols("slip_aware:max_step=0.1:bias_weight=3")] == [
         "slip_aware:max_step=0.1:bias_weight=3.0"]
