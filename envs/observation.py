@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 from gymnasium import spaces
 
 from envs.sensors import RelativePoseSensor
 from excite.core import se2
-from excite.core.information import eigen_3x3
+from excite.core.information import eigen_3x3, information_matrix
 from excite.core.kinematics import Params
 from excite.core.models import AXLE, SegmentModel, body_to_sensor
 
@@ -157,10 +158,6 @@ def on_axle(knowledge):
     """The same knowledge on the axle model (the wheels' three parameters, the information
     of the log on them): what a policy trained on the wheels-only env reads while a live
     session plans for the sensor-pose model."""
-    from dataclasses import replace
-
-    from excite.core.information import information_matrix
-
     log = knowledge.log
     information = (information_matrix(log[:, 0], log[:, 1], knowledge.estimate,
                                       knowledge.sigma, scale=knowledge.nominal)
