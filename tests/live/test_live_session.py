@@ -31,6 +31,29 @@ def _first_command(session) -> float:
     return float(session.log[np.argmax(moving), 6])
 
 
+#: The wheel speeds (left, right) each of sim-robot's --fault turns a command into.
+FAULTS = {"ignore_commands": np.zeros((2, 2)),
+          "swap_wheels": np.array([[0.0, 1.0], [1.0, 0.0]]),
+          "mirror_left": np.diag([-1.0, 1.0])}
+
+
+def _first_visible(session, fault: np.ndarray) -> float:
+    """When the first command reached the robot whose faulty response shows the fault, s
+    simulated: one the watch judges (a wheel at MIN_COMMAND of the limit or more) and whose
+    faulty response excite.live.watch.judge flags (a straight command does not show swapped
+    wheels, nor does a gentle turn, which they miss by less than half its size)."""
+    from excite.live.watch import MIN_COMMAND, judge
+
+    nominal = PRESETS["default"].nominal()
+    r, _, b = nominal.kinematic_params()
+    v, omega = session.log[:, 4], session.log[:, 5]
+    wheels = np.stack([(v - 0.5 * b * omega) / r, (v + 0.5 * b * omega) / r], axis=1)
+    shows = [np.abs(w).max() >= MIN_COMMAND * nominal.max_wheel_speed
+             and judge(w, fault @ w) is not None for w in wheels]
+    assert any(shows), "no command showed the fault"
+    return float(session.log[int(np.argmax(shows)), 6])
+
+
 def _error_lines(session):
     return [line for line in session.err.splitlines() if line.startswith("excite:")]
 
@@ -249,7 +272,7 @@ def test_wheels_that_do_not_follow_stop_the_session(session_dir, fault, words):
     assert s.code == 6, (s.out, s.err)
     assert words in s.result["live"]["reason"]
     assert any(words in line for line in s.out.splitlines())
-    first = _first_command(s)  # the fault shows from the first command on
+    first = _first_visible(s, FAULTS[fault])
     assert s.zero_after(first) - first <= 1.0
     assert s.log[-1, 4] == 0 and s.log[-1, 5] == 0
 
