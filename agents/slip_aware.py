@@ -28,10 +28,12 @@ Each segment this planner scores candidate commands near the previous one (at mo
 A candidate is a maneuver to aim at, anywhere in the command box (a ``grid`` x ``grid`` grid
 over it, and the same grid within ``max_step`` of the last command), valued over
 ``lookahead`` segments: ramping towards it by at most ``max_step`` per wheel and segment, then
-holding it; the first step of the ramp is the command. Valued over the next segment alone
-(``lookahead=1``), a planner whose neighbourhood holds no information in the weakest
-direction (a spin's, on the overall scale of the wheels and the track) holds its command for
-ever: the maneuver that would inform that direction is several steps away.
+holding it; the first step of the ramp is the command. Where ``max_step`` crosses the box in
+fewer steps, over that many (one when a step reaches anywhere: nothing is out of reach).
+Valued over the next segment alone (``lookahead=1``), a planner whose neighbourhood holds no
+information in the weakest direction (a spin's, on the overall scale of the wheels and the
+track) holds its command for ever: the maneuver that would inform that direction is several
+steps away.
 
 Safe means: the candidate clears the walls (the guard's check, so the guard never has to undo
 a plan), and so does a continuation from its end pose that honours the smoothness limit for up
@@ -43,6 +45,7 @@ Light: numpy and excite's contracts only, no simulator (a planner can drive a re
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -78,7 +81,8 @@ HORIZON = Parameter("horizon", int, 6, "segments of smooth continuation (stop, o
 GRID = Parameter("grid", int, 9, "candidate commands per wheel (grid x grid over the command "
                  "box, and as many within max_step of the previous command)", 3, 41)
 LOOKAHEAD = Parameter("lookahead", int, 6, "segments over which a candidate is valued: ramping "
-                      "towards it by max_step per segment, then holding it", 1, 20)
+                      "towards it by max_step per segment, then holding it (at most the steps "
+                      "that cross the command box)", 1, 20)
 
 
 def nominal_segment(previous: np.ndarray, actions: np.ndarray, knowledge: RobotKnowledge,
@@ -209,13 +213,21 @@ class SlipAwarePlanner(Protocol):
         moved = np.clip(self.previous + self.offsets, -self.max_speed, self.max_speed)
         return np.unique(np.concatenate([moved, self.box]), axis=0)
 
+    @property
+    def steps(self) -> int:
+        """The segments a candidate is valued over: ``lookahead``, or fewer where
+        ``max_step`` crosses the command box in fewer (2 max_speed / max_step; 1 when one
+        step reaches anywhere, and there is no ramp to value)."""
+        return max(1, min(self.lookahead, math.ceil(2.0 * self.max_speed / self.max_step
+                                                    - 1e-9)))
+
     def ramps(self, targets: np.ndarray) -> np.ndarray:
-        """The commands (n, lookahead, 2) of the next ``lookahead`` segments towards each
+        """The commands (n, steps, 2) of the next :attr:`steps` segments towards each
         target (n, 2): each at most ``max_step`` per wheel from the one before, the first
         from the previous command, then the target held."""
-        paths = np.empty((len(targets), self.lookahead, 2))
+        paths = np.empty((len(targets), self.steps, 2))
         command = np.broadcast_to(self.previous, targets.shape)
-        for k in range(self.lookahead):
+        for k in range(self.steps):
             command = command + np.clip(targets - command, -self.max_step, self.max_step)
             paths[:, k] = command
         return paths

@@ -158,6 +158,26 @@ def test_keeps_informing_its_weakest_direction_on_the_sensor_env():
     assert sigma_min_growth(lookahead=1) < 1.01  # the planner this replaced: stuck
     assert sigma_min_growth() > 1.2
 
+def test_a_step_that_reaches_anywhere_values_the_next_segment_alone():
+    """With max_step 2 (TurtleBot3's and the ideal env's tuned setting) one step reaches any
+    command: nothing is out of reach, and the lookahead (holding a target for six segments)
+    is not applied; the plan is lookahead 1's, command for command."""
+    assert SlipAwarePlanner(max_step=2.0).steps == 1
+    assert SlipAwarePlanner(max_step=0.5).steps == 4
+    assert SlipAwarePlanner().steps == 6
+    env = make_env("excite/DiffDriveCalib-v0", 15)
+    actions = []
+    for settings in ({"max_step": 2.0}, {"max_step": 2.0, "lookahead": 1}):
+        env.reset(seed=4)
+        planner = SlipAwarePlanner(**settings)
+        planner.reset(np.random.default_rng(4))
+        taken = []
+        for _ in range(15):
+            taken.append(planner.act(env.unwrapped.knowledge()))
+            env.step(taken[-1])
+        actions.append(np.array(taken))
+    np.testing.assert_array_equal(actions[0], actions[1])
+
 def test_parameters_are_declared_checked_and_tunable():
     assert [s.label for s in parse_protocols("slip_aware:max_step=0.1:bias_weight=3")] == [
         "slip_aware:max_step=0.1:bias_weight=3.0"]
