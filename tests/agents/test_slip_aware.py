@@ -122,18 +122,20 @@ def test_never_plans_into_a_wall_when_heading_at_one_fast():
             np.testing.assert_array_equal(planner.act(knowledge), plan)
 
 
+def _actions(env, planner, seed: int, segments: int) -> np.ndarray:
+    """The planner's commands (segments, 2) over an episode of ``env`` reset with ``seed``."""
+    env.reset(seed=seed)
+    planner.reset(np.random.default_rng(seed))
+    actions = []
+    for _ in range(segments):
+        actions.append(planner.act(env.unwrapped.knowledge()))
+        env.step(actions[-1])
+    return np.array(actions)
+
+
 def test_deterministic_given_its_rng_and_the_episode():
     env = make_env("excite/DiffDriveCalib-v0", 8)
-    runs = []
-    for _ in range(2):
-        env.reset(seed=4)
-        planner = make_protocol("slip_aware")
-        planner.reset(np.random.default_rng(4))
-        actions = []
-        for _ in range(8):
-            actions.append(planner.act(env.unwrapped.knowledge()))
-            env.step(actions[-1])
-        runs.append(np.array(actions))
+    runs = [_actions(env, make_protocol("slip_aware"), 4, 8) for _ in range(2)]
     np.testing.assert_array_equal(runs[0], runs[1])
     assert np.abs(np.diff(runs[0], axis=0)).max() > 0  # it does change its commands
 
@@ -158,6 +160,7 @@ def test_keeps_informing_its_weakest_direction_on_the_sensor_env():
     assert sigma_min_growth(lookahead=1) < 1.01  # the planner this replaced: stuck
     assert sigma_min_growth() > 1.2
 
+
 def test_a_step_that_reaches_anywhere_values_the_next_segment_alone():
     """With max_step 2 (TurtleBot3's and the ideal env's tuned setting) one step reaches any
     command: nothing is out of reach, and the lookahead (holding a target for six segments)
@@ -166,17 +169,10 @@ def test_a_step_that_reaches_anywhere_values_the_next_segment_alone():
     assert SlipAwarePlanner(max_step=0.5).steps == 4
     assert SlipAwarePlanner().steps == 6
     env = make_env("excite/DiffDriveCalib-v0", 15)
-    actions = []
-    for settings in ({"max_step": 2.0}, {"max_step": 2.0, "lookahead": 1}):
-        env.reset(seed=4)
-        planner = SlipAwarePlanner(**settings)
-        planner.reset(np.random.default_rng(4))
-        taken = []
-        for _ in range(15):
-            taken.append(planner.act(env.unwrapped.knowledge()))
-            env.step(taken[-1])
-        actions.append(np.array(taken))
-    np.testing.assert_array_equal(actions[0], actions[1])
+    np.testing.assert_array_equal(_actions(env, SlipAwarePlanner(max_step=2.0), 4, 15),
+                                  _actions(env, SlipAwarePlanner(max_step=2.0, lookahead=1), 4,
+                                           15))
+
 
 def test_parameters_are_declared_checked_and_tunable():
     assert [s.label for s in parse_protocols("slip_aware:max_step=0.1:bias_weight=3")] == [
