@@ -62,6 +62,7 @@ from agents.protocols import MAX_SPEED, WALL_MARGIN, Parameter, Protocol, Protoc
 from excite.contracts import RobotKnowledge
 from excite.core.information import scaled_jacobian
 from excite.core.kinematics import Params
+from excite.core.models import SegmentModel
 from excite.estimators.base import DEFAULT_PRIOR
 
 #: Hz, the rate at which the nominal wheel dynamics are integrated (the simulator's tick).
@@ -194,16 +195,21 @@ class SlipAwarePlanner(Protocol):
         super().reset(rng)
         self.previous = np.zeros(2)
         self.bias_gradient: np.ndarray | None = None  # sum_k J_k^T e_k of the segments so far
+        self.bias_model: SegmentModel | None = None  # the model it is of
 
     def act(self, knowledge: RobotKnowledge) -> np.ndarray:
         action = super().act(knowledge)
         jac, error = predicted_bias(self.previous, action[None, :], knowledge)
         self.bias_gradient = self._gradient(knowledge) + np.einsum("nrp,nr->p", jac, error)
+        self.bias_model = knowledge.model
         self.previous = action
         return action
 
     def _gradient(self, knowledge: RobotKnowledge) -> np.ndarray:
-        if self.bias_gradient is None:
+        """The predicted bias gradient of the segments so far, in the knowledge's model: zero
+        at the start, and again when the model changes (a live session's ``auto`` choosing
+        the axle model once the mounting is found on the axle)."""
+        if self.bias_gradient is None or self.bias_model is not knowledge.model:
             return np.zeros(knowledge.model.size)
         return self.bias_gradient
 
