@@ -7,9 +7,10 @@ when it asks a wheel's contact for more acceleration than the floor can give, by
 encoders then count rotation that never became motion. Both bias the calibration, and the
 bias does not average out with more segments.
 
-Each segment this planner scores candidate commands near the previous one (at most
-``max_step`` per wheel away: a smoothness limit) with a model of the NOMINAL robot
-(:class:`excite.contracts.Traction`: motor lag and grip, never the hidden truth):
+Each segment this planner scores candidate maneuvers (below), reached from the previous
+command by at most ``max_step`` per wheel and segment (a smoothness limit), with a model of
+the NOMINAL robot (:class:`excite.contracts.Traction`: motor lag and grip, never the hidden
+truth):
 
 1. the nominal wheel dynamics, integrated at ``SUBSTEP_HZ``: each motor approaches the command
    with its lag, and the wheels' contacts follow their surface speeds only as fast as the grip
@@ -172,8 +173,9 @@ def prior_information(knowledge: RobotKnowledge) -> np.ndarray:
 
 class SlipAwarePlanner(Protocol):
     """E-optimal planner with a nominal slip/lag model: minimises the predicted worst variance
-    plus ``bias_weight`` x squared bias over commands within ``max_step`` of the last one,
-    keeping a smooth way out of every wall for ``horizon`` segments."""
+    plus ``bias_weight`` x squared bias over maneuvers ramped to by ``max_step`` per segment
+    (valued over :attr:`steps` segments), keeping a smooth way out of every wall for
+    ``horizon`` segments."""
 
     parameters = (
         replace(MAX_SPEED, grid=2),  # 0.1 or 1 (2 x 3 candidates: a few minutes to tune)
@@ -251,10 +253,8 @@ class SlipAwarePlanner(Protocol):
         return first[safe][best_index(score, first[safe], knowledge)]
 
     def cost(self, paths: np.ndarray, knowledge: RobotKnowledge) -> np.ndarray:
-        """Predicted squared worst relative error after each path of commands (n, k, 2), or
-        after each candidate command (n, 2): worst-direction variance plus ``bias_weight`` x
-        the largest squared relative bias."""
-        paths = paths[:, None] if paths.ndim == 2 else paths
+        """Predicted squared worst relative error after each path of commands (n, k, 2):
+        worst-direction variance plus ``bias_weight`` x the largest squared relative bias."""
         information = knowledge.information + prior_information(knowledge)
         gradient = self._gradient(knowledge)
         previous = np.broadcast_to(self.previous, paths[:, 0].shape)

@@ -423,11 +423,8 @@ class LiveNode:
             joints = ", ".join(sorted(self._joints_seen)) or "none"
             what = (f"no joint {' nor '.join(map(repr, missing))}" if missing
                     else "no positions for the wheel joints")
-            text = (f"the JointState messages on {self.topics.joint_states} have {what} "
-                    f"(joints: {joints}); check --left-wheel, --right-wheel")
-            if self.session.state == "waiting":
-                raise DataError(text)  # never started: bad input
-            self.session.abort(text)
+            self._refuse(f"the JointState messages on {self.topics.joint_states} have "
+                         f"{what} (joints: {joints}); check --left-wheel, --right-wheel")
 
     def _check_commanders(self) -> None:
         """Another node publishing on the command topic (a teleop or a navigation stack left
@@ -443,11 +440,15 @@ class LiveNode:
                          if (info.node_namespace, info.node_name) != own})
         if not others:
             return
-        text = (f"another node publishes on {self.topics.cmd_vel} ({', '.join(others)}): the "
-                "robot would follow both (a teleop or navigation left running?); stop it, or "
-                "give excite a command topic of its own (--cmd-vel)")
+        self._refuse(f"another node publishes on {self.topics.cmd_vel} ({', '.join(others)}): "
+                     "the robot would follow both (a teleop or navigation left running?); stop "
+                     "it, or give excite a command topic of its own (--cmd-vel)")
+
+    def _refuse(self, text: str) -> None:
+        """A fault of the robot's set-up: bad input (DataError) before the session started,
+        the robot never commanded; the session aborted after."""
         if self.session.state == "waiting":
-            raise DataError(text)  # never started: bad input
+            raise DataError(text)
         self.session.abort(text)
 
     def _check_clock(self, now: float) -> None:

@@ -86,8 +86,6 @@ __all__ = ["MIN_SPEED_SCALE", "LiveSession"]
 MIN_SPEED_SCALE = 0.25
 
 
-
-
 class LiveSession:
     """Drives a robot with ``protocol`` until calibrated (see the module docstring).
 
