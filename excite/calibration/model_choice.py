@@ -7,8 +7,10 @@ the sensor so far from the axle that the test's outcome is not in question (the 
 Wald statistic above NEAR_AXLE times the test's threshold), the axle model is not fitted:
 the Wald statistic decides (the two statistics agree near the axle, and far from it both are
 far beyond the threshold; a misfitting axle model takes many iterations to reach an optimum
-that changes no decision). ``"estimate"``, ``"axle"`` and a
-given SensorPose fit the one model asked for.
+that changes no decision). With the noise levels estimated, "auto" fits the axle model
+alone when the segments are too few to leave the sensor-pose model a residual degree of
+freedom per channel (:func:`fitted_option`). ``"estimate"``, ``"axle"`` and a given
+SensorPose fit the one model asked for.
 """
 
 from __future__ import annotations
@@ -25,9 +27,11 @@ from excite.calibration.solver import Loss, normal_system, solve_psd
 from excite.calibration.starts import Starts
 from excite.core.arrays import FloatArray
 from excite.core.models import AXLE, SENSOR_POSE
+from excite.logs.segments import Segments
 from excite.stats.chi2 import chi2_quantile
 
-__all__ = ["Candidates", "ModelChoice", "choose_model", "fit_candidates"]
+__all__ = ["Candidates", "ModelChoice", "choose_model", "fit_candidates", "fitted_option",
+           "too_few_for_the_pose"]
 
 
 @dataclass(frozen=True)
@@ -77,6 +81,27 @@ class ModelChoice:
     alternative: ModelFit | None = None
     statistic: float | None = None
     statistic_name: str | None = None
+
+
+def fitted_option(sensor_pose: SensorPoseOption, sigma_given: bool, segments: Segments
+                  ) -> SensorPoseOption:
+    """The sensor-pose option the fits run under: "axle" for "auto" when the noise levels
+    are estimated and the independent ``segments`` are too few to leave the sensor-pose
+    model a residual degree of freedom per channel (its parameters and the noise levels
+    would fit the data exactly, and the likelihood ratio would choose it on noise); else
+    ``sensor_pose``. Segments that share pose samples have their own minimum
+    (:func:`excite.calibration.noise_rounds.estimated_noise`)."""
+    chained = segments.chained is not None and bool(segments.chained.any())
+    if (sensor_pose == "auto" and not sigma_given and not chained
+            and len(segments) <= len(SENSOR_POSE.names)):
+        return "axle"
+    return sensor_pose
+
+
+def too_few_for_the_pose(n_segments: int) -> str:
+    """The model choice's words when :func:`fitted_option` kept the axle model."""
+    return (f"axle: {n_segments} segments are too few to estimate the sensor pose with the "
+            f"noise levels (at least {len(SENSOR_POSE.names) + 1} are needed)")
 
 
 def fit_candidates(fitter: Fitter, starts: Starts, noise: EstimatedNoise | None,
@@ -163,13 +188,22 @@ def _likelihood_ratio(small: ModelFit, large: ModelFit, sigma_given: bool,
                       loss: Loss) -> float:
     """2 log(L_large / L_small) >= 0 of two nested fits on the same data: with estimated
     noise levels (linear loss) the profile likelihood N sum_c log(RSS_c,small / RSS_c,large);
-    otherwise the difference of the whitened costs at the larger model's noise levels."""
+    otherwise the difference of the whitened costs at the larger model's noise levels. With
+    estimated levels each channel's N is taken as the larger model's residual degrees of
+    freedom in it, N - h_c with h_c = tr(F^-1 F_c) the share of its parameters the channel
+    carries (:func:`excite.calibration.solver.estimate_sigma`'s; at least 1): the
+    small-sample form of the statistic (as an F test's denominator), which with N itself
+    chooses the larger model on noise more often than TEST_LEVEL says when N is a few times
+    the parameters; the same for large N."""
     if loss == "linear" and not sigma_given:
         rss_small = small.fit.ev.unit_system()[2]
         rss_large = large.fit.ev.unit_system()[2]
         floor = large.problem.sigma_floor**2
         ratio = np.maximum(rss_small, floor) / np.maximum(rss_large, floor)
-        return max(float(small.problem.n * np.sum(np.log(ratio))), 0.0)
+        system = large.fit.system
+        inverse = np.linalg.pinv(system.information, hermitian=True)
+        dof = large.problem.n - np.einsum("ij,cji->c", inverse, system.channel_information)
+        return max(float(np.sum(np.maximum(dof, 1.0) * np.log(ratio))), 0.0)
     sigma = large.fit.sigma
     cost_small = normal_system(small.fit.ev, sigma, loss).cost
     cost_large = normal_system(large.fit.ev, sigma, loss).cost

@@ -17,7 +17,9 @@ No initial guess and no noise levels are needed. The stages, in order, each in i
    trimming), the gross errors found at the primary model's fit (bad pose samples of
    segments that share them, :mod:`excite.calibration.gross_samples`); when any, stages 2, 4
    and 5 again without them.
-6. :func:`~excite.calibration.model_choice.choose_model`: the axle or the sensor-pose model.
+6. :func:`~excite.calibration.model_choice.choose_model`: the axle or the sensor-pose model
+   (under "auto" with estimated noise levels, the axle model alone from too few segments for
+   the sensor pose: :func:`~excite.calibration.model_choice.fitted_option`).
 7. :func:`~excite.calibration.fit_tests.fit_verdict`: whether the chosen model fits the data.
 8. :func:`~excite.calibration.covariance.reported_covariance`: the covariance under a
    wandering heading error and widened for serially correlated residuals.
@@ -34,13 +36,20 @@ No initial guess and no noise levels are needed. The stages, in order, each in i
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from numpy.typing import ArrayLike
 
 from excite.calibration.covariance import reported_covariance
 from excite.calibration.fit_tests import fit_verdict, pooled_over_kinds
 from excite.calibration.gross_errors import Fits, GrossErrors, without_gross_errors
 from excite.calibration.heterogeneity import HeterogeneityOption, applied, check_option
-from excite.calibration.model_choice import choose_model, fit_candidates
+from excite.calibration.model_choice import (
+    choose_model,
+    fit_candidates,
+    fitted_option,
+    too_few_for_the_pose,
+)
 from excite.calibration.model_fit import UNIT_SIGMA, Fitter
 from excite.calibration.motion_kinds import motion_heterogeneity
 from excite.calibration.noise_rounds import estimated_noise
@@ -114,20 +123,23 @@ def calibrate(
     check_option(heterogeneity)
     seg, given = checked_inputs(segments, sigma, loss, sensor_pose, trim)
     options = FitOptions(solver_loss(loss), max_iterations, tol, max_relative_std)
-    starts = first_estimates(seg, initial, sensor_pose)
+    fitted = fitted_option(sensor_pose, given is not None, seg)
+    starts = first_estimates(seg, initial, fitted)
     data = trimmed(seg, starts, given, trim, options)
     n_trimmed = len(seg) - len(data)
-    fits = _fitted(data, starts, given, ticks_per_rev, options, sensor_pose)
+    fits = _fitted(data, starts, given, ticks_per_rev, options, fitted)
     gross: GrossErrors | None = None
     if loss == "auto" and not trim:  # the calibration again, without the gross errors
 
         def refit(kept: Segments) -> Fits:
-            return _fitted(kept, first_estimates(kept, initial, sensor_pose), given,
-                           ticks_per_rev, options, sensor_pose)
+            return _fitted(kept, first_estimates(kept, initial, fitted), given,
+                           ticks_per_rev, options, fitted)
 
         data, fits, gross = without_gross_errors(fits, refit, given, options)
     starts, noise, fitter, candidates = fits
     choice = choose_model(candidates, fitter)
+    if fitted != sensor_pose:  # "auto" on too few segments: the axle model, untested
+        choice = replace(choice, words=too_few_for_the_pose(len(seg)))
     test = fit_verdict(choice, fitter, starts, sensor_pose, given, noise)
     relative, test = reported_covariance(choice.chosen, test, fitter)
     kinds = (None if heterogeneity == "off"

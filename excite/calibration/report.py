@@ -57,6 +57,9 @@ def verdict(result: CalibrationResult, nominal: Params | None = None) -> str:
     if not result.fit.ok:
         return (f"the model does not fit the data, do not use these values: "
                 f"{result.fit.message}")
+    if not result.identifiable and result.sigma_estimated and result.residual_dof < 1:
+        return (f"not determined ({result.unidentifiable_direction}), do not use these "
+                "values: drive more, or give the sensor's noise (--sigma)")
     if not result.identifiable:
         return (f"not determined ({result.unidentifiable_direction}), do not use these "
                 "values: drive so that the data determine it (turns both ways, straight "

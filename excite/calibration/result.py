@@ -16,7 +16,7 @@ from excite.calibration.identifiability import describe_weak
 from excite.calibration.model_choice import ModelChoice
 from excite.calibration.model_fit import weak_directions
 from excite.calibration.noise_rounds import EstimatedNoise
-from excite.calibration.options import FitOptions
+from excite.calibration.options import MIN_RESIDUAL_DOF, FitOptions
 from excite.calibration.reml import at_floor, level_floors
 from excite.calibration.slip_tests import DrivingTest
 from excite.calibration.wander import HeadingWander
@@ -411,6 +411,15 @@ def _slip_share(seg: Segments, slip: float) -> float | None:
 UNDETERMINED_SHARE = 0.05
 
 
+def too_few_segments(n_segments: int, n_parameters: int) -> str:
+    """Why a calibration with estimated noise levels is not determined when its segments
+    leave no residual degree of freedom per channel (the parameters and the noise levels
+    would fit the data exactly), in words."""
+    return (f"{n_segments} segments cannot determine {n_parameters} parameters and the "
+            f"noise levels: at least {n_parameters + 1} are needed, "
+            f"{n_parameters + MIN_RESIDUAL_DOF} to trust the std")
+
+
 def build_result(data: Segments, choice: ModelChoice, test: FitTest, relative: FloatArray,
                  sigma_estimated: bool, n_trimmed: int, noise: EstimatedNoise | None,
                  options: FitOptions, loss: str | None = None,
@@ -440,6 +449,9 @@ def build_result(data: Segments, choice: ModelChoice, test: FitTest, relative: F
     std = np.sqrt(np.diag(full))
     if not identifiable:  # moving along a direction the data do not determine: not determined
         std[np.linalg.norm(weak, axis=1) > UNDETERMINED_SHARE] = np.inf
+    if sigma_estimated and len(data) <= len(mf.model.names):  # the noise levels fit exactly
+        identifiable, std[:] = False, np.inf
+        direction = too_few_segments(len(data), len(mf.model.names))
     pose_std = std[3:6] if mf.model is SENSOR_POSE else None
     levels = None if noise is None else noise.levels
     wheels = None if noise is None else noise.whitener.wheels

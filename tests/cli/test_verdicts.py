@@ -34,12 +34,22 @@ def undetermined_args(tmp_path, rng):
     return [path]
 
 
+def too_few_args(tmp_path, rng):
+    """A calibration that ends with exit status 3: three segments, the noise levels
+    estimated (with the parameters, they would fit the data exactly)."""
+    path = tmp_path / "three.csv"
+    save_segments(path, lesson_dataset(rng, 3, dphi_std=2.0))
+    return [path]
+
+
 # --------------------------------------------------------------------------- --ros2-yaml
 
 
 @pytest.mark.parametrize("make, status, why", [
     (misfit_args, 4, "the model does not fit the data"),
     (undetermined_args, 3, "the data do not determine every parameter: b: no segment turns"),
+    (too_few_args, 3, "the data do not determine every parameter: 3 segments cannot "
+     "determine 3 parameters and the noise levels"),
 ])
 @pytest.mark.parametrize("json_out", [False, True])
 def test_no_controller_file_from_a_failed_calibration(capsys, tmp_path, rng, make, status,
