@@ -6,7 +6,8 @@ do, without the command line).
 for validation (``holdout``) -> read and segment each input -> check each one's wiring and
 pose source -> pool the segments -> calibrate (:func:`excite.calibration.pipeline.calibrate`)
 -> with several inputs, test whether they agree (each calibrated alone,
-:func:`excite.calibration.heterogeneity.across_logs`) -> validate on the held-out logs.
+:func:`excite.calibration.heterogeneity.across_logs`) -> fail the fit where the data reject a
+given clock offset -> validate on the held-out logs.
 :func:`validate_logs` dead-reckons logs with a calibrated and a nominal robot
 (:mod:`excite.validation.dead_reckoning`).
 
@@ -17,7 +18,7 @@ arise to an ``on_note`` function when one is given (the command line prints them
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from numpy.typing import ArrayLike
 
@@ -201,6 +202,22 @@ def validate_logs(paths: Sequence[str], calibrated: Robot, nominal: Robot,
                       note_unused=True)
 
 
+def _with_rejected_offsets(result: CalibrationResult, parts: Sequence[Part]
+                           ) -> CalibrationResult:
+    """The result with its fit failed when the data reject a clock offset the user gave
+    (:attr:`Log.hint` of a "given" offset): a wrong offset bends every segment where the
+    wheel speeds change, and estimated noise levels would take that for noise. The reason
+    comes first in the fit's message."""
+    reasons = [f"the data reject the clock offset given for {part.log.name} "
+               f"({part.log.time_offset:+.4f} s): {part.log.hint.text()}"
+               for part in parts if part.log is not None and part.log.hint is not None
+               and part.log.offset_source == "given"]
+    if not reasons:
+        return result
+    message = "; ".join(reasons) + ("" if result.fit.ok else f"; and {result.fit.message}")
+    return replace(result, fit=replace(result.fit, ok=False, message=message))
+
+
 def calibrate_logs(
     paths: Sequence[str],
     options: LogOptions = DEFAULT_LOG_OPTIONS,
@@ -257,6 +274,7 @@ def calibrate_logs(
                            lambda segments, pose: fit(segments, pose, "off"), note,
                            sensor_pose)
         result = applied(result, test, heterogeneity)
+    result = _with_rejected_offsets(result, parts)
     if initial is None and metre_radii(result.params.r_L, result.params.r_R):
         note(f"{', '.join(paths)}: both wheel radii come out 1 m ({result.params.r_L:.4g} and "
              f"{result.params.r_R:.4g} m), what {METRE_RADII}: if the wheel columns hold "

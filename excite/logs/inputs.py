@@ -41,6 +41,7 @@ from excite.logs.time_offset import (
     OffsetHint,
     estimate_time_offset,
     noticeable_time_offset,
+    rejected_offset,
 )
 from excite.logs.timeseries import TimeSeries, during, unwrapped_words, without_poses
 from excite.logs.timeseries_csv import read_timeseries
@@ -151,7 +152,10 @@ class Log:
     LogOptions.time_offset), "estimated" ("estimate"), "detected" (none given, and the data
     reject a zero offset: their estimate, ``hint.offset``) or "default" (none given: 0).
     Without a given offset, hint says what the data suggest when it is clearly not zero
-    (:func:`excite.logs.time_offset.noticeable_time_offset`), else None. skipped: for a bag,
+    (:func:`excite.logs.time_offset.noticeable_time_offset`); with a given one (wheel angles,
+    not integrated speeds), what they suggest when they reject it
+    (:func:`excite.logs.time_offset.rejected_offset`: the calibration's fit then fails);
+    else None. skipped: for a bag,
     the messages the reader skipped, in one line (None for a CSV log). notes: what the user
     should hear about the log, one line each, in order (each starts with the log's name).
     speed_lag: the time constant (s) of the wheel speeds' lag the series was corrected for
@@ -326,15 +330,18 @@ def _read_series(source: Input, options: LogOptions, note: OnNote
 
 def _clock_offset(series: TimeSeries, options: LogOptions
                   ) -> tuple[float, OffsetSource, OffsetHint | None]:
-    """The log's clock offset (s), where it came from, and without a given one what the data
-    suggest when it is clearly not zero: their estimate is used when it lies within the search
-    range ("detected"; a stamp latency of a few ms shifts a fitted sensor mounting by many of
-    its std), else 0 ("default")."""
+    """The log's clock offset (s), where it came from, and what the data suggest instead:
+    without a given offset when it is clearly not zero, their estimate then used when it lies
+    within the search range ("detected"; a stamp latency of a few ms shifts a fitted sensor
+    mounting by many of its std), else 0 ("default"); with a given one (of wheel angles, not
+    integrated speeds) when the data reject it (:func:`rejected_offset`)."""
     if options.time_offset == "estimate":
         offset = estimate_time_offset(series, max_offset=options.max_time_offset)
         return offset, "estimated", None
-    if options.time_offset is not None:
-        return float(options.time_offset), "given", None
+    if options.time_offset is not None:  # tested, unless the wheel angles are integrated
+        given = float(options.time_offset)  # speeds (their own lag: the user's to settle)
+        return given, "given", (None if series.speeds else
+                                rejected_offset(series, given, options.max_time_offset))
     hint = noticeable_time_offset(series, max_offset=options.max_time_offset)
     if hint is not None and hint.offset is not None:
         return hint.offset, "detected", hint
@@ -399,6 +406,9 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
         note(f"{source.name}: the pose stamps are offset from the encoder stamps by "
              f"{offset:+.4f} s (pose time + offset = encoder time): the data reject a zero "
              f"offset (a stamp latency), so the calibration uses it; {OVERRULE}")
+    elif hint is not None and offset_source == "given":
+        note(f"{source.name}: the data reject the given clock offset {offset:+.4f} s (pose "
+             f"time + offset = encoder time): {hint.text()}")
     elif hint is not None:
         note(f"{source.name}: the clocks of the encoder and pose streams seem offset (pose "
              "time + offset = encoder time), but none was given and 0 is used; "

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,7 +20,7 @@ from excite.logs.timeseries import TimeSeries
 
 __all__ = ["MAX_TIME_OFFSET", "OffsetFit", "OffsetHint", "OffsetOutOfRange",
            "estimate_time_offset", "explained", "noticeable_time_offset", "offset_fit",
-           "refined_lag", "smoothed_change"]
+           "refined_lag", "rejected_offset", "smoothed_change"]
 
 FloatArray = NDArray[np.float64]
 
@@ -330,3 +330,17 @@ def noticeable_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET
     if abs(fit.offset) <= NOTICEABLE_OFFSET_PERIODS * coarser:
         return None  # within the interpolation's own lag (module constant)
     return OffsetHint(fit.offset, max_offset)
+
+
+def rejected_offset(ts: TimeSeries, offset: float, max_offset: float = MAX_TIME_OFFSET
+                    ) -> OffsetHint | None:
+    """What the data say about a given clock offset ``offset`` (s; pose time + offset =
+    encoder time): :func:`noticeable_time_offset`'s hint on the log with that offset applied,
+    in offsets of the log itself (the offset the data show instead, or the lags beyond the
+    search range around ``offset`` that fit far better); None when the data do not reject
+    it."""
+    hint = noticeable_time_offset(replace(ts, t_pose=ts.t_pose + offset), max_offset)
+    if hint is None:
+        return None
+    return OffsetHint(None if hint.offset is None else hint.offset + offset, max_offset,
+                      tuple(lag + offset for lag in hint.beyond))

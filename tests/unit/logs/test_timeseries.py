@@ -30,7 +30,11 @@ from excite.logs.segmentation import (
     STANDSTILL,
     segment_timeseries,
 )
-from excite.logs.time_offset import estimate_time_offset, noticeable_time_offset
+from excite.logs.time_offset import (
+    estimate_time_offset,
+    noticeable_time_offset,
+    rejected_offset,
+)
 from excite.logs.timeseries import SpeedIntegral, TimeSeries, integrated_speed
 from excite.logs.timeseries_csv import read_timeseries, write_timeseries
 from excite.logs.timeseries_header import is_timeseries_csv
@@ -643,6 +647,19 @@ def test_noticeable_time_offset_beyond_the_search_range():
     assert hint is not None and hint.offset is None and abs(hint.beyond[0] - 2.0) < 0.02
     assert hint.text() == ("the data suggest an offset beyond +-1 s (near +2.00 s): "
                            "--time-offset estimate --max-time-offset S")
+
+
+def test_a_given_offset_is_tested_against_the_data():
+    """A one-minute log with a 30 ms offset: the right offset given passes, a wrong one
+    (0, the wrong sign, 0.3 s) is rejected with the offset the data show, and one beyond the
+    search range around it names the lags near the truth."""
+    ts = make_log(simulate(duration=60.0, step=0.01), offset=0.03, noise=(0.002, 0.002), seed=1)
+    assert rejected_offset(ts, 0.03) is None
+    for wrong in (0.0, -0.03, 0.3):
+        hint = rejected_offset(ts, wrong)
+        assert hint is not None and abs(hint.offset - 0.03) < 1e-3, wrong
+    far = rejected_offset(ts, 3.0)
+    assert far is not None and far.offset is None and abs(far.beyond[0] - 0.03) < 0.02
 
 
 def test_noticeable_time_offset_is_silent_without_an_estimate():
