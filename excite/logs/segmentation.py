@@ -16,7 +16,13 @@ Segmentation
 ------------
 * Fixed windows (``window`` s): a boundary at the first pose sample at or after
   t_0 + k window (k = 0, 1, ...) in each stretch of the log without gaps, so a segment lasts
-  the window to within one pose period.
+  the window to within one pose period. When the encoders are the coarser stream (a median
+  period over COARSER times the poses'), at the pose sample nearest the encoder sample
+  nearest t_0 + k window instead: the interpolated wheel angles are then read within half a
+  pose period of an encoder sample, where the cubic errs least. A robot whose speed changes
+  at the boundaries (a protocol's command steps, ``excite live``'s segments) otherwise
+  biased the wheels by up to 7 standard errors with encoders of 2-12.5 Hz under 100 Hz
+  poses, the fit passing.
 * Keyframes by motion (``min_distance`` m and/or ``min_angle`` rad): a new boundary at the first
   pose sample where the sensor is at least ``min_distance`` from the last keyframe's position,
   or its heading differs from the keyframe's by at least ``min_angle``.
@@ -100,6 +106,9 @@ MAX_SUBSTEPS = 256
 #: errors, per 80 ms by 2.6 (even with the cubic boundaries; 6 with straight lines); 20 ms
 #: sub-steps leave no bias at 12.5 Hz (synthetic logs, 100 Hz poses of 1 mm / 2 mrad).
 MAX_SUBSTEP = 0.02
+#: Fixed windows end near encoder samples when the encoders' median period is over this many
+#: times the poses' (module docstring).
+COARSER = 1.5
 
 
 def _plural(count: int, noun: str) -> str:
@@ -209,13 +218,27 @@ def _stretches(t_enc: FloatArray, t_pose: FloatArray, encoders: StreamCheck,
                       int((~inside).sum()), int(in_gap.sum()))
 
 
-def _window_boundaries(t: FloatArray, first: int, last: int, window: float) -> IntArray:
-    """Boundary samples of one stretch: the first sample at or after t[first] + k window."""
+def _window_boundaries(t: FloatArray, first: int, last: int, window: float,
+                       t_enc: FloatArray | None = None) -> IntArray:
+    """Boundary samples of one stretch: the first sample at or after t[first] + k window;
+    with ``t_enc`` (the encoder times, when they are the coarser stream), the sample nearest
+    the encoder sample nearest that time (module docstring)."""
     tolerance = 1e-6 * window
     n = int(math.floor((t[last] - t[first] + tolerance) / window))
     grid = t[first] + window * np.arange(n + 1)
-    index = first + np.searchsorted(t[first:last + 1], grid - tolerance, side="left")
+    part = t[first:last + 1]
+    if t_enc is None:
+        index = first + np.searchsorted(part, grid - tolerance, side="left")
+    else:
+        index = first + _nearest(part, t_enc[_nearest(t_enc, grid)])
+        index[0] = first  # the stretch starts where it starts
     return index[np.concatenate(([True], np.diff(index) > 0))]
+
+
+def _nearest(t: FloatArray, times: FloatArray) -> IntArray:
+    """Index of the sample of the increasing ``t`` nearest each of ``times``."""
+    right = np.clip(np.searchsorted(t, times), 1, t.size - 1)
+    return right - (times - t[right - 1] < t[right] - times)
 
 
 def _next_keyframe(x: FloatArray, y: FloatArray, theta: FloatArray, key: int, last: int,
@@ -260,12 +283,14 @@ def _cut(ts: TimeSeries, t_pose: FloatArray, stretches: _Stretches, window: floa
     starts, ends = [], []
     tails: dict[str, list[tuple[int, int]]] = {CUT_BY_GAP: [], END_OF_LOG: []}
     keyframes = min_distance is not None or min_angle is not None
+    coarse = (ts.t_enc if np.median(np.diff(ts.t_enc)) > COARSER * np.median(np.diff(t_pose))
+              else None)
     for k, (first, last) in enumerate(zip(stretches.first, stretches.last, strict=True)):
         if keyframes:
             bounds = _keyframe_boundaries(ts, int(first), int(last), min_distance or math.inf,
                                           min_angle or math.inf)
         else:
-            bounds = _window_boundaries(t_pose, int(first), int(last), window)
+            bounds = _window_boundaries(t_pose, int(first), int(last), window, coarse)
         starts.append(bounds[:-1])
         ends.append(bounds[1:])
         if bounds[-1] < last:

@@ -649,6 +649,25 @@ def test_noticeable_time_offset_beyond_the_search_range():
                            "--time-offset estimate --max-time-offset S")
 
 
+@pytest.mark.parametrize("encoder_rate, near", [(12.5, 0.005), (5.0, 0.005), (100.0, 0.02)])
+def test_windows_end_near_encoder_samples_when_the_encoders_are_coarser(encoder_rate, near):
+    """Under 100 Hz poses, 12.5 Hz and 5 Hz encoders: every segment starts and ends within
+    half a pose period of an encoder sample (where the interpolated wheel angles err least),
+    lasting the window to within an encoder period; with denser encoders the windows end at
+    the first pose sample after each window as before (100 Hz encoders under 50 Hz poses)."""
+    from excite.logs.synthetic import synthetic_log
+
+    pose_rate = 100.0 if encoder_rate < 100.0 else 50.0
+    ts = synthetic_log(np.random.default_rng(3), 30.0, encoder_rate=encoder_rate,
+                       pose_rate=pose_rate, pose_noise=(0.002, 0.002)).series
+    seg = segment_timeseries(ts).segments
+    ends = np.concatenate([seg.t_start, seg.t_end])
+    distance = np.abs(ends[:, None] - ts.t_enc[None, :]).min(axis=1)
+    assert distance.max() <= near / 2 + 1e-9 if encoder_rate < 100.0 else distance.max() < near
+    period = 1.0 / min(encoder_rate, pose_rate)
+    assert np.all(np.abs(seg.t_end - seg.t_start - 1.0) <= period + 1e-9)
+
+
 def test_a_given_offset_is_tested_against_the_data():
     """A one-minute log with a 30 ms offset: the right offset given passes, a wrong one
     (0, the wrong sign, 0.3 s) is rejected with the offset the data show, and one beyond the
