@@ -102,16 +102,32 @@ def _noise_ratio(mf: ModelFit, reference: FloatArray) -> FloatArray:
     return np.sqrt(rss / mf.problem.n) / reference
 
 
-def _goodness_of_fit(mf: ModelFit, sigma: FloatArray) -> tuple[bool, FloatArray]:
-    """Residuals against given noise levels: per channel RSS / sigma^2 ~ chi2(N - h_c); fails
-    when any channel exceeds its quantile at the test level (Bonferroni over 3 channels)."""
+def _against_given(mf: ModelFit, sigma: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Per channel RSS_c / sigma_c^2, chi-square with N - h_c degrees of freedom when the
+    given levels ``sigma`` are right (h_c the degrees of freedom the fit takes from channel
+    c), and those degrees of freedom."""
     system = normal_system(mf.fit.ev, sigma, "linear")
     inverse = np.linalg.pinv(system.information, hermitian=True)
     dof = mf.problem.n - np.einsum("ij,cji->c", inverse, system.channel_information)
-    statistic = mf.fit.ev.unit_system()[2] / sigma**2
+    return mf.fit.ev.unit_system()[2] / sigma**2, dof
+
+
+def _goodness_of_fit(mf: ModelFit, sigma: FloatArray) -> tuple[bool, FloatArray]:
+    """Residuals against given noise levels (:func:`_against_given`): fails when any channel
+    exceeds its quantile at the test level (Bonferroni over 3 channels)."""
+    statistic, dof = _against_given(mf, sigma)
     survival = np.array([chi2_survival(s, d) for s, d in zip(statistic, dof, strict=True)])
     ratio = np.sqrt(statistic / np.maximum(dof, 1.0))
     return bool(np.all(survival > (1.0 - TEST_LEVEL) / 3.0)), ratio
+
+
+def _below_given(mf: ModelFit, sigma: FloatArray) -> NDArray[np.bool_]:
+    """The channels whose residuals are far below the given noise levels: the statistic of
+    :func:`_against_given` below its lower quantile at the test level (Bonferroni over 3
+    channels), the given level then too large (the std too wide by as much)."""
+    statistic, dof = _against_given(mf, sigma)
+    return np.array([d >= 1 and 1.0 - chi2_survival(s, d) < (1.0 - TEST_LEVEL) / 3.0
+                     for s, d in zip(statistic, dof, strict=True)])
 
 
 def _channels_in_words(ratio: FloatArray, worse: FloatArray) -> str:
@@ -165,6 +181,13 @@ def _model_test(chosen: ModelFit, alternative: ModelFit | None, statistic: float
             return FitTest(False, f"the residuals are {_channels_in_words(ratio, ratio > 1.2)}"
                            f" given{grows}: the model or the given noise levels are wrong"
                            f"{hint}", ratio, *numbers)
+        small = _below_given(chosen, sigma_given)
+        if small.any():
+            names = [n for n, low in zip(("x", "y", "theta"), small, strict=True) if low]
+            return FitTest(True, f"the residuals are up to {1.0 / ratio[small].min():.1f}x smaller "
+                           f"than the given noise level in {', '.join(names)}: the given "
+                           "levels are too large and the std as much too wide; omit --sigma "
+                           "to estimate them", ratio, *numbers)
         return FitTest(True, "the residuals match the given noise levels", ratio, *numbers)
     if statistic is not None and chosen.model is not SENSOR_POSE:
         return FitTest(True, f"the sensor-pose alternative does not fit significantly better "

@@ -282,6 +282,23 @@ def test_given_noise_levels_that_are_too_small_fail_the_fit(rng):
     assert not result.fit.ok and "noise level" in result.fit.message
 
 
+def test_given_noise_levels_far_too_large_are_said_to_be(rng):
+    """Levels 100x the truth: the fit is not failed (the std are too wide, not too narrow)
+    but its words say so, naming the channels; the true levels and 1.1 times them match."""
+    seg = lesson_dataset(rng, 200, TRUTH)
+    large = calibrate(seg, sigma=(0.2, 0.2, 0.1), sensor_pose="axle").fit
+    factor = float(large.message.split("up to ")[1].split("x ")[0])
+    assert large.ok and 80 < factor < 120 and large.message.startswith("the residuals are up")
+    assert large.message.endswith("x smaller than the given noise level in x, y, theta: the "
+                                  "given levels are too large and the std as much too wide; "
+                                  "omit --sigma to estimate them")
+    theta = calibrate(seg, sigma=(2e-3, 2e-3, 0.05), sensor_pose="axle").fit.message
+    assert "smaller than the given noise level in theta:" in theta
+    for factor in (1.0, 1.1):
+        fit = calibrate(seg, sigma=factor * np.array([2e-3, 2e-3, 1e-3]), sensor_pose="axle").fit
+        assert fit.message == "the residuals match the given noise levels", factor
+
+
 def test_sensor_pose_identifiability_in_words(rng):
     straight = sensor_segments(rng, 60, phi=np.repeat(rng.uniform(5, 20, (1, 60)), 2, axis=0)
                                * np.array([[TRUTH.r_R], [TRUTH.r_L]]) / TRUTH.r_L)
