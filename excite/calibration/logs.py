@@ -20,6 +20,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
+import numpy as np
 from numpy.typing import ArrayLike
 
 from excite.calibration.heterogeneity import HeterogeneityOption, across_logs, applied
@@ -98,6 +99,20 @@ def _split_holdout(inputs: list[Input], fraction: float) -> tuple[list[Input], l
     count = min(max(1, round(fraction * len(logs))), len(logs) - 1)
     held = logs[-count:]
     return [source for source in inputs if source not in held], held
+
+
+def _refuse_repeated(parts: Sequence[Part]) -> None:
+    """DataError when two inputs hold the same segments (a file given twice, or a copy of
+    it): pooled, they would count every segment twice and halve the variances."""
+    seen: dict[bytes, str] = {}
+    for part in parts:
+        seg = part.segments
+        key = np.column_stack([seg.dphi_L, seg.dphi_R, seg.dx, seg.dy, seg.dtheta]).tobytes()
+        if key in seen:
+            raise DataError(f"{seen[key]} and {part.source.name} hold the same data: give "
+                            "each log once (pooled twice, every std would be 1/sqrt(2) of "
+                            "what the data say)")
+        seen[key] = part.source.name
 
 
 def _check_part(part: Part, initial: Params | None, note: OnNote) -> None:
@@ -259,6 +274,7 @@ def calibrate_logs(
     note = note_taker(notes, on_note)
     note_unused_options(inputs, options, note)
     parts = segment_inputs(used, options, on_note=note)
+    _refuse_repeated(parts)
     for part in parts:
         _check_part(part, initial, note)
     several = len(parts) > 1

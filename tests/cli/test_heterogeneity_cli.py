@@ -2,6 +2,7 @@
 --json carries the per-file estimates, --common-params fails the fit."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -95,3 +96,16 @@ def test_files_whose_sensor_mountings_differ_fail_the_fit(capsys, tmp_path):
     mounting = json.loads(out)["heterogeneity"]["mounting"]
     assert code == 4 and mounting["differ"] and mounting["dof"] == 3
     assert mounting["p_value"] < mounting["level"] == 0.001
+
+
+def test_the_same_data_twice_is_a_one_line_error_naming_both(capsys, tmp_path, two_robots):
+    """A file given twice, or a copy of it beside it, would pool every segment twice (every
+    std 1/sqrt(2) of what the data say, the agreement test blind): refused."""
+    copy = tmp_path / "copy_of_a.csv"
+    copy.write_bytes(Path(two_robots[0]).read_bytes())
+    for files in ([two_robots[0], two_robots[0]], [two_robots[0], two_robots[1], str(copy)]):
+        code, out, err = run_cli(capsys, "calibrate", *files)
+        assert code == 2 and out == "" and err.count("\n") == 1
+        assert err == (f"excite: error: {files[0]} and {files[-1]} hold the same data: give "
+                       "each log once (pooled twice, every std would be 1/sqrt(2) of what the "
+                       "data say)\n")
