@@ -250,11 +250,12 @@ def read_text(name: str, kind: str = "CSV") -> str:
 
 
 def _looks_like_tuples(text: str) -> bool:
-    """True when the first character outside blank and ``#`` comment lines is ``{``."""
+    """True when the first character outside blank and ``#`` comment lines is ``{`` (or
+    ``[``: a JSON array, which the tuple reader refuses with a hint; no CSV starts so)."""
     for line in text.splitlines():
         stripped = line.strip()
         if stripped and not stripped.startswith("#"):
-            return stripped.startswith("{")
+            return stripped.startswith(("{", "["))
     return False
 
 

@@ -141,6 +141,18 @@ def test_tuple_file_detected_by_content(tmp_path):
         load_segments(path)
 
 
+def test_a_json_array_of_tuples_is_refused_with_the_format_s_words(tmp_path):
+    """Tuples written as one JSON array (json.dump of a list) were read as a CSV of one row
+    and hundreds of columns; they are a tuple file the reader refuses, saying why."""
+    objects = [{"T": 0.5, "phi_l": 2.0 + k, "phi_r": -3.0, "sm": [0.1, -0.02, 0.3]}
+               for k in range(4)]
+    path = write(tmp_path, json.dumps(objects), "log.json")
+    with pytest.raises(DataError, match=re.escape(
+            f"{path}: object 1 (line 1): expected a JSON object, found a list (a tuple file "
+            "is a stream of objects, not a JSON array)")):
+        load_segments(path)
+
+
 def test_tuple_comments_and_crlf_between_objects(tmp_path):
     text = "# head\r\n" + GOOD + "  # after\r\n\r\n" + GOOD + "\r\n# mid\r\n" + GOOD + "\r\n"
     seg = load_segments(write(tmp_path, text, "c.tuple"))
