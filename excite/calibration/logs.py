@@ -32,6 +32,7 @@ from excite.calibration.wiring import check_pose_source, check_wiring
 from excite.core.kinematics import Params
 from excite.core.plausible import METRE_RADII, metre_radii
 from excite.errors import DataError
+from excite.logs.continuity import encoder_stretches
 from excite.logs.inputs import (
     DEFAULT_LOG_OPTIONS,
     Input,
@@ -48,6 +49,7 @@ from excite.logs.inputs import (
 )
 from excite.logs.segment_bounds import first_impossible
 from excite.logs.segments import MIN_SEGMENTS, Segments
+from excite.logs.timeseries import TimeSeries, during
 from excite.validation.dead_reckoning import Robot, ValidationResult, summarize, validate_log
 
 __all__ = ["LogCalibration", "ValidatedLogs", "calibrate_logs", "validate_logs"]
@@ -195,9 +197,37 @@ def _validated(inputs: Sequence[Input], options: LogOptions, calibrated: Robot,
     for source in inputs:
         log = read_log(source, options, whole=True, on_note=note)
         _check_wired(source, log, options)
-        validations.append(validate_log(log.series, log.time_offset, calibrated, nominal,
-                                        name=log.name))
+        for name, series in _between_encoder_gaps(log, options.window, note):
+            validations.append(validate_log(series, log.time_offset, calibrated, nominal,
+                                            name=name))
     return ValidatedLogs(summarize(validations), tuple(notes))
+
+
+def _between_encoder_gaps(log: Log, window: float, note: OnNote
+                          ) -> list[tuple[str, TimeSeries]]:
+    """The log whole, or its parts between encoder gaps longer than the window (s, as
+    calibrate cuts logs), each named (the wheels' path across a gap is unknown: each part is
+    dead-reckoned from its own first pose), with a note; parts with fewer than 2 samples of a
+    stream are left out (a DataError when none is left)."""
+    stretches, gaps = encoder_stretches(log.series, window)
+    if not gaps:
+        return [(log.name, log.series)]
+    pieces = []
+    for start, end in stretches:
+        try:
+            pieces.append(during(log.series, start, end))
+        except DataError:  # too short to follow
+            continue
+    if not pieces:
+        raise DataError(f"{log.name}: no part between its encoder gaps holds 2 samples of "
+                        "each stream")
+    longest = max(gaps, key=lambda gap: gap.duration)
+    note(f"{log.name}: cut at {len(gaps)} encoder gap(s) longer than the window ({window:g} s), "
+         f"the longest {longest.duration:.3f} "
+         f"s ({longest.location}): the wheels' path across a gap is unknown, so each of its "
+         f"{len(pieces)} parts is dead-reckoned from its own first pose")
+    return [(f"{log.name} (part {k + 1} of {len(pieces)})", piece)
+            for k, piece in enumerate(pieces)]
 
 
 def validate_logs(paths: Sequence[str], calibrated: Robot, nominal: Robot,

@@ -35,8 +35,8 @@ from excite.logs.timeseries import Stream, TimeSeries, without_poses
 from excite.stats.robust import MEDIAN_ABS_NORMAL
 
 __all__ = ["Limits", "Gap", "StreamCheck", "check_continuity", "check_encoders", "check_poses",
-           "excursions", "left_on_track", "on_track", "find_gaps", "refuse_long_gaps",
-           "stale_poses", "flagged_overlaps", "pose_noise"]
+           "encoder_stretches", "excursions", "left_on_track", "on_track", "find_gaps",
+           "refuse_long_gaps", "stale_poses", "flagged_overlaps", "pose_noise"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -321,6 +321,20 @@ def check_continuity(ts: TimeSeries, limits: Limits | None = None) -> None:
             raise DataError(f"{ts.location(stream, int(jumps[0]) + 1)}: {what} ({jumps.size} "
                             f"time(s) in the log; the first here), so dead reckoning across it "
                             f"means nothing: {hint}")
+
+
+def encoder_stretches(ts: TimeSeries, longer_than: float
+                      ) -> tuple[list[tuple[float, float]], list[Gap]]:
+    """The encoder stream's stretches between its gaps longer than ``longer_than`` s (first
+    and last stamp, s, encoder clock), and those gaps: the wheels' path across such a gap is
+    unknown, so dead reckoning (:mod:`excite.validation.dead_reckoning`) restarts after it."""
+    cuts = np.flatnonzero(np.diff(ts.t_enc) > longer_than)
+    firsts = np.concatenate(([0], cuts + 1))
+    lasts = np.concatenate((cuts, [ts.t_enc.size - 1]))
+    gaps = [Gap("encoder", float(ts.t_enc[i]), float(ts.t_enc[i + 1]),
+                ts.location("encoder", int(i) + 1)) for i in cuts]
+    return [(float(ts.t_enc[a]), float(ts.t_enc[b])) for a, b in zip(firsts, lasts,
+                                                                     strict=True)], gaps
 
 
 def find_gaps(ts: TimeSeries, encoders: StreamCheck, poses: StreamCheck) -> list[Gap]:

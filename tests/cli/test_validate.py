@@ -439,3 +439,29 @@ def test_a_counter_that_overflows_is_unwrapped_and_said_so(capsys, tmp_path, par
     assert code == 0 and "excite validation" in out
     assert err == (f"excite: note: {path}: ticks_L (16-bit counter), ticks_R (16-bit counter) "
                    "overflowed, unwrapped\n")
+
+
+def test_a_log_with_an_encoder_gap_is_dead_reckoned_in_parts(capsys, tmp_path, noisy_log,
+                                                             params_file):
+    """Five seconds of both streams missing: across the gap the wheels' path is unknown (one
+    straight arc between two encoder samples 5 s apart took the calibrated robot metres off
+    and the verdict flipped to "no better"); each part is dead-reckoned from its own first
+    pose, with a note naming the gap."""
+    series = noisy_log.series
+    keep_enc = (series.t_enc < 20.0) | (series.t_enc > 25.0)
+    keep_pose = (series.t_pose < 20.0) | (series.t_pose > 25.0)
+    holed = TimeSeries(series.t_enc[keep_enc], series.phi_L[keep_enc], series.phi_R[keep_enc],
+                       series.t_pose[keep_pose], series.x[keep_pose], series.y[keep_pose],
+                       series.theta[keep_pose])
+    files = write_log(tmp_path, "holed", holed)
+    code, out, err = run_cli(capsys, "validate", *files, "--params", params_file, "--nominal",
+                             "0.05,0.05,0.3", "--json")
+    assert code == 0
+    [note] = err.splitlines()
+    assert note.startswith(f"excite: note: {'+'.join(files)}: cut at 1 encoder gap(s) longer "
+                           "than the window (1 s), the longest 5.0")
+    assert note.endswith("each of its 2 parts is dead-reckoned from its own first pose")
+    logs = json.loads(out)["logs"]
+    assert [e["file"] for e in logs] == [f"{'+'.join(files)} (part {k} of 2)" for k in (1, 2)]
+    for entry in logs:
+        assert entry["calibrated"]["rms_path_error"] < 0.02 and entry["verdict"] == "better"
