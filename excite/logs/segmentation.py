@@ -8,9 +8,9 @@ Segment boundaries are pose samples, and poses are never interpolated: a segment
 increment is the difference of two measured poses, so consecutive segments share exactly one
 pose sample (``SegmentedLog.shares_endpoints``) and nothing else. The encoder angles are
 interpolated at the boundary times (encoders are usually denser and far less noisy than
-poses) by a monotone cubic (PCHIP): a straight line errs by up to max|phi''| h^2 / 8 for an
-encoder period h (1e-4 rad at 100 Hz and 8 rad/s^2, but 6 standard errors of bias on b with
-12.5 Hz encoders), the cubic by O(h^3), and it never overshoots a standstill.
+poses) along the wheels' path between samples (:mod:`excite.logs.wheel_path`): a monotone
+cubic, or for slow encoders whose log's heading says so, straight lines (one arc per encoder
+period).
 
 Segmentation
 ------------
@@ -80,6 +80,7 @@ from excite.logs.continuity import (
 )
 from excite.logs.segments import MIN_SEGMENTS, Segments
 from excite.logs.timeseries import TimeSeries, unwrapped_words
+from excite.logs.wheel_path import MAX_SUBSTEP, WheelPath, path_between_samples, wheel_angles
 
 __all__ = ["SegmentationReport", "SegmentedLog", "segment_timeseries", "POSE_JUMP",
            "ENCODER_JUMP", "STANDSTILL", "CARRIED", "CUT_BY_GAP", "END_OF_LOG",
@@ -101,11 +102,6 @@ OFF_TRACK = ("off the track (out and back beyond the jump limits: a marker swap 
 #: left a systematic model error of ~1e-5 m per 1 s segment on curving paths, which biased the
 #: wheel radii by 1.7 standard deviations at 0.5 mm pose noise (benchmarks/bench_logs.py).
 MAX_SUBSTEPS = 256
-#: s, the longest sub-step: slower encoders get several sub-steps per period, through the cubic
-#: interpolant (:func:`wheel_angles`). One arc per 40 ms period biased b by 0.65 standard
-#: errors, per 80 ms by 2.6 (even with the cubic boundaries; 6 with straight lines); 20 ms
-#: sub-steps leave no bias at 12.5 Hz (synthetic logs, 100 Hz poses of 1 mm / 2 mrad).
-MAX_SUBSTEP = 0.02
 #: Fixed windows end near encoder samples when the encoders' median period is over this many
 #: times the poses' (module docstring).
 COARSER = 1.5
@@ -131,6 +127,9 @@ class SegmentationReport:
     encoder time range, inside an encoder gap, off the track). gaps: every gap, in time
     order. dropouts: missed samples per stream, bridged. unwrapped_wheels: the wheel columns
     that were wrapped modulo 2 pi and were unwrapped (TimeSeries.unwrapped_wheels).
+    wheel_path: how the wheels turned between encoder samples, as the segments read them
+    (:mod:`excite.logs.wheel_path`: "cubic", or "arcs" for a log of slow encoders whose
+    heading follows straight wheel angles clearly better).
     """
 
     n_segments: int
@@ -141,6 +140,7 @@ class SegmentationReport:
     dropouts: dict[str, int] = field(default_factory=dict)
     unwrapped_wheels: tuple[str, ...] = ()
     unwrapped_counters: tuple[str, ...] = ()
+    wheel_path: WheelPath = "cubic"
 
     def unwrapped_text(self) -> str:
         """'phi_L, phi_R wrapped modulo 2 pi, unwrapped' and/or 'ticks_L (16-bit counter)
@@ -158,6 +158,10 @@ class SegmentationReport:
     def summary(self) -> str:
         """The report in words, one fact per line."""
         lines = [f"{_plural(self.n_segments, 'segment')} kept."]
+        if self.wheel_path == "arcs":
+            lines.append("Wheel speeds constant between encoder samples (one arc per encoder "
+                         "period: the heading follows that clearly better than a smooth "
+                         "curve).")
         if self.unwrapped_text():
             lines.append(f"Wheel angles {self.unwrapped_text()}.")
         dropped = sum(self.segments_dropped.values())
@@ -300,19 +304,6 @@ def _cut(ts: TimeSeries, t_pose: FloatArray, stretches: _Stretches, window: floa
     return _Cut(np.concatenate([empty, *starts]), np.concatenate([empty, *ends]), tails)
 
 
-def wheel_angles(ts: TimeSeries) -> Callable[[FloatArray], FloatArray]:
-    """The wheels' cumulative angles (rad) at any times (s, encoder clock, within the stream),
-    (..., 2) for (phi_L, phi_R): a monotone cubic (PCHIP, Fritsch-Carlson) between the
-    samples. On a smoothly accelerating wheel it errs by O(h^3) of the encoder period h, where
-    a straight line errs by max|phi''| h^2 / 8 (a bias of 6 standard errors on b with 12.5 Hz
-    encoders and 100 Hz poses); it never leaves the range of the two samples around (no
-    overshoot at a standstill or a command step) and is exact at the samples."""
-    from scipy.interpolate import PchipInterpolator
-
-    return PchipInterpolator(ts.t_enc, np.column_stack([ts.phi_L, ts.phi_R]),
-                             extrapolate=False)
-
-
 def _increments(ts: TimeSeries, wheels: Callable[[FloatArray], FloatArray],
                 t_pose: FloatArray, start: IntArray, end: IntArray) -> FloatArray:
     """(N, 5) segments: encoder increments interpolated at the boundary times (rad) and the
@@ -323,13 +314,16 @@ def _increments(ts: TimeSeries, wheels: Callable[[FloatArray], FloatArray],
 
 
 def _substeps(ts: TimeSeries, wheels: Callable[[FloatArray], FloatArray], t_a: FloatArray,
-              t_b: FloatArray) -> tuple[FloatArray, FloatArray, IntArray]:
+              t_b: FloatArray, path: WheelPath) -> tuple[FloatArray, FloatArray, IntArray]:
     """Each segment's encoder sub-increments (N, K) over its own count (N,) of equal
     sub-intervals of [t_a, t_b] (s, encoder clock), zero-padded to the largest: sub-intervals
-    of about the (median) encoder period, or MAX_SUBSTEP when the encoders are slower (the
-    angles between samples from the cubic interpolant), at most MAX_SUBSTEPS. They sum to the
+    of about the (median) encoder period, or MAX_SUBSTEP when the encoders are slower and
+    ``path`` is "cubic" (the angles between samples from the cubic interpolant;
+    :mod:`excite.logs.wheel_path`), at most MAX_SUBSTEPS. They sum to the
     segment's increments exactly."""
-    period = min(float(np.median(np.diff(ts.t_enc))), MAX_SUBSTEP)
+    period = float(np.median(np.diff(ts.t_enc)))
+    if path == "cubic":
+        period = min(period, MAX_SUBSTEP)
     duration = t_b - t_a
     count = np.clip(np.ceil(duration / period - 1e-9), 1, MAX_SUBSTEPS)
     count = count.astype(np.int64)
@@ -385,9 +379,11 @@ def _merged(ranges: list[tuple[float, float]]) -> tuple[tuple[float, float], ...
 
 def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: int,
             stretches: _Stretches, gaps: list[Gap], encoders: StreamCheck,
-            poses: StreamCheck, ts: TimeSeries, off_track: int) -> SegmentationReport:
+            poses: StreamCheck, ts: TimeSeries, off_track: int, path: WheelPath
+            ) -> SegmentationReport:
     """What was kept and dropped, and why (dropped ranges on the encoder clock;
-    ``off_track``: the pose samples left out as off the track)."""
+    ``off_track``: the pose samples left out as off the track; ``path``: the wheels' path
+    between encoder samples)."""
     ranges = {reason: [(t_pose[a], t_pose[b]) for a, b in zip(cut.start[mask], cut.end[mask],
                                                               strict=True)]
               for reason, mask in reasons.items()}
@@ -404,6 +400,7 @@ def _report(t_pose: FloatArray, cut: _Cut, reasons: dict[str, BoolArray], kept: 
         dropouts={"encoder": encoders.dropouts, "pose": poses.dropouts},
         unwrapped_wheels=ts.unwrapped_wheels,
         unwrapped_counters=ts.unwrapped_counters,
+        wheel_path=path,
     )
 
 
@@ -456,13 +453,13 @@ def _refuse_too_few_segments(ts: TimeSeries, t_pose: FloatArray, report: Segment
 
 
 def _segmented_log(ts: TimeSeries, wheels: Callable[[FloatArray], FloatArray],
-                   t_pose: FloatArray, start: IntArray, end: IntArray, rows: FloatArray,
-                   report: SegmentationReport) -> SegmentedLog:
+                   path: WheelPath, t_pose: FloatArray, start: IntArray, end: IntArray,
+                   rows: FloatArray, report: SegmentationReport) -> SegmentedLog:
     """The kept segments (boundary samples ``start``, ``end``; their ``rows`` of
-    :func:`_increments`) with their time spans, chaining and sub-steps."""
+    :func:`_increments`) with their time spans, chaining and sub-steps along ``path``."""
     t_start, t_end = t_pose[start], t_pose[end]
     shares = np.concatenate(([False], start[1:] == end[:-1]))
-    sub_L, sub_R, count = _substeps(ts, wheels, t_start, t_end)
+    sub_L, sub_R, count = _substeps(ts, wheels, t_start, t_end, path)
     segments = Segments(*rows.T, t_start=t_start, t_end=t_end, chained=shares,
                         sub_dphi_L=sub_L, sub_dphi_R=sub_R, sub_count=count)
     return SegmentedLog(segments=segments, t_start=t_start, t_end=t_end,
@@ -502,12 +499,13 @@ def segment_timeseries(
     t_pose = ts.t_pose + time_offset
     stretches = _stretches(ts.t_enc, t_pose, encoders, poses)
     cut = _cut(ts, t_pose, stretches, window, min_distance, min_angle)
-    wheels = wheel_angles(ts)
+    path = path_between_samples(ts, time_offset)
+    wheels = wheel_angles(ts, path)
     rows = _increments(ts, wheels, t_pose, cut.start, cut.end)
     reasons = _drop_reasons(ts, t_pose, cut, rows, encoders, poses, limits, noise)
     keep = ~np.logical_or.reduce(list(reasons.values()))
     report = _report(t_pose, cut, reasons, int(keep.sum()), stretches, gaps, encoders, poses,
-                     ts, off_track)
+                     ts, off_track, path)
     _refuse_too_few_segments(ts, t_pose, report)
-    return _segmented_log(ts, wheels, t_pose, cut.start[keep], cut.end[keep], rows[keep],
+    return _segmented_log(ts, wheels, path, t_pose, cut.start[keep], cut.end[keep], rows[keep],
                           report)

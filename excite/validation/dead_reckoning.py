@@ -16,7 +16,7 @@ Dead reckoning (one choice, everywhere)
   curvature from its neighbours (:func:`excite.core.models.curvature_change`: an arc per
   interval alone drifts by O(h^2) of the encoder period on curving paths). At the pose times
   the cumulative wheel angles are interpolated by the segmentation's monotone cubic
-  (:func:`excite.logs.segmentation.wheel_angles`): the integration grid is the union of the
+  (:func:`excite.logs.wheel_path.wheel_angles`): the integration grid is the union of the
   encoder and pose times. Across a gap in the encoder stream the motion is one arc, like any
   other interval.
 * Poses are composed in SE(2) (:mod:`excite.core.se2`), vectorised: the heading is the cumulative
@@ -76,9 +76,9 @@ from excite.core.kinematics import Arc, Params, wrap_angle
 from excite.core.models import SensorPose, curvature_change
 from excite.errors import DataError
 from excite.logs.continuity import check_continuity
-from excite.logs.segmentation import wheel_angles
 from excite.logs.segments import read_text
 from excite.logs.timeseries import TimeSeries
+from excite.logs.wheel_path import wheel_angles
 from excite.validation.verdict import METRIC, Verdict, judge
 
 __all__ = [

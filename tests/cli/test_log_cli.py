@@ -516,3 +516,39 @@ def test_options_no_input_reads_are_noted(capsys, tmp_path, logs):
     code, _, err = run_cli(capsys, "segment", logs[0], "--out", str(tmp_path / "s2.csv"),
                            "--tf", "map:base")
     assert code == 0 and "--tf ignored: read from bags only" in err
+
+
+@pytest.mark.parametrize("every", [4, 5, 10])
+def test_slow_encoders_of_a_robot_driven_by_held_commands(capsys, tmp_path, every):
+    """The ideal env driven by `arcs` (a command held for each 1 s segment, the wheels
+    settling within 0.1 s), its 50 Hz encoders thinned to 12.5, 10 and 5 Hz under the 100 Hz
+    poses: through the smooth cubic every speed step bent the path the same way, and the
+    wheels came out 3.5-7 std high beside 'fit ok'; the log now reads one arc per encoder
+    period where its heading says so (10 and 5 Hz), the windows end near encoder samples,
+    and every parameter is within 3 std."""
+    import csv
+
+    from excite.logs.timeseries_csv import read_timeseries
+    from excite.logs.wheel_path import path_between_samples
+
+    full, thin = tmp_path / "full.csv", tmp_path / "thin.csv"
+    assert run_cli(capsys, "simulate", "--env", "excite/DiffDriveCalibIdeal-v0", "--protocol",
+                   "arcs", "--segments", 40, "--seed", 2, "--format", "timeseries", "--out",
+                   full)[0] == 0
+    with open(full, newline="") as source, open(thin, "w", newline="") as sink:
+        rows, out = csv.reader(source), csv.writer(sink)
+        out.writerow(next(rows))
+        encoder = 0
+        for row in rows:
+            if row[1]:
+                row[1:3] = row[1:3] if encoder % every == 0 else ["", ""]
+                encoder += 1
+            if row[1] or row[3]:
+                out.writerow(row)
+    series = read_timeseries([thin], ticks_per_rev=4096)
+    assert path_between_samples(series) == ("cubic" if every == 4 else "arcs")
+    code, out, _ = run_cli(capsys, "calibrate", thin, "--ticks-per-rev", 4096, "--json")
+    report = json.loads(out)
+    truth = json.loads((tmp_path / "full.truth.json").read_text())
+    z = [(report["params"][k] - truth[k]) / report["std"][k] for k in ("r_L", "r_R", "b")]
+    assert code == 0 and max(map(abs, z)) < 3, z

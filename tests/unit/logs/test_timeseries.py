@@ -668,6 +668,22 @@ def test_windows_end_near_encoder_samples_when_the_encoders_are_coarser(encoder_
     assert np.all(np.abs(seg.t_end - seg.t_start - 1.0) <= period + 1e-9)
 
 
+@pytest.mark.parametrize("encoder_rate", [100.0, 12.5, 5.0, 2.0])
+def test_smooth_driving_reads_the_wheels_through_the_cubic(encoder_rate):
+    """Smooth random curves (no command steps), 100 Hz poses: the cubic explains the heading
+    as well or better at every encoder rate, so it stays the wheels' path (the straight
+    reading biased the wheels by 1.7 std at 5 Hz); its segmentation report says nothing."""
+    from excite.logs.synthetic import synthetic_log
+    from excite.logs.wheel_path import path_between_samples
+
+    for seed in range(3):
+        ts = synthetic_log(np.random.default_rng(seed), 60.0, encoder_rate=encoder_rate,
+                           pose_rate=100.0, pose_noise=(0.002, 0.002), ticks_per_rev=4096).series
+        assert path_between_samples(ts) == "cubic", seed
+    report = segment_timeseries(ts).report
+    assert report.wheel_path == "cubic" and "arc per encoder" not in report.summary()
+
+
 def test_a_given_offset_is_tested_against_the_data():
     """A one-minute log with a 30 ms offset: the right offset given passes, a wrong one
     (0, the wrong sign, 0.3 s) is rejected with the offset the data show, and one beyond the
