@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         for part in calibration.parts:
             print(part.describe())
         if status != EXIT_OK:
-            for line in _clock_doubts(calibration):
+            for line in _clock_doubts(calibration, args.max_time_offset):
                 print(line)
         print(result.summary(initial))
         if estimated_pose is not None and status == EXIT_OK:  # as --ros2-yaml: usable only
@@ -134,16 +134,30 @@ def run(args: argparse.Namespace) -> int:
     return status
 
 
-def _clock_doubts(calibration: LogCalibration) -> list[str]:
-    """For a calibration that failed: each log whose clocks the data say are offset beyond
-    the search range (0 was used), first in the report, since that alone spoils the fit
-    whatever the driving."""
-    return [f"clocks first: {part.log.name}: 0 was used for the clock offset, but "
-            f"{part.log.hint.text()}; an offset alone can make the fit fail or determine "
-            "nothing, whatever the driving"
-            for part in calibration.parts
-            if part.log is not None and part.log.hint is not None
-            and part.log.offset_source == "default"]
+def _clock_doubts(calibration: LogCalibration, max_offset: float) -> list[str]:
+    """For a calibration that failed: each log whose clocks the data say are offset while 0
+    was used (beyond the search range, or a best lag the test of a zero offset did not
+    confirm), first in the report, since that alone spoils the fit whatever the driving."""
+    from excite.logs.time_offset import untested_offset
+
+    lines = []
+    for part in calibration.parts:
+        log = part.log
+        if log is None or log.offset_source != "default":
+            continue
+        if log.hint is not None:
+            lines.append(f"clocks first: {log.name}: 0 was used for the clock offset, but "
+                         f"{log.hint.text()}; an offset alone can make the fit fail or "
+                         "determine nothing, whatever the driving")
+            continue
+        best = untested_offset(log.series, max_offset)
+        if best is not None:
+            lines.append(f"clocks first: {log.name}: 0 was used for the clock offset, but the "
+                         f"wheel rates explain the heading rate best at {best:+.4f} s (the "
+                         "test of a zero offset did not reject it, which it may miss on this "
+                         "driving); an offset alone can make the fit fail: try --time-offset "
+                         "estimate")
+    return lines
 
 
 def _refuse_implausible(files: list[str], result: CalibrationResult,

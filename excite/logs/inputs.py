@@ -313,6 +313,9 @@ def _read_series(source: Input, options: LogOptions, note: OnNote
         if not options.left_wheel or not options.right_wheel:
             raise DataError(f"{source.name}: a bag needs --left-wheel and --right-wheel "
                             "(joint names in the JointState messages)")
+        if options.left_wheel == options.right_wheel:
+            raise DataError(f"{source.name}: --left-wheel and --right-wheel name the same "
+                            f"joint {options.left_wheel!r}")
         if (options.pose_topic is None) == (options.tf is None):
             raise DataError(f"{source.name}: a bag needs exactly one pose source: "
                             "--pose-topic TOPIC or --tf PARENT:CHILD")
@@ -405,7 +408,7 @@ def read_log(source: Input, options: LogOptions, *, whole: bool = False,
     if offset_source == "detected":
         note(f"{source.name}: the pose stamps are offset from the encoder stamps by "
              f"{offset:+.4f} s (pose time + offset = encoder time): the data reject a zero "
-             f"offset (a stamp latency), so the calibration uses it; {OVERRULE}")
+             f"offset (a stamp latency), so it is used; {OVERRULE}")
     elif hint is not None and offset_source == "given":
         note(f"{source.name}: the data reject the given clock offset {offset:+.4f} s (pose "
              f"time + offset = encoder time): {hint.text()}")

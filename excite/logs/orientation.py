@@ -30,6 +30,8 @@ MIN_QUATERNION_NORM = 1e-3
 #: The largest tilt (rad) of the pose's z axis from the world z axis: a ground robot's sensor
 #: stays near z-up (a ramp tilts it a few degrees); more means another frame convention.
 MAX_TILT = math.radians(45.0)
+#: A z axis tilted more than this from up points down: upside down rather than Y-up (90).
+UPSIDE_DOWN = math.radians(135.0)
 
 
 def headings(q: np.ndarray, where: Callable[[int], str]) -> np.ndarray:
@@ -53,11 +55,15 @@ def headings(q: np.ndarray, where: Callable[[int], str]) -> np.ndarray:
     tilt = np.arccos(np.clip(_cos_tilt(q), -1.0, 1.0))
     if np.any(tilt > MAX_TILT):
         i = int(np.argmax(tilt))
+        why = (": upside down, a sensor mounted rolled by 180 degrees or a world frame with "
+               "z down? Give the poses of a frame whose z axis points up"
+               if tilt[i] > UPSIDE_DOWN else
+               ": a Y-up frame? Motion capture systems often stream Y-up; convert the poses "
+               "to Z-up")
         raise DataError(f"{where(i)}: the pose's z axis is tilted "
                         f"{math.degrees(tilt[i]):.1f} degrees from the world z axis (the "
                         f"largest tilt; a ground robot stays within "
-                        f"{math.degrees(MAX_TILT):.0f}): a Y-up frame? Motion capture systems "
-                        "often stream Y-up; convert the poses to Z-up")
+                        f"{math.degrees(MAX_TILT):.0f}){why}")
     return np.arctan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
 
 

@@ -20,7 +20,7 @@ from excite.logs.timeseries import TimeSeries
 
 __all__ = ["MAX_TIME_OFFSET", "OffsetFit", "OffsetHint", "OffsetOutOfRange",
            "estimate_time_offset", "explained", "noticeable_time_offset", "offset_fit",
-           "refined_lag", "rejected_offset", "smoothed_change"]
+           "refined_lag", "rejected_offset", "smoothed_change", "untested_offset"]
 
 FloatArray = NDArray[np.float64]
 
@@ -344,3 +344,19 @@ def rejected_offset(ts: TimeSeries, offset: float, max_offset: float = MAX_TIME_
         return None
     return OffsetHint(None if hint.offset is None else hint.offset + offset, max_offset,
                       tuple(lag + offset for lag in hint.beyond))
+
+
+def untested_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET) -> float | None:
+    """The lag (s; pose time + offset = encoder time) at which the wheel rates explain the
+    heading rate best, when it lies beyond NOTICEABLE_OFFSET_PERIODS of the coarser stream's
+    period, whether or not the test of a zero offset rejects zero
+    (:func:`noticeable_time_offset`; on some driving, long holds between smooth ramps, that
+    test has little power where the estimate is still close to the truth); None when it lies
+    within that floor or cannot be estimated. For a calibration that failed: a clock offset
+    alone can make it fail."""
+    try:
+        offset = offset_fit(ts, max_offset, MIN_CORRELATION).offset
+    except DataError:
+        return None
+    coarser = max(float(np.median(np.diff(ts.t_enc))), float(np.median(np.diff(ts.t_pose))))
+    return offset if abs(offset) > NOTICEABLE_OFFSET_PERIODS * coarser else None

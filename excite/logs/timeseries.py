@@ -219,8 +219,8 @@ def during(series: TimeSeries, start: float | None = None, end: float | None = N
     for k, (name, mask) in enumerate(zip(("encoder", "pose"), keep, strict=True)):
         if mask.sum() < 2:
             raise DataError(f"{series.source[k]}: fewer than 2 {name} samples between "
-                            f"{lo:g} and {hi:g} s (its stamps run from {stamps[k][0]:.9g} to "
-                            f"{stamps[k][-1]:.9g} s; --start and --end are in the log's own "
+                            f"{lo:.3f} and {hi:.3f} s (its stamps run from {stamps[k][0]:.3f} "
+                            f"to {stamps[k][-1]:.3f} s; --start and --end are in the log's own "
                             "stamps)")
     return _subset(series, *keep)
 

@@ -424,7 +424,7 @@ def test_during_keeps_the_samples_between_two_times():
     assert part.t_enc.min() >= 2.0 and part.t_enc.max() <= 4.0
     assert part.t_pose.min() >= 2.0 and part.t_pose.max() <= 4.0
     from excite.errors import DataError
-    with pytest.raises(DataError, match=r"fewer than 2 encoder samples between 100 and inf s "
+    with pytest.raises(DataError, match=r"fewer than 2 encoder samples between 100\.000 and inf s "
                                         r"\(its stamps run from 0\.\d+ to 6\.\d+ s; --start and "
                                         r"--end are in the log's own stamps\)"):
         during(series, 100.0, None)

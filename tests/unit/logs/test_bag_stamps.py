@@ -330,3 +330,19 @@ def test_a_y_up_world_is_turned_z_up(tmp_path, log, body):
     assert bag.notes == (f"{path} /sensor_pose: the poses are Y-up (the world's y axis up, as "
                          "motion capture streams by default; the body its "
                          f"{axis}): turned Z-up, positions (x, y, z) read as (x, -z, y)",)
+
+
+def test_an_upside_down_pose_is_not_called_y_up():
+    """A pose rolled by 180 degrees (a sensor mounted upside down, a world frame with z down)
+    is refused with those words; one tilted 90 degrees is the Y-up case."""
+    from excite.logs.orientation import headings
+
+    where = lambda i: f"sample {i}"  # noqa: E731
+    rolled = np.array([[1.0, 0.0, 0.0, 0.0]] * 3)  # (x, y, z, w): 180 degrees about x
+    with pytest.raises(DataError, match=r"sample 0: the pose's z axis is tilted 180\.0 degrees "
+                                        r".*: upside down, a sensor mounted rolled by 180"):
+        headings(rolled, where)
+    half = np.sqrt(0.5)
+    y_up = np.array([[half, 0.0, 0.0, half]] * 3)  # 90 degrees about x
+    with pytest.raises(DataError, match=r"tilted 90\.0 degrees .*: a Y-up frame\?"):
+        headings(y_up, where)
