@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import signal
 from pathlib import Path
@@ -148,6 +149,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         session.add_argument(flag, dest=field, type=positive_number, metavar=metavar,
                              default=_default("LiveSettings", field),
                              help=f"{text} (default %(default)g)")
+    session.add_argument("--time-offset", type=_finite_seconds, metavar="S",
+                         default=_default("LiveSettings", "time_offset"),
+                         help="pose time + S = wheel time (s), as excite calibrate "
+                         "--time-offset: the session's log is cut with it (a pose source's "
+                         "stamp latency; excite calibrate --time-offset estimate on a "
+                         "recorded session measures it; default %(default)g)")
     add_seed_option(session, "seed of the protocol's random choices (default %(default)s)")
     out = p.add_argument_group("output")
     add_result_options(out, "--nominal or --robot")
@@ -217,7 +224,7 @@ def settings_from(args: argparse.Namespace):
             nominal=nominal, max_wheel_speed=speed, speed_fraction=args.speed_fraction,
             area=area, radius=args.radius, area_size=side, chassis=chassis, traction=traction,
             max_wheel_acceleration=args.max_wheel_accel,
-            sensor_pose=sensor_pose_arg(args.sensor_pose),
+            sensor_pose=sensor_pose_arg(args.sensor_pose), time_offset=args.time_offset,
             **{field: getattr(args, field) for _, field, _, _ in _SESSION_NUMBERS})
     except ValueError as exc:  # named as the options that set the fields
         message = str(exc)
@@ -230,6 +237,16 @@ def settings_from(args: argparse.Namespace):
 _OPTION_OF = {field: flag for flag, field, _, _ in _SESSION_NUMBERS} | {
     "speed_fraction": "--speed-fraction", "max_wheel_acceleration": "--max-wheel-accel",
     "max_wheel_speed": "--max-wheel-speed", "radius": "--radius"}
+
+
+def _finite_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
 
 
 def _protocol(text: str, settings):
@@ -359,6 +376,7 @@ def _report(args: argparse.Namespace, result, settings) -> UsageError | None:
                        "--split-at-gaps"
                        + (f" --window {args.segment_duration:g}"
                           if args.segment_duration != 1.0 else "")
+                       + (f" --time-offset {args.time_offset!r}" if args.time_offset else "")
                        + (f" --start {result.calibrated_from!r}"
                           if result.calibrated_from is not None else ""))
     if args.ros2_yaml and result.calibration is not None:

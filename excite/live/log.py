@@ -50,19 +50,22 @@ def increment_noise(result: CalibrationResult, duration: float) -> np.ndarray:
     return np.sqrt(variance)
 
 
-def cut(series: TimeSeries, window: float) -> Segments:
+def cut(series: TimeSeries, window: float, time_offset: float = 0.0) -> Segments:
     """A session's log cut into segments as ``excite calibrate --window WINDOW
-    --split-at-gaps`` cuts it (ExciteError when it cannot be, e.g. too few segments)."""
-    return segment_timeseries(series, window=window, on_gap="split").segments
+    --time-offset TIME_OFFSET --split-at-gaps`` cuts it (ExciteError when it cannot be, e.g.
+    too few segments)."""
+    return segment_timeseries(series, window=window, time_offset=time_offset,
+                              on_gap="split").segments
 
 
 def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal,
-               previous: StopDecision | None = None) -> StopDecision | None:
-    """The stopping rule's decision on a session's log so far, ``previous`` the decision at
-    an earlier look of it (the rule's screen then spares most looks the batch calibration);
-    None while the log cannot be cut into segments yet."""
+               previous: StopDecision | None = None, time_offset: float = 0.0
+               ) -> StopDecision | None:
+    """The stopping rule's decision on a session's log so far cut with ``time_offset`` (s),
+    ``previous`` the decision at an earlier look of it (the rule's screen then spares most
+    looks the batch calibration); None while the log cannot be cut into segments yet."""
     try:
-        segments = cut(series, window)
+        segments = cut(series, window, time_offset)
     except ExciteError:
         return None
     return rule.decide(segments, nominal, previous=previous)

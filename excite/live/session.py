@@ -368,7 +368,7 @@ class LiveSession:
         series = self._series(self._epoch)
         if series is None:
             raise ExciteError("no wheel angles and poses yet")
-        return cut(series, self.settings.segment_duration)
+        return cut(series, self.settings.segment_duration, self.settings.time_offset)
 
     def _start_decision(self, screen: bool = True) -> None:
         """The stopping rule on the log so far (:func:`decide_log`; ``screen``: passing the
@@ -380,7 +380,7 @@ class LiveSession:
         if series is None:
             return
         args = (self.rule, series, self.settings.segment_duration, self.settings.nominal,
-                self._decision if screen else None)
+                self._decision if screen else None, self.settings.time_offset)
         self._pending_epoch = self._epoch
         if self.executor is None:
             try:
