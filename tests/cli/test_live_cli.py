@@ -40,6 +40,9 @@ TOPICS = ["--left-wheel", "l", "--right-wheel", "r", "--pose-topic", "/pose"]
     (["--robot", "default", "--target-confidence", "1"], "--target-confidence must be in (0, 1)"),
     (["--robot", "default", "--segment-duration", "1e300"],
      "--segment-duration (1e+300 s) must be at most --max-time (600 s)"),
+    (["--robot", "default", "--time-offset", "nan"], "--time-offset: must be finite, got 'nan'"),
+    (["--robot", "default", "--time-offset", "estimate"],
+     "--time-offset: must be a number of seconds, got 'estimate'"),
 ])
 def test_bad_live_input(capsys, args, words):
     code, _, err = run_cli(capsys, "live", *TOPICS, *args)
