@@ -64,6 +64,17 @@ def floats(text: str, names: str, what: str, positive: bool = True) -> tuple[flo
     return tuple(values)
 
 
+def finite_number(text: str) -> float:
+    """A finite number (an argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
+
+
 def positive_number(text: str) -> float:
     """A finite number > 0 (an argparse type)."""
     try:

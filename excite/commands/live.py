@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import re
 import signal
 from pathlib import Path
@@ -15,6 +14,7 @@ from excite.commands.args import (
     POSE_VALUES,
     UsageError,
     check_writable,
+    finite_number,
     floats,
     params_arg,
     positive_number,
@@ -149,7 +149,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         session.add_argument(flag, dest=field, type=positive_number, metavar=metavar,
                              default=_default("LiveSettings", field),
                              help=f"{text} (default %(default)g)")
-    session.add_argument("--time-offset", type=_finite_seconds, metavar="S",
+    session.add_argument("--time-offset", type=finite_number, metavar="S",
                          default=_default("LiveSettings", "time_offset"),
                          help="pose time + S = wheel time (s), as excite calibrate "
                          "--time-offset: the session's log is cut with it (a pose source's "
@@ -237,16 +237,6 @@ def settings_from(args: argparse.Namespace):
 _OPTION_OF = {field: flag for flag, field, _, _ in _SESSION_NUMBERS} | {
     "speed_fraction": "--speed-fraction", "max_wheel_acceleration": "--max-wheel-accel",
     "max_wheel_speed": "--max-wheel-speed", "radius": "--radius"}
-
-
-def _finite_seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-    return value
 
 
 def _protocol(text: str, settings):

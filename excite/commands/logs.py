@@ -7,12 +7,11 @@ user, printed on stderr as they arise (:func:`print_note`).
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from dataclasses import fields
 from typing import Any
 
-from excite.commands.args import positive_number
+from excite.commands.args import finite_number, positive_number
 from excite.logs.inputs import DEFAULT_LOG_OPTIONS, LogOptions
 
 __all__ = ["LOG_FILES", "add_log_options", "log_options", "print_note"]
@@ -21,27 +20,15 @@ __all__ = ["LOG_FILES", "add_log_options", "log_options", "print_note"]
 LOG_FILES = "time-series CSV (or a pair of stream CSVs) or ROS bag"
 
 
-def _finite(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-    return value
-
-
 def _offset(text: str) -> float | str:
     if text == "estimate":
         return text
     try:
-        value = float(text)
+        float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be a number of seconds or 'estimate', "
                                          f"got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-    return value
+    return finite_number(text)
 
 
 def _frame_pair(text: str) -> tuple[str, str]:
@@ -59,7 +46,7 @@ def _wheel_joint(side: str) -> dict[str, Any]:
 
 def _time_bound(text: str) -> dict[str, Any]:
     """The keywords of --start or --end: read only the samples stamped ``text``."""
-    return {"type": _finite, "metavar": "S", "help": f"read only the samples stamped {text}"}
+    return {"type": finite_number, "metavar": "S", "help": f"read only the samples stamped {text}"}
 
 
 #: The options that cut logs into segments: a field of LogOptions and add_argument's keywords
