@@ -10,9 +10,8 @@ Two readings of the path between samples:
 * ``"arcs"``: the angles straight between samples, the wheel speeds constant within each
   encoder period (each period one arc): a robot driven by commands held over intervals, whose
   speeds settle within a period. Through the cubic, such a log's speed steps bend the path
-  within the period after each step the same way every time: with 5-10 Hz encoders under
-  100 Hz poses and a step at every segment's start the wheels came out 4.5-7 standard errors
-  high, the fit passing; straight, within 0.3.
+  within the period after each step the same way every time, a bias of the wheels that the
+  fit does not see (BENCHMARKS.md, "Logs as real exports differ").
 
 With encoders at least 1 / MAX_SUBSTEP fast (50 Hz) the two differ by less than the noise and
 the cubic is used. With slower ones the log decides (:func:`path_between_samples`): the
@@ -45,11 +44,9 @@ WheelPath = Literal["cubic", "arcs"]
 #: 12.5 Hz, synthetic logs of 100 Hz poses of 1 mm / 2 mrad), unless the log reads "arcs".
 MAX_SUBSTEP = 0.02
 #: Arcs are read when the straight angles' wheel rates leave at most this share of the heading
-#: rate's unexplained variance that the cubic's leave. Measured (one-minute logs, 100 Hz
-#: poses): smooth synthetic driving 0.998-1.12 at 12.5 Hz, 1.005-1.9 at 5 Hz, 1.04-4.8 at
-#: 2 Hz (24 logs each: three pose-noise settings); an env's arcs protocol, commands held over
-#: 1 s, 0.04-0.2 at 2-10 Hz, its random protocol 0.1-0.2 at 5-10 Hz (1.05 at 12.5 Hz, where
-#: the cubic is within 1.3 standard errors).
+#: rate's unexplained variance that the cubic's leave: clear of smooth driving, where the
+#: share is about 1 or more at every encoder rate, and of held commands, where it is a few
+#: tenths (the ranges measured: BENCHMARKS.md, "Logs as real exports differ").
 ARCS_SHARE = 0.9
 
 
