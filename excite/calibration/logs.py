@@ -222,10 +222,10 @@ def _between_encoder_gaps(log: Log, window: float, note: OnNote
         raise DataError(f"{log.name}: no part between its encoder gaps holds 2 samples of "
                         "each stream")
     longest = max(gaps, key=lambda gap: gap.duration)
-    note(f"{log.name}: cut at {len(gaps)} encoder gap(s) longer than the window ({window:g} s), "
-         f"the longest {longest.duration:.3f} "
-         f"s ({longest.location}): the wheels' path across a gap is unknown, so each of its "
-         f"{len(pieces)} parts is dead-reckoned from its own first pose")
+    note(f"{log.name}: cut at {len(gaps)} encoder gap(s) longer than the window ({window:g} "
+         f"s), the longest {longest.duration:.3f} s ({longest.location}): the wheels' path "
+         f"across a gap is unknown, so each of its {len(pieces)} parts is dead-reckoned from "
+         "its own first pose")
     return [(f"{log.name} (part {k + 1} of {len(pieces)})", piece)
             for k, piece in enumerate(pieces)]
 
