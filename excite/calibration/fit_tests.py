@@ -107,25 +107,22 @@ def _against_given(mf: ModelFit, sigma: FloatArray) -> tuple[FloatArray, FloatAr
     given levels ``sigma`` are right (h_c the degrees of freedom the fit takes from channel
     c), and those degrees of freedom."""
     system = normal_system(mf.fit.ev, sigma, "linear")
-    inverse = np.linalg.pinv(system.information, hermitian=True)
-    dof = mf.problem.n - np.einsum("ij,cji->c", inverse, system.channel_information)
-    return mf.fit.ev.unit_system()[2] / sigma**2, dof
+    return mf.fit.ev.unit_system()[2] / sigma**2, mf.problem.n - system.channel_dof()
 
 
-def _goodness_of_fit(mf: ModelFit, sigma: FloatArray) -> tuple[bool, FloatArray]:
-    """Residuals against given noise levels (:func:`_against_given`): fails when any channel
-    exceeds its quantile at the test level (Bonferroni over 3 channels)."""
-    statistic, dof = _against_given(mf, sigma)
+def _goodness_of_fit(statistic: FloatArray, dof: FloatArray) -> tuple[bool, FloatArray]:
+    """Residuals against given noise levels (:func:`_against_given`'s ``statistic`` and
+    ``dof``): fails when any channel exceeds its quantile at the test level (Bonferroni over 3
+    channels); and each channel's residual RMS over its given level."""
     survival = np.array([chi2_survival(s, d) for s, d in zip(statistic, dof, strict=True)])
     ratio = np.sqrt(statistic / np.maximum(dof, 1.0))
     return bool(np.all(survival > (1.0 - TEST_LEVEL) / 3.0)), ratio
 
 
-def _below_given(mf: ModelFit, sigma: FloatArray) -> NDArray[np.bool_]:
+def _below_given(statistic: FloatArray, dof: FloatArray) -> NDArray[np.bool_]:
     """The channels whose residuals are far below the given noise levels: the statistic of
     :func:`_against_given` below its lower quantile at the test level (Bonferroni over 3
     channels), the given level then too large (the std too wide by as much)."""
-    statistic, dof = _against_given(mf, sigma)
     return np.array([d >= 1 and 1.0 - chi2_survival(s, d) < (1.0 - TEST_LEVEL) / 3.0
                      for s, d in zip(statistic, dof, strict=True)])
 
@@ -173,7 +170,8 @@ def _model_test(chosen: ModelFit, alternative: ModelFit | None, statistic: float
                        f"pose (the data put it at {where}); try --sensor-pose estimate")
         return FitTest(False, verdict, ratio, *numbers)
     if sigma_given is not None and loss == "linear":
-        ok, ratio = _goodness_of_fit(chosen, sigma_given)
+        statistic_given, dof = _against_given(chosen, sigma_given)
+        ok, ratio = _goodness_of_fit(statistic_given, dof)
         if not ok:
             grows = " and grow with the turn rate" if trend > _TREND_Z else ""
             hint = ("; the sensor may be off the axle: try --sensor-pose estimate"
@@ -181,7 +179,7 @@ def _model_test(chosen: ModelFit, alternative: ModelFit | None, statistic: float
             return FitTest(False, f"the residuals are {_channels_in_words(ratio, ratio > 1.2)}"
                            f" given{grows}: the model or the given noise levels are wrong"
                            f"{hint}", ratio, *numbers)
-        small = _below_given(chosen, sigma_given)
+        small = _below_given(statistic_given, dof)
         if small.any():
             names = [n for n, low in zip(("x", "y", "theta"), small, strict=True) if low]
             return FitTest(True, f"the residuals are up to {1.0 / ratio[small].min():.1f}x smaller "

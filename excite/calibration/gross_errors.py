@@ -253,10 +253,7 @@ def _posterior(z2: FloatArray, fraction: float, spread: float) -> FloatArray:
 def _weighted_sigma(problem: Problem, weights: FloatArray, fit) -> FloatArray:
     """Per-channel noise std from the weighted residuals of a fit: sqrt(sum w r_c^2 /
     (sum w - h_c)), h_c = tr(F^-1 F_c) the degrees of freedom the fit takes from channel c."""
-    system = fit.system
-    inverse = np.linalg.pinv(system.information, hermitian=True)
-    dof = float(np.sum(weights)) - np.einsum("ij,cji->c", inverse,
-                                              system.channel_information)
+    dof = float(np.sum(weights)) - fit.system.channel_dof()
     rss = fit.ev.unit_system()[2]  # of the weighted rows: sum w r_c^2
     return np.maximum(np.sqrt(rss / np.maximum(dof, 1.0)), problem.sigma_floor)
 

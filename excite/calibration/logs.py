@@ -20,7 +20,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-import numpy as np
 from numpy.typing import ArrayLike
 
 from excite.calibration.heterogeneity import HeterogeneityOption, across_logs, applied
@@ -108,8 +107,7 @@ def _refuse_repeated(parts: Sequence[Part]) -> None:
     it): pooled, they would count every segment twice and halve the variances."""
     seen: dict[bytes, str] = {}
     for part in parts:
-        seg = part.segments
-        key = np.column_stack([seg.dphi_L, seg.dphi_R, seg.dx, seg.dy, seg.dtheta]).tobytes()
+        key = part.segments.as_array().tobytes()
         if key in seen:
             raise DataError(f"{seen[key]} and {part.source.name} hold the same data: give "
                             "each log once (pooled twice, every std would be 1/sqrt(2) of "

@@ -191,7 +191,7 @@ def _likelihood_ratio(small: ModelFit, large: ModelFit, sigma_given: bool,
     otherwise the difference of the whitened costs at the larger model's noise levels. With
     estimated levels each channel's N is taken as the larger model's residual degrees of
     freedom in it, N - h_c with h_c = tr(F^-1 F_c) the share of its parameters the channel
-    carries (:func:`excite.calibration.solver.estimate_sigma`'s; at least 1): the
+    carries (:meth:`excite.calibration.solver.System.channel_dof`; at least 1): the
     small-sample form of the statistic (as an F test's denominator), which with N itself
     chooses the larger model on noise more often than TEST_LEVEL says when N is a few times
     the parameters; the same for large N."""
@@ -200,9 +200,7 @@ def _likelihood_ratio(small: ModelFit, large: ModelFit, sigma_given: bool,
         rss_large = large.fit.ev.unit_system()[2]
         floor = large.problem.sigma_floor**2
         ratio = np.maximum(rss_small, floor) / np.maximum(rss_large, floor)
-        system = large.fit.system
-        inverse = np.linalg.pinv(system.information, hermitian=True)
-        dof = large.problem.n - np.einsum("ij,cji->c", inverse, system.channel_information)
+        dof = large.problem.n - large.fit.system.channel_dof()
         return max(float(np.sum(np.maximum(dof, 1.0) * np.log(ratio))), 0.0)
     sigma = large.fit.sigma
     cost_small = normal_system(small.fit.ev, sigma, loss).cost

@@ -143,6 +143,13 @@ class System:
     def information(self) -> FloatArray:
         return self.channel_information.sum(axis=0)
 
+    def channel_dof(self) -> FloatArray:
+        """h_c = tr(F^-1 F_c) (3,): the degrees of freedom the fit takes from each channel
+        (they sum to the parameters the data determine); a channel's residual degrees of
+        freedom are its residuals' count less h_c."""
+        inverse = np.linalg.pinv(self.information, hermitian=True)
+        return np.einsum("ij,cji->c", inverse, self.channel_information)
+
 
 def _weights(ev: Evaluation, sigma: FloatArray, loss: Loss) -> FloatArray:
     """The weight of each residual (3, N): 1 / sigma_c^2, times Huber's k / max(|z|, k)."""
@@ -268,8 +275,7 @@ def estimate_sigma(problem: Problem, ev: Evaluation, system: System | None,
     else:
         dof = np.full(3, float(raw.shape[1]))
         if system is not None:
-            inverse = np.linalg.pinv(system.information, hermitian=True)
-            dof -= np.einsum("ij,cji->c", inverse, system.channel_information)
+            dof -= system.channel_dof()
         sigma = np.sqrt(ev.unit_system()[2] / np.maximum(dof, 1.0))
     return np.maximum(sigma, problem.sigma_floor)
 

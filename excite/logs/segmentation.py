@@ -19,10 +19,8 @@ Segmentation
   the window to within one pose period. When the encoders are the coarser stream (a median
   period over COARSER times the poses'), at the pose sample nearest the encoder sample
   nearest t_0 + k window instead: the interpolated wheel angles are then read within half a
-  pose period of an encoder sample, where the cubic errs least. A robot whose speed changes
-  at the boundaries (a protocol's command steps, ``excite live``'s segments) otherwise
-  biased the wheels by up to 7 standard errors with encoders of 2-12.5 Hz under 100 Hz
-  poses, the fit passing.
+  pose period of an encoder sample, where the cubic errs least (a robot whose speed changes
+  at the boundaries: a protocol's command steps, ``excite live``'s segments).
 * Keyframes by motion (``min_distance`` m and/or ``min_angle`` rad): a new boundary at the first
   pose sample where the sensor is at least ``min_distance`` from the last keyframe's position,
   or its heading differs from the keyframe's by at least ``min_angle``.

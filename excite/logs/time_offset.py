@@ -326,10 +326,16 @@ def noticeable_time_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET
     score, blocks = _lag_zero_score(fit)
     if blocks == 0 or abs(score) <= stdtrit(blocks - 1, 1.0 - 0.5 * NOTICEABLE_OFFSET_LEVEL):
         return None
-    coarser = max(float(np.median(np.diff(ts.t_enc))), float(np.median(np.diff(ts.t_pose))))
-    if abs(fit.offset) <= NOTICEABLE_OFFSET_PERIODS * coarser:
+    if not _beyond_the_floor(ts, fit.offset):
         return None  # within the interpolation's own lag (module constant)
     return OffsetHint(fit.offset, max_offset)
+
+
+def _beyond_the_floor(ts: TimeSeries, offset: float) -> bool:
+    """Whether ``offset`` (s) lies beyond NOTICEABLE_OFFSET_PERIODS of the coarser stream's
+    median sample period (within it, the interpolation's own lag)."""
+    coarser = max(float(np.median(np.diff(ts.t_enc))), float(np.median(np.diff(ts.t_pose))))
+    return abs(offset) > NOTICEABLE_OFFSET_PERIODS * coarser
 
 
 def rejected_offset(ts: TimeSeries, offset: float, max_offset: float = MAX_TIME_OFFSET
@@ -358,5 +364,4 @@ def untested_offset(ts: TimeSeries, max_offset: float = MAX_TIME_OFFSET) -> floa
         offset = offset_fit(ts, max_offset, MIN_CORRELATION).offset
     except DataError:
         return None
-    coarser = max(float(np.median(np.diff(ts.t_enc))), float(np.median(np.diff(ts.t_pose))))
-    return offset if abs(offset) > NOTICEABLE_OFFSET_PERIODS * coarser else None
+    return offset if _beyond_the_floor(ts, offset) else None

@@ -18,7 +18,8 @@ Dead reckoning (one choice, everywhere)
   the cumulative wheel angles are interpolated by the segmentation's monotone cubic
   (:func:`excite.logs.wheel_path.wheel_angles`): the integration grid is the union of the
   encoder and pose times. Across a gap in the encoder stream the motion is one arc, like any
-  other interval.
+  other interval (``excite validate`` cuts a log at gaps longer than a second and follows
+  each part from its own first pose: :func:`excite.calibration.logs.validate_logs`).
 * Poses are composed in SE(2) (:mod:`excite.core.se2`), vectorised: the heading is the cumulative
   sum of the arcs' dtheta and the position the cumulative sum of their (dx, dy) rotated by the
   heading at each arc's start.
