@@ -78,7 +78,9 @@ MAX_CHUNKS = 3
 #: Logs of fewer segments are not tested for a wandering heading error.
 MIN_WANDER_SEGMENTS = 50
 #: Time constants (in segment durations) at which the search may start, each with the std
-#: at the chain's heading level and 3 times it; it starts at the best.
+#: at the chain's heading level, 3 times it and the heading residuals' RMS (where the chain
+#: found no heading noise its level is the floor, where the deviance is flat in the time
+#: constant); it starts at the best.
 START_TIMES = (2.0, 6.0, 20.0, 60.0)
 #: Relative tolerance of each likelihood search (the deviance is ~ -1e3 per 100 segments).
 FTOL = 1e-10
@@ -424,8 +426,10 @@ def estimate_wander(segments: Segments, residual: FloatArray, jac: FloatArray,
     # start the search at the best of a few time constants (the deviance can have a local
     # minimum at a short one, mimicking white noise, and one at a long one)
     first_std = max(levels.pose[1], levels.sigma[2], floor[2])  # rad: the chain's heading level
+    heading_rms = max(float(np.sqrt(np.mean(residual[2] ** 2))), floor[2])  # rad
     starts = [np.clip(np.append(start, [math.log(std), math.log(tau)]), w_lower, w_upper)
-              for tau in step * np.array(START_TIMES) for std in (first_std, 3.0 * first_std)]
+              for tau in step * np.array(START_TIMES)
+              for std in (first_std, 3.0 * first_std, heading_rms)]
     search = _Search(chunks, n_levels)
     values = [search(u0) for u0 in starts]
     first = int(np.argmin(values))
