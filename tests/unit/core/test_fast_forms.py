@@ -57,12 +57,14 @@ def _wheels(rng: np.random.Generator, size) -> np.ndarray:
 
 
 def _sinc_family_scalar(rng):
-    """kinematics.sinc_family_scalar against sinc_family (numpy's sin/cos against math's)."""
+    """kinematics.sinc_family_scalar against sinc_family: two closed forms (sin and cos of
+    u/2 by math; tan of u/2 by numpy), each within 4 eps of exact
+    (test_kinematics.test_sinc_family_is_accurate_everywhere), so within 8 eps of each other."""
     u = _angles(rng)
     reference = np.stack(sinc_family(u))
     fast = np.array([sinc_family_scalar(x) for x in u.tolist()]).T
     size = np.maximum(1.0 / np.maximum(np.abs(u), 1.0), np.abs(reference))  # ~1/|u| far out
-    return fast, reference, 0.0, 2 * EPS * size
+    return fast, reference, 0.0, 8 * EPS * size
 
 
 def _traction_kernel_sinc_cosc(rng):

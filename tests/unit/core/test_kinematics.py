@@ -119,8 +119,10 @@ def test_sinc_family_is_accurate_everywhere():
 
     ref = np.array([exact(x) for x in u]).T
     size = np.maximum(1.0 / np.maximum(np.abs(u), 1.0), np.abs(ref[0]))  # ~1/|u| far out
-    for got, expected in zip(K.sinc_family(u), ref, strict=True):
-        assert np.all(np.abs(got - expected) <= 4 * np.finfo(float).eps * size)
+    scalar = np.array([K.sinc_family_scalar(x) for x in u.tolist()]).T
+    for form in (K.sinc_family(u), scalar):
+        for got, expected in zip(form, ref, strict=True):
+            assert np.all(np.abs(got - expected) <= 4 * np.finfo(float).eps * size)
 
 
 def test_straight_spin_and_full_circle():
