@@ -22,13 +22,16 @@ from excite.live import LiveSession, LiveSettings
 class ToyRobot:
     """A robot whose true wheels differ from the nominal ones: it turns its wheels at the
     commanded speeds (rad/s), its encoders report the angles, a motion-capture system its
-    pose (1 mm, 2 mrad noise)."""
+    pose (1 mm, 2 mrad noise). With a ``latency`` (s) the poses arrive that long after they
+    were taken and are stamped on arrival (a pose source that stamps at receipt: pose time =
+    true time + latency; ``excite live --time-offset`` is for that)."""
 
-    def __init__(self, truth: Params, seed: int = 0) -> None:
+    def __init__(self, truth: Params, seed: int = 0, latency: float = 0.0) -> None:
         self.truth = truth
         self.rng = np.random.default_rng(seed)
         self.t, self.phi, self.pose = 0.0, np.zeros(2), np.zeros(3)
         self.speeds = np.zeros(2)
+        self.latency, self.taken = latency, []
 
     def step(self, dt: float) -> None:
         dphi = self.speeds * dt
@@ -36,11 +39,21 @@ class ToyRobot:
         self.pose = compose(self.pose, np.array(increment, dtype=float))
         self.phi += dphi
         self.t += dt
+        if self.latency:
+            self.taken.append(self._pose_now())
 
     def wheel_angles(self) -> tuple[float, float, float]:
         return self.t, *self.phi
 
     def measured_pose(self) -> tuple[float, float, float, float]:
+        if not self.latency:
+            return self._pose_now()
+        while len(self.taken) > 1 and self.taken[1][0] <= self.t - self.latency + 1e-9:
+            self.taken.pop(0)
+        t, *pose = self.taken[0]
+        return t + self.latency, *pose
+
+    def _pose_now(self) -> tuple[float, float, float, float]:
         noise = self.rng.normal(0.0, [1e-3, 1e-3, 2e-3])
         return self.t, *(self.pose + noise)
 

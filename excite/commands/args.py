@@ -28,7 +28,7 @@ __all__ = ["PARAMS_VALUES", "SIGMA_VALUES", "POSE_VALUES", "POSE_NOISE_VALUES", 
            "sensor_pose_arg", "check_not_an_input", "check_writable", "seed_int",
            "pose_noise_arg",
            "fraction_arg", "positive_int", "nonnegative_int", "env_id", "robot_preset",
-           "output_folder", "check_parent_folder", "check_output_file"]
+           "output_folder", "check_parent_folder", "check_output_file", "time_offset_arg"]
 
 #: The comma-separated values of the options that take several numbers, as their metavars and
 #: error messages name them: wheel radii and separation (m); noise std of dx, dy, dtheta (m, m,
@@ -73,6 +73,18 @@ def finite_number(text: str) -> float:
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
     return value
+
+
+def time_offset_arg(text: str) -> float | str:
+    """A clock offset: a finite number of seconds or 'estimate' (an argparse type)."""
+    if text == "estimate":
+        return text
+    try:
+        float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds or 'estimate', "
+                                         f"got {text!r}") from None
+    return finite_number(text)
 
 
 def positive_number(text: str) -> float:

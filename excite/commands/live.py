@@ -14,12 +14,12 @@ from excite.commands.args import (
     POSE_VALUES,
     UsageError,
     check_writable,
-    finite_number,
     floats,
     params_arg,
     positive_number,
     robot_preset,
     sensor_pose_arg,
+    time_offset_arg,
 )
 from excite.commands.exit_status import (
     EXIT_ABORTED,
@@ -149,12 +149,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         session.add_argument(flag, dest=field, type=positive_number, metavar=metavar,
                              default=_default("LiveSettings", field),
                              help=f"{text} (default %(default)g)")
-    session.add_argument("--time-offset", type=finite_number, metavar="S",
+    session.add_argument("--time-offset", type=time_offset_arg, metavar="S|estimate",
                          default=_default("LiveSettings", "time_offset"),
                          help="pose time + S = wheel time (s), as excite calibrate "
                          "--time-offset: the session's log is cut with it (a pose source's "
-                         "stamp latency; excite calibrate --time-offset estimate on a "
-                         "recorded session measures it; default %(default)g)")
+                         "stamp latency); 'estimate' estimates it from the log at every look "
+                         "(default %(default)s)")
     add_seed_option(session, "seed of the protocol's random choices (default %(default)s)")
     out = p.add_argument_group("output")
     add_result_options(out, "--nominal or --robot")
@@ -366,7 +366,7 @@ def _report(args: argparse.Namespace, result, settings) -> UsageError | None:
                        "--split-at-gaps"
                        + (f" --window {args.segment_duration:g}"
                           if args.segment_duration != 1.0 else "")
-                       + (f" --time-offset {args.time_offset!r}" if args.time_offset else "")
+                       + (f" --time-offset {args.time_offset}" if args.time_offset else "")
                        + (f" --start {result.calibrated_from!r}"
                           if result.calibrated_from is not None else ""))
     if args.ros2_yaml and result.calibration is not None:

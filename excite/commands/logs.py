@@ -11,24 +11,13 @@ import sys
 from dataclasses import fields
 from typing import Any
 
-from excite.commands.args import finite_number, positive_number
+from excite.commands.args import finite_number, positive_number, time_offset_arg
 from excite.logs.inputs import DEFAULT_LOG_OPTIONS, LogOptions
 
 __all__ = ["LOG_FILES", "add_log_options", "log_options", "print_note"]
 
 #: What a log given to calibrate, segment or validate is (part of their arguments' help).
 LOG_FILES = "time-series CSV (or a pair of stream CSVs) or ROS bag"
-
-
-def _offset(text: str) -> float | str:
-    if text == "estimate":
-        return text
-    try:
-        float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number of seconds or 'estimate', "
-                                         f"got {text!r}") from None
-    return finite_number(text)
 
 
 def _frame_pair(text: str) -> tuple[str, str]:
@@ -75,7 +64,7 @@ _READING: dict[str, dict[str, Any]] = {
                       "ticks_L,ticks_R columns to rad, and calibrate models the encoders' "
                       "rounding (one tick) in the noise of the segments cut from logs (default: "
                       "none; the wheel columns are phi_L,phi_R in rad)"},
-    "time_offset": {"type": _offset, "metavar": "S|estimate",
+    "time_offset": {"type": time_offset_arg, "metavar": "S|estimate",
                     "help": "pose time + S = encoder time (s; default: 0 unless the data "
                     "reject a zero offset, then the offset they show, with a note), or "
                     "'estimate' it from the data"},

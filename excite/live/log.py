@@ -17,11 +17,12 @@ from excite.calibration.result import CalibrationResult
 from excite.errors import ExciteError
 from excite.logs.segmentation import segment_timeseries
 from excite.logs.segments import Segments
+from excite.logs.time_offset import estimate_time_offset
 from excite.logs.timeseries import TimeSeries
 from excite.stopping import StopDecision, StoppingRule
 
-__all__ = ["FROZEN_WHEEL_TURN", "Stream", "cut", "decide_log", "increment_noise", "pose_age",
-           "silence_text"]
+__all__ = ["FROZEN_WHEEL_TURN", "Stream", "clock_offset", "cut", "decide_log",
+           "increment_noise", "pose_age", "silence_text"]
 
 #: rad: wheels that turned this much while the poses repeated one value: the pose source is
 #: frozen (any robot moves its sensor by a millimetre or more on it, and a real source's noise
@@ -50,20 +51,29 @@ def increment_noise(result: CalibrationResult, duration: float) -> np.ndarray:
     return np.sqrt(variance)
 
 
-def cut(series: TimeSeries, window: float, time_offset: float = 0.0) -> Segments:
+def clock_offset(series: TimeSeries, time_offset: float | str) -> float:
+    """The clock offset (s; pose time + offset = wheel time) a session's log is cut with:
+    ``time_offset`` itself, or for "estimate" the log's estimate (as ``excite calibrate
+    --time-offset estimate``; DataError while the log cannot give one, e.g. too short)."""
+    return float(estimate_time_offset(series) if time_offset == "estimate" else time_offset)
+
+
+def cut(series: TimeSeries, window: float, time_offset: float | str = 0.0) -> Segments:
     """A session's log cut into segments as ``excite calibrate --window WINDOW
-    --time-offset TIME_OFFSET --split-at-gaps`` cuts it (ExciteError when it cannot be, e.g.
-    too few segments)."""
-    return segment_timeseries(series, window=window, time_offset=time_offset,
+    --time-offset TIME_OFFSET --split-at-gaps`` cuts it (TIME_OFFSET a number or "estimate";
+    ExciteError when it cannot be, e.g. too few segments)."""
+    return segment_timeseries(series, window=window,
+                              time_offset=clock_offset(series, time_offset),
                               on_gap="split").segments
 
 
 def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal,
-               previous: StopDecision | None = None, time_offset: float = 0.0
+               previous: StopDecision | None = None, time_offset: float | str = 0.0
                ) -> StopDecision | None:
-    """The stopping rule's decision on a session's log so far cut with ``time_offset`` (s),
-    ``previous`` the decision at an earlier look of it (the rule's screen then spares most
-    looks the batch calibration); None while the log cannot be cut into segments yet."""
+    """The stopping rule's decision on a session's log so far cut with ``time_offset`` (s,
+    or "estimate": :func:`clock_offset`), ``previous`` the decision at an earlier look of it
+    (the rule's screen then spares most looks the batch calibration); None while the log
+    cannot be cut into segments yet."""
     try:
         segments = cut(series, window, time_offset)
     except ExciteError:

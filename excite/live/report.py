@@ -37,6 +37,14 @@ def closing_lines(result: LiveResult) -> list[str]:
              f"({segments} segments): {result.reason}"]
     if result.calibration is None:
         lines.append(f"no calibration of the session: {result.calibration_error}")
+    elif result.time_offset:
+        lines.append(f"the session's log was cut with a clock offset of "
+                     f"{result.time_offset:+.4f} s (pose time + offset = wheel time)")
+    if result.suggested_time_offset is not None:
+        lines.append(f"the pose stamps seem offset: with a clock offset of "
+                     f"{result.suggested_time_offset:+.4f} s (not the "
+                     f"{result.time_offset or 0.0:+.4f} s used) the session's data reach the "
+                     "target (--time-offset estimate)")
     return lines
 
 
@@ -44,8 +52,10 @@ def result_dict(result: LiveResult, nominal=None) -> dict:
     """``calibrate --json``'s object for the session's calibration (null fields without
     one) with a ``live`` section: outcome, reason, duration (s), segments, area (m, pose
     frame: x0, y0, x1, y1), calibrated_from (the stamp in s the calibration starts at, null:
-    all), slowdowns ([stamp, speed share] each), the last stopping decision, and every
-    status."""
+    all), time_offset (s, pose time + offset = wheel time: the one the log was cut with, null
+    when it could not be), suggested_time_offset (s: for a session not done, the offset the
+    data show instead of the one given, with which they reach the target; null: none),
+    slowdowns ([stamp, speed share] each), the last stopping decision, and every status."""
     out = result.calibration.to_dict() if result.calibration is not None else {
         "calibration_error": result.calibration_error}
     if nominal is not None:
@@ -57,6 +67,8 @@ def result_dict(result: LiveResult, nominal=None) -> dict:
         "segments": result.statuses[-1].segments if result.statuses else 0,
         "area": None if area is None else [area.x0, area.y0, area.x1, area.y1],
         "calibrated_from": result.calibrated_from,
+        "time_offset": result.time_offset,
+        "suggested_time_offset": result.suggested_time_offset,
         "slowdowns": [list(x) for x in result.slowdowns],
         "decision": None if result.decision is None else result.decision.to_dict(),
         "statuses": [_status_dict(s) for s in result.statuses],

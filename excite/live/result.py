@@ -111,6 +111,15 @@ class LiveResult:
         (``excite calibrate --start`` on the recorded bag gives the same calibration).
     slowdowns : tuple of (float, float)
         Each slowdown's stamp (s) and the share of the speed limit driven from then on.
+    time_offset : float or None
+        The clock offset (s; pose time + offset = wheel time) the session's log was cut with
+        for ``calibration``: the one given, or the log's estimate (``time_offset="estimate"``);
+        None when the log could not be cut.
+    suggested_time_offset : float or None
+        For a session that did not end done with a given offset: the offset (s) at which its
+        wheel rates explain its heading rate best
+        (:func:`excite.logs.time_offset.untested_offset`) when the stopping rule says done on
+        the log cut with it; else None.
     """
 
     outcome: str
@@ -124,3 +133,5 @@ class LiveResult:
     duration: float
     calibrated_from: float | None = None
     slowdowns: tuple[tuple[float, float], ...] = ()
+    time_offset: float | None = None
+    suggested_time_offset: float | None = None

@@ -72,11 +72,20 @@ from excite.core.models import AXLE, SENSOR_POSE, SegmentModel, SensorPose
 from excite.errors import DataError, ExciteError
 from excite.live.area import Area
 from excite.live.braking import within_reach
-from excite.live.log import Stream, cut, decide_log, increment_noise, pose_age, silence_text
+from excite.live.log import (
+    Stream,
+    clock_offset,
+    cut,
+    decide_log,
+    increment_noise,
+    pose_age,
+    silence_text,
+)
 from excite.live.result import OUTCOMES, Command, LiveResult, LiveStatus
 from excite.live.settings import LiveSettings
 from excite.live.watch import MotionWatch
 from excite.logs.segments import Segments
+from excite.logs.time_offset import untested_offset
 from excite.logs.timeseries import TimeSeries, during
 from excite.stopping import StopDecision, StoppingRule
 
@@ -362,13 +371,15 @@ class LiveSession:
         except DataError:  # fewer than 2 samples of a stream since ``start``
             return None
 
-    def _segmented(self) -> Segments:
+    def _segmented(self) -> tuple[Segments, float]:
         """The session's log since the last slowdown cut into segments as ``excite calibrate
-        --start`` cuts it (raises ExciteError when it cannot be, e.g. too few segments)."""
+        --start`` cuts it, and the clock offset it was cut with (s; raises ExciteError when it
+        cannot be, e.g. too few segments)."""
         series = self._series(self._epoch)
         if series is None:
             raise ExciteError("no wheel angles and poses yet")
-        return cut(series, self.settings.segment_duration, self.settings.time_offset)
+        offset = clock_offset(series, self.settings.time_offset)
+        return cut(series, self.settings.segment_duration, offset), offset
 
     def _start_decision(self, screen: bool = True) -> None:
         """The stopping rule on the log so far (:func:`decide_log`; ``screen``: passing the
@@ -549,6 +560,22 @@ class LiveSession:
             seconds_to_go=None if d is None else d.seconds_to_go,
             clearance=clearance, reason=self._reason)
 
+    def _better_offset(self, offset: float) -> float | None:
+        """The clock offset (s) at which the whole log's wheel rates explain its heading rate
+        best (:func:`untested_offset`) when the stopping rule says *done* on the whole log cut
+        with it (a pose source's stamp latency kept the session from its target, and made
+        it slow down for a misfit); else None."""
+        series = self._series()
+        lag = untested_offset(replace(series, t_pose=series.t_pose + offset))
+        if lag is None:
+            return None
+        try:
+            segments = cut(series, self.settings.segment_duration, lag + offset)
+            done = self.rule.decide(segments, self.settings.nominal).done
+        except (ExciteError, np.linalg.LinAlgError):  # a hint only: none
+            return None
+        return lag + offset if done else None
+
     def finish(self) -> LiveResult:
         """End the session (as *aborted* if it is still running) and run the full offline
         calibration of everything it recorded."""
@@ -556,16 +583,19 @@ class LiveSession:
             self._end("aborted", "the session was finished before it ended")
         if self._pending is not None:
             self._take_decision(wait=True)
-        calibration, error = None, None
+        calibration, error, offset = None, None, None
         try:
-            segments = self._segmented()
+            segments, offset = self._segmented()
             calibration = calibrate(segments, initial=self.settings.nominal,
                                     sensor_pose=self.settings.sensor_pose)
         except ExciteError as exc:
             error = str(exc)
         duration = 0.0 if self._start is None or self._now is None else self._now - self._start
+        suggested = (None if self._state == "done" or offset is None
+                     or self.settings.time_offset == "estimate" else self._better_offset(offset))
         return LiveResult(outcome=self._state, reason=self._reason, calibration=calibration,
                           calibration_error=error, decision=self._decision,
                           series=self._series(), area=self._area,
                           statuses=tuple(self._statuses), duration=duration,
-                          calibrated_from=self._epoch, slowdowns=tuple(self._slowdowns))
+                          calibrated_from=self._epoch, slowdowns=tuple(self._slowdowns),
+                          time_offset=offset, suggested_time_offset=suggested)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -82,9 +83,13 @@ class LiveSettings:
         mirrored (:mod:`excite.live.watch`).
     response_time : float
         How long (s) the controller and motors take to follow a command.
-    time_offset : float
+    time_offset : float or "estimate"
         The clock offset of the pose stamps (s; pose time + time_offset = wheel time), as
-        ``excite calibrate --time-offset``: the session's log is cut with it.
+        ``excite calibrate --time-offset``: the session's log is cut with it; "estimate"
+        estimates it from the log so far at every look
+        (:func:`excite.logs.time_offset.estimate_time_offset`, as ``excite calibrate
+        --time-offset estimate``; no look before the log holds 4 x MAX_TIME_OFFSET s of
+        turning).
     """
 
     nominal: Params
@@ -106,7 +111,7 @@ class LiveSettings:
     abort_timeout: float = 10.0
     motion_window: float = 0.5
     response_time: float = 0.2
-    time_offset: float = 0.0
+    time_offset: float | Literal["estimate"] = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.nominal, Params):
@@ -125,8 +130,10 @@ class LiveSettings:
                              "maneuver never decides")
         if not (isinstance(self.speed_fraction, (int, float)) and 0 < self.speed_fraction <= 1):
             raise ValueError(f"speed_fraction must be in (0, 1], got {self.speed_fraction!r}")
-        if not (isinstance(self.time_offset, (int, float)) and math.isfinite(self.time_offset)):
-            raise ValueError(f"time_offset must be finite (s), got {self.time_offset!r}")
+        if self.time_offset != "estimate" and not (
+                isinstance(self.time_offset, (int, float)) and math.isfinite(self.time_offset)):
+            raise ValueError(f"time_offset must be finite (s) or 'estimate', got "
+                             f"{self.time_offset!r}")
         if self.radius is not None:
             _positive("radius", self.radius)
         if self.area is not None and self.radius is not None:

@@ -41,8 +41,8 @@ TOPICS = ["--left-wheel", "l", "--right-wheel", "r", "--pose-topic", "/pose"]
     (["--robot", "default", "--segment-duration", "1e300"],
      "--segment-duration (1e+300 s) must be at most --max-time (600 s)"),
     (["--robot", "default", "--time-offset", "nan"], "--time-offset: must be finite, got 'nan'"),
-    (["--robot", "default", "--time-offset", "estimate"],
-     "--time-offset: not a number: 'estimate'"),
+    (["--robot", "default", "--time-offset", "soon"],
+     "--time-offset: must be a number of seconds or 'estimate', got 'soon'"),
 ])
 def test_bad_live_input(capsys, args, words):
     code, _, err = run_cli(capsys, "live", *TOPICS, *args)
