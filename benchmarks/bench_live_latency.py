@@ -6,8 +6,8 @@ stamped on arrival, ``--latency`` s after they were taken (pose time = true time
 driven by slip_aware until the stopping rule says done at 0.5% (95%) or 120 s pass,
 the commands every 20 ms. The same robots and seeds for each ``time_offset`` (a number, s, or
 "estimate"). Per setting: sessions done, the median and 90th percentile of the seconds driven,
-the final calibration's truth inside its 95% ellipse (r_L, r_R, b) and within the target, and
-the offsets the log was cut with.
+the final calibration's truth inside its 95% ellipse (r_L, r_R, b) and within the target, the
+false stops (done with the truth outside the target), and the offsets the log was cut with.
 
 Usage: python benchmarks/bench_live_latency.py [--latency 0.03] [--sessions 40]
        [--offsets 0,-0.03,estimate]
@@ -88,11 +88,13 @@ def main(argv=None) -> dict:
             "done": sum(r[0] == "done" for r in rows), "sessions": len(rows),
             "median_s": float(np.median(seconds)), "p90_s": float(np.percentile(seconds, 90)),
             "inside_95": sum(r[2] for r in rows), "within_target": sum(r[3] for r in rows),
+            "false_stops": sum(r[0] == "done" and not r[3] for r in rows),
             "offset_range": [float(np.nanmin(cut)), float(np.nanmax(cut))]}
         print(f"latency {args.latency:g} s, time_offset {offset}: done {row['done']}/"
               f"{row['sessions']}, {row['median_s']:.1f} s median ({row['p90_s']:.1f} s 90th "
               f"percentile), truth in the 95% ellipse {row['inside_95']}/{row['sessions']}, "
-              f"within the target {row['within_target']}/{row['sessions']}, cut with "
+              f"within the target {row['within_target']}/{row['sessions']}, false stops "
+              f"{row['false_stops']}/{row['done']}, cut with "
               f"{row['offset_range'][0]:+.4f} to {row['offset_range'][1]:+.4f} s", flush=True)
     return out
 

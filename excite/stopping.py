@@ -145,6 +145,14 @@ class StopDecision:
     result: CalibrationResult | None
     screened: bool = False
 
+    @classmethod
+    def not_yet(cls, n_segments: int, reason: str, tolerances: dict[str, float] | None = None,
+                result: CalibrationResult | None = None) -> StopDecision:
+        """A *not yet* without a judged calibration: ``reason`` says why (statistic and
+        segments to go inf)."""
+        return cls(False, math.inf, reason, n_segments, math.nan, {}, tolerances or {},
+                   math.inf, None, result)
+
     def to_dict(self) -> dict:
         """JSON-ready dict (without the calibration result)."""
         return {"done": self.done, "statistic": finite_or_none(self.statistic),
@@ -328,8 +336,7 @@ class StoppingRule:
 
     def _not_yet(self, n: int, reason: str, tolerances: dict[str, float] | None = None,
                  result: CalibrationResult | None = None) -> StopDecision:
-        return StopDecision(False, math.inf, reason, n, math.nan, {}, tolerances or {},
-                            math.inf, None, result)
+        return StopDecision.not_yet(n, reason, tolerances, result)
 
 
 def _doubt(result: CalibrationResult) -> str | None:

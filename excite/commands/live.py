@@ -366,7 +366,8 @@ def _report(args: argparse.Namespace, result, settings) -> UsageError | None:
                        "--split-at-gaps"
                        + (f" --window {args.segment_duration:g}"
                           if args.segment_duration != 1.0 else "")
-                       + (f" --time-offset {args.time_offset}" if args.time_offset else "")
+                       + (f" --time-offset {result.time_offset!r}"
+                          if result.time_offset is not None else "")
                        + (f" --start {result.calibrated_from!r}"
                           if result.calibrated_from is not None else ""))
     if args.ros2_yaml and result.calibration is not None:

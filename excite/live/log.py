@@ -69,16 +69,22 @@ def cut(series: TimeSeries, window: float, time_offset: float | str = 0.0) -> Se
 
 def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal,
                previous: StopDecision | None = None, time_offset: float | str = 0.0
-               ) -> StopDecision | None:
+               ) -> tuple[StopDecision | None, float | None]:
     """The stopping rule's decision on a session's log so far cut with ``time_offset`` (s,
     or "estimate": :func:`clock_offset`), ``previous`` the decision at an earlier look of it
-    (the rule's screen then spares most looks the batch calibration); None while the log
-    cannot be cut into segments yet."""
+    (the rule's screen then spares most looks the batch calibration), and the offset (s) the
+    log was cut with. The decision is None while the log cannot be cut into segments yet,
+    and *not yet* (offset None) while "estimate" cannot estimate the offset (the reason says
+    why)."""
     try:
-        segments = cut(series, window, time_offset)
+        offset = clock_offset(series, time_offset)
+    except ExciteError as exc:  # "estimate" on a log that cannot give one yet
+        return StopDecision.not_yet(0, f"no clock offset yet: {exc}"), None
+    try:
+        segments = cut(series, window, offset)
     except ExciteError:
-        return None
-    return rule.decide(segments, nominal, previous=previous)
+        return None, offset
+    return rule.decide(segments, nominal, previous=previous), offset
 
 
 class Stream:

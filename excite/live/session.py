@@ -137,6 +137,8 @@ class LiveSession:
         self._sent_at: float | None = None
         self._rows = np.zeros((0, 5))
         self._decision: StopDecision | None = None
+        # the clock offset (s) the accepted decisions' log was cut with (time_offset="estimate")
+        self._offset: float | None = None
         self._area: Area | None = None
         self._statuses: list[LiveStatus] = []
         self._silent_since: float | None = None
@@ -373,12 +375,16 @@ class LiveSession:
 
     def _segmented(self) -> tuple[Segments, float]:
         """The session's log since the last slowdown cut into segments as ``excite calibrate
-        --start`` cuts it, and the clock offset it was cut with (s; raises ExciteError when it
-        cannot be, e.g. too few segments)."""
+        --start`` cuts it, and the clock offset it was cut with (s): the given one, or the one
+        the last accepted decision's log was cut with (that decision's calibration is then
+        this one's), estimated here when none was; raises ExciteError when it cannot be cut,
+        e.g. too few segments."""
         series = self._series(self._epoch)
         if series is None:
             raise ExciteError("no wheel angles and poses yet")
-        offset = clock_offset(series, self.settings.time_offset)
+        offset = (self._offset if self.settings.time_offset == "estimate"
+                  and self._offset is not None
+                  else clock_offset(series, self.settings.time_offset))
         return cut(series, self.settings.segment_duration, offset), offset
 
     def _start_decision(self, screen: bool = True) -> None:
@@ -428,10 +434,14 @@ class LiveSession:
                         f"({type(exc).__name__}: {exc}); it decides again at the next "
                         "segment's end")
 
-    def _accept(self, decision: StopDecision | None) -> None:
-        """Take a decision on the data since the current slowdown (an older one is stale)."""
+    def _accept(self, look: tuple[StopDecision | None, float | None]) -> None:
+        """Take a decision on the data since the current slowdown (an older one is stale),
+        and the clock offset its log was cut with (:func:`decide_log`)."""
+        decision, offset = look
         if decision is not None and self._pending_epoch == self._epoch:
             self._decision = decision
+            if offset is not None:
+                self._offset = offset
 
     def _slow_down(self, now: float) -> None:
         """The model does not fit the data since the last slowdown (the wheels slip, most

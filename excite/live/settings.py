@@ -86,10 +86,11 @@ class LiveSettings:
     time_offset : float or "estimate"
         The clock offset of the pose stamps (s; pose time + time_offset = wheel time), as
         ``excite calibrate --time-offset``: the session's log is cut with it; "estimate"
-        estimates it from the log so far at every look
+        (default) estimates it from the log so far at every look
         (:func:`excite.logs.time_offset.estimate_time_offset`, as ``excite calibrate
-        --time-offset estimate``; no look before the log holds 4 x MAX_TIME_OFFSET s of
-        turning).
+        --time-offset estimate``; *not yet*, saying why, while the log cannot give one, e.g.
+        before it spans 4 x MAX_TIME_OFFSET s). A pose source that stamps at receipt lags
+        the wheels, and a lag cut with 0 makes false stops.
     """
 
     nominal: Params
@@ -111,7 +112,7 @@ class LiveSettings:
     abort_timeout: float = 10.0
     motion_window: float = 0.5
     response_time: float = 0.2
-    time_offset: float | Literal["estimate"] = 0.0
+    time_offset: float | Literal["estimate"] = "estimate"
 
     def __post_init__(self) -> None:
         if not isinstance(self.nominal, Params):
