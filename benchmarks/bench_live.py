@@ -55,7 +55,9 @@ def live_sessions(args: argparse.Namespace, work: Path) -> list[dict]:
                               "right_wheel_joint", "--pose-topic", "/pose", "--robot",
                               args.robot, "--sensor-pose", "axle", "--target",
                               str(args.target), "--protocol", args.protocol, "--max-time",
-                              str(args.max_time), "--seed", str(seed)],
+                              str(args.max_time), "--seed", str(seed),
+                              *([] if args.time_offset is None
+                                else ["--time-offset", args.time_offset])],
                      ["--robot", args.robot, "--seed", str(seed), "--mount", "0,0,0",
                       "--pose-noise", noise], speed=args.speed,
                      timeout=args.max_time / args.speed * 4 + 120)
@@ -105,6 +107,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--protocol", default="slip_aware")
     parser.add_argument("--max-time", type=float, default=150.0)
     parser.add_argument("--seed", type=int, default=7000)
+    parser.add_argument("--time-offset", default=None,
+                        help="passed to excite live (default: live's own)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     args = parser.parse_args(argv)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
