@@ -16,8 +16,8 @@ Usage: python benchmarks/bench_live_latency.py [--latency 0.03] [--sessions 40]
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -28,35 +28,22 @@ from excite import Params
 from excite.contracts import Traction
 from excite.live import LiveSession, LiveSettings
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+import live_session as EXAMPLE  # noqa: E402  (the made-up robot and the transport's loop)
+
 NOMINAL = Params(0.05, 0.05, 0.30)
 TRACTION = Traction(motor_tau=0.05, grip=5.0)
-STEP = 0.02  # s between commands
 
-
-def _toy_robot_class():
-    spec = importlib.util.spec_from_file_location("live_session",
-                                                  ROOT / "examples" / "live_session.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.ToyRobot
 
 
 def session(truth: Params, seed: int, latency: float, time_offset) -> tuple:
     """One session: (outcome, seconds driven, truth in the 95% ellipse, within the target,
     the offset the log was cut with)."""
-    robot = _toy_robot_class()(truth, seed=100 + seed, latency=latency)
+    robot = EXAMPLE.ToyRobot(truth, seed=100 + seed, latency=latency)
     settings = LiveSettings(nominal=NOMINAL, max_wheel_speed=20.0, target=0.005,
                             sensor_pose="axle", max_time=120.0, traction=TRACTION,
                             time_offset=time_offset)
-    live = LiveSession(settings, make_protocol("slip_aware"), seed=seed)
-    while not live.ended:
-        robot.step(STEP)
-        live.add_wheels(*robot.wheel_angles())
-        live.add_pose(*robot.measured_pose())
-        command = live.command(robot.t)
-        robot.speeds = np.array([command.left, command.right])
-    result = live.finish()
+    result = EXAMPLE.run(LiveSession(settings, make_protocol("slip_aware"), seed=seed), robot)
     c = result.calibration
     if c is None:
         return result.outcome, robot.t, False, False, math.nan

@@ -16,7 +16,7 @@ from excite import Params
 from excite.contracts import Traction
 from excite.core.kinematics import predict_increment
 from excite.core.se2 import compose
-from excite.live import LiveSession, LiveSettings
+from excite.live import LiveResult, LiveSession, LiveSettings
 
 
 class ToyRobot:
@@ -58,21 +58,26 @@ class ToyRobot:
         return self.t, *(self.pose + noise)
 
 
-def main() -> None:
-    nominal = Params(0.05, 0.05, 0.30)
-    robot = ToyRobot(Params(0.0505, 0.0497, 0.306))
-    settings = LiveSettings(nominal=nominal, max_wheel_speed=20.0, target=0.005,
-                            sensor_pose="axle", max_time=120.0,
-                            traction=Traction(motor_tau=0.05, grip=5.0))
-    session = LiveSession(settings, make_protocol("slip_aware"), seed=0)
-    dt = 0.02  # a 50 Hz loop, run as fast as the computer goes
+def run(session: LiveSession, robot: ToyRobot, dt: float = 0.02) -> LiveResult:
+    """The transport's loop (every ``dt`` s, here as fast as the computer goes): the robot
+    moves, the session gets its wheel angles and pose and gives the wheel speeds to command,
+    until the session ends; then its result."""
     while not session.ended:
         robot.step(dt)
         session.add_wheels(*robot.wheel_angles())
         session.add_pose(*robot.measured_pose())
         command = session.command(robot.t)
         robot.speeds = np.array([command.left, command.right])
-    result = session.finish()
+    return session.finish()
+
+
+def main() -> None:
+    nominal = Params(0.05, 0.05, 0.30)
+    robot = ToyRobot(Params(0.0505, 0.0497, 0.306))
+    settings = LiveSettings(nominal=nominal, max_wheel_speed=20.0, target=0.005,
+                            sensor_pose="axle", max_time=120.0,
+                            traction=Traction(motor_tau=0.05, grip=5.0))
+    result = run(LiveSession(settings, make_protocol("slip_aware"), seed=0), robot)
     print(f"{result.outcome} after {result.duration:.0f} s: {result.reason}")
     if result.calibration is not None:
         print(result.calibration.summary())
