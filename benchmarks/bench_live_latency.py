@@ -10,7 +10,7 @@ the final calibration's truth inside its 95% ellipse (r_L, r_R, b) and within th
 false stops (done with the truth outside the target), and the offsets the log was cut with.
 
 Usage: python benchmarks/bench_live_latency.py [--latency 0.03] [--sessions 40]
-       [--offsets 0,-0.03,estimate]
+       [--offsets 0,-0.03,estimate] [--wheels-every K (wheel angles at 50/K Hz)]
 """
 
 from __future__ import annotations
@@ -36,14 +36,16 @@ TRACTION = Traction(motor_tau=0.05, grip=5.0)
 
 
 
-def session(truth: Params, seed: int, latency: float, time_offset) -> tuple:
+def session(truth: Params, seed: int, latency: float, time_offset, wheels_every: int = 1
+            ) -> tuple:
     """One session: (outcome, seconds driven, truth in the 95% ellipse, within the target,
     the offset the log was cut with)."""
     robot = EXAMPLE.ToyRobot(truth, seed=100 + seed, latency=latency)
     settings = LiveSettings(nominal=NOMINAL, max_wheel_speed=20.0, target=0.005,
                             sensor_pose="axle", max_time=120.0, traction=TRACTION,
                             time_offset=time_offset)
-    result = EXAMPLE.run(LiveSession(settings, make_protocol("slip_aware"), seed=seed), robot)
+    result = EXAMPLE.run(LiveSession(settings, make_protocol("slip_aware"), seed=seed), robot,
+                         wheels_every=wheels_every)
     c = result.calibration
     if c is None:
         return result.outcome, robot.t, False, False, math.nan
@@ -57,6 +59,8 @@ def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--latency", type=float, default=0.03)
     parser.add_argument("--sessions", type=int, default=40)
+    parser.add_argument("--wheels-every", type=int, default=1,
+                        help="wheel angles every K-th 20 ms tick (50/K Hz; default 1)")
     parser.add_argument("--offsets", default=None,
                         help="comma-separated: numbers (s) or estimate (default 0, the "
                         "negated latency, estimate)")
@@ -68,7 +72,8 @@ def main(argv=None) -> dict:
               for _ in range(args.sessions)]
     out = {}
     for offset in offsets:
-        rows = [session(truth, k, args.latency, offset) for k, truth in enumerate(truths)]
+        rows = [session(truth, k, args.latency, offset, args.wheels_every)
+                for k, truth in enumerate(truths)]
         seconds = np.array([r[1] for r in rows])
         cut = np.array([r[4] for r in rows], dtype=float)
         out[str(offset)] = row = {
@@ -77,7 +82,8 @@ def main(argv=None) -> dict:
             "inside_95": sum(r[2] for r in rows), "within_target": sum(r[3] for r in rows),
             "false_stops": sum(r[0] == "done" and not r[3] for r in rows),
             "offset_range": [float(np.nanmin(cut)), float(np.nanmax(cut))]}
-        print(f"latency {args.latency:g} s, time_offset {offset}: done {row['done']}/"
+        print(f"latency {args.latency:g} s, wheels at {50 / args.wheels_every:g} Hz, "
+              f"time_offset {offset}: done {row['done']}/"
               f"{row['sessions']}, {row['median_s']:.1f} s median ({row['p90_s']:.1f} s 90th "
               f"percentile), truth in the 95% ellipse {row['inside_95']}/{row['sessions']}, "
               f"within the target {row['within_target']}/{row['sessions']}, false stops "

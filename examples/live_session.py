@@ -58,13 +58,18 @@ class ToyRobot:
         return self.t, *(self.pose + noise)
 
 
-def run(session: LiveSession, robot: ToyRobot, dt: float = 0.02) -> LiveResult:
+def run(session: LiveSession, robot: ToyRobot, dt: float = 0.02,
+        wheels_every: int = 1) -> LiveResult:
     """The transport's loop (every ``dt`` s, here as fast as the computer goes): the robot
-    moves, the session gets its wheel angles and pose and gives the wheel speeds to command,
-    until the session ends; then its result."""
+    moves, the session gets its wheel angles (every ``wheels_every``-th tick: encoders
+    slower than the loop) and its pose and gives the wheel speeds to command, until the
+    session ends; then its result."""
+    tick = 0
     while not session.ended:
         robot.step(dt)
-        session.add_wheels(*robot.wheel_angles())
+        tick += 1
+        if tick % wheels_every == 0:
+            session.add_wheels(*robot.wheel_angles())
         session.add_pose(*robot.measured_pose())
         command = session.command(robot.t)
         robot.speeds = np.array([command.left, command.right])
