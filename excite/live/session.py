@@ -584,7 +584,7 @@ class LiveSession:
             done = self.rule.decide(segments, self.settings.nominal).done
         except (ExciteError, np.linalg.LinAlgError):  # a hint only: none
             return None
-        return lag + offset if done else None
+        return float(lag + offset) if done else None
 
     def finish(self) -> LiveResult:
         """End the session (as *aborted* if it is still running) and run the full offline
