@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -17,12 +18,12 @@ from excite.calibration.result import CalibrationResult
 from excite.errors import ExciteError
 from excite.logs.segmentation import segment_timeseries
 from excite.logs.segments import Segments
-from excite.logs.time_offset import estimate_time_offset
+from excite.logs.time_offset import estimate_time_offset, untested_offset
 from excite.logs.timeseries import TimeSeries
 from excite.stopping import StopDecision, StoppingRule
 
-__all__ = ["FROZEN_WHEEL_TURN", "Stream", "clock_offset", "cut", "decide_log",
-           "increment_noise", "pose_age", "silence_text"]
+__all__ = ["FROZEN_WHEEL_TURN", "Stream", "better_offset", "clock_offset", "cut",
+           "decide_log", "increment_noise", "pose_age", "silence_text"]
 
 #: rad: wheels that turned this much while the poses repeated one value: the pose source is
 #: frozen (any robot moves its sensor by a millimetre or more on it, and a real source's noise
@@ -85,6 +86,23 @@ def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal,
     except ExciteError:
         return None, offset
     return rule.decide(segments, nominal, previous=previous), offset
+
+
+def better_offset(rule: StoppingRule, series: TimeSeries, window: float, nominal,
+                  offset: float) -> float | None:
+    """For a session's whole log cut with a given clock ``offset`` (s) that did not reach its
+    target: the offset at which its wheel rates explain its heading rate best
+    (:func:`~excite.logs.time_offset.untested_offset`) when ``rule`` says *done* on the log
+    cut with that one (a pose source's stamp latency kept the session from its target);
+    else None."""
+    lag = untested_offset(replace(series, t_pose=series.t_pose + offset))
+    if lag is None:
+        return None
+    try:
+        done = rule.decide(cut(series, window, lag + offset), nominal).done
+    except (ExciteError, np.linalg.LinAlgError):  # a hint only: none
+        return None
+    return float(lag + offset) if done else None
 
 
 class Stream:

@@ -74,6 +74,7 @@ from excite.live.area import Area
 from excite.live.braking import within_reach
 from excite.live.log import (
     Stream,
+    better_offset,
     clock_offset,
     cut,
     decide_log,
@@ -85,7 +86,6 @@ from excite.live.result import OUTCOMES, Command, LiveResult, LiveStatus
 from excite.live.settings import LiveSettings
 from excite.live.watch import MotionWatch
 from excite.logs.segments import Segments
-from excite.logs.time_offset import untested_offset
 from excite.logs.timeseries import TimeSeries, during
 from excite.stopping import StopDecision, StoppingRule
 
@@ -570,22 +570,6 @@ class LiveSession:
             seconds_to_go=None if d is None else d.seconds_to_go,
             clearance=clearance, reason=self._reason)
 
-    def _better_offset(self, offset: float) -> float | None:
-        """The clock offset (s) at which the whole log's wheel rates explain its heading rate
-        best (:func:`untested_offset`) when the stopping rule says *done* on the whole log cut
-        with it (a pose source's stamp latency kept the session from its target, and made
-        it slow down for a misfit); else None."""
-        series = self._series()
-        lag = untested_offset(replace(series, t_pose=series.t_pose + offset))
-        if lag is None:
-            return None
-        try:
-            segments = cut(series, self.settings.segment_duration, lag + offset)
-            done = self.rule.decide(segments, self.settings.nominal).done
-        except (ExciteError, np.linalg.LinAlgError):  # a hint only: none
-            return None
-        return float(lag + offset) if done else None
-
     def finish(self) -> LiveResult:
         """End the session (as *aborted* if it is still running) and run the full offline
         calibration of everything it recorded."""
@@ -602,7 +586,9 @@ class LiveSession:
             error = str(exc)
         duration = 0.0 if self._start is None or self._now is None else self._now - self._start
         suggested = (None if self._state == "done" or offset is None
-                     or self.settings.time_offset == "estimate" else self._better_offset(offset))
+                     or self.settings.time_offset == "estimate"
+                     else better_offset(self.rule, self._series(), self.settings.segment_duration,
+                                        self.settings.nominal, offset))
         return LiveResult(outcome=self._state, reason=self._reason, calibration=calibration,
                           calibration_error=error, decision=self._decision,
                           series=self._series(), area=self._area,
