@@ -15,10 +15,10 @@ from dataclasses import replace
 import numpy as np
 
 from excite.calibration.result import CalibrationResult
-from excite.errors import ExciteError
+from excite.errors import DataError, ExciteError
 from excite.logs.segmentation import segment_timeseries
 from excite.logs.segments import Segments
-from excite.logs.time_offset import estimate_time_offset, untested_offset
+from excite.logs.time_offset import OffsetOutOfRange, estimate_time_offset, untested_offset
 from excite.logs.timeseries import TimeSeries
 from excite.stopping import StopDecision, StoppingRule
 
@@ -55,8 +55,18 @@ def increment_noise(result: CalibrationResult, duration: float) -> np.ndarray:
 def clock_offset(series: TimeSeries, time_offset: float | str) -> float:
     """The clock offset (s; pose time + offset = wheel time) a session's log is cut with:
     ``time_offset`` itself, or for "estimate" the log's estimate (as ``excite calibrate
-    --time-offset estimate``; DataError while the log cannot give one, e.g. too short)."""
-    return float(estimate_time_offset(series) if time_offset == "estimate" else time_offset)
+    --time-offset estimate``), 0 while the log cannot give one (too short, too little turning,
+    or a heading too noisy to compare its rate with the wheels': the data then say nothing
+    about the clocks), and :class:`~excite.logs.time_offset.OffsetOutOfRange` (a DataError)
+    when the best fit lies beyond the search range."""
+    if time_offset != "estimate":
+        return float(time_offset)
+    try:
+        return float(estimate_time_offset(series))
+    except OffsetOutOfRange:
+        raise
+    except DataError:
+        return 0.0
 
 
 def cut(series: TimeSeries, window: float, time_offset: float | str = 0.0) -> Segments:
@@ -75,12 +85,12 @@ def decide_log(rule: StoppingRule, series: TimeSeries, window: float, nominal,
     or "estimate": :func:`clock_offset`), ``previous`` the decision at an earlier look of it
     (the rule's screen then spares most looks the batch calibration), and the offset (s) the
     log was cut with. The decision is None while the log cannot be cut into segments yet,
-    and *not yet* (offset None) while "estimate" cannot estimate the offset (the reason says
-    why)."""
+    and *not yet* (offset None) while "estimate" finds the offset beyond its search range
+    (the reason says so)."""
     try:
         offset = clock_offset(series, time_offset)
-    except ExciteError as exc:  # "estimate" on a log that cannot give one yet
-        return StopDecision.not_yet(0, f"no clock offset yet: {exc}"), None
+    except OffsetOutOfRange as exc:
+        return StopDecision.not_yet(0, f"no clock offset: {exc}"), None
     try:
         segments = cut(series, window, offset)
     except ExciteError:

@@ -88,9 +88,9 @@ class LiveSettings:
         ``excite calibrate --time-offset``: the session's log is cut with it; "estimate"
         (default) estimates it from the log so far at every look
         (:func:`excite.logs.time_offset.estimate_time_offset`, as ``excite calibrate
-        --time-offset estimate``; *not yet*, saying why, while the log cannot give one, e.g.
-        before it spans 4 x MAX_TIME_OFFSET s). A pose source that stamps at receipt lags
-        the wheels, and a lag cut with 0 makes false stops.
+        --time-offset estimate``; 0 while the log cannot give one, *not yet* while it lies
+        beyond the search range: :func:`excite.live.log.clock_offset`). A pose source that
+        stamps at receipt lags the wheels, and a lag cut with 0 makes false stops.
     """
 
     nominal: Params

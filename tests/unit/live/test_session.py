@@ -734,22 +734,31 @@ def test_a_session_kept_from_its_target_by_late_poses_names_the_offset_that_reac
     assert short.suggested_time_offset is None
 
 
-def test_a_look_before_the_log_gives_its_clock_offset_is_not_yet_and_says_why():
-    """With time_offset="estimate", a look at a log too short to estimate the offset from (the
-    streams must overlap for 4 x MAX_TIME_OFFSET s) is *not yet*, its reason the estimate's,
-    and names no offset; a longer one is cut with the estimate and names it."""
-    from excite.live.log import decide_log
+def test_a_log_that_cannot_give_its_clock_offset_is_cut_with_zero_or_waits_for_it():
+    """With time_offset="estimate": a log too short to estimate the offset from (the streams
+    must overlap for 4 x MAX_TIME_OFFSET s), or whose heading is too noisy to compare its rate
+    with the wheels', is cut with 0 (the data say nothing about the clocks); one whose best
+    fit lies beyond the search range (poses 2 s late) is *not yet*, saying so; a long enough
+    one is cut with the estimate."""
+    from excite.live.log import clock_offset, decide_log
+    from excite.logs.synthetic import synthetic_log
     from excite.stopping import StoppingRule
 
-    robot = EXAMPLE.ToyRobot(TRUTH, seed=4, latency=0.04)
-    session = LiveSession(_settings(time_offset=0.0, target=1e-4, max_time=12.0),
-                          make_protocol("slip_aware"), seed=4)
-    series = EXAMPLE.run(session, robot).series
     rule = StoppingRule(target=0.005, sensor_pose="axle")
-    short = during(series, None, series.t_enc[0] + 3.0)
-    decision, offset = decide_log(rule, short, 1.0, NOMINAL, time_offset="estimate")
-    assert offset is None and not decision.done and decision.result is None
-    assert decision.reason.startswith("no clock offset yet: cannot estimate the time offset: "
-                                      "the streams overlap for"), decision.reason
-    decision, offset = decide_log(rule, series, 1.0, NOMINAL, time_offset="estimate")
+    logs = {}
+    for latency in (0.04, 2.0):
+        robot = EXAMPLE.ToyRobot(TRUTH, seed=4, latency=latency)
+        session = LiveSession(_settings(time_offset=0.0, target=1e-4, max_time=12.0),
+                              make_protocol("slip_aware"), seed=4)
+        logs[latency] = EXAMPLE.run(session, robot).series
+    late = logs[0.04]
+    assert clock_offset(during(late, None, late.t_enc[0] + 3.0), "estimate") == 0.0
+    noisy = synthetic_log(np.random.default_rng(0), 20.0, pose_rate=200.0,
+                          pose_noise=(0.005, 0.01)).series
+    assert clock_offset(noisy, "estimate") == 0.0
+    decision, offset = decide_log(rule, late, 1.0, NOMINAL, time_offset="estimate")
     assert abs(offset + 0.04) < 0.003 and decision.n_segments >= 10
+    decision, offset = decide_log(rule, logs[2.0], 1.0, NOMINAL, time_offset="estimate")
+    assert offset is None and not decision.done and decision.result is None
+    assert decision.reason.startswith("no clock offset: cannot estimate the time offset: "
+                                      "it is not within +-1.0 s"), decision.reason
