@@ -762,3 +762,23 @@ def test_a_log_that_cannot_give_its_clock_offset_is_cut_with_zero_or_waits_for_i
     assert offset is None and not decision.done and decision.result is None
     assert decision.reason.startswith("no clock offset: cannot estimate the time offset: "
                                       "it is not within +-1.0 s"), decision.reason
+
+
+@pytest.mark.slow
+@pytest.mark.statistical
+def test_late_poses_make_no_false_stops_with_the_offset_estimated():
+    """Monte Carlo over 20 made-up robots whose poses arrive 30 ms late (stamped on arrival):
+    with the clock offset estimated (live's default) at most one session stops *done* with the
+    truth outside the target (none of 120 in the benchmark, BENCHMARKS.md "Poses that arrive
+    late"); cut with 0, 6 of the 30 that ended done did, a rate at which 20 sessions show at
+    most one false stop 7% of the time."""
+    rng = np.random.default_rng(2027)
+    false_stops = 0
+    for k in range(20):
+        truth = Params(*(NOMINAL.as_array() * rng.uniform(0.97, 1.03, 3)))
+        robot = EXAMPLE.ToyRobot(truth, seed=300 + k, latency=0.03)
+        result = EXAMPLE.run(LiveSession(_settings(), make_protocol("slip_aware"), seed=k),
+                             robot)
+        error = np.abs(result.calibration.params.as_array() / truth.as_array() - 1.0)
+        false_stops += result.outcome == "done" and bool(np.any(error > 0.005))
+    assert false_stops <= 1, false_stops
