@@ -454,7 +454,8 @@ class LiveSession:
             self._reason = f"{d.reason}; already at the lowest speed"
             return
         self._speed_scale = max(0.5 * self._speed_scale, MIN_SPEED_SCALE)
-        self._epoch, self._decision = now, None
+        # the clock offset too: one the faster driving showed may be its slip's lag
+        self._epoch, self._decision, self._offset = now, None, None
         self._slowdowns.append((now, self._speed_scale))
         self._reason = (f"{d.reason}: driving at {self._speed_scale:.0%} of the speed from "
                         "now on, calibrating on the data from here")
