@@ -231,7 +231,7 @@ class StoppingRule:
             result = calibrate(segments, initial=nominal, sensor_pose=self.sensor_pose,
                                ticks_per_rev=self.ticks_per_rev)
         except ExciteError as exc:  # too few segments for the noise levels, no motion, ...
-            return self._not_yet(len(segments), f"no calibration yet: {exc}")
+            return StopDecision.not_yet(len(segments), f"no calibration yet: {exc}")
         return self.judge(result, segments)
 
     def judge(self, result: CalibrationResult, segments: Segments | None = None
@@ -245,25 +245,9 @@ class StoppingRule:
         ``seconds_to_go`` (None without them)."""
         n = result.n_segments if segments is None else len(segments)
         tolerances = self._tolerances(result)
-        if not result.identifiable:
-            return self._not_yet(n, "the data do not determine the parameters yet: "
-                                 f"{result.unidentifiable_direction}", tolerances, result)
-        if not result.fit.ok:
-            return self._not_yet(n, f"the model does not fit the data: {result.fit.message}",
-                                 tolerances, result)
-        doubt = _doubt(result)
-        if doubt:
-            return self._not_yet(n, doubt, tolerances, result)
-        dof = result.residual_dof
-        if dof < MIN_RESIDUAL_DOF:
-            return self._not_yet(n, f"{dof} residual degrees of freedom per noise channel; the "
-                                 f"noise levels need at least {MIN_RESIDUAL_DOF}", tolerances,
-                                 result)
-        exact = [c for c in ("x", "y", "theta") if c in result.levels_at_floor]
-        if exact and result.pose_sigma is None:
-            return self._not_yet(n, f"the {', '.join(exact)} residuals vanish (a channel fitted "
-                                 "exactly): its noise level is not known yet", tolerances,
-                                 result)
+        unready = _unready(result)
+        if unready is not None:
+            return StopDecision.not_yet(n, unready, tolerances, result)
         quantile = self._quantile(result)
         half, ratios = _half_widths(_standard_deviations(result), quantile, tolerances)
         statistic = max(ratios.values())
@@ -334,9 +318,28 @@ class StoppingRule:
         dof = max(n_segments - count, 1)
         return float(t.ppf(1.0 - (1.0 - self.confidence) / (2 * count), dof))
 
-    def _not_yet(self, n: int, reason: str, tolerances: dict[str, float] | None = None,
-                 result: CalibrationResult | None = None) -> StopDecision:
-        return StopDecision.not_yet(n, reason, tolerances, result)
+
+def _unready(result: CalibrationResult) -> str | None:
+    """Why a calibration cannot make a *done* whatever its std, in words (the parameters not
+    determined, the model not fitting, a doubt of :func:`_doubt`, too few residual degrees of
+    freedom, a channel fitted exactly); None when it can."""
+    if not result.identifiable:
+        return ("the data do not determine the parameters yet: "
+                f"{result.unidentifiable_direction}")
+    if not result.fit.ok:
+        return f"the model does not fit the data: {result.fit.message}"
+    doubt = _doubt(result)
+    if doubt:
+        return doubt
+    dof = result.residual_dof
+    if dof < MIN_RESIDUAL_DOF:
+        return (f"{dof} residual degrees of freedom per noise channel; the noise levels need "
+                f"at least {MIN_RESIDUAL_DOF}")
+    exact = [c for c in ("x", "y", "theta") if c in result.levels_at_floor]
+    if exact and result.pose_sigma is None:
+        return (f"the {', '.join(exact)} residuals vanish (a channel fitted exactly): its "
+                "noise level is not known yet")
+    return None
 
 
 def _doubt(result: CalibrationResult) -> str | None:

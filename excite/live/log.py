@@ -69,12 +69,11 @@ def clock_offset(series: TimeSeries, time_offset: float | str) -> float:
         return 0.0
 
 
-def cut(series: TimeSeries, window: float, time_offset: float | str = 0.0) -> Segments:
+def cut(series: TimeSeries, window: float, time_offset: float = 0.0) -> Segments:
     """A session's log cut into segments as ``excite calibrate --window WINDOW
-    --time-offset TIME_OFFSET --split-at-gaps`` cuts it (TIME_OFFSET a number or "estimate";
-    ExciteError when it cannot be, e.g. too few segments)."""
-    return segment_timeseries(series, window=window,
-                              time_offset=clock_offset(series, time_offset),
+    --time-offset TIME_OFFSET --split-at-gaps`` cuts it (TIME_OFFSET in s, e.g. from
+    :func:`clock_offset`; ExciteError when it cannot be, e.g. too few segments)."""
+    return segment_timeseries(series, window=window, time_offset=time_offset,
                               on_gap="split").segments
 
 

@@ -137,7 +137,7 @@ class LiveSession:
         self._sent_at: float | None = None
         self._rows = np.zeros((0, 5))
         self._decision: StopDecision | None = None
-        # the clock offset (s) the accepted decisions' log was cut with (time_offset="estimate")
+        # the clock offset (s) the accepted decisions' log was cut with
         self._offset: float | None = None
         self._area: Area | None = None
         self._statuses: list[LiveStatus] = []
@@ -375,15 +375,14 @@ class LiveSession:
 
     def _segmented(self) -> tuple[Segments, float]:
         """The session's log since the last slowdown cut into segments as ``excite calibrate
-        --start`` cuts it, and the clock offset it was cut with (s): the given one, or the one
-        the last accepted decision's log was cut with (that decision's calibration is then
-        this one's), estimated here when none was; raises ExciteError when it cannot be cut,
-        e.g. too few segments."""
+        --start`` cuts it, and the clock offset it was cut with (s): the one the last accepted
+        decision's log was cut with (that decision's calibration is then this one's), else
+        :func:`clock_offset`'s; raises ExciteError when it cannot be cut, e.g. too few
+        segments."""
         series = self._series(self._epoch)
         if series is None:
             raise ExciteError("no wheel angles and poses yet")
-        offset = (self._offset if self.settings.time_offset == "estimate"
-                  and self._offset is not None
+        offset = (self._offset if self._offset is not None
                   else clock_offset(series, self.settings.time_offset))
         return cut(series, self.settings.segment_duration, offset), offset
 
